@@ -1,0 +1,192 @@
+"""The fuzzy exploration controller of the paper (section 5), in integers.
+
+A zero-order Sugeno engine: each rule's firing strength (0..1024) weights a
+pair of wheel-speed singletons, and the wheel setpoints are the weighted
+averages (rounded half up).  Memberships use min for AND and max for the
+circular aggregation; no floating point anywhere, so every port computes the
+same setpoints bit for bit.
+
+Inputs: the eight reflected IR readings (ADC counts, ambient removed), S1
+front, then counter-clockwise every 45 degrees.  Each reading's membership
+in "obstacle" ramps from 0 at NEAR_LO counts to 1024 at NEAR_HI counts.
+
+The first rule set sees the sensors through a circular fuzzification into
+{front, left, back, right}: a triangle 90 degrees wide on each side of its
+direction, so S2 is half front and half left.  The refined rule set reacts
+to every sensor on its own and adds the quick turns (Fig. 18).  Because the
+unconditional "go ahead" is always averaged in, the first rule set stops the
+robot in front of an obstacle, as the paper observed; the quick turns of
+S2 and S8 are what get it past.
+
+Rule bases are data (RULES_FIRST, RULES_REFINED); tools/fuzzy_rules.py names
+them, prints them as IEC 61131-7 FCL text and draws the sets (docs/fuzzy.md).
+"""
+from protocol.compat import const
+
+ONE = const(1024)  # membership 1.0
+N_SENSORS = const(8)
+
+# Obstacle membership ramp, in reflected ADC counts (12-bit).
+NEAR_LO = const(40)
+NEAR_HI = const(700)
+
+# Only numbers live here (RAM is scarce on the robot); the names of terms,
+# actions and antecedents are in tools/fuzzy_rules.py, in the same order.
+
+# Wheel-speed singletons, % of the max_speed parameter (Figs. 17 and 18).
+_FULL_BACK = const(0)
+_BACK = const(1)
+_SLOW = const(2)
+_AHEAD = const(3)
+_FAST = const(4)
+TERMS = (-100, -80, 15, 55, 100)  # full back, back, slow, ahead, fast
+
+# Actions: (left wheel term, right wheel term).  Turning right means the
+# left wheel runs faster than the right.
+_GO_AHEAD = const(0)
+_GO_BACK = const(1)
+_MORE_RIGHT = const(2)
+_MORE_LEFT = const(3)
+_FAST_AHEAD = const(4)
+_QUICK_RIGHT = const(5)
+_QUICK_LEFT = const(6)
+ACTIONS = (
+    (_AHEAD, _AHEAD),  # go ahead
+    (_BACK, _BACK),  # go back
+    (_FAST, _SLOW),  # go more on right
+    (_SLOW, _FAST),  # go more on left
+    (_FAST, _FAST),  # go fast ahead
+    (_FAST, _FULL_BACK),  # quick turn right
+    (_FULL_BACK, _FAST),  # quick turn left
+)
+
+# Antecedents: 0..7 "obstacle on S1..S8", 8..11 "obstacle on the front,
+# left, back, right" (circular fuzzification), 12 always true.
+_FRONT = const(8)
+_LEFT = const(9)
+_BACKWARD = const(10)
+_RIGHT = const(11)
+ALWAYS = const(12)
+
+# (antecedent, action), in the paper's order.
+RULES_FIRST = (
+    (ALWAYS, _GO_AHEAD),
+    (_FRONT, _GO_BACK),
+    (_LEFT, _MORE_RIGHT),
+    (_RIGHT, _MORE_LEFT),
+    (_BACKWARD, _FAST_AHEAD),
+)
+RULES_REFINED = (
+    (ALWAYS, _GO_AHEAD),
+    (0, _GO_BACK),  # S1 front
+    (2, _MORE_RIGHT),  # S3 left
+    (6, _MORE_LEFT),  # S7 right
+    (4, _FAST_AHEAD),  # S5 back
+    (1, _QUICK_RIGHT),  # S2 front-left
+    (3, _FAST_AHEAD),  # S4 back-left: fast ahead and more right
+    (3, _MORE_RIGHT),
+    (5, _FAST_AHEAD),  # S6 back-right: fast ahead and more left
+    (5, _MORE_LEFT),
+    (7, _QUICK_LEFT),  # S8 front-right
+)
+RULE_SETS = (RULES_FIRST, RULES_REFINED)
+
+
+def direction_weight(direction: int, sensor: int) -> int:
+    """Membership (0..1024) of sensor's bearing in a direction's circular set.
+
+    direction 0..3 = front, left, back, right at 0, 90, 180, 270 degrees;
+    sensor i sits at 45*i degrees; each set is a triangle of half-width 90.
+    """
+    diff = (45 * sensor - 90 * direction) % 360
+    if diff > 180:
+        diff = 360 - diff
+    if diff >= 90:
+        return 0
+    return ONE - (diff * ONE) // 90
+
+
+def membership(reading: int, lo: int = NEAR_LO, hi: int = NEAR_HI) -> int:
+    """Obstacle membership of one reflected reading: a ramp from lo to hi."""
+    if reading <= lo:
+        return 0
+    if reading >= hi:
+        return ONE
+    return ((reading - lo) * ONE) // (hi - lo)
+
+
+class FuzzyController:
+    """Evaluates one rule set; infer() allocates nothing."""
+
+    def __init__(self, rule_set: int = 1, max_speed: int = 200) -> None:
+        self.mu = [0] * N_SENSORS  # obstacle membership per sensor
+        self.direction_mu = [0] * 4  # front, left, back, right
+        self._dirw = [direction_weight(d, i) for d in range(4) for i in range(N_SENSORS)]
+        self.lo = NEAR_LO
+        self.hi = NEAR_HI
+        self.left = 0
+        self.right = 0
+        self.rule_set = 0
+        self.max_speed = 0
+        self._rules: list[int] = []
+        self.configure(rule_set, max_speed)
+
+    def configure(self, rule_set: int, max_speed: int) -> None:
+        """Select a rule set and speed scale (flattens the rules once)."""
+        if rule_set not in (0, 1):
+            raise ValueError("rule_set must be 0 (first) or 1 (refined)")
+        self.rule_set = rule_set
+        self.max_speed = max_speed
+        flat = []
+        for antecedent, action in RULE_SETS[rule_set]:
+            lt, rt = ACTIONS[action]
+            flat.append(antecedent)
+            flat.append(TERMS[lt] * max_speed // 100)
+            flat.append(TERMS[rt] * max_speed // 100)
+        self._rules = flat
+
+    def infer(self, reflected: list[int]) -> None:
+        """Set self.left, self.right (mm/s) from the 8 reflected readings."""
+        mu = self.mu
+        lo = self.lo
+        span = self.hi - lo
+        for i in range(N_SENSORS):
+            r = reflected[i]
+            if r <= lo:
+                mu[i] = 0
+            elif r >= lo + span:
+                mu[i] = ONE
+            else:
+                mu[i] = ((r - lo) * ONE) // span
+        dmu = self.direction_mu
+        if self.rule_set == 0:
+            dirw = self._dirw
+            for d in range(4):
+                best = 0
+                base = d * N_SENSORS
+                for i in range(N_SENSORS):
+                    v = mu[i]
+                    w = dirw[base + i]
+                    if w < v:
+                        v = w
+                    if v > best:
+                        best = v
+                dmu[d] = best
+        rules = self._rules
+        num_l = 0
+        num_r = 0
+        den = 0
+        for k in range(0, len(rules), 3):
+            a = rules[k]
+            if a == ALWAYS:
+                w = ONE
+            elif a < N_SENSORS:
+                w = mu[a]
+            else:
+                w = dmu[a - N_SENSORS]
+            num_l += w * rules[k + 1]
+            num_r += w * rules[k + 2]
+            den += w
+        # den >= ONE: the unconditional rule always fires.  Round half up.
+        self.left = (2 * num_l + den) // (2 * den)
+        self.right = (2 * num_r + den) // (2 * den)

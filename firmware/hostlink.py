@@ -1,0 +1,51 @@
+"""The host link over the board's USB serial port (sys.stdin / sys.stdout).
+
+The same code on the RP2040 (USB CDC) and on the virtual board (whose
+stdin/stdout are wired to a pseudo-terminal).  Reads never block and,
+like writes, allocate nothing.  Ctrl-C must reach the protocol as a byte,
+so keyboard interrupts are switched off while the firmware runs and
+restored when it stops.
+"""
+import select
+import sys
+
+import micropython
+
+
+class StdioLink:
+    def __init__(self) -> None:
+        self._in = sys.stdin.buffer
+        self._out = sys.stdout.buffer
+        self._poll = select.poll()
+        self._poll.register(sys.stdin, select.POLLIN)
+        self._one = bytearray(1)
+        self.closed = False  # the host side hung up (virtual board only)
+
+    def open(self) -> None:
+        micropython.kbd_intr(-1)
+
+    def close(self) -> None:
+        micropython.kbd_intr(3)
+
+    def read(self, buf: bytearray) -> int:
+        """Copy up to len(buf) waiting bytes into buf; return the count."""
+        n = 0
+        one = self._one
+        cap = len(buf)
+        while n < cap:
+            ready = False
+            for _obj, event in self._poll.ipoll(0):
+                if event & (select.POLLHUP | select.POLLERR):
+                    self.closed = True
+                if event & select.POLLIN:
+                    ready = True
+            # One byte at a time: on bare-metal ports a longer read blocks
+            # until the buffer is full.
+            if not ready or not self._in.readinto(one):
+                return n
+            buf[n] = one[0]
+            n += 1
+        return n
+
+    def write(self, data: memoryview) -> None:
+        self._out.write(data)

@@ -1,0 +1,315 @@
+"""The robot's main loop: one control cycle after another, on any HAL.
+
+Each cycle: wait for the cycle tick -> IR acquisition (ambient removed) ->
+encoders -> odometry and wheel speeds -> messages from the host -> the mode
+decides the wheel setpoints (AUTONOMOUS: the fuzzy explorer; HOST, TELEOP:
+the host's COMMAND, guarded by the watchdog; STOP: zero) -> wheel PI ->
+current references -> TELEMETRY.
+
+A cycle allocates nothing in steady state (tests run it under
+micropython.heap_lock()).  An exception inside a cycle never ends the loop:
+it is counted, reported by a LOG frame, and the robot goes to STOP with its
+motors at zero and the FAULT flag set.
+
+The host link also carries mpremote: a frame that begins 0x0D 0x03 (its
+"\\r Ctrl-C") is never a valid frame of protocol version 1, so it is taken
+as a request to stop the firmware and hand the port to the REPL.
+"""
+import struct
+
+from firmware import config
+from firmware.fuzzy import FuzzyController
+from firmware.hal import TICK_MASK
+from firmware.ir import IRArray
+from firmware.odometry import Odometry
+from firmware.wheels import WheelLoop
+from protocol import wire as M
+from protocol.compat import const
+from protocol.framing import FrameDecoder, FrameEncoder
+
+# Parameter ids (protocol/SPEC.md).
+P_EMITTER = const(1)
+P_AVERAGING = const(2)
+P_WINDOW = const(3)
+P_RULE_SET = const(4)
+P_WATCHDOG = const(5)
+P_CYCLE = const(6)
+P_KP = const(7)
+P_KI = const(8)
+P_ODOMETRY = const(9)
+P_MAX_SPEED = const(10)
+P_CURRENT_LIMIT = const(11)
+N_PARAMS = const(12)
+
+_TELEMETRY_FMT = "<IBHii8H8HhhH"
+_PARAM_FMT = "<Bi"
+_HELLO_FMT = "<6B"
+_NACK_FMT = "<3B"
+
+
+class BreakToRepl(Exception):
+    """The host asked for the REPL (mpremote's Ctrl-C on the protocol port)."""
+
+
+def _i16(b: bytearray, o: int) -> int:
+    v = b[o] | (b[o + 1] << 8)
+    return v - 65536 if v & 0x8000 else v
+
+
+def _i32(b: bytearray, o: int) -> int:
+    hi = b[o + 3]
+    if hi & 0x80:
+        hi -= 256
+    return (hi << 24) | (b[o + 2] << 16) | (b[o + 1] << 8) | b[o]
+
+
+class Robot:
+    """Firmware state and the control cycle."""
+
+    def __init__(self, hal: object) -> None:
+        self.hal = hal
+        self.params = [0] * N_PARAMS
+        for pid in range(1, N_PARAMS):
+            self.params[pid] = M.PARAM_LIMITS[pid][2]
+        p = self.params
+        self.ir = IRArray(hal, p[P_EMITTER], p[P_AVERAGING], p[P_WINDOW])
+        self.fuzzy = FuzzyController(p[P_RULE_SET], p[P_MAX_SPEED])
+        self.odometry = Odometry(config.WHEEL_DIAMETER_UM, config.WHEEL_BASE_UM, config.TICKS_PER_REV,
+                                 p[P_ODOMETRY])
+        q8 = self.odometry.um_per_tick_q8
+        self.wheel_l = WheelLoop(q8, p[P_KP], p[P_KI], p[P_CURRENT_LIMIT])
+        self.wheel_r = WheelLoop(q8, p[P_KP], p[P_KI], p[P_CURRENT_LIMIT])
+        self.enc = [0, 0]
+        self.mode = M.MODE_STOP
+        self.cmd_left = 0
+        self.cmd_right = 0
+        self.setpoint_l = 0
+        self.setpoint_r = 0
+        self.tick = 0
+        self._last_tick = -1
+        self.last_command = 0  # tick of the last valid COMMAND
+        self.watchdog_tripped = False
+        self.fault_pending = False
+        self.faults = 0  # exceptions caught since start
+        self.cycles = 0
+        self.vbat = 0
+        self.flags = 0
+        self.tx = FrameEncoder()
+        self.rx = FrameDecoder()
+        self._rx_buf = bytearray(256)
+
+    # -- the cycle -------------------------------------------------------
+
+    def cycle(self) -> None:
+        hal = self.hal
+        tick = hal.wait_cycle(self.params[P_CYCLE])  # type: ignore[attr-defined]
+        self.tick = tick
+        dt = 0 if self._last_tick < 0 else (tick - self._last_tick) & TICK_MASK
+        self._last_tick = tick
+        self.ir.acquire()
+        enc = self.enc
+        hal.read_encoders(enc)  # type: ignore[attr-defined]
+        self.vbat = hal.battery_mv()  # type: ignore[attr-defined]
+        self.odometry.update(enc[0], enc[1])
+        self.wheel_l.measure(enc[0], dt)
+        self.wheel_r.measure(enc[1], dt)
+        self.read_host()
+        self.decide()
+        if self.mode == M.MODE_STOP or self.watchdog_tripped:
+            self.wheel_l.reset()
+            self.wheel_r.reset()
+            il = 0
+            ir = 0
+        else:
+            il = self.wheel_l.control(self.setpoint_l, dt)
+            ir = self.wheel_r.control(self.setpoint_r, dt)
+        hal.set_currents(il, ir)  # type: ignore[attr-defined]
+        self.flags = self.make_flags()
+        self.fault_pending = False
+        self.send_telemetry(il, ir)
+        hal.end_cycle()  # type: ignore[attr-defined]
+        self.cycles += 1
+
+    def decide(self) -> None:
+        mode = self.mode
+        if mode == M.MODE_AUTONOMOUS:
+            self.fuzzy.infer(self.ir.value)
+            self.setpoint_l = self.fuzzy.left
+            self.setpoint_r = self.fuzzy.right
+            self.watchdog_tripped = False
+        elif mode == M.MODE_HOST or mode == M.MODE_TELEOP:
+            if (self.tick - self.last_command) & TICK_MASK > self.params[P_WATCHDOG]:
+                self.watchdog_tripped = True
+            if self.watchdog_tripped:
+                self.setpoint_l = 0
+                self.setpoint_r = 0
+            else:
+                self.setpoint_l = self.cmd_left
+                self.setpoint_r = self.cmd_right
+        else:
+            self.setpoint_l = 0
+            self.setpoint_r = 0
+            self.watchdog_tripped = False
+
+    def make_flags(self) -> int:
+        f = 0
+        if self.watchdog_tripped:
+            f |= M.FLAG_WATCHDOG
+        if self.ir.saturated:
+            f |= M.FLAG_IR_SATURATED
+        if self.hal.overrun:  # type: ignore[attr-defined]
+            f |= M.FLAG_OVERRUN
+        if self.fault_pending:
+            f |= M.FLAG_FAULT
+        if self.wheel_l.clamped or self.wheel_r.clamped:
+            f |= M.FLAG_CURRENT_LIMIT
+        if 0 < self.vbat < config.LOW_BATTERY_MV:
+            f |= M.FLAG_LOW_BATTERY
+        return f
+
+    def run(self, cycles: int = -1) -> None:
+        """Run cycles forever (or that many); only BreakToRepl ends it."""
+        while cycles != 0:
+            if cycles > 0:
+                cycles -= 1
+            try:
+                self.cycle()
+            except BreakToRepl:
+                self.safe_state()
+                raise
+            except Exception as exc:  # noqa: BLE001 - a robot must keep running
+                self.on_fault(exc)
+
+    def safe_state(self) -> None:
+        self.mode = M.MODE_STOP
+        self.setpoint_l = 0
+        self.setpoint_r = 0
+        self.wheel_l.reset()
+        self.wheel_r.reset()
+        try:
+            self.hal.set_currents(0, 0)  # type: ignore[attr-defined]
+        except Exception:  # noqa: BLE001
+            pass
+
+    def on_fault(self, exc: Exception) -> None:
+        self.faults += 1
+        self.fault_pending = True
+        self.safe_state()
+        try:
+            self.log(M.LOG_ERROR, "fault #{} in cycle {}: {}: {}".format(
+                self.faults, self.cycles, type(exc).__name__, exc))
+        except Exception:  # noqa: BLE001 - the link itself may be what failed
+            pass
+
+    # -- host messages ---------------------------------------------------
+
+    def read_host(self) -> None:
+        buf = self._rx_buf
+        dec = self.rx
+        while True:
+            n = self.hal.host_read(buf)  # type: ignore[attr-defined]
+            if n <= 0:
+                return
+            i = 0
+            while i < n:
+                i = dec.feed(buf, i, n)
+                if dec.ready:
+                    self.handle(dec.msg_type, dec.seq, dec.body)
+            if dec.pending_starts_with(0x0D, 0x03):
+                raise BreakToRepl()
+
+    def handle(self, msg_type: int, seq: int, b: bytearray) -> None:
+        if msg_type == M.COMMAND:
+            mode = b[3]
+            if mode > M.MODE_TELEOP:
+                self.nack(seq, msg_type, M.ERR_BAD_MODE)
+                return
+            limit = self.params[P_MAX_SPEED]
+            left = _i16(b, 4)
+            right = _i16(b, 6)
+            self.cmd_left = limit if left > limit else -limit if left < -limit else left
+            self.cmd_right = limit if right > limit else -limit if right < -limit else right
+            if mode != self.mode:
+                self.wheel_l.reset()
+                self.wheel_r.reset()
+                self.mode = mode
+            self.last_command = self.tick
+            self.watchdog_tripped = False
+        elif msg_type == M.PARAM_SET:
+            pid = b[3]
+            err = self.set_param(pid, _i32(b, 4))
+            if err:
+                self.nack(seq, msg_type, err)
+            else:
+                self.send_param(pid)
+        elif msg_type == M.PARAM_GET:
+            pid = b[3]
+            if 0 < pid < N_PARAMS:
+                self.send_param(pid)
+            else:
+                self.nack(seq, msg_type, M.ERR_UNKNOWN_PARAM)
+        elif msg_type == M.HELLO:
+            self.send_hello()
+        elif msg_type in (M.TELEMETRY, M.PARAM_VALUE, M.LOG, M.HW_SENSE, M.HW_ACTUATE):
+            self.nack(seq, msg_type, M.ERR_UNSUPPORTED)
+
+    def set_param(self, pid: int, value: int) -> int:
+        """Apply a parameter; 0 or a NACK error code."""
+        if not 0 < pid < N_PARAMS:
+            return M.ERR_UNKNOWN_PARAM
+        limits = M.PARAM_LIMITS[pid]
+        if not limits[0] <= value <= limits[1]:
+            return M.ERR_OUT_OF_RANGE
+        p = self.params
+        p[pid] = value
+        if pid in (P_EMITTER, P_AVERAGING, P_WINDOW):
+            self.ir.configure(p[P_EMITTER], p[P_AVERAGING], p[P_WINDOW])
+        elif pid in (P_RULE_SET, P_MAX_SPEED):
+            self.fuzzy.configure(p[P_RULE_SET], p[P_MAX_SPEED])
+        elif pid == P_ODOMETRY:
+            self.odometry.method = value
+        elif pid in (P_KP, P_KI, P_CURRENT_LIMIT):
+            for w in (self.wheel_l, self.wheel_r):
+                w.kp = p[P_KP]
+                w.ki = p[P_KI]
+                w.limit = p[P_CURRENT_LIMIT]
+        return 0
+
+    # -- frames to the host ----------------------------------------------
+
+    def _send(self, msg_type: int, payload_len: int) -> None:
+        n = self.tx.finish(msg_type, payload_len)
+        self.hal.host_write(self.tx.view(n))  # type: ignore[attr-defined]
+
+    def send_telemetry(self, il: int, ir: int) -> None:
+        on = self.ir.on
+        am = self.ir.ambient
+        enc = self.enc
+        struct.pack_into(
+            _TELEMETRY_FMT, self.tx.body, 3, self.tick, self.mode, self.flags, enc[0], enc[1],
+            on[0], on[1], on[2], on[3], on[4], on[5], on[6], on[7],
+            am[0], am[1], am[2], am[3], am[4], am[5], am[6], am[7],
+            il, ir, self.vbat)
+        self._send(M.TELEMETRY, 53)
+
+    def send_param(self, pid: int) -> None:
+        struct.pack_into(_PARAM_FMT, self.tx.body, 3, pid, self.params[pid])
+        self._send(M.PARAM_VALUE, 5)
+
+    def send_hello(self) -> None:
+        v = config.FIRMWARE_VERSION
+        struct.pack_into(_HELLO_FMT, self.tx.body, 3, M.PROTOCOL_VERSION, v[0], v[1], v[2],
+                         self.hal.board, 8)  # type: ignore[attr-defined]
+        self._send(M.HELLO, 6)
+
+    def nack(self, seq: int, msg_type: int, error: int) -> None:
+        struct.pack_into(_NACK_FMT, self.tx.body, 3, seq, msg_type, error)
+        self._send(M.NACK, 3)
+
+    def log(self, level: int, text: str) -> None:
+        data = text.encode()[:M.MAX_PAYLOAD - 1]
+        body = self.tx.body
+        body[3] = level
+        for k in range(len(data)):
+            body[4 + k] = data[k]
+        self._send(M.LOG, 1 + len(data))

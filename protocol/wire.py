@@ -1,0 +1,99 @@
+"""The numbers both ends of a link agree on: message types, sizes, schema bytes,
+modes, flags, error codes and parameter limits.
+
+This is all the firmware needs of the message set, kept small because it
+lives in a microcontroller's RAM.  protocol/messages.py adds the names, the
+field layouts and packing for hosts, and derives PAYLOAD_SIZE and SCHEMA
+from the layouts; a test checks that the two agree (as MAVLink compiles
+its CRC_EXTRA bytes into generated code).  SPEC.md documents every value.
+"""
+from protocol.compat import const
+
+PROTOCOL_VERSION = const(1)
+MAX_PAYLOAD = const(249)  # body (254) - version, type, seq (3) - CRC (2)
+
+# Message types.
+HELLO = const(0x01)
+TELEMETRY = const(0x02)
+COMMAND = const(0x03)
+PARAM_SET = const(0x04)
+PARAM_GET = const(0x05)
+PARAM_VALUE = const(0x06)
+ACK = const(0x07)
+NACK = const(0x08)
+HW_SENSE = const(0x10)
+HW_ACTUATE = const(0x11)
+LOG = const(0x20)
+
+# (type, payload size, schema byte); LOG's size is that of its fixed part.
+_TYPES = (
+    (HELLO, 6, 0xF8),
+    (TELEMETRY, 53, 0x9E),
+    (COMMAND, 5, 0xA2),
+    (PARAM_SET, 5, 0x36),
+    (PARAM_GET, 1, 0xC9),
+    (PARAM_VALUE, 5, 0xDE),
+    (ACK, 2, 0xBE),
+    (NACK, 3, 0x9E),
+    (HW_SENSE, 46, 0xB0),
+    (HW_ACTUATE, 9, 0xA7),
+    (LOG, 1, 0x7D),
+)
+N_TYPES = const(0x21)  # types are below this
+UNKNOWN = const(0xFF)  # PAYLOAD_SIZE of a type that does not exist
+VARIABLE_TYPE = const(0x20)  # LOG: its text runs to the end of the payload
+PAYLOAD_SIZE = bytearray(b"\xff" * N_TYPES)
+SCHEMA = bytearray(N_TYPES)
+for _t, _size, _schema in _TYPES:
+    PAYLOAD_SIZE[_t] = _size
+    SCHEMA[_t] = _schema
+
+# Modes (COMMAND.mode, TELEMETRY.mode).
+MODE_STOP = const(0)
+MODE_AUTONOMOUS = const(1)
+MODE_HOST = const(2)
+MODE_TELEOP = const(3)
+
+# Board kinds (HELLO.board).
+BOARD_UNKNOWN = const(0)
+BOARD_HOST = const(1)
+BOARD_VIRTUAL = const(2)
+BOARD_RP2040 = const(3)
+
+# TELEMETRY.flags bits.
+FLAG_WATCHDOG = const(0x01)  # no valid COMMAND in time: motors forced to zero
+FLAG_IR_SATURATED = const(0x02)  # at least one IR reading hit the ADC ceiling
+FLAG_OVERRUN = const(0x04)  # the last cycle took longer than its period
+FLAG_FAULT = const(0x08)  # an exception was caught in the last cycle
+FLAG_CURRENT_LIMIT = const(0x10)  # a current reference was clamped
+FLAG_LOW_BATTERY = const(0x20)
+
+# NACK.error codes.
+ERR_UNKNOWN_PARAM = const(1)
+ERR_OUT_OF_RANGE = const(2)
+ERR_BAD_MODE = const(3)
+ERR_UNSUPPORTED = const(4)
+ERR_BUSY = const(5)
+
+# LOG.level.
+LOG_DEBUG = const(0)
+LOG_INFO = const(1)
+LOG_WARNING = const(2)
+LOG_ERROR = const(3)
+
+# Parameters by id: (minimum, maximum, default); id 0 does not exist.
+# Names and units are in messages.PARAMS.
+PARAM_LIMITS = (
+    (0, 0, 0),
+    (0, 100, 60),  # 1 emitter_pct
+    (0, 3, 0),  # 2 ir_averaging
+    (1, 16, 4),  # 3 ir_window
+    (0, 1, 1),  # 4 rule_set
+    (20, 10000, 200),  # 5 watchdog_ms
+    (10, 1000, 40),  # 6 cycle_ms
+    (0, 100000, 2000),  # 7 speed_kp
+    (0, 100000, 20000),  # 8 speed_ki
+    (0, 2, 2),  # 9 odometry
+    (0, 1000, 200),  # 10 max_speed
+    (0, 3000, 500),  # 11 current_limit
+)

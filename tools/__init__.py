@@ -1,0 +1,1 @@
+"""What a user types: the `twinbot` command and its benchmarks."""

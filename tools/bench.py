@@ -1,0 +1,49 @@
+"""`twinbot bench`: the benchmarks behind the README's figures.
+
+Each benchmark is a module with a `register(subparsers, name, summary)`
+function, like the top-level subcommands; adding one is one line in
+BENCHMARKS.  Modules are imported when the parser is built, so they keep
+heavy imports (numpy, pymavlink) inside their functions.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import textwrap
+from typing import Any
+
+# (name, module, what it measures).
+BENCHMARKS = (
+    ("protocol", "tools.bench_protocol",
+     "serial protocol: encode/decode frames/s and MB/s on CPython (against pymavlink) and "
+     "MicroPython, framing overhead, allocation per received byte"),
+)
+
+
+def _description() -> str:
+    lines = [
+        "Benchmarks that produce the README's figures.  Each prints the machine, the exact",
+        "command, one table and the targets with whether each is met; --json FILE keeps",
+        "every figure.  Timings are medians over repeated runs.",
+        "",
+        "benchmarks (what each measures):",
+    ]
+    for name, _module, summary in BENCHMARKS:
+        lines += textwrap.wrap(summary, 78, initial_indent=f"  {name:<10} ", subsequent_indent=" " * 13)
+    lines += ["", "Run 'twinbot bench BENCHMARK --help' for the details of one."]
+    return "\n".join(lines)
+
+
+def register(subparsers: Any, name: str, summary: str) -> None:
+    parser = subparsers.add_parser(
+        name, help=summary, description=_description(), formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    sub = parser.add_subparsers(dest="benchmark", metavar="BENCHMARK")
+    for bench_name, module_name, bench_summary in BENCHMARKS:
+        importlib.import_module(module_name).register(sub, bench_name, bench_summary)
+
+    def no_benchmark(args: argparse.Namespace) -> int:
+        parser.print_help()
+        return 2
+
+    parser.set_defaults(func=no_benchmark)
