@@ -52,3 +52,6 @@ class Hal:
     def end_cycle(self) -> None:
         """The cycle's outputs are set (the virtual board sends HW_ACTUATE here)."""
         raise NotImplementedError
+
+    def close(self) -> None:
+        """The firmware stops: outputs off, links released."""

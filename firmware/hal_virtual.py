@@ -107,6 +107,9 @@ class VirtualHal(Hal):
     def host_write(self, data: memoryview) -> None:
         self.link.write(data)
 
+    def close(self) -> None:
+        self.sock.close()
+
     def end_cycle(self) -> None:
         """Send HW_ACTUATE: the currents and the emitter power this cycle used.
 

@@ -40,6 +40,7 @@ P_ODOMETRY = const(9)
 P_MAX_SPEED = const(10)
 P_CURRENT_LIMIT = const(11)
 N_PARAMS = const(12)
+MAX_RX_PER_CYCLE = const(512)  # bounds the cycle time under a flood of bytes
 
 _TELEMETRY_FMT = "<IBHii8H8HhhH"
 _PARAM_FMT = "<Bi"
@@ -96,7 +97,7 @@ class Robot:
         self.flags = 0
         self.tx = FrameEncoder()
         self.rx = FrameDecoder()
-        self._rx_buf = bytearray(256)
+        self._rx_one = bytearray(1)
 
     # -- the cycle -------------------------------------------------------
 
@@ -204,19 +205,28 @@ class Robot:
     # -- host messages ---------------------------------------------------
 
     def read_host(self) -> None:
-        buf = self._rx_buf
+        """Take the host's bytes one at a time, at most MAX_RX_PER_CYCLE a cycle.
+
+        One at a time so that nothing after mpremote's break is consumed:
+        the REPL must see the Ctrl-A that follows it.  A partial frame that
+        gets no byte for a whole cycle is dropped (the sender died mid-frame),
+        so the next frame, or a break, starts clean.
+        """
+        one = self._rx_one
         dec = self.rx
-        while True:
-            n = self.hal.host_read(buf)  # type: ignore[attr-defined]
-            if n <= 0:
-                return
-            i = 0
-            while i < n:
-                i = dec.feed(buf, i, n)
-                if dec.ready:
-                    self.handle(dec.msg_type, dec.seq, dec.body)
-            if dec.pending_starts_with(0x0D, 0x03):
+        hal = self.hal
+        got = 0
+        while got < MAX_RX_PER_CYCLE:
+            if hal.host_read(one) <= 0:  # type: ignore[attr-defined]
+                break
+            got += 1
+            dec.feed(one, 0, 1)
+            if dec.ready:
+                self.handle(dec.msg_type, dec.seq, dec.body)
+            elif dec.pending_starts_with(0x0D, 0x03):
                 raise BreakToRepl()
+        if not got:
+            dec.abandon_partial()
 
     def handle(self, msg_type: int, seq: int, b: bytearray) -> None:
         if msg_type == M.COMMAND:

@@ -91,12 +91,20 @@ class FrameDecoder:
         self.unknown_types = 0
         self.length_errors = 0  # too short, or wrong size for the type
         self.overflows = 0  # more than 255 bytes before a 0x00
+        self.abandoned = 0  # unfinished frames dropped by abandon_partial()
         self.seq_gaps = 0  # times the sequence jumped
         self.frames_lost = 0  # frames missing according to the sequence
 
     def reset_sequence(self) -> None:
         """Forget the last sequence number (e.g. after the peer restarted)."""
         self._last_seq = -1
+
+    def abandon_partial(self) -> None:
+        """Drop an unfinished frame (its sender went quiet); counted in `abandoned`."""
+        if self._n or self._overflow:
+            self.abandoned += 1
+        self._n = 0
+        self._overflow = False
 
     def pending_starts_with(self, b0: int, b1: int) -> bool:
         """True if the unfinished frame so far begins with bytes b0, b1."""
@@ -105,7 +113,7 @@ class FrameDecoder:
     @property
     def errors(self) -> int:
         return (self.cobs_errors + self.crc_errors + self.version_errors + self.unknown_types
-                + self.length_errors + self.overflows)
+                + self.length_errors + self.overflows + self.abandoned)
 
     def feed(self, data: bytes | bytearray, start: int = 0, end: int = -1) -> int:
         if end < 0:
@@ -185,7 +193,7 @@ class FrameDecoder:
         return {
             "frames": self.frames, "cobs_errors": self.cobs_errors, "crc_errors": self.crc_errors,
             "version_errors": self.version_errors, "unknown_types": self.unknown_types,
-            "length_errors": self.length_errors, "overflows": self.overflows,
+            "length_errors": self.length_errors, "overflows": self.overflows, "abandoned": self.abandoned,
             "seq_gaps": self.seq_gaps, "frames_lost": self.frames_lost,
         }
 

@@ -21,7 +21,7 @@ SMALL = settings(SETTINGS, max_examples=40)
 
 TYPES = [t for t, _n, _f in messages.LAYOUTS]
 COUNTERS = ("frames", "cobs_errors", "crc_errors", "version_errors", "unknown_types",
-            "length_errors", "overflows", "seq_gaps", "frames_lost")
+            "length_errors", "overflows", "abandoned", "seq_gaps", "frames_lost")
 
 
 def _copy_loop(dst, dpos, src, spos, n):  # the MicroPython _copy_bytes

@@ -14,12 +14,16 @@ import sys
 SUBCOMMANDS = (
     ("demo", "run the main demonstration (a protocol loop-back through the serial harness)"),
     ("serial", "serial protocol test harness: show, send and record frames on a port"),
+    ("board", "run the firmware on a virtual board behind a pseudo-terminal"),
+    ("flash", "compile the firmware with mpy-cross, copy it to a board with mpremote, check HELLO"),
     ("bench", "benchmarks that produce the README's figures"),
 )
 
 _MODULES = {
     "demo": "tools.demo",
     "serial": "tools.serial_harness",
+    "board": "tools.board",
+    "flash": "tools.flash",
     "bench": "tools.bench",
 }
 

@@ -32,7 +32,7 @@ RANGES = {
 }
 MAX_TEXT = messages.MAX_PAYLOAD - 1  # LOG: level byte + text
 COUNTERS = ("frames", "cobs_errors", "crc_errors", "version_errors", "unknown_types",
-            "length_errors", "overflows", "seq_gaps", "frames_lost")
+            "length_errors", "overflows", "abandoned", "seq_gaps", "frames_lost")
 
 
 def _fields(msg_type: int, pick) -> dict:

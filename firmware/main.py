@@ -1,0 +1,45 @@
+"""Start the firmware on whatever board this is.
+
+A board's /main.py holds two lines (`twinbot flash` writes them):
+
+    import firmware.main
+    firmware.main.start()
+
+On an RP2040 the HAL is the real hardware; under the unix port (the virtual
+board) it is the simulator's hardware link named by TWINBOT_HW=host:port.
+start() returns when mpremote (or a person) breaks into the REPL.
+"""
+import sys
+
+from firmware.robot import BreakToRepl, Robot
+
+
+def make_hal() -> object:
+    if sys.platform == "rp2":
+        from firmware.hal_rp2040 import Rp2040Hal
+
+        return Rp2040Hal()
+    import os
+
+    address = os.getenv("TWINBOT_HW")
+    if not address or ":" not in address:
+        raise RuntimeError("virtual board: set TWINBOT_HW=host:port of the simulator (twinbot board does)")
+    host, port = address.rsplit(":", 1)
+    from firmware.hal_virtual import VirtualHal
+
+    return VirtualHal(host, int(port))
+
+
+def start() -> None:
+    hal = make_hal()
+    robot = Robot(hal)
+    link = hal.link  # type: ignore[attr-defined]
+    link.open()
+    try:
+        robot.run()
+    except BreakToRepl:
+        pass
+    finally:
+        link.close()
+        hal.set_currents(0, 0)  # type: ignore[attr-defined]
+        hal.close()  # type: ignore[attr-defined]

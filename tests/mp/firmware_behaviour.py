@@ -1,0 +1,314 @@
+"""Behaviour of the firmware, checked on both interpreters.
+
+Each check_* function drives firmware.robot.Robot on the TestHal and
+asserts what a robot engineer would expect.  pytest runs every check on
+CPython (tests/test_firmware_behaviour.py); run as a script, this file runs
+them all under MicroPython and prints 'behaviour: N checks ok'.
+"""
+import struct
+import sys
+
+from firmware.fuzzy import FuzzyController
+from firmware.robot import BreakToRepl, Robot
+from protocol import wire as W
+from protocol.framing import FrameDecoder, FrameEncoder
+from testhal import TestHal
+
+ENC = FrameEncoder()
+
+
+def command(mode, left=0, right=0):
+    return ENC.encode(W.COMMAND, struct.pack("<Bhh", mode, left, right))
+
+
+def param_set(pid, value):
+    return ENC.encode(W.PARAM_SET, struct.pack("<Bi", pid, value))
+
+
+def frames_of(data):
+    """(type, seq, payload) of every frame the robot sent."""
+    return FrameDecoder().decode_all(data)
+
+
+def telemetry(data):
+    """Unpacked TELEMETRY tuples, oldest first."""
+    return [struct.unpack("<IBHii8H8HhhH", p) for t, _s, p in frames_of(data) if t == W.TELEMETRY]
+
+
+def robot_with(rule_set=1, mode=W.MODE_AUTONOMOUS):
+    hal = TestHal()
+    robot = Robot(hal)
+    hal.give(param_set(4, rule_set))
+    hal.give(command(mode))
+    robot.cycle()
+    return hal, robot
+
+
+def setpoints_for(rule_set, sensor, level=3000):
+    hal, robot = robot_with(rule_set)
+    if sensor >= 0:
+        hal.reflection[sensor] = level
+    for _ in range(3):
+        robot.cycle()
+    return robot.setpoint_l, robot.setpoint_r
+
+
+def check_nothing_seen_goes_ahead():
+    for rs in (0, 1):
+        left, right = setpoints_for(rs, -1)
+        assert left == right and left > 0, (rs, left, right)
+
+
+def check_obstacle_front_goes_back():
+    for rs in (0, 1):
+        left, right = setpoints_for(rs, 0)
+        assert left < 0 and right < 0, (rs, left, right)
+
+
+def check_front_left_turns_right():
+    left, right = setpoints_for(1, 1)  # S2
+    assert left > 0 > right, (left, right)  # quick turn right
+    left, right = setpoints_for(0, 1)
+    assert left > right, (left, right)  # the first rule set turns, gently
+
+
+def check_front_right_turns_left():
+    left, right = setpoints_for(1, 7)  # S8
+    assert right > 0 > left, (left, right)
+    left, right = setpoints_for(0, 7)
+    assert right > left, (left, right)
+
+
+def check_sides_and_back():
+    for rs in (0, 1):
+        left, right = setpoints_for(rs, 2)  # S3 left: more right
+        assert left > right > 0, (rs, left, right)
+        left, right = setpoints_for(rs, 6)  # S7 right: more left
+        assert right > left > 0, (rs, left, right)
+        ahead = setpoints_for(rs, -1)[0]
+        left, right = setpoints_for(rs, 4)  # S5 back: fast ahead
+        assert left == right and left > ahead, (rs, left, right)
+
+
+def check_mirror_symmetry():
+    c = FuzzyController(1)
+    for rs in (0, 1):
+        c.configure(rs, 200)
+        for k in range(200):
+            r = [((k * 7919 + i * 104729) % 4096) for i in range(8)]
+            mirrored = [r[(8 - i) % 8] for i in range(8)]
+            c.infer(r)
+            a = (c.left, c.right)
+            c.infer(mirrored)
+            assert (c.right, c.left) == a, (rs, r)
+
+
+def check_ambient_subtraction_under_changing_light():
+    hal, robot = robot_with(1, W.MODE_STOP)
+    hal.reflection = [400, 0, 0, 0, 0, 0, 0, 300]
+    seen = []
+    for k in range(40):
+        amb = 50 + (k * 97) % 1500  # a lamp flickering between cycles
+        hal.ambient = [amb + 10 * i for i in range(8)]
+        robot.cycle()
+        seen.append(list(robot.ir.reflected))
+        assert robot.ir.ambient[3] == amb + 30
+    for r in seen:
+        assert r == [240, 0, 0, 0, 0, 0, 0, 180], r  # 60 % emitter power, ambient gone
+
+
+def check_saturation_flag():
+    hal, robot = robot_with(1, W.MODE_STOP)
+    hal.reflection[0] = 9000
+    robot.cycle()
+    assert robot.ir.saturated and robot.flags & W.FLAG_IR_SATURATED
+    hal.reflection[0] = 100
+    robot.cycle()
+    assert not robot.flags & W.FLAG_IR_SATURATED
+
+
+def check_watchdog_stops_motors():
+    hal, robot = robot_with(1, W.MODE_HOST)
+    hal.give(command(W.MODE_HOST, 150, 150))
+    for _ in range(4):  # 160 ms of fresh commands: driving
+        robot.cycle()
+    assert robot.setpoint_l == 150 and hal.current[0] != 0
+    assert not robot.flags & W.FLAG_WATCHDOG
+    for _ in range(5):  # no COMMAND for 200 ms and more
+        robot.cycle()
+    assert robot.flags & W.FLAG_WATCHDOG
+    assert hal.current == [0, 0], hal.current
+    last = telemetry(hal.take_output())[-1]
+    assert last[2] & W.FLAG_WATCHDOG and last[21] == 0 and last[22] == 0
+    hal.give(command(W.MODE_HOST, 100, 100))  # commands again: driving again
+    robot.cycle()
+    assert not robot.flags & W.FLAG_WATCHDOG and robot.setpoint_l == 100
+
+
+def check_watchdog_timeout_is_a_parameter():
+    hal, robot = robot_with(1, W.MODE_TELEOP)
+    hal.give(param_set(5, 1000))
+    hal.give(command(W.MODE_TELEOP, 80, 80))
+    for _ in range(20):  # 800 ms
+        robot.cycle()
+    assert not robot.flags & W.FLAG_WATCHDOG
+    for _ in range(8):  # past 1000 ms
+        robot.cycle()
+    assert robot.flags & W.FLAG_WATCHDOG
+
+
+def check_mode_changes():
+    hal, robot = robot_with(1, W.MODE_STOP)
+    robot.cycle()
+    assert robot.mode == W.MODE_STOP and hal.current == [0, 0]
+    for mode in (W.MODE_AUTONOMOUS, W.MODE_HOST, W.MODE_TELEOP, W.MODE_STOP):
+        hal.give(command(mode, 120, 120))
+        robot.cycle()
+        assert robot.mode == mode
+        tm = telemetry(hal.take_output())[-1]
+        assert tm[1] == mode
+    assert hal.current == [0, 0]
+    hal.give(command(9, 0, 0))  # no such mode: refused, mode kept
+    robot.cycle()
+    assert robot.mode == W.MODE_STOP
+    nacks = [struct.unpack("<3B", p) for t, _s, p in frames_of(hal.take_output()) if t == W.NACK]
+    assert nacks and nacks[-1][1:] == (W.COMMAND, W.ERR_BAD_MODE)
+
+
+def check_setpoints_limited_to_max_speed():
+    hal, robot = robot_with(1, W.MODE_HOST)
+    hal.give(command(W.MODE_HOST, 5000, -5000))
+    robot.cycle()
+    assert (robot.setpoint_l, robot.setpoint_r) == (200, -200)
+
+
+def check_parameters_set_get_and_refuse():
+    hal, robot = robot_with(1, W.MODE_STOP)
+    hal.take_output()
+    hal.give(param_set(1, 80))
+    hal.give(param_set(1, 101))
+    hal.give(param_set(77, 1))
+    hal.give(ENC.encode(W.PARAM_GET, bytes((6,))))
+    robot.cycle()
+    out = frames_of(hal.take_output())
+    values = [struct.unpack("<Bi", p) for t, _s, p in out if t == W.PARAM_VALUE]
+    nacks = [struct.unpack("<3B", p)[2] for t, _s, p in out if t == W.NACK]
+    assert values == [(1, 80), (6, 40)], values
+    assert nacks == [W.ERR_OUT_OF_RANGE, W.ERR_UNKNOWN_PARAM], nacks
+    assert robot.ir.power == 80
+
+
+def check_hello_answered():
+    hal, robot = robot_with(1, W.MODE_STOP)
+    hal.give(ENC.encode(W.HELLO, bytes(6)))
+    robot.cycle()
+    hellos = [struct.unpack("<6B", p) for t, _s, p in frames_of(hal.take_output()) if t == W.HELLO]
+    assert hellos and hellos[0][0] == W.PROTOCOL_VERSION and hellos[0][4] == W.BOARD_VIRTUAL
+
+
+def check_telemetry_every_cycle_in_sequence():
+    hal, robot = robot_with(1, W.MODE_AUTONOMOUS)
+    hal.take_output()
+    for _ in range(50):
+        robot.cycle()
+    dec = FrameDecoder()
+    frames = dec.decode_all(hal.take_output())
+    assert len([f for f in frames if f[0] == W.TELEMETRY]) == 50
+    assert dec.seq_gaps == 0 and dec.errors == 0
+    ticks = [t[0] for t in telemetry(b"".join(ENC.encode(f[0], f[2]) for f in frames))]
+    assert ticks == sorted(ticks)
+
+
+def check_random_bytes_on_the_uart_do_not_stop_the_loop():
+    hal, robot = robot_with(1, W.MODE_AUTONOMOUS)
+    x = 987654321
+    for k in range(300):
+        junk = bytearray(23)
+        for j in range(23):
+            x = (x * 1103515245 + 12345) & 0x7FFFFFFF
+            junk[j] = (x >> 16) & 0xFF
+            if junk[j] == 0x0D:  # never the start of a break request
+                junk[j] = 0x0E
+        hal.give(junk)
+        if k % 10 == 0:
+            hal.give(command(W.MODE_AUTONOMOUS))
+        robot.cycle()
+    assert robot.cycles >= 300 and robot.faults == 0
+    assert robot.rx.errors > 0  # the junk was seen and dropped
+    assert robot.mode == W.MODE_AUTONOMOUS
+
+
+def check_exception_in_a_cycle_is_survived():
+    hal, robot = robot_with(1, W.MODE_HOST)
+
+    def broken(out):
+        raise OSError(5)
+
+    hal.read_ir = broken
+    robot.run(3)
+    assert robot.faults == 3 and robot.mode == W.MODE_STOP
+    assert hal.current == [0, 0]
+    logs = [p for t, _s, p in frames_of(hal.take_output()) if t == W.LOG]
+    assert logs and logs[0][0] == W.LOG_ERROR and b"OSError" in logs[0]
+    del hal.read_ir  # repaired: the loop carries on and reports FAULT once
+    robot.run(2)
+    assert robot.faults == 3
+    tms = telemetry(hal.take_output())
+    assert tms[0][2] & W.FLAG_FAULT and not tms[-1][2] & W.FLAG_FAULT
+
+
+def check_break_request_stops_and_leaves_the_rest():
+    hal, robot = robot_with(1, W.MODE_HOST)
+    hal.give(b"\r\x03\r\x01")  # mpremote: Ctrl-C, then Ctrl-A for the raw REPL
+    raised = False
+    try:
+        robot.cycle()
+    except BreakToRepl:
+        raised = True
+    assert raised
+    assert bytes(hal.inbox[hal.in_pos:hal.in_len]) == b"\r\x01"  # left for the REPL
+
+
+def check_partial_frame_abandoned_after_silence():
+    hal, robot = robot_with(1, W.MODE_STOP)
+    frame = command(W.MODE_HOST, 50, 50)
+    hal.give(frame[:5])  # the sender dies mid-frame
+    robot.cycle()
+    robot.cycle()  # a silent cycle: the partial frame is dropped
+    assert robot.rx.abandoned == 1
+    hal.give(b"\r\x03")
+    raised = False
+    try:
+        robot.cycle()
+    except BreakToRepl:
+        raised = True
+    assert raised
+
+
+def check_odometry_follows_the_wheels():
+    hal, robot = robot_with(1, W.MODE_HOST)
+    for _ in range(25):
+        hal.give(command(W.MODE_HOST, 100, 100))
+        robot.cycle()
+    odo = robot.odometry
+    assert odo.x_um > 0 and abs(odo.y_um) < odo.x_um // 20, (odo.x_um, odo.y_um)
+
+
+CHECKS = [name for name in sorted(globals()) if name.startswith("check_")]
+
+
+def main():
+    failed = 0
+    for name in CHECKS:
+        try:
+            globals()[name]()
+        except Exception as exc:  # noqa: BLE001
+            failed += 1
+            print("behaviour: FAIL", name, repr(exc))
+    if failed:
+        sys.exit(1)
+    print("behaviour:", len(CHECKS), "checks ok")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,89 @@
+"""A board for tests: a HAL with a plain plant, on CPython and MicroPython alike.
+
+IR: each sensor reads ambient + reflection * emitter power / 100, capped at
+the ADC ceiling.  Wheels: encoder ticks advance with the current reference
+(a crude motor).  Host link: bytes queued with give(); frames sent collected
+in `out`.  No method allocates once the buffers exist.
+"""
+
+
+class TestHal:
+    board = 2  # BOARD_VIRTUAL
+    overrun = False
+
+    def __init__(self):
+        self.t = 0
+        self.emitters = 0
+        self.ambient = [100] * 8
+        self.reflection = [0] * 8  # at 100 % emitter power
+        self.encs = [0, 0]
+        self.current = [0, 0]
+        self.inbox = bytearray(2048)
+        self.in_len = 0
+        self.in_pos = 0
+        self.out = bytearray(8192)
+        self.out_len = 0
+        self.vbat = 7400
+
+    def wait_cycle(self, period):
+        self.t += period
+        return self.t & 0x3FFFFFFF
+
+    def set_emitters(self, pct):
+        self.emitters = pct
+
+    def read_ir(self, out):
+        for i in range(8):
+            v = self.ambient[i] + (self.reflection[i] * self.emitters) // 100
+            out[i] = v if v < 4095 else 4095
+
+    def read_encoders(self, out):
+        out[0] = self.encs[0]
+        out[1] = self.encs[1]
+
+    def battery_mv(self):
+        return self.vbat
+
+    def set_currents(self, left, right):
+        self.current[0] = left
+        self.current[1] = right
+        self.encs[0] += left // 16
+        self.encs[1] += right // 16
+
+    def host_read(self, buf):
+        n = self.in_len - self.in_pos
+        if n > len(buf):
+            n = len(buf)
+        for k in range(n):
+            buf[k] = self.inbox[self.in_pos + k]
+        self.in_pos += n
+        return n
+
+    def host_write(self, data):
+        n = len(data)
+        if self.out_len + n > len(self.out):
+            self.out_len = 0  # keep the newest frames
+        for k in range(n):
+            self.out[self.out_len + k] = data[k]
+        self.out_len += n
+
+    def end_cycle(self):
+        pass
+
+    def close(self):
+        pass
+
+    def give(self, data):
+        """Queue bytes from the host (appended to what is still unread)."""
+        rest = self.in_len - self.in_pos
+        for k in range(rest):
+            self.inbox[k] = self.inbox[self.in_pos + k]
+        for k in range(len(data)):
+            self.inbox[rest + k] = data[k]
+        self.in_pos = 0
+        self.in_len = rest + len(data)
+
+    def take_output(self):
+        data = bytes(self.out[:self.out_len])
+        self.out_len = 0
+        return data

@@ -1,0 +1,173 @@
+"""The virtual board: the firmware under MicroPython behind a real pseudo-terminal.
+
+Everything here goes through the pty with pyserial, mpremote or the twinbot
+command, as it would with a Pico on /dev/ttyACM0.
+"""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+import serial
+
+from protocol import messages as M
+from tests.helpers import REPO, run_twinbot
+from tools.board import STANDIN_AMBIENT, STANDIN_REFLECTION, StandInHardware, VirtualBoard, factory_image
+from tools.flash import BoardInfo, check_mpy_compatible, mpy_cross_version, probe
+from tools.cli import CliError
+from tools.serial_link import SerialLink
+
+
+@pytest.fixture
+def standin():
+    hw = StandInHardware()
+    hw.start()
+    yield hw
+    hw.stop()
+
+
+@pytest.fixture
+def board(tmp_path, standin):
+    """A virtual board flashed with this checkout's firmware (sources)."""
+    flash = tmp_path / "flash"
+    flash.mkdir()
+    factory_image(flash)
+    vb = VirtualBoard(str(flash), standin.port, tmp_path / "board.log")
+    yield vb
+    vb.close()
+
+
+def mpremote(port, *args, timeout=60):
+    return subprocess.run([sys.executable, "-m", "mpremote", "connect", port, "resume", *args],
+                          capture_output=True, text=True, timeout=timeout, check=False)
+
+
+def collect(link, seconds, msg_type=M.TELEMETRY):
+    out = []
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        out += [f for f in link.poll(0.05) if f.msg_type == msg_type]
+    return out
+
+
+def test_telemetry_flows_with_ambient_removed_by_the_firmware(board):
+    link = SerialLink.open(board.path)
+    try:
+        link.send(M.HELLO, {"protocol": 1, "fw_major": 0, "fw_minor": 0, "fw_patch": 0, "board": 1, "sensors": 0})
+        hello = link.wait_for(M.HELLO, 5)
+        assert hello is not None and hello.fields["board"] == M.BOARD_VIRTUAL and hello.fields["sensors"] == 8
+        frames = collect(link, 1.0)
+    finally:
+        link.close()
+    assert len(frames) >= 15  # 25 Hz
+    assert link.decoder.errors == 0 and link.decoder.seq_gaps == 0
+    last = frames[-1].fields
+    assert list(last["ir_amb"]) == list(STANDIN_AMBIENT)
+    # The stand-in answers the firmware's default emitter power (60 %).
+    assert [on - amb for on, amb in zip(last["ir_on"], last["ir_amb"])] == [
+        min(4095, a + r * 60 // 100) - a for a, r in zip(STANDIN_AMBIENT, STANDIN_REFLECTION)]
+    ticks = [f.fields["tick_ms"] for f in frames]
+    assert all(b - a == 40 for a, b in zip(ticks, ticks[1:]))
+
+
+def test_host_mode_and_watchdog_over_the_port(board, standin):
+    link = SerialLink.open(board.path)
+    try:
+        end = time.monotonic() + 1.0
+        while time.monotonic() < end:  # drive at 10 Hz
+            link.send(M.COMMAND, {"mode": M.MODE_HOST, "left": 120, "right": 120})
+            link.poll(0.1)
+        driving = collect(link, 0.05)
+        silent = collect(link, 0.8)  # stop sending: the watchdog trips
+    finally:
+        link.close()
+    assert driving and driving[-1].fields["mode"] == M.MODE_HOST
+    assert driving[-1].fields["i_ref_l_ma"] > 0  # wheels that do not turn: the PI pushes
+    assert not driving[-1].fields["flags"] & M.FLAG_WATCHDOG
+    assert silent[-1].fields["flags"] & M.FLAG_WATCHDOG
+    assert silent[-1].fields["i_ref_l_ma"] == 0 and silent[-1].fields["i_ref_r_ma"] == 0
+    assert standin.last_actuate is not None and standin.last_actuate["i_ref_l_ma"] == 0
+
+
+def test_random_bytes_on_the_port_do_not_stop_the_loop(board):
+    link = SerialLink.open(board.path)
+    try:
+        rng = __import__("random").Random(7)
+        for _ in range(40):
+            junk = bytes(rng.randrange(256) for _ in range(200)).replace(b"\r", b"\x0e")
+            link.send_raw(junk)
+            link.poll(0.02)
+        link.send_raw(b"\x00")
+        link.send(M.COMMAND, {"mode": M.MODE_AUTONOMOUS, "left": 0, "right": 0})
+        frames = collect(link, 1.0)
+    finally:
+        link.close()
+    assert len(frames) >= 15
+    assert frames[-1].fields["mode"] == M.MODE_AUTONOMOUS
+    assert not frames[-1].fields["flags"] & M.FLAG_FAULT
+
+
+def test_mpremote_breaks_in_and_reset_restarts_the_firmware(board):
+    r = mpremote(board.path, "exec", "import sys; print('board', sys.platform, sys.implementation._mpy)")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["board", "linux", str(mpy_cross_version()[0] | (mpy_cross_version()[1] << 8) | 2 << 10)]
+    r = mpremote(board.path, "ls")
+    assert "main.py" in r.stdout and "firmware/" in r.stdout
+    mpremote(board.path, "reset")
+    link = SerialLink.open(board.path)
+    try:
+        frames = collect(link, 1.0)
+    finally:
+        link.close()
+    assert len(frames) >= 10  # the firmware runs again
+
+
+@pytest.mark.slow
+def test_flash_a_blank_board_then_it_answers_hello(tmp_path, standin):
+    """The issue's end-to-end check: mpy-cross, mpremote cp, reset, HELLO."""
+    vb = VirtualBoard(f"{tmp_path / 'flash.img'}:512", standin.port, tmp_path / "board.log")
+    try:
+        r = mpremote(vb.path, "ls")
+        assert r.returncode == 0 and "main.py" not in r.stdout  # blank
+        r = run_twinbot("flash", "--port", vb.path, timeout=240)
+        assert r.returncode == 0, r.stdout + r.stderr
+        assert "the board answered HELLO: firmware 0.2.0" in r.stdout
+        r = mpremote(vb.path, "ls", ":firmware")
+        assert "robot.mpy" in r.stdout and "robot.py" not in r.stdout
+    finally:
+        vb.close()
+
+
+def test_flash_refuses_a_board_out_of_space(tmp_path, standin):
+    vb = VirtualBoard(f"{tmp_path / 'tiny.img'}:64", standin.port, tmp_path / "board.log")
+    try:
+        r = run_twinbot("flash", "--port", vb.path, timeout=120)
+    finally:
+        vb.close()
+    assert r.returncode == 2
+    assert "board out of space" in r.stderr and "KB free" in r.stderr
+
+
+def test_flash_refuses_what_is_not_a_micropython_board(pty_pair):
+    r = run_twinbot("flash", "--port", pty_pair.path, timeout=120)
+    assert r.returncode == 2
+    assert "does not answer as a MicroPython board" in r.stderr
+
+
+def test_flash_refuses_a_missing_port():
+    r = run_twinbot("flash", "--port", "/dev/ttyTWINBOT_NONE")
+    assert r.returncode == 2 and "no such port" in r.stderr
+
+
+def test_mpy_version_mismatch_is_named(board):
+    info = probe(board.path)
+    emitted = mpy_cross_version()
+    check_mpy_compatible(info, emitted)  # the virtual board matches this mpy-cross
+    older = BoardInfo(info.mpy - (1 << 8), info.platform, info.block_size, info.free_blocks)  # sub-version 3 -> 2
+    with pytest.raises(CliError, match=r"\.mpy version mismatch: the board loads v6\.2, this mpy-cross emits v6\.3"):
+        check_mpy_compatible(older, emitted)
+    with pytest.raises(CliError, match="too old"):
+        check_mpy_compatible(BoardInfo(-1, "rp2", 4096, 100), emitted)
