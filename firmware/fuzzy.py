@@ -15,8 +15,9 @@ The first rule set sees the sensors through a circular fuzzification into
 direction, so S2 is half front and half left.  The refined rule set reacts
 to every sensor on its own and adds the quick turns (Fig. 18).  Because the
 unconditional "go ahead" is always averaged in, the first rule set stops the
-robot in front of an obstacle, as the paper observed; the quick turns of
-S2 and S8 are what get it past.
+robot in front of a wall it approaches head-on (it settles where "go back"
+balances "go ahead"), as the paper observed; the quick turns of S2 and S8
+are what get it past.
 
 Rule bases are data (RULES_FIRST, RULES_REFINED); tools/fuzzy_rules.py names
 them, prints them as IEC 61131-7 FCL text and draws the sets (docs/fuzzy.md).

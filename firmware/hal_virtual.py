@@ -7,10 +7,12 @@ references, emitter power) back, over a TCP connection to 127.0.0.1.
 The simulator thus owns time: in fixed-step mode a run is exactly
 repeatable.  The host link is the board's stdin/stdout, as on the RP2040.
 """
+import select
 import socket
 import struct
 
-from firmware.hal import TICK_MASK, Hal
+from firmware.hal import TICK_MASK
+from firmware.hal_sensed import SensedHal
 from firmware.hostlink import StdioLink
 from protocol import wire
 from protocol.framing import FrameDecoder, FrameEncoder
@@ -33,42 +35,45 @@ class HardwareGone(SystemExit):
     """The simulator closed the hardware link: the board powers off."""
 
 
-class VirtualHal(Hal):
-    board = wire.BOARD_VIRTUAL
+class VirtualHal(SensedHal):
+    """SensedHal whose readings arrive as HW_SENSE frames and whose outputs leave as HW_ACTUATE."""
 
     def __init__(self, host: str, port: int) -> None:
+        SensedHal.__init__(self)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         self.sock.connect(socket.getaddrinfo(host, port)[0][-1])
+        # Non-blocking, waited on with poll: a blocking readinto() would wait
+        # until its whole buffer is full, not for one frame.
+        self.sock.setblocking(False)
+        self._poll = select.poll()
+        self._poll.register(self.sock, select.POLLIN)
         self.link = StdioLink()
         self.tx = FrameEncoder()
         self.rx = FrameDecoder()
         self._buf = bytearray(128)
         self._n = 0
         self._i = 0
-        self.tick = 0
-        self.adc_off = [0] * 8
-        self.adc_on = [0] * 8
-        self.enc = [0, 0]
-        self.vbat = 0
-        self.emitters = 0
-        self.power_used = 0  # emitter power of this cycle's "on" reading
-        self.i_left = 0
-        self.i_right = 0
-        self.overrun = False
 
     def wait_cycle(self, period_ms: int) -> int:
         dec = self.rx
         buf = self._buf
         while True:
             if self._i >= self._n:
-                got = self.sock.readinto(buf)
+                for _obj, _event in self._poll.ipoll(-1):
+                    pass
+                try:
+                    got = self.sock.readinto(buf)
+                except OSError:
+                    got = 0
+                if got is None:  # woken without data
+                    continue
                 if not got:
                     raise HardwareGone()
                 self._n = got
                 self._i = 0
             self._i = dec.feed(buf, self._i, self._n)
             if dec.ready and dec.msg_type == wire.HW_SENSE:
-                self.power_used = 0
+                self.begin()
                 b = dec.body
                 self.tick = _i32(b, 3) & TICK_MASK
                 for k in range(8):
@@ -78,28 +83,6 @@ class VirtualHal(Hal):
                 self.enc[1] = _i32(b, 43)
                 self.vbat = _u16(b, 47)
                 return self.tick
-
-    def set_emitters(self, pct: int) -> None:
-        self.emitters = pct
-
-    def read_ir(self, out: list[int]) -> None:
-        src = self.adc_off
-        if self.emitters:
-            src = self.adc_on
-            self.power_used = self.emitters
-        for k in range(8):
-            out[k] = src[k]
-
-    def read_encoders(self, out: list[int]) -> None:
-        out[0] = self.enc[0]
-        out[1] = self.enc[1]
-
-    def battery_mv(self) -> int:
-        return self.vbat
-
-    def set_currents(self, left_ma: int, right_ma: int) -> None:
-        self.i_left = left_ma
-        self.i_right = right_ma
 
     def host_read(self, buf: bytearray) -> int:
         return self.link.read(buf)

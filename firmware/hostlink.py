@@ -49,3 +49,26 @@ class StdioLink:
 
     def write(self, data: memoryview) -> None:
         self._out.write(data)
+
+
+class UartLink:
+    """The host link over a UART (a radio module, a USB-serial adapter)."""
+
+    def __init__(self, uart_id: int, tx: int, rx: int, baudrate: int) -> None:
+        from machine import UART, Pin
+
+        self.uart = UART(uart_id, baudrate=baudrate, tx=Pin(tx), rx=Pin(rx), rxbuf=1024)
+        self.closed = False
+
+    def open(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+    def read(self, buf: bytearray) -> int:
+        n = self.uart.readinto(buf)
+        return n if n else 0
+
+    def write(self, data: memoryview) -> None:
+        self.uart.write(data)

@@ -91,8 +91,8 @@ PARAM_LIMITS = (
     (0, 1, 1),  # 4 rule_set
     (20, 10000, 200),  # 5 watchdog_ms
     (10, 1000, 40),  # 6 cycle_ms
-    (0, 100000, 2000),  # 7 speed_kp
-    (0, 100000, 20000),  # 8 speed_ki
+    (0, 100000, 400),  # 7 speed_kp
+    (0, 100000, 2000),  # 8 speed_ki
     (0, 2, 2),  # 9 odometry
     (0, 1000, 200),  # 10 max_speed
     (0, 3000, 500),  # 11 current_limit

@@ -176,7 +176,7 @@ def test_frame_log_reader_names_the_broken_line(tmp_path):
 
 
 def test_demo_runs_and_catches_the_injected_faults(tmp_path):
-    r = run_twinbot("demo", "--record", str(tmp_path / "demo.jsonl"))
+    r = run_twinbot("demo", "--loopback", "--record", str(tmp_path / "demo.jsonl"))
     assert r.returncode == 0, r.stderr
     assert "CRC errors 1" in r.stdout and "sequence gaps 2 (2 frames lost)" in r.stdout
     assert "re-read and verified" in r.stdout

@@ -5,17 +5,16 @@ command, as it would with a Pico on /dev/ttyACM0.
 """
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 import time
 
 import pytest
-import serial
 
 from protocol import messages as M
-from tests.helpers import REPO, run_twinbot
-from tools.board import STANDIN_AMBIENT, STANDIN_REFLECTION, StandInHardware, VirtualBoard, factory_image
+from tests.helpers import run_twinbot
+from host_sim.virtual_board import VirtualBoard, factory_image
+from tools.board import STANDIN_AMBIENT, STANDIN_REFLECTION, StandInHardware
 from tools.flash import BoardInfo, check_mpy_compatible, mpy_cross_version, probe
 from tools.cli import CliError
 from tools.serial_link import SerialLink

@@ -17,6 +17,9 @@ BENCHMARKS = (
     ("protocol", "tools.bench_protocol",
      "serial protocol: encode/decode frames/s and MB/s on CPython (against pymavlink) and "
      "MicroPython, framing overhead, allocation per received byte"),
+    ("firmware", "tools.bench_firmware",
+     "firmware: control-cycle time and allocations under MicroPython, heap of the loaded firmware, "
+     "one fuzzy inference on CPython against peer fuzzy libraries"),
 )
 
 

@@ -33,6 +33,7 @@ import platform
 import statistics
 import sys
 import time
+import warnings
 from typing import Any, Callable
 
 from firmware import fuzzy as fz
@@ -115,7 +116,7 @@ def build_simpful(rule_set: int, max_speed: int = 200) -> tuple[Any, Infer]:
     rule becomes two simpful rules (one consequent each), one per wheel.
     simpful's WEIGHT is not used: it scales the numerator only.
     """
-    import simpful as sf
+    import simpful as sf  # type: ignore[import-untyped]
 
     system = sf.FuzzySystem(show_banner=False, verbose=False)
     near = [[fz.NEAR_LO, 0.0], [fz.NEAR_HI, 1.0]]  # extended flat on both sides
@@ -206,8 +207,8 @@ def build_skfuzzy(rule_set: int, max_speed: int = 200) -> Infer:
     """A Mamdani/centroid build in scikit-fuzzy (it has no Sugeno engine): not
     the same arithmetic as the firmware, for timing only."""
     import numpy as np
-    import skfuzzy as fuzz
-    from skfuzzy import control as ctrl
+    import skfuzzy as fuzz  # type: ignore[import-untyped]
+    from skfuzzy import control as ctrl  # type: ignore[import-untyped]
 
     z = singletons(max_speed)
     wterms = _weight_terms(rule_set)
@@ -263,7 +264,7 @@ PEERS = (
 # --------------------------------------------------------------------------- #
 # Benchmark
 # --------------------------------------------------------------------------- #
-def _time(infer: Infer, vectors: list[list[int]], reference: list[list[tuple[int, int]]] | None
+def _time(infer: Infer, vectors: list[list[int]], reference: list[tuple[float, float]] | None
           ) -> tuple[float, float | None]:
     for v in vectors[:20]:  # warm up
         infer(v)
@@ -281,13 +282,21 @@ def _time(infer: Infer, vectors: list[list[int]], reference: list[list[tuple[int
     return statistics.median(times) * 1e6, (worst if reference is not None else None)
 
 
-def bench_inference(repeats: int = 1000, max_speed: int = 200, seed: int = 1) -> dict[str, Any]:
+def bench_inference(repeats: int = 1000, max_speed: int = 200, seed: int = 1,
+                    peer_repeats: int | None = None) -> dict[str, Any]:
     """Median microseconds per inference, per engine and rule set.
+
+    The firmware engine is timed on `repeats` random reading vectors, the
+    peers on the first `peer_repeats` of them (default min(repeats, 300):
+    they take 0.2 to 20 ms per inference, scikit-fuzzy the most, and 300
+    calls give a stable median; all 2000 would take ~90 s).
 
     Returns {"engines": {name: {"version", "kind", "us": {rule set: us},
     "max_diff_mm_s": {rule set: largest |setpoint - firmware's| over the inputs}}},
     "unavailable": {package: reason}, "fastest_peer": {rule set: name},
-    "speedup": {rule set: fastest peer's time / firmware's time}, ...}.
+    "speedup": {rule set: fastest peer's time / firmware's time},
+    "speedup_vs_fastest_peer": the smaller of the two (None without peers),
+    "table": format_table() of all that, ...}.
     """
     import importlib.metadata as md
 
@@ -295,14 +304,15 @@ def bench_inference(repeats: int = 1000, max_speed: int = 200, seed: int = 1) ->
 
     if repeats < 1:
         raise ValueError("repeats must be >= 1")
+    peer_repeats = min(repeats, 300) if peer_repeats is None else max(1, min(peer_repeats, repeats))
     vectors = random_readings(np.random.default_rng(seed), repeats)
     result: dict[str, Any] = {
-        "repeats": repeats, "max_speed": max_speed, "seed": seed,
+        "repeats": repeats, "peer_repeats": peer_repeats, "max_speed": max_speed, "seed": seed,
         "python": f"{platform.python_implementation()} {platform.python_version()}",
         "machine": f"{platform.machine()} {platform.processor() or ''}".strip(),
         "engines": {}, "unavailable": {}, "fastest_peer": {}, "speedup": {},
     }
-    reference: dict[str, list[tuple[int, int]]] = {}
+    reference: dict[str, list[tuple[float, float]]] = {}
     ours: dict[str, Any] = {"version": "firmware/fuzzy.py", "kind": "integer zero-order Sugeno",
                             "us": {}, "max_diff_mm_s": {}}
     for rs, rs_name in enumerate(RULE_SET_NAMES):
@@ -316,11 +326,13 @@ def bench_inference(repeats: int = 1000, max_speed: int = 200, seed: int = 1) ->
         try:
             version = md.version(dist)
             entry: dict[str, Any] = {"version": version, "kind": kind, "us": {}, "max_diff_mm_s": {}}
-            for rs, rs_name in enumerate(RULE_SET_NAMES):
-                infer = build(rs, max_speed)
-                us, diff = _time(infer, vectors, reference[rs_name])
-                entry["us"][rs_name] = us
-                entry["max_diff_mm_s"][rs_name] = diff
+            with warnings.catch_warnings():  # scikit-fuzzy 0.5 warns on every call under numpy 2
+                warnings.simplefilter("ignore", DeprecationWarning)
+                for rs, rs_name in enumerate(RULE_SET_NAMES):
+                    infer = build(rs, max_speed)
+                    us, diff = _time(infer, vectors[:peer_repeats], reference[rs_name][:peer_repeats])
+                    entry["us"][rs_name] = us
+                    entry["max_diff_mm_s"][rs_name] = diff
         except Exception as exc:  # not installed, or broken against this numpy
             result["unavailable"][dist] = f"{type(exc).__name__}: {exc}"
             continue
@@ -332,13 +344,16 @@ def bench_inference(repeats: int = 1000, max_speed: int = 200, seed: int = 1) ->
             best = min(peers, key=peers.__getitem__)
             result["fastest_peer"][rs_name] = best
             result["speedup"][rs_name] = peers[best] / ours["us"][rs_name]
+    result["speedup_vs_fastest_peer"] = min(result["speedup"].values()) if result["speedup"] else None
+    result["table"] = format_table(result)
     return result
 
 
 def format_table(res: dict[str, Any]) -> str:
     lines = [
         f"fuzzy inference, {res['python']} on {res['machine']}: median of {res['repeats']} calls "
-        f"on random readings (seed {res['seed']}), max_speed {res['max_speed']} mm/s",
+        f"({res['peer_repeats']} for the peers) on random readings (seed {res['seed']}), "
+        f"max_speed {res['max_speed']} mm/s",
         "",
         f"{'engine':<14}{'version':<19}{'first µs':>10}{'refined µs':>12}   {'max |Δ| mm/s':<17} kind",
         f"{'':<14}{'':<19}{'':>10}{'':>12}   {'first / refined':<17}",
@@ -359,5 +374,7 @@ def format_table(res: dict[str, Any]) -> str:
 
 
 if __name__ == "__main__":
-    n = int(sys.argv[1]) if len(sys.argv) > 1 else 1000
-    print(format_table(bench_inference(n)))
+    # python -m tools.bench_fuzzy [REPEATS [PEER_REPEATS]]
+    n = int(sys.argv[1]) if len(sys.argv) > 1 else 2000
+    peers = int(sys.argv[2]) if len(sys.argv) > 2 else None
+    print(bench_inference(n, peer_repeats=peers)["table"])

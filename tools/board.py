@@ -14,43 +14,25 @@ readings (a wall in front), encoders that do not move, a full battery.
 from __future__ import annotations
 
 import argparse
-import errno
-import os
 import select
-import shutil
 import socket
-import struct
-import subprocess
 import sys
 import tempfile
 import threading
 import time
-import tty
 from pathlib import Path
 
+from host_sim.virtual_board import VirtualBoard, factory_image
 from protocol import messages as M
 from protocol.framing import FrameDecoder, FrameEncoder
 from tools.cli import CliError
-from tools.micropython_rig import REPO_ROOT, micropython_exe
 
-MAIN_PY = "import firmware.main\nfirmware.main.start()\n"
-SUPERVISOR = REPO_ROOT / "firmware" / "vboard.py"
 
 # What the stand-in hardware reports: ambient light on every sensor, a wall
 # about 10 cm in front of S1 (strong reflection) and seen obliquely by S2, S8.
 STANDIN_AMBIENT = (180, 175, 170, 165, 160, 165, 170, 175)
 STANDIN_REFLECTION = (900, 260, 0, 0, 0, 0, 0, 240)  # at 100 % emitter power
 STANDIN_VBAT_MV = 7400
-
-
-def factory_image(folder: Path) -> None:
-    """Write what a freshly flashed board holds: the sources and main.py."""
-    for pkg in ("protocol", "firmware"):
-        dst = folder / pkg
-        dst.mkdir(parents=True, exist_ok=True)
-        for src in sorted((REPO_ROOT / pkg).glob("*.py")):
-            shutil.copy2(src, dst / src.name)
-    (folder / "main.py").write_text(MAIN_PY)
 
 
 class StandInHardware:
@@ -121,76 +103,6 @@ class StandInHardware:
                         self.last_actuate = M.unpack_payload(t, payload)
                         power = int(self.last_actuate["emitter_pct"])  # type: ignore[call-overload]
                         self.actuations += 1
-
-
-class VirtualBoard:
-    """A running virtual board: the MicroPython process, its pty and its relay."""
-
-    def __init__(self, flash: str, hw_port: int, stderr_path: Path | None = None) -> None:
-        self.flash = flash
-        self.hw_port = hw_port
-        self.master, self.slave = os.openpty()
-        tty.setraw(self.slave)
-        self.path = os.ttyname(self.slave)
-        os.set_blocking(self.master, False)
-        env = dict(os.environ, TWINBOT_HW=f"127.0.0.1:{hw_port}", MICROPYPATH="")
-        self._stderr = open(stderr_path, "ab") if stderr_path else subprocess.DEVNULL
-        self.proc = subprocess.Popen(
-            [micropython_exe(), str(SUPERVISOR), flash], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-            stderr=self._stderr, env=env, bufsize=0,
-        )
-        self.dropped = 0  # bytes the board sent while nobody read the port
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._relay, name="pty relay", daemon=True)
-        self._thread.start()
-
-    def _relay(self) -> None:
-        assert self.proc.stdin is not None and self.proc.stdout is not None
-        board_out = self.proc.stdout.fileno()
-        board_in = self.proc.stdin.fileno()
-        while not self._stop.is_set() and self.proc.poll() is None:
-            ready, _, _ = select.select([board_out, self.master], [], [], 0.1)
-            if board_out in ready:
-                data = os.read(board_out, 4096)
-                if not data:
-                    return
-                try:
-                    os.write(self.master, data)
-                except OSError as exc:  # nobody reads the port and its buffer is full
-                    if exc.errno not in (errno.EAGAIN, errno.EIO):
-                        raise
-                    self.dropped += len(data)
-            if self.master in ready:
-                try:
-                    data = os.read(self.master, 4096)
-                except OSError:
-                    continue
-                if data:
-                    try:
-                        os.write(board_in, data)
-                    except BrokenPipeError:
-                        return
-
-    def alive(self) -> bool:
-        return self.proc.poll() is None
-
-    def close(self) -> None:
-        self._stop.set()
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(5)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        self._thread.join(2)
-        for fd in (self.master, self.slave):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
-        if self._stderr is not subprocess.DEVNULL:
-            self._stderr.close()  # type: ignore[union-attr]
 
 
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
@@ -271,6 +183,3 @@ def run(args: argparse.Namespace) -> int:
         if standin:
             standin.stop()
 
-
-# Re-exported for tests and the simulator.
-__all__ = ["VirtualBoard", "StandInHardware", "factory_image", "MAIN_PY", "struct"]

@@ -12,18 +12,22 @@ import sys
 # (module under tools/, one-line summary for the overview).  Imported lazily
 # so that `twinbot serial` does not pay for numpy or pymavlink.
 SUBCOMMANDS = (
-    ("demo", "run the main demonstration (a protocol loop-back through the serial harness)"),
+    ("demo", "run the main demonstration: both rule sets exploring the paper's room"),
+    ("sim", "simulate the robot with its firmware in the loop (SIL or PIL), headless"),
     ("serial", "serial protocol test harness: show, send and record frames on a port"),
     ("board", "run the firmware on a virtual board behind a pseudo-terminal"),
     ("flash", "compile the firmware with mpy-cross, copy it to a board with mpremote, check HELLO"),
+    ("fuzzy", "the fuzzy controller: rule table, FCL, figure, evaluation"),
     ("bench", "benchmarks that produce the README's figures"),
 )
 
 _MODULES = {
     "demo": "tools.demo",
+    "sim": "tools.sim",
     "serial": "tools.serial_harness",
     "board": "tools.board",
     "flash": "tools.flash",
+    "fuzzy": "tools.fuzzy_rules",
     "bench": "tools.bench",
 }
 

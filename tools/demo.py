@@ -1,81 +1,106 @@
-"""`twinbot demo`: the main demonstration.
+"""`twinbot demo`: the paper's experiment, start to finish.
 
-Until the simulator lands this is a protocol loop-back: a scripted robot
-conversation (HELLO, parameters, COMMANDs, TELEMETRY, a LOG) goes out
-through the serial harness on loop:// and comes back decoded, with one
-frame corrupted on the way and one dropped, so the counters show what the
-decoder catches.  Every frame is recorded to a frame log.
+1. Both rule sets of section 5 explore the paper's room (Fig. 15), with the
+   firmware in the loop (SIL), fixed step: trajectory pictures, coverage
+   over time, collisions.
+2. The repeatability experiment of section 4: two real-time runs from
+   identical conditions (variable step from the wall clock) and two
+   fixed-step runs; the real-time pair drifts apart, the fixed pair is
+   identical bit for bit.
+
+Pictures go to --out (default demo/).  `twinbot demo --loopback` shows the
+serial protocol on its own instead.
 """
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
-from protocol import messages as M
-from tools.frame_log import FrameLogWriter, read_frame_log
-from tools.serial_harness import Display, status_text
-from tools.serial_link import Frame, SerialLink
+import numpy as np
+
+from tools.cli import CliError
 
 
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
-    p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n")[1].replace("\n", " "))
-    p.add_argument("--record", default="recordings/demo-frames.jsonl", metavar="FILE",
-                   help="frame log to write (default: recordings/demo-frames.jsonl)")
-    p.add_argument("--port", default="loop://", help="port to loop through (default loop://)")
+    p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1],
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", default="demo", help="folder for the pictures (default demo/)")
+    p.add_argument("--duration", type=float, default=180.0, help="simulated seconds per exploration (default 180)")
+    p.add_argument("--world", default="paper_room", help="world to explore (default paper_room)")
+    p.add_argument("--repeat-duration", type=float, default=60.0,
+                   help="simulated seconds of each repeatability run (default 60)")
+    p.add_argument("--repeat-speed", type=float, default=15.0,
+                   help="real-time runs go at this many times real time (default 15)")
+    p.add_argument("--loopback", action="store_true", help="show the serial protocol on loop:// instead")
+    p.add_argument("--record", default="recordings/demo-frames.jsonl", help=argparse.SUPPRESS)
+    p.add_argument("--port", default="loop://", help=argparse.SUPPRESS)
     p.set_defaults(func=run)
 
 
-def script() -> list[tuple[int, dict[str, object]]]:
-    """What a robot and its host say in the first second of a session."""
-    out: list[tuple[int, dict[str, object]]] = [
-        (M.HELLO, {"protocol": M.PROTOCOL_VERSION, "fw_major": 0, "fw_minor": 1, "fw_patch": 0,
-                   "board": M.BOARD_VIRTUAL, "sensors": 8}),
-        (M.PARAM_SET, {"param": M.param_by_name("emitter_pct")[0], "value": 80}),
-        (M.PARAM_VALUE, {"param": M.param_by_name("emitter_pct")[0], "value": 80}),
-        (M.COMMAND, {"mode": M.MODE_HOST, "left": 150, "right": 120}),
-    ]
-    for k in range(10):
-        near = 40 * k
-        out.append((M.TELEMETRY, {
-            "tick_ms": 40 * k, "mode": M.MODE_HOST, "flags": 0, "enc_l": 9 * k, "enc_r": 7 * k,
-            "ir_on": [300 + near, 250, 120, 90, 80, 95, 130, 260 + near], "ir_amb": [60, 55, 50, 48, 47, 49, 52, 58],
-            "i_ref_l_ma": 120, "i_ref_r_ma": 100, "vbat_mv": 7400 - k,
-        }))
-    out.append((M.LOG, {"level": M.LOG_INFO, "text": "demo: obstacle ahead, slowing down"}))
-    return out
+def identical(a, b) -> bool:  # type: ignore[no-untyped-def]
+    return a.pose.shape == b.pose.shape and bool(np.array_equal(a.pose, b.pose))
 
 
 def run(args: argparse.Namespace) -> int:
-    Path(args.record).parent.mkdir(parents=True, exist_ok=True)
-    log = FrameLogWriter(args.record, args.port)
-    display = Display(quiet=False)
+    if args.loopback:
+        from tools import loopback_demo
 
-    def on_frame(frame: Frame) -> None:
-        log.frame(frame)
-        if frame.direction == "rx":
-            display.frame(frame)
+        return loopback_demo.run(args)
+    from host_sim.controllers import SilController
+    from host_sim.params import DEFAULT
+    from host_sim.simulation import Simulation
+    from host_sim.world import WorldError, world_by_name_or_path
+    from tools.plots import save_coverage, save_runs
+    from tools.sim import Progress, summary
 
-    link = SerialLink.open(args.port, on_frame=on_frame)
-    display.link = link
-    print(f"twinbot demo: {len(script())} frames out through {args.port} and back; frame 6 is corrupted on the way, "
-          "frame 9 is dropped")
     try:
-        for k, (msg_type, fields) in enumerate(script()):
-            payload = M.pack_payload(msg_type, fields)  # type: ignore[arg-type]
-            raw = link.encoder.encode(msg_type, payload)
-            if k == 6:
-                raw = raw[:10] + bytes([raw[10] ^ 0x04]) + raw[11:]  # one flipped bit: the CRC must catch it
-            if k == 9:
-                continue  # never sent: the sequence numbers show the gap
-            link.send_raw(raw)
-            link.poll(0.01)
-        while link.poll(0.05):
-            pass
-    finally:
-        log.stats(link.now(), link.decoder.stats())
-        log.close()
-        link.close()
-    print("\n" + status_text(link) if display.tty else status_text(link))
-    records = read_frame_log(args.record)
-    print(f"frame log: {args.record} ({len(records)} records, re-read and verified)")
-    return 0
+        world = world_by_name_or_path(args.world, DEFAULT.body_radius)
+    except WorldError as exc:
+        raise CliError(str(exc)) from None
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+
+    print(f"1. exploration of {world.name}, {args.duration:.0f} s per rule set, firmware in the loop (SIL), fixed step")
+    runs = {}
+    for rules, rule_set in (("first", 0), ("refined", 1)):
+        progress = Progress(args.duration, f"{rules} rule set")
+        try:
+            runs[rules] = Simulation(world, DEFAULT, SilController(rule_set), seed=1).run_fixed(
+                args.duration, progress=progress)
+        finally:
+            progress.close()
+        print("   " + summary(runs[rules], f"{rules:>7}: "))
+    pic = save_runs(out / "exploration.png", world, list(runs.values()),
+                    [f"first rule set ({100 * runs['first'].coverage[-1]:.0f} % covered)",
+                     f"refined rule set ({100 * runs['refined'].coverage[-1]:.0f} % covered)"],
+                    DEFAULT.body_radius, f"{world.name}: {args.duration:.0f} s of exploration")
+    cov = save_coverage(out / "coverage.png", list(runs.values()), ["first rule set", "refined rule set"])
+    print(f"   pictures: {pic}, {cov}")
+
+    print(f"2. repeatability (paper Fig. 15): {args.repeat_duration:.0f} s runs, refined rules, same start, same seed")
+    pair = []
+    for k in range(2):
+        progress = Progress(args.repeat_duration, f"real-time run {k + 1}")
+        try:
+            pair.append(Simulation(world, DEFAULT, SilController(1), seed=2).run_realtime(
+                args.repeat_duration, speed=args.repeat_speed, progress=progress))
+        finally:
+            progress.close()
+    fixed = [Simulation(world, DEFAULT, SilController(1), seed=2).run_fixed(args.repeat_duration) for _ in range(2)]
+    gap = _final_gap(pair[0], pair[1])
+    print(f"   real time ({args.repeat_speed:g}x, variable step): "
+          f"{'identical' if identical(*pair) else 'different'}; final positions {gap * 100:.1f} cm apart")
+    print(f"   fixed step: {'identical, bit for bit' if identical(*fixed) else 'DIFFERENT (a bug)'}")
+    pic = save_runs(out / "repeatability.png", world, pair + fixed,
+                    ["real time, run A", "real time, run B", "fixed step, run A", "fixed step, run B"],
+                    DEFAULT.body_radius, "Same start, same seed: variable steps drift apart, fixed steps do not")
+    print(f"   picture: {pic}")
+    return 0 if identical(*fixed) else 1
+
+
+def _final_gap(a, b) -> float:  # type: ignore[no-untyped-def]
+    n = min(len(a.pose), len(b.pose))
+    if not n:
+        return math.nan
+    return float(math.hypot(*(a.pose[n - 1, :2] - b.pose[n - 1, :2])))

@@ -327,61 +327,75 @@ def plot_sets(path: str, max_speed: int = 200) -> None:
     bearings = [x / 2 for x in range(0, 721)]
     for dirn, name in enumerate(("front", "left", "back", "right")):
         ys = [circular_weight(dirn, t) for t in bearings]
-        b.plot(bearings, ys, color=colours[dirn], lw=2, label=name)
-    for i in range(fz.N_SENSORS):
+        b.plot(bearings, ys, color=colours[dirn], lw=2)
+        for peak in ((0, 360) if dirn == 0 else (DIRECTION_BEARINGS[dirn],)):
+            right_side = peak < 360
+            b.text(peak + (6 if right_side else -6), 0.93, name, color=colours[dirn], fontsize=10,
+                   ha="left" if right_side else "right", va="center", fontweight="bold")
+    for i in range(fz.N_SENSORS + 1):
         b.axvline(45 * i, color="0.75", lw=0.8, ls=":")
-        b.text(45 * i, 1.04, f"S{i + 1}", ha="center", va="bottom", fontsize=9)
+        b.text(45 * i, 1.04, f"S{i % fz.N_SENSORS + 1}", ha="center", va="bottom", fontsize=9)
+    for i in range(fz.N_SENSORS):
         for dirn in range(4):
             w = fz.direction_weight(dirn, i)
             if w:
                 b.plot([45 * i], [w / fz.ONE], "o", color=colours[dirn], ms=5)
-    b.axvline(360, color="0.75", lw=0.8, ls=":")
-    b.text(360, 1.04, "S1", ha="center", va="bottom", fontsize=9)
-    b.set_xlim(-5, 365)
+    b.set_xlim(-12, 372)
     b.set_ylim(-0.03, 1.15)
     b.set_xticks(range(0, 361, 45))
     b.set_xlabel("sensor bearing (degrees, counter-clockwise from front)")
     b.set_ylabel("weight of the bearing in the direction")
     b.set_title("(b) circular fuzzification (first rule set)")
-    b.legend(loc="center right", fontsize=9, ncol=1, bbox_to_anchor=(1.0, 0.62))
 
     # (c) output singletons.
     z = singletons(max_speed)
     refined_only = {t for t in range(len(z))} - {t for _, act in fz.RULES_FIRST for t in fz.ACTIONS[act]}
+    previous = None
     for t, v in enumerate(z):
+        lift = 0.13 if previous is not None and v - previous < 0.25 * max_speed else 0.0
+        previous = v if not lift else None
         style = "--" if t in refined_only else "-"
         col = "tab:red" if t in refined_only else "k"
         c.vlines(v, 0, 1, color=col, lw=2.5, ls=style)
         c.plot([v], [1], "o", color=col)
-        c.text(v, 1.04, f"{TERM_NAMES[t]}\n{v:+d}", ha="center", va="bottom", fontsize=9, color=col)
+        c.vlines(v, 1, 1.02 + lift, color="0.6", lw=0.6)
+        c.text(v, 1.04 + lift, f"{TERM_NAMES[t]}\n{v:+d}", ha="center", va="bottom", fontsize=9, color=col)
     c.axvline(0, color="0.7", lw=0.8, ls=":")
     c.set_xlim(-max_speed * 1.15, max_speed * 1.15)
-    c.set_ylim(0, 1.35)
+    c.set_ylim(0, 1.45)
     c.set_yticks([0, 1])
     c.set_xlabel(f"wheel speed (mm/s, max_speed {max_speed}); same terms for the left and right wheel")
     c.set_ylabel("membership")
     c.set_title("(c) outputs: singletons per wheel (dashed: quick turns only)")
 
     # (d) actions in the wheel-speed plane.
-    lim = max_speed * 1.2
-    d.plot([-lim, lim], [-lim, lim], color="0.7", lw=0.8, ls=":")
+    m = max_speed
+    d.plot([-1.3 * m, 1.3 * m], [-1.3 * m, 1.3 * m], color="0.7", lw=0.8, ls=":")
     d.axhline(0, color="0.7", lw=0.8)
     d.axvline(0, color="0.7", lw=0.8)
-    d.text(-lim * 0.92, lim * 0.82, "turns left\n(right > left)", fontsize=9, color="0.4")
-    d.text(lim * 0.45, -lim * 0.9, "turns right\n(left > right)", fontsize=9, color="0.4")
+    d.text(-0.45 * m, 0.3 * m, "turns left\n(right > left)", fontsize=9, color="0.45", ha="right")
+    d.text(0.45 * m, -0.35 * m, "turns right\n(left > right)", fontsize=9, color="0.45", ha="left")
     refined_actions = {act for _, act in fz.RULES_REFINED} - {act for _, act in fz.RULES_FIRST}
-    offsets = {"go ahead": (6, -14), "go fast ahead": (-95, 4), "go back": (6, 4)}
+    # Label placement (x, y in units of max_speed, ha, va) per action.
+    place = {
+        "go ahead": (0.6, 0.42, "left", "center"),
+        "go back": (-0.72, -0.95, "left", "center"),
+        "go more on right": (1.06, 0.15, "left", "center"),
+        "go more on left": (0.15, 1.07, "center", "bottom"),
+        "go fast ahead": (1.06, 1.0, "left", "center"),
+        "quick turn right": (1.06, -1.0, "left", "center"),
+        "quick turn left": (-1.06, 1.0, "right", "center"),
+    }
     for act, (lt, rt) in enumerate(fz.ACTIONS):
         x, y = z[lt], z[rt]
         col = "tab:red" if act in refined_actions else "tab:blue"
         d.annotate("", xy=(x, y), xytext=(0, 0),
                    arrowprops={"arrowstyle": "->", "color": col, "lw": 1.8})
         d.plot([x], [y], "o", color=col)
-        off = offsets.get(ACTION_NAMES[act], (6, 4))
-        d.annotate(f"{ACTION_NAMES[act]}\n({x:+d}, {y:+d})", (x, y), textcoords="offset points",
-                   xytext=off, fontsize=9, color=col)
-    d.set_xlim(-lim, lim)
-    d.set_ylim(-lim, lim)
+        px, py, ha, va = place.get(ACTION_NAMES[act], (x / m + 0.05, y / m, "left", "center"))
+        d.text(px * m, py * m, f"{ACTION_NAMES[act]}\n({x:+d}, {y:+d})", fontsize=9, color=col, ha=ha, va=va)
+    d.set_xlim(-1.75 * m, 1.75 * m)
+    d.set_ylim(-1.2 * m, 1.3 * m)
     d.set_aspect("equal")
     d.set_xlabel("left wheel (mm/s)")
     d.set_ylabel("right wheel (mm/s)")
@@ -431,7 +445,12 @@ def run(args: argparse.Namespace) -> int:
     if args.max_speed <= 0:
         raise CliError(f"--max-speed {args.max_speed}: must be positive")
     if args.plot:
-        plot_sets(args.plot, args.max_speed)
+        try:
+            plot_sets(args.plot, args.max_speed)
+        except ImportError as exc:
+            raise CliError(f"--plot needs matplotlib ({exc}); pip install matplotlib") from None
+        except OSError as exc:
+            raise CliError(f"--plot {args.plot}: {exc.strerror or exc}") from None
         print(f"wrote {args.plot}")
     if args.fcl:
         print(to_fcl(rs, args.max_speed), end="")
@@ -458,6 +477,6 @@ def format_eval(rule_set: int, readings: list[int], max_speed: int = 200) -> str
     for (a, act), w in zip(fz.RULE_SETS[rule_set], e["strengths"]):
         if w:
             lt, rt = fz.ACTIONS[act]
-            lines.append(f"  {w / fz.ONE:5.3f}  {describe_rule(a, act):<50} ({z[lt]:+d}, {z[rt]:+d})")
+            lines.append(f"  {w / fz.ONE:5.3f}  {describe_rule(a, act):<52} ({z[lt]:+d}, {z[rt]:+d})")
     lines.append(f"left = {e['left']} mm/s, right = {e['right']} mm/s")
     return "\n".join(lines)

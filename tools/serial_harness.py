@@ -46,7 +46,9 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
                    help="repeat --command at this rate in Hz, to keep the watchdog fed (0: send once; default 10)")
     p.add_argument("--param-set", action="append", default=[], metavar="NAME=VALUE", help="send PARAM_SET (repeatable)")
     p.add_argument("--param-get", action="append", default=[], metavar="NAME", help="send PARAM_GET (repeatable)")
-    p.add_argument("--record", metavar="FILE", help="append every frame to this frame log (JSON lines, flushed)")
+    p.add_argument("--record", metavar="FILE",
+                   help="record as you go: FILE.csv writes a recording (TELEMETRY rows, docs/recordings.md), "
+                        "any other name a frame log of every frame (JSON lines, docs/frame-log.md)")
     p.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C)")
     p.add_argument("--count", type=int, help="stop after receiving this many good frames")
     p.add_argument("--quiet", action="store_true", help="no per-frame lines, only the counts")
@@ -175,10 +177,13 @@ def run(args: argparse.Namespace) -> int:
     if args.rate < 0:
         raise CliError("--rate must be >= 0")
     display = Display(args.quiet)
-    log = None
+    log: FrameLogWriter | TelemetryRecorder | None = None
     try:
-        log = FrameLogWriter(args.record, args.port) if args.record else None
-    except FrameLogError as exc:
+        if args.record and args.record.endswith(".csv"):
+            log = TelemetryRecorder(args.record, args.port)
+        elif args.record:
+            log = FrameLogWriter(args.record, args.port)
+    except (FrameLogError, ValueError) as exc:
         raise CliError(str(exc)) from None
 
     def on_frame(frame: Frame) -> None:
@@ -205,6 +210,38 @@ def run(args: argparse.Namespace) -> int:
             log.stats(link.now(), link.decoder.stats())
             log.close()
         link.close()
+
+
+class TelemetryRecorder:
+    """Writes a robot's TELEMETRY as a recording (the simulator's format), row by row."""
+
+    def __init__(self, path: str, port: str) -> None:
+        from host_sim.recording import RecordingWriter
+
+        self.writer = RecordingWriter(path, source="robot", sample_period=0.04, extra={"port": port})
+        self.last_tick: int | None = None
+        self.t_ms = 0  # unwrapped robot clock
+
+    def frame(self, frame: Frame) -> None:
+        if frame.direction != "rx" or frame.msg_type != M.TELEMETRY:
+            return
+        f = frame.fields
+        tick = int(f["tick_ms"])  # type: ignore[call-overload]
+        if self.last_tick is not None:
+            step = (tick - self.last_tick) & 0x3FFFFFFF
+            if step == 0 or step > 0x20000000:  # a repeat, or the clock went back (a reset)
+                return
+            self.t_ms += step
+        self.last_tick = tick
+        self.writer.row(self.t_ms / 1000.0, (int(f["i_ref_l_ma"]) / 1000.0, int(f["i_ref_r_ma"]) / 1000.0),  # type: ignore[call-overload]
+                        (int(f["enc_l"]), int(f["enc_r"])), list(f["ir_on"]), list(f["ir_amb"]),  # type: ignore[call-overload]
+                        int(f["vbat_mv"]) / 1000.0)  # type: ignore[call-overload]
+
+    def stats(self, t: float, counters: dict[str, int]) -> None:
+        self.writer.meta["decoder"] = counters
+
+    def close(self) -> None:
+        self.writer.close()
 
 
 def session(link: SerialLink, args: argparse.Namespace, command: dict[str, object] | None,

@@ -1,6 +1,6 @@
 """One control cycle allocates nothing: micropython tests/mp/firmware_cycle_check.py
 
-Runs the firmware's Robot on a test HAL whose methods allocate nothing,
+Runs the firmware's Robot on the test HAL (tools/mp_testhal.py), whose methods allocate nothing,
 warms every path up (autonomous with obstacles, host commands, a parameter
 change, the watchdog), then runs cycles inside micropython.heap_lock(): any
 heap allocation raises MemoryError.  Host bytes (COMMAND frames) arrive
@@ -16,71 +16,7 @@ import micropython
 from firmware.robot import Robot
 from protocol import wire as M
 from protocol.framing import FrameEncoder
-
-
-class TestHal:
-    board = M.BOARD_VIRTUAL
-    overrun = False
-
-    def __init__(self):
-        self.t = 0
-        self.em = 0
-        self.amb = [120, 130, 90, 80, 70, 85, 95, 110]
-        self.refl = [0] * 8
-        self.encs = [0, 0]
-        self.cur_l = 0
-        self.cur_r = 0
-        self.inbox = bytearray(512)
-        self.in_len = 0
-        self.in_pos = 0
-        self.sent = 0
-
-    def wait_cycle(self, period):
-        self.t += period
-        return self.t
-
-    def set_emitters(self, pct):
-        self.em = pct
-
-    def read_ir(self, out):
-        for i in range(8):
-            v = self.amb[i] + (self.refl[i] * self.em) // 100
-            out[i] = v if v < 4095 else 4095
-
-    def read_encoders(self, out):
-        out[0] = self.encs[0]
-        out[1] = self.encs[1]
-
-    def battery_mv(self):
-        return 7400
-
-    def set_currents(self, left, right):
-        self.cur_l = left
-        self.cur_r = right
-        self.encs[0] += left // 16
-        self.encs[1] += right // 16
-
-    def host_read(self, buf):
-        n = self.in_len - self.in_pos
-        if n > len(buf):
-            n = len(buf)
-        for k in range(n):
-            buf[k] = self.inbox[self.in_pos + k]
-        self.in_pos += n
-        return n
-
-    def host_write(self, data):
-        self.sent += len(data)
-
-    def end_cycle(self):
-        pass
-
-    def give(self, frame):
-        """Queue host bytes (setup only)."""
-        self.in_pos = 0
-        self.in_len = len(frame)
-        for k in range(len(frame)):
-            self.inbox[k] = frame[k]
+from tools.mp_testhal import TestHal
 
 
 def command_frame(enc, mode, left, right):
@@ -99,7 +35,7 @@ def locked_cycles(robot, hal, frames, n, result):
                 hal.in_len = len(f)
                 for j in range(len(f)):
                     hal.inbox[j] = f[j]
-            hal.refl[k & 7] = (k * 37) % 3000
+            hal.reflection[k & 7] = (k * 37) % 3000
             robot.cycle()
             k += 1
     except MemoryError:
@@ -120,7 +56,7 @@ def main():
     # host mode, watchdog, a parameter, a HELLO.
     hal.give(autonomous)
     for k in range(20):
-        hal.refl[k & 7] = 2500
+        hal.reflection[k & 7] = 2500
         robot.cycle()
     hal.give(enc.encode(M.PARAM_SET, struct.pack("<Bi", 4, 0)))
     robot.cycle()

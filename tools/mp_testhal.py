@@ -1,4 +1,4 @@
-"""A board for tests: a HAL with a plain plant, on CPython and MicroPython alike.
+"""A board for tests and benchmarks: a HAL with a plain plant, on CPython and MicroPython alike.
 
 IR: each sensor reads ambient + reflection * emitter power / 100, capped at
 the ADC ceiling.  Wheels: encoder ticks advance with the current reference
@@ -11,17 +11,17 @@ class TestHal:
     board = 2  # BOARD_VIRTUAL
     overrun = False
 
-    def __init__(self):
+    def __init__(self, in_size=2048, out_size=8192):
         self.t = 0
         self.emitters = 0
         self.ambient = [100] * 8
         self.reflection = [0] * 8  # at 100 % emitter power
         self.encs = [0, 0]
         self.current = [0, 0]
-        self.inbox = bytearray(2048)
+        self.inbox = bytearray(in_size)
         self.in_len = 0
         self.in_pos = 0
-        self.out = bytearray(8192)
+        self.out = bytearray(out_size)
         self.out_len = 0
         self.vbat = 7400
 

@@ -1,0 +1,115 @@
+"""The robot's HAL: a Raspberry Pi Pico (RP2040) with the pin map of config.py.
+
+- IR: the eight phototransistors reach ADC0 through a CD4051 multiplexer;
+  one PWM pin drives all eight emitters (pulse width = light power L).
+- Encoders: channel A of each wheel interrupts on both edges; channel B
+  gives the direction (x2 decoding).  The handlers allocate nothing.
+- Motors: each driver regulates current; its reference is a filtered PWM
+  duty (full scale CURRENT_FULL_SCALE_MA) plus a direction pin.
+- Host link: the USB serial port (or a UART, config.HOST_UART).
+
+Cycles are timed with time.ticks_ms(); a cycle that starts late sets
+`overrun` (the OVERRUN flag in telemetry).  Not run in CI (no board there):
+mpy-cross and mypy against the rp2 stubs check it.
+"""
+import time
+
+from machine import ADC, PWM, Pin
+
+from firmware import config
+from firmware.hal import TICK_MASK, Hal
+from firmware.hostlink import StdioLink, UartLink
+from protocol import wire
+
+
+class Rp2040Hal(Hal):
+    board = wire.BOARD_RP2040
+
+    def __init__(self) -> None:
+        self.mux = [Pin(p, Pin.OUT) for p in config.PIN_IR_MUX_SELECT]
+        self.ir_adc = ADC(Pin(config.PIN_IR_ADC))
+        self.battery_adc = ADC(Pin(config.PIN_BATTERY_ADC))
+        self.emitter_pwm = PWM(Pin(config.PIN_EMITTERS_PWM))
+        self.emitter_pwm.freq(config.EMITTER_PWM_HZ)
+        self.emitter_pwm.duty_u16(0)
+        self.motor_pwm = [PWM(Pin(config.PIN_MOTOR_L_PWM)), PWM(Pin(config.PIN_MOTOR_R_PWM))]
+        for pwm in self.motor_pwm:
+            pwm.freq(config.MOTOR_PWM_HZ)
+            pwm.duty_u16(0)
+        self.motor_dir = [Pin(config.PIN_MOTOR_L_DIR, Pin.OUT), Pin(config.PIN_MOTOR_R_DIR, Pin.OUT)]
+        self.counts = [0, 0]
+        self._enc_a = [Pin(config.PIN_ENC_L[0], Pin.IN, Pin.PULL_UP), Pin(config.PIN_ENC_R[0], Pin.IN, Pin.PULL_UP)]
+        self._enc_b = [Pin(config.PIN_ENC_L[1], Pin.IN, Pin.PULL_UP), Pin(config.PIN_ENC_R[1], Pin.IN, Pin.PULL_UP)]
+        edges = Pin.IRQ_RISING | Pin.IRQ_FALLING
+        self._enc_a[0].irq(handler=self._edge_left, trigger=edges, hard=True)
+        self._enc_a[1].irq(handler=self._edge_right, trigger=edges, hard=True)
+        uart = config.HOST_UART
+        self.link = StdioLink() if uart is None else UartLink(*uart)
+        self.overrun = False
+        self._next = time.ticks_ms()
+
+    # Encoder edges (hard interrupts: no allocation, no long work).
+    def _edge_left(self, pin: Pin) -> None:
+        self.counts[0] += 1 if pin.value() != self._enc_b[0].value() else -1
+
+    def _edge_right(self, pin: Pin) -> None:
+        # The right motor is mounted mirrored: the same rotation of the robot's
+        # wheel forward gives the opposite phase.
+        self.counts[1] += 1 if pin.value() == self._enc_b[1].value() else -1
+
+    def wait_cycle(self, period_ms: int) -> int:
+        late = time.ticks_diff(time.ticks_ms(), self._next)
+        if late < 0:
+            time.sleep_ms(-late)
+            self.overrun = False
+        else:
+            self.overrun = late > 0
+            if late > period_ms:  # far behind: start again from now
+                self._next = time.ticks_ms()
+        start = self._next
+        self._next = time.ticks_add(self._next, period_ms)
+        return start & TICK_MASK  # type: ignore[operator]  # ticks are small ints
+
+    def set_emitters(self, pct: int) -> None:
+        self.emitter_pwm.duty_u16(pct * 65535 // 100)
+        time.sleep_us(config.IR_SETTLE_US)
+
+    def read_ir(self, out: list[int]) -> None:
+        mux = self.mux
+        adc = self.ir_adc
+        for ch in range(8):
+            mux[0].value(ch & 1)
+            mux[1].value((ch >> 1) & 1)
+            mux[2].value((ch >> 2) & 1)
+            time.sleep_us(10)  # the multiplexer settles
+            out[ch] = adc.read_u16() >> (16 - config.ADC_BITS)
+
+    def read_encoders(self, out: list[int]) -> None:
+        out[0] = self.counts[0]
+        out[1] = self.counts[1]
+
+    def battery_mv(self) -> int:
+        return self.battery_adc.read_u16() * 3300 * config.BATTERY_DIVIDER // 65535
+
+    def set_currents(self, left_ma: int, right_ma: int) -> None:
+        self._drive(0, left_ma)
+        self._drive(1, right_ma)
+
+    def _drive(self, side: int, ma: int) -> None:
+        self.motor_dir[side].value(1 if ma < 0 else 0)
+        mag = -ma if ma < 0 else ma
+        duty = mag * 65535 // config.CURRENT_FULL_SCALE_MA
+        self.motor_pwm[side].duty_u16(duty if duty < 65535 else 65535)
+
+    def host_read(self, buf: bytearray) -> int:
+        return self.link.read(buf)
+
+    def host_write(self, data: memoryview) -> None:
+        self.link.write(data)
+
+    def end_cycle(self) -> None:
+        pass
+
+    def close(self) -> None:
+        self.set_currents(0, 0)
+        self.emitter_pwm.duty_u16(0)

@@ -1,0 +1,324 @@
+"""The IR proximity sensors of the paper (section 3.3), with ambient light, noise and the ADC.
+
+Eight emitter/phototransistor pairs sit on the rim of the body (radius
+body_radius) at bearings 45*i degrees from the heading, i = 0..7 = S1..S8
+(S1 front, then counter-clockwise), each looking radially outward.
+
+Reflected light (docs/ir-sensor.md has the figures and the derivation):
+
+    response(x, angle, L) = C * P(L) * A(angle) * F(x)           [ADC counts]
+
+* the reflection point: a ray from the sensor along its axis to the nearest
+  wall (world.World.cast_robot); x is the distance along the ray (m), angle
+  the incidence angle between the ray and the wall's normal;
+* A: two 5th-degree polynomials in |angle| (rad), the big dome (diffuse
+  reflection) and the small dome (the specular beam on top of it near normal
+  incidence), blended by a smoothstep of |angle| over ir_angle_blend: the
+  small dome alone below its first value, the big dome alone above its
+  second; symmetric on [-pi/2, pi/2] by construction, clipped at 0;
+* F: 1/x^2 far (a fixed solid angle of light), x^2 / x_p^4 near (the
+  emitter's and the receiver's cones stop overlapping), the two meeting at
+  the peak x_p = ir_near_peak; a weighted average (smoothstep weight) over
+  ir_blend around x_p; faded to 0 over the last 20 % of sensor_range;
+* P: the pulse width L (%) gives proportional light, min(L/100,
+  ir_saturation): flat above the emitter's saturation (Fig. 10);
+* C = ir_gain, counts m^2 at 100 % pulse width (extrapolated linearly).
+
+Readings (`read_sensors`): emitters off -> ambient + noise; emitters on ->
+ambient + reflected + noise; each clipped to 0..adc_max (the ADC ceiling
+saturates the total) and rounded to integer counts.  The ambient is the
+world's global level (or ir_ambient) plus lamps, each adding
+level * max(0, cos(axis, direction to lamp)) / d^2 when no wall hides it,
+flickering as level * (1 + depth sin(2 pi f t)) if asked; the emitter-on
+reading is taken ir_on_delay after the emitter-off one, so a flickering lamp
+leaks into on - off as it does on the robot.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from host_sim.params import DEFAULT, RobotParams
+from host_sim.world import World
+
+N_SENSORS = 8
+BEARINGS = tuple(i * math.pi / 4 for i in range(N_SENSORS))  # rad from the heading, S1..S8
+NAMES = tuple(f"S{i + 1}" for i in range(N_SENSORS))
+LAMP_MIN_DISTANCE = 0.10  # m: a lamp closer than this counts as this far (no 1/d^2 blow-up)
+RANGE_TAPER = 0.2  # fraction of sensor_range over which the response fades to 0
+
+# --------------------------------------------------------------------------- #
+# Fig. 7: the target angle shape and the fit of the two domes
+# --------------------------------------------------------------------------- #
+# White matte paper: a broad diffuse dome ~ cos^k(angle) (Lambert's law for
+# the emitter spot, a little narrower from the cones' overlap), with the
+# residual the paper measured at grazing incidence, plus a narrow specular
+# beam on top near normal incidence.  Normalised to 1 at 0.
+ANGLE_TARGET = {
+    "diffuse_exponent": 1.5,  # k
+    "grazing_floor": 0.02,  # the residual at +-pi/2
+    "specular_height": 0.20,  # the small dome's share of the peak
+    "specular_width": 0.12,  # rad, Gaussian standard deviation (about 7 degrees)
+}
+
+
+def angle_target(angle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(big dome alone, big + small dome) of the target shape at |angle| (rad)."""
+    a = np.abs(np.asarray(angle, dtype=float))
+    k, floor = ANGLE_TARGET["diffuse_exponent"], ANGLE_TARGET["grazing_floor"]
+    h, w = ANGLE_TARGET["specular_height"], ANGLE_TARGET["specular_width"]
+    big = (1.0 - h - floor) * np.cos(np.minimum(a, math.pi / 2)) ** k + floor
+    return big, big + h * np.exp(-0.5 * (a / w) ** 2)
+
+
+def _fit_even_start(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Least-squares degree-5 polynomial, coefficients x^0..x^5, with the x^1 term held at 0.
+
+    numpy.polyfit's fit with one constraint: a zero slope at 0 keeps the
+    symmetric extension A(|angle|) smooth at normal incidence.
+    """
+    vander = np.stack([x ** 0, x ** 2, x ** 3, x ** 4, x ** 5], 1)
+    c, *_ = np.linalg.lstsq(vander, y, rcond=None)
+    return np.array([c[0], 0.0, c[1], c[2], c[3], c[4]])
+
+
+def fit_angle_polynomials(blend: tuple[float, float] = (0.25, 0.45)
+                          ) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Fit the two domes to `angle_target`: (big, small) coefficients x^0..x^5.
+
+    The big dome fits the diffuse part on [0, pi/2]; the small dome fits the
+    whole shape (diffuse + specular) on [0, blend[1] + 0.05], where it is
+    used.  These are the defaults of ir_big_dome / ir_small_dome.
+    """
+    x_big = np.linspace(0.0, math.pi / 2, 400)
+    x_small = np.linspace(0.0, blend[1] + 0.05, 300)
+    big = _fit_even_start(x_big, angle_target(x_big)[0])
+    small = _fit_even_start(x_small, angle_target(x_small)[1])
+    return tuple(float(f"{v:.6g}") for v in big), tuple(float(f"{v:.6g}") for v in small)
+
+
+# --------------------------------------------------------------------------- #
+# The model
+# --------------------------------------------------------------------------- #
+class _Consts:
+    """Per-parameter-set constants, computed once."""
+
+    def __init__(self, p: RobotParams) -> None:
+        check_params(p)
+        self.p = p
+        self.coef = np.array([p.ir_big_dome, p.ir_small_dome]).T  # (6, 2)
+        # [small, big - small]: A = small + w (big - small) from one product
+        self.coef_blend = np.array([p.ir_small_dome, np.subtract(p.ir_big_dome, p.ir_small_dome)]).T
+        self.blend_lo, self.blend_hi = p.ir_angle_blend
+        self.inv_blend = 1.0 / (self.blend_hi - self.blend_lo)
+        xp = p.ir_near_peak
+        self.inv_xp4 = 1.0 / xp ** 4
+        self.near_lo = xp - p.ir_blend / 2
+        self.inv_w = 1.0 / p.ir_blend
+        self.range = p.sensor_range
+        self.inv_taper = 1.0 / (RANGE_TAPER * p.sensor_range)
+        self.adc_max = p.adc_max
+        self.powers = np.arange(6.0)
+
+
+_CACHE: dict[int, _Consts] = {}
+
+
+def _consts(p: RobotParams) -> _Consts:
+    c = _CACHE.get(id(p))
+    if c is None or c.p is not p:
+        if len(_CACHE) > 64:
+            _CACHE.clear()
+        c = _CACHE[id(p)] = _Consts(p)
+    return c
+
+
+def check_params(p: RobotParams) -> None:
+    """ValueError if the IR parameters cannot make a sensor."""
+    problems = []
+    if not p.ir_near_peak > 0:
+        problems.append(f"ir_near_peak must be > 0 m, got {p.ir_near_peak}")
+    if not 0 < p.ir_blend < 2 * p.ir_near_peak:
+        problems.append(f"ir_blend must be in (0, 2 * ir_near_peak), got {p.ir_blend}")
+    if not p.sensor_range > p.ir_near_peak + p.ir_blend:
+        problems.append("sensor_range must exceed ir_near_peak + ir_blend")
+    if not 0 < p.ir_saturation <= 1:
+        problems.append(f"ir_saturation must be in (0, 1], got {p.ir_saturation}")
+    lo, hi = p.ir_angle_blend
+    if not 0 <= lo < hi <= math.pi / 2:
+        problems.append(f"ir_angle_blend must satisfy 0 <= lo < hi <= pi/2, got {p.ir_angle_blend}")
+    if p.ir_gain < 0 or p.ir_noise < 0 or p.ir_ambient < 0 or p.ir_on_delay < 0:
+        problems.append("ir_gain, ir_noise, ir_ambient and ir_on_delay must be >= 0")
+    if len(p.ir_big_dome) != 6 or len(p.ir_small_dome) != 6:
+        problems.append("ir_big_dome and ir_small_dome need 6 coefficients (x^0..x^5)")
+    if problems:
+        raise ValueError("IR sensor parameters: " + "; ".join(problems))
+
+
+def _smoothstep(u: np.ndarray) -> np.ndarray:
+    u = np.minimum(np.maximum(u, 0.0), 1.0)  # np.clip is several times slower on small arrays
+    return u * u * (3.0 - 2.0 * u)
+
+
+def domes(angle: Any, p: RobotParams = DEFAULT) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(big dome, small dome, blend weight of the big dome) at |angle| (rad)."""
+    c = _consts(p)
+    a = np.abs(np.asarray(angle, dtype=float))
+    v = a[..., None] ** c.powers @ c.coef
+    return v[..., 0], v[..., 1], _smoothstep((a - c.blend_lo) * c.inv_blend)
+
+
+def angle_term(angle: Any, p: RobotParams = DEFAULT) -> np.ndarray:
+    """A(angle): relative response to a wall seen at `angle` (rad) from its normal; A(0) ~ 1."""
+    c = _consts(p)
+    a = np.abs(np.asarray(angle, dtype=float))
+    v = np.power.outer(a, c.powers) @ c.coef_blend
+    w = _smoothstep((a - c.blend_lo) * c.inv_blend)
+    return np.maximum(v[..., 0] + w * v[..., 1], 0.0)
+
+
+def distance_term(distance: Any, p: RobotParams = DEFAULT) -> np.ndarray:
+    """F(x) in 1/m^2: x^2/x_p^4 near, 1/x^2 far, averaged over ir_blend around x_p; 0 beyond range."""
+    c = _consts(p)
+    x = np.maximum(np.minimum(distance, c.range), 1e-6)  # inf (no wall) -> range -> 0
+    x2 = x * x
+    near = x2 * c.inv_xp4
+    f = near + _smoothstep((x - c.near_lo) * c.inv_w) * (1.0 / x2 - near)
+    u = np.minimum((c.range - x) * c.inv_taper, 1.0)  # >= 0 already
+    return f * (u * u * (3.0 - 2.0 * u))
+
+
+def power_term(power_pct: Any, p: RobotParams = DEFAULT) -> Any:
+    """P(L): light emitted at pulse width L (%), as a fraction of full: proportional, then flat."""
+    if isinstance(power_pct, (int, float)):
+        return min(max(power_pct / 100.0, 0.0), p.ir_saturation)
+    return np.minimum(np.maximum(np.asarray(power_pct, dtype=float) / 100.0, 0.0), p.ir_saturation)
+
+
+def response(distance: Any, angle: Any, power_pct: Any, p: RobotParams = DEFAULT) -> np.ndarray:
+    """Reflected light (ADC counts, before noise and the ADC ceiling) of a wall at
+    `distance` (m, along the sensor axis; inf = nothing) seen at `angle` (rad)
+    with the emitters at `power_pct` (%).  Vectorised; arguments broadcast."""
+    return (p.ir_gain * power_term(power_pct, p)) * angle_term(angle, p) * distance_term(distance, p)
+
+
+# --------------------------------------------------------------------------- #
+# Geometry of the ring and ambient light
+# --------------------------------------------------------------------------- #
+_BEAR = np.array(BEARINGS)
+
+
+def sensor_rays(poses: Any, p: RobotParams = DEFAULT) -> tuple[np.ndarray, np.ndarray]:
+    """Positions (..., 8, 2) on the rim and unit axes (..., 8, 2) of the sensors of robots at poses (..., 3)."""
+    q = np.asarray(poses, dtype=float)
+    ang = q[..., 2:3] + _BEAR
+    axes = np.stack([np.cos(ang), np.sin(ang)], -1)
+    return q[..., None, :2] + p.body_radius * axes, axes
+
+
+def reflection(world: World, poses: Any, p: RobotParams = DEFAULT) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(distance from the sensor (m), incidence angle (rad), hit) of each sensor, shape (..., 8).
+
+    The ray leaves the robot's centre along the sensor's axis; the distance
+    from the sensor is that minus body_radius, at least 0 (a wall pushed
+    into the rim touches the sensor).
+    """
+    q = np.asarray(poses, dtype=float)
+    reach = p.sensor_range + p.body_radius
+    if q.ndim == 1:
+        d, a, h = world.cast_robot(float(q[0]), float(q[1]), float(q[2]), BEARINGS, reach)
+    else:
+        d, a, h = world.cast_robots(q, BEARINGS, reach)
+    return np.maximum(d - p.body_radius, 0.0), a, h
+
+
+def ambient_level(world: World, positions: Any, axes: Any, t: Any = 0.0, p: RobotParams = DEFAULT,
+                  occlusion: bool = True) -> np.ndarray:
+    """Ambient light (ADC counts) seen by sensors at positions (..., 2) looking along axes (..., 2) at time t (s).
+
+    The world's global level (ir_ambient when the world sets none) plus, for
+    each lamp not hidden by a wall (occlusion=True), level(t) * max(0,
+    cos(axis, direction to the lamp)) / d^2 with d in m, at least
+    LAMP_MIN_DISTANCE.  t broadcasts against the batch shape.
+    """
+    pos = np.asarray(positions, dtype=float)
+    ax = np.asarray(axes, dtype=float)
+    base = p.ir_ambient if world.ambient is None else world.ambient
+    level = np.full(np.broadcast_shapes(pos.shape, ax.shape)[:-1], float(base))
+    for lamp in world.lamps:
+        vec = np.array([lamp.x, lamp.y]) - pos
+        d = np.sqrt((vec * vec).sum(-1))
+        cos = (vec * ax).sum(-1) / np.maximum(d, 1e-12)
+        light = np.asarray(lamp.level_at(t)) * np.maximum(cos, 0.0) / np.maximum(d, LAMP_MIN_DISTANCE) ** 2
+        if occlusion and world.n_walls:
+            lit = light > 0
+            if lit.any():
+                # A wall between the sensor and the lamp hides it.
+                pos_b = np.broadcast_to(pos, vec.shape)
+                dist, _, _ = world.ray_cast(pos_b[lit], vec[lit] / d[lit, None])
+                light = np.array(light, dtype=float)
+                light[lit] = np.where(dist < d[lit] - 1e-9, 0.0, light[lit])
+        level = level + light
+    return level
+
+
+# --------------------------------------------------------------------------- #
+# Readings
+# --------------------------------------------------------------------------- #
+def _quantise(v: np.ndarray, adc_max: int) -> np.ndarray:
+    return np.minimum(np.maximum(np.rint(v), 0.0), adc_max).astype(np.int64)
+
+
+def _read(world: World, poses: np.ndarray, power_pct: Any, t: Any, p: RobotParams,
+          rng: np.random.Generator | None) -> tuple[np.ndarray, np.ndarray]:
+    c = _consts(p)
+    dist, ang, _hit = reflection(world, poses, p)
+    refl = response(dist, ang, power_pct, p)
+    if world.lamps:
+        pos, axes = sensor_rays(poses, p)
+        t_arr = np.asarray(t, dtype=float)
+        if t_arr.ndim:
+            t_arr = t_arr[..., None]  # one time per robot
+        amb_off = ambient_level(world, pos, axes, t_arr, p)
+        flicker = any(lamp.flicker_hz for lamp in world.lamps)
+        amb_on = ambient_level(world, pos, axes, t_arr + p.ir_on_delay, p) if flicker else amb_off
+    else:
+        amb_off = amb_on = p.ir_ambient if world.ambient is None else world.ambient
+    off = amb_off + np.zeros_like(refl)
+    on = amb_on + refl
+    if rng is not None and p.ir_noise > 0:
+        noise = rng.standard_normal((2,) + refl.shape) * p.ir_noise
+        off = off + noise[0]
+        on = on + noise[1]
+    return _quantise(off, c.adc_max), _quantise(on, c.adc_max)
+
+
+def read_sensors(world: World, pose: Any, power_pct: float = 60.0, t: float = 0.0, p: RobotParams = DEFAULT,
+                 rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """One robot at pose (x, y, phi): (adc_off[8], adc_on[8]) integer ADC counts, S1..S8.
+
+    off = ambient + noise; on = ambient (ir_on_delay later) + reflected +
+    noise; each clipped to 0..adc_max and rounded.  rng: a numpy Generator
+    for the noise (None = no noise).
+    """
+    q = np.asarray(pose, dtype=float)
+    if q.shape != (3,):
+        raise ValueError(f"pose must be (x, y, phi), got shape {q.shape}")
+    return _read(world, q, power_pct, t, p, rng)
+
+
+def read_sensors_batch(world: World, poses: Any, power_pct: Any = 60.0, t: Any = 0.0, p: RobotParams = DEFAULT,
+                       rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """N robots at poses (N, 3): (adc_off (N, 8), adc_on (N, 8)).
+
+    power_pct and t may be scalars or (N,) arrays, one per robot.
+    """
+    q = np.asarray(poses, dtype=float)
+    if q.ndim != 2 or q.shape[1] != 3:
+        raise ValueError(f"poses must have shape (N, 3), got {q.shape}")
+    power = np.asarray(power_pct, dtype=float)
+    if power.ndim:
+        power = power[:, None]
+    return _read(world, q, power, t, p, rng)

@@ -1,0 +1,185 @@
+"""The robot's parameters: one documented set, with units.
+
+Every other layer reads them from here: the dynamics, the motors, the IR
+sensor model, the encoders, the simulator's hardware link and the
+identification tools (which see them as a plain vector with names, see
+`to_vector` / `from_vector`).  The firmware cannot import this (it runs on
+a microcontroller); firmware/config.py repeats the geometry it needs and a
+test checks that the two agree.
+
+Values describe a robot of about 12 cm diameter: two N20-class gear motors
+(50:1) on 42 mm wheels, eight IR emitter/phototransistor pairs on the rim,
+a 2S LiPo battery.  A parameter file is JSON: {"name": value, ...} with any
+subset of the names below; `load_params` says precisely what is wrong with
+a bad one.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+
+def _p(default: float, unit: str, doc: str) -> Any:
+    return field(default=default, metadata={"unit": unit, "doc": doc})
+
+
+@dataclass(frozen=True)
+class RobotParams:
+    # --- geometry (paper Fig. 3) ------------------------------------------------
+    wheel_radius: float = _p(0.021, "m", "wheel radius r")
+    half_axle: float = _p(0.048, "m", "half the distance between the wheels, b")
+    com_offset: float = _p(0.015, "m", "distance d from the wheel-axle centre C forward to the centre of mass G")
+    body_radius: float = _p(0.060, "m", "radius of the round body (collisions, sensor ring)")
+    # --- masses and inertias ------------------------------------------------------
+    body_mass: float = _p(0.46, "kg", "mass of the body without the wheels, m_c")
+    wheel_mass: float = _p(0.025, "kg", "mass of one wheel with its motor rotor, m_w")
+    body_inertia: float = _p(8.3e-4, "kg m^2", "body's moment of inertia about the vertical axis through G, I_c")
+    wheel_inertia: float = _p(1.2e-5, "kg m^2",
+                              "one wheel's inertia about its axle, rotor reflected through the gear, I_w")
+    wheel_inertia_diam: float = _p(3.0e-6, "kg m^2", "one wheel's inertia about a diameter, I_m")
+    # --- motors and drivers (paper 3.2) --------------------------------------------
+    torque_constant: float = _p(0.0038, "N m/A", "motor torque constant k_t (= back-EMF constant k_e, V s/rad)")
+    armature_resistance: float = _p(10.0, "ohm", "motor armature resistance R")
+    gear_ratio: float = _p(50.0, "-", "motor turns per wheel turn N")
+    gear_efficiency: float = _p(0.85, "-", "fraction of motor torque delivered through the gear")
+    current_limit: float = _p(0.5, "A", "driver current limit")
+    viscous_friction: float = _p(2.0e-4, "N m s/rad", "viscous friction at each wheel axle")
+    coulomb_friction: float = _p(1.5e-3, "N m", "dry friction torque at each wheel axle")
+    battery_voltage: float = _p(7.4, "V", "battery voltage feeding the drivers")
+    # --- encoders ------------------------------------------------------------------
+    ticks_per_rev: float = _p(1200, "ticks", "encoder ticks per wheel turn (12 CPR x2 decoding x 50:1)")
+    # --- IR sensors (paper 3.3; host_sim/ir_sensor.py, docs/ir-sensor.md) ----------
+    # reflected = ir_gain * min(L/100, ir_saturation) * A(angle) * F(x), in ADC
+    # counts.  Calibrated on a white matte wall straight ahead at L = 60 %:
+    # ~700 counts at 5 cm, ~78 at 15 cm, ~28 at 25 cm; maximum at 1.5 cm
+    # (7800 counts: the 12-bit ADC saturates from ~1.1 to ~2.1 cm), 0 at contact.
+    sensor_range: float = _p(0.50, "m", "farthest reflection considered, from the sensor; the response "
+                                        "fades to 0 over the last 20 % of it")
+    ir_gain: float = _p(2.9, "counts m^2", "C of the far-field law C/x^2 at normal incidence and 100 % "
+                                           "pulse width (linear extrapolation; the emitter saturates first)")
+    ir_near_peak: float = _p(0.015, "m", "distance of the response maximum, where the near law D x^2 "
+                                         "(D = C/x_p^4) meets C/x^2")
+    ir_blend: float = _p(0.012, "m", "width, centred on ir_near_peak, over which the near and the far law "
+                                     "are averaged (smoothstep weight)")
+    ir_saturation: float = _p(0.85, "-", "emitter pulse-width fraction above which more pulse width adds "
+                                         "no light (Fig. 10)")
+    ir_ambient: float = _p(150.0, "counts", "global ambient light seen by every phototransistor, when the "
+                                            "world sets none")
+    ir_noise: float = _p(3.0, "counts", "standard deviation of the Gaussian noise on every ADC reading")
+    ir_on_delay: float = _p(4.0e-4, "s", "time from a sensor's emitter-off reading to its emitter-on "
+                                         "reading (emitter settling + the 8-way multiplexer)")
+    adc_bits: float = _p(12, "bits", "ADC resolution; readings clip at 2^bits - 1")
+    # Angle response A (Fig. 7): two 5th-degree polynomials in |angle| (rad),
+    # coefficients x^0..x^5, blended by a smoothstep of |angle| over
+    # ir_angle_blend.  Least-squares fits (x^1 held at 0) of the target in
+    # docs/ir-sensor.md (ir_sensor.fit_angle_polynomials): diffuse
+    # 0.78 cos^1.5 + 0.02, plus a specular Gaussian 0.2 exp(-a^2 / (2 0.12^2)).
+    ir_big_dome: tuple[float, ...] = field(
+        default=(0.800363, 0.0, -0.607462, 0.0698622, 0.056394, 0.0106067),
+        metadata={"unit": "-", "doc": "big dome: diffuse reflection, |angle| in rad, x^0..x^5 "
+                                      "(0.80 at 0, 0.017 at pi/2, positive on [0, pi/2])"})
+    ir_small_dome: tuple[float, ...] = field(
+        default=(1.00305, 0.0, -10.7864, 45.1569, -73.8708, 42.4242),
+        metadata={"unit": "-", "doc": "small dome: diffuse + the specular beam near normal incidence, "
+                                      "|angle| in rad, x^0..x^5; used up to ir_angle_blend[1]"})
+    ir_angle_blend: tuple[float, ...] = field(
+        default=(0.25, 0.45),
+        metadata={"unit": "rad", "doc": "below the first |angle| the small dome alone, above the second the "
+                                        "big dome alone, smoothstep in between"})
+
+    # ------------------------------------------------------------------------------
+    @property
+    def wheel_base(self) -> float:
+        return 2 * self.half_axle
+
+    @property
+    def adc_max(self) -> int:
+        return (1 << int(self.adc_bits)) - 1
+
+    @property
+    def total_mass(self) -> float:
+        return self.body_mass + 2 * self.wheel_mass
+
+    def replace(self, **changes: float) -> RobotParams:
+        return dataclasses.replace(self, **changes)  # type: ignore[arg-type]
+
+    # --- as a plain vector, for identification -----------------------------------
+    @classmethod
+    def scalar_names(cls) -> list[str]:
+        return [f.name for f in dataclasses.fields(cls) if f.type in ("float", float)]
+
+    def to_vector(self, names: list[str] | None = None) -> list[float]:
+        return [float(getattr(self, n)) for n in (names or self.scalar_names())]
+
+    @classmethod
+    def from_vector(cls, values: list[float], names: list[str] | None = None,
+                    base: RobotParams | None = None) -> RobotParams:
+        names = names or cls.scalar_names()
+        if len(values) != len(names):
+            raise ValueError(f"{len(values)} values for {len(names)} names")
+        return dataclasses.replace(base or cls(), **dict(zip(names, map(float, values))))
+
+    def describe(self) -> list[tuple[str, object, str, str]]:
+        """(name, value, unit, meaning) for every parameter."""
+        return [(f.name, getattr(self, f.name), f.metadata["unit"], f.metadata["doc"])
+                for f in dataclasses.fields(self)]
+
+    def to_json(self) -> dict[str, object]:
+        return {f.name: (list(v) if isinstance(v := getattr(self, f.name), tuple) else v)
+                for f in dataclasses.fields(self)}
+
+
+class ParamsError(ValueError):
+    """A parameter file is wrong; the message names the file, the entry and the problem."""
+
+
+def params_from_dict(data: object, where: str = "parameters") -> RobotParams:
+    if not isinstance(data, dict):
+        raise ParamsError(f"{where}: expected a JSON object of name: value")
+    known = {f.name: f for f in dataclasses.fields(RobotParams)}
+    changes: dict[str, object] = {}
+    for name, value in data.items():
+        if name not in known:
+            close = [k for k in known if k.split("_")[0] == str(name).split("_")[0]]
+            hint = f" (did you mean {', '.join(close)}?)" if close else ""
+            raise ParamsError(f"{where}: unknown parameter '{name}'{hint}")
+        default = known[name].default
+        if isinstance(default, tuple):
+            if not isinstance(value, list) or len(value) != len(default) or not all(
+                    isinstance(v, (int, float)) for v in value):
+                raise ParamsError(f"{where}: '{name}' must be a list of {len(default)} numbers")
+            changes[name] = tuple(float(v) for v in value)
+        else:
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ParamsError(f"{where}: '{name}' must be a finite number ({known[name].metadata['unit']}), "
+                                  f"got {value!r}")
+            changes[name] = float(value)
+    params = dataclasses.replace(RobotParams(), **changes)  # type: ignore[arg-type]
+    for name in ("wheel_radius", "half_axle", "body_radius", "body_mass", "wheel_mass", "body_inertia",
+                 "wheel_inertia", "torque_constant", "armature_resistance", "gear_ratio", "ticks_per_rev",
+                 "battery_voltage", "sensor_range", "adc_bits"):
+        if getattr(params, name) <= 0:
+            raise ParamsError(f"{where}: '{name}' must be positive, got {getattr(params, name)}")
+    if params.com_offset < 0:
+        raise ParamsError(f"{where}: 'com_offset' must be >= 0 (G ahead of C), got {params.com_offset}")
+    if not 0 < params.gear_efficiency <= 1:
+        raise ParamsError(f"{where}: 'gear_efficiency' must be in (0, 1], got {params.gear_efficiency}")
+    return params
+
+
+def load_params(path: str | Path) -> RobotParams:
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except OSError as exc:
+        raise ParamsError(f"{path}: cannot read: {exc.strerror}") from exc
+    except json.JSONDecodeError as exc:
+        raise ParamsError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from exc
+    return params_from_dict(data, str(path))
+
+
+DEFAULT = RobotParams()

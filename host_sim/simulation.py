@@ -1,0 +1,150 @@
+"""The simulation loop of the paper's section 4: fixed-step and real-time.
+
+Every control period (40 ms) the controller gets the robot's readings and
+sets its currents; between control instants the physics advances.
+
+- Fixed step: every control period is split into n substeps of equal dt.
+  Nothing depends on the clock, so two runs with the same world, seed and
+  controller are identical bit for bit.  `speed` paces it (k x real time) or,
+  at infinity, runs as fast as the machine can.
+- Real time (the paper's variable step): each pass of the loop measures Dt
+  from the wall clock (times `speed`) and integrates X = X + X' dt over n
+  substeps dt = Dt / n, stopping at each control instant.  Dt depends on
+  what else the machine does, so rounding differs from run to run and, as
+  the paper observed (Fig. 15), two runs from identical conditions drift
+  apart until the robot takes different decisions.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from host_sim.controllers import Actuate, Sense
+from host_sim.coverage import Coverage
+from host_sim.hardware import SimRobot
+from host_sim.params import RobotParams
+from host_sim.recording import RecordingWriter
+from host_sim.world import World
+
+CYCLE_S = 0.040  # the firmware's default control period
+
+
+@dataclass
+class RunResult:
+    t: np.ndarray  # (n,) s, at each control instant
+    pose: np.ndarray  # (n, 3) x, y, phi
+    cmd: np.ndarray  # (n, 2) current references, A
+    coverage: np.ndarray  # (n,) covered fraction
+    collisions: int
+    wall_seconds: float
+    sim_seconds: float
+    mode: str
+    controller: str
+    steps: int  # physics substeps taken
+    extra: dict[str, object] = field(default_factory=dict)
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.sim_seconds / self.wall_seconds if self.wall_seconds > 0 else math.inf
+
+    def time_to(self, level: float) -> float | None:
+        hit = np.nonzero(self.coverage >= level)[0]
+        return float(self.t[hit[0]]) if len(hit) else None
+
+
+class Simulation:
+    def __init__(self, world: World, params: RobotParams, controller: object, *, seed: int | None = 0,
+                 noise: bool = True, substeps: int = 8, cycle_s: float = CYCLE_S,
+                 pose: tuple[float, float, float] | None = None, recorder: RecordingWriter | None = None,
+                 coverage_resolution: float = 0.05) -> None:
+        if substeps < 1:
+            raise ValueError("substeps must be >= 1")
+        self.world = world
+        self.params = params
+        self.controller = controller
+        self.robot = SimRobot(world, params, pose, seed, noise)
+        self.substeps = substeps
+        self.cycle_s = cycle_s
+        self.recorder = recorder
+        self.coverage = Coverage(world, params.body_radius, coverage_resolution)
+        self._t: list[float] = []
+        self._pose: list[tuple[float, float, float]] = []
+        self._cmd: list[tuple[float, float]] = []
+        self.steps = 0
+
+    # One control instant: readings -> controller -> currents; log it.
+    def control(self) -> None:
+        robot = self.robot
+        pose = robot.pose
+        s: Sense = robot.sense()
+        a: Actuate = self.controller.cycle(s)  # type: ignore[attr-defined]
+        robot.actuate(a)
+        cmd = (a.i_left_ma / 1000.0, a.i_right_ma / 1000.0)
+        self._t.append(robot.t)
+        self._pose.append(pose)
+        self._cmd.append(cmd)
+        self.coverage.add(robot.t, pose[0], pose[1])
+        if self.recorder is not None:
+            self.recorder.row(robot.t, cmd, (s.enc_l, s.enc_r), s.adc_on, s.adc_off, s.vbat_mv / 1000.0, pose)
+
+    def run_fixed(self, duration: float, speed: float = math.inf,
+                  progress: Callable[[float], None] | None = None) -> RunResult:
+        """Fixed step: n substeps of cycle/n per control period; exactly repeatable."""
+        n_cycles = int(round(duration / self.cycle_s))
+        dt = self.cycle_s / self.substeps
+        robot = self.robot
+        start = time.perf_counter()
+        for k in range(n_cycles):
+            self.control()
+            for _ in range(self.substeps):
+                robot.advance(dt)
+            self.steps += self.substeps
+            if speed != math.inf:
+                ahead = (k + 1) * self.cycle_s / speed - (time.perf_counter() - start)
+                if ahead > 0:
+                    time.sleep(ahead)
+            if progress and k % 25 == 0:
+                progress(robot.t)
+        return self._result("fixed", time.perf_counter() - start)
+
+    def run_realtime(self, duration: float, speed: float = 1.0, min_wall_step: float = 0.002,
+                     progress: Callable[[float], None] | None = None) -> RunResult:
+        """Variable step from the wall clock: Dt = elapsed * speed, split into n substeps."""
+        if not speed > 0 or math.isinf(speed):
+            raise ValueError("real-time mode needs a finite speed factor > 0")
+        robot = self.robot
+        start = last = time.perf_counter()
+        next_control = 0.0
+        n = self.substeps
+        while robot.t < duration - 1e-12:
+            now = time.perf_counter()
+            if now - last < min_wall_step:
+                time.sleep(min_wall_step - (now - last))
+                now = time.perf_counter()
+            big_dt = (now - last) * speed
+            last = now
+            target = min(robot.t + big_dt, duration)
+            while robot.t < target - 1e-12:
+                if robot.t >= next_control - 1e-9:
+                    self.control()
+                    next_control += self.cycle_s
+                h = min(target, next_control) - robot.t
+                if h <= 0:
+                    continue
+                for _ in range(n):
+                    robot.advance(h / n)
+                self.steps += n
+            if progress:
+                progress(robot.t)
+        return self._result("realtime", time.perf_counter() - start)
+
+    def _result(self, mode: str, wall: float) -> RunResult:
+        return RunResult(
+            t=np.array(self._t), pose=np.array(self._pose).reshape(-1, 3), cmd=np.array(self._cmd).reshape(-1, 2),
+            coverage=np.array(self.coverage.fractions), collisions=self.robot.collisions, wall_seconds=wall,
+            sim_seconds=self.robot.t, mode=mode, controller=getattr(self.controller, "name", "?"), steps=self.steps,
+        )

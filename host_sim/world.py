@@ -1,0 +1,608 @@
+"""Worlds: walls (segments and convex polygons), lamps, and the geometry on them.
+
+A world is a JSON file (format in docs/worlds.md)::
+
+    {"name": "paper_room", "size": [2.0, 1.5],
+     "walls": [{"segment": [x1, y1, x2, y2]}, {"polygon": [[x, y], ...]}],
+     "start": {"x": 0.4, "y": 0.45, "phi": 0.3},
+     "lamps": [{"x": 1.0, "y": 2.0, "level": 300, "flicker_hz": 100}],
+     "ambient": 150}
+
+`load_world(path)` validates it and raises WorldError naming the file, the
+entry (``walls[3].polygon``) and the problem.  Built-in worlds live in
+host_sim/worlds/*.json: `builtin_world(name)`, `world_by_name_or_path(text)`.
+
+Coordinates are metres in a fixed frame, x right, y up; angles are radians,
+counter-clockwise from +x.  "size" is the area of interest [0, w] x [0, h]:
+the coverage grid spans it, and a robot whose centre leaves it has left the
+world (found the exit of the paper's room).  Walls are lines without
+thickness; a convex polygon is a solid obstacle.
+
+Geometry (numpy, vectorised; every wall, polygon edges included, is one row
+of `World.segments`, shape (M, 4)):
+
+* `World.ray_cast(origins, directions, max_range)` -> (distance, incidence,
+  hit) for rays of any batch shape;
+* `World.cast_robots(poses, bearings)` the same for rays leaving robot
+  centres at fixed bearings (the IR ring), with the front end folded into
+  one matrix product: the fast path of the sensor model;
+* `World.nearest_wall(points)` -> (signed distance, unit normal) for
+  collisions;
+* `World.inside_obstacle(points)`;
+* `World.free_cells(resolution, margin)` -> boolean occupancy grid of the
+  places a robot centre may occupy, for coverage.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+WORLDS_DIR = Path(__file__).with_name("worlds")
+BUILTIN_NAMES = ("paper_room", "maze", "arena")
+TOP_KEYS = {"name", "description", "size", "walls", "start", "lamps", "ambient"}
+LAMP_KEYS = {"x", "y", "level", "flicker_hz", "flicker_depth"}
+DEFAULT_FLICKER_DEPTH = 0.3  # fraction of the lamp's level, when flicker_hz is given
+DEFAULT_BODY_RADIUS = 0.060  # m; params.RobotParams.body_radius, for the start check
+_EPS = 1e-9  # m, geometric tolerance
+
+
+class WorldError(ValueError):
+    """A world file is wrong; the message names the file, the entry and the problem."""
+
+
+@dataclass(frozen=True)
+class Lamp:
+    x: float
+    y: float
+    level: float  # ADC counts at 1 m, straight along the sensor axis
+    flicker_hz: float = 0.0  # 0 = steady
+    flicker_depth: float = DEFAULT_FLICKER_DEPTH  # level * (1 + depth * sin(2 pi f t))
+
+    def level_at(self, t: float | np.ndarray) -> float | np.ndarray:
+        if not self.flicker_hz:
+            return self.level
+        return self.level * (1.0 + self.flicker_depth * np.sin(2.0 * np.pi * self.flicker_hz * np.asarray(t)))
+
+    def to_dict(self) -> dict[str, float]:
+        d = {"x": self.x, "y": self.y, "level": self.level}
+        if self.flicker_hz:
+            d["flicker_hz"] = self.flicker_hz
+            d["flicker_depth"] = self.flicker_depth
+        return d
+
+
+@dataclass(eq=False)
+class World:
+    """Walls, start pose and light sources; geometry arrays built once."""
+
+    name: str
+    size: tuple[float, float]
+    walls: list[dict[str, Any]]  # as in the file: {"segment": [...]} or {"polygon": [[x, y], ...]}
+    start: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    lamps: tuple[Lamp, ...] = ()
+    ambient: float | None = None  # counts; None = the robot parameters' ir_ambient
+    description: str = ""
+    source: str = "<memory>"
+    # Derived, filled by __post_init__.
+    segments: np.ndarray = field(init=False, repr=False)  # (M, 4) x1, y1, x2, y2
+    segment_entry: np.ndarray = field(init=False, repr=False)  # (M,) index into walls
+    polygons: list[np.ndarray] = field(init=False, repr=False)  # counter-clockwise (K, 2) vertices
+
+    def __post_init__(self) -> None:
+        segs: list[list[float]] = []
+        entry: list[int] = []
+        self.polygons = []
+        self._poly_entry: list[int] = []
+        for i, wall in enumerate(self.walls):
+            if "segment" in wall:
+                segs.append([float(v) for v in wall["segment"]])
+                entry.append(i)
+            else:
+                pts = np.asarray(wall["polygon"], dtype=float)
+                if _signed_area(pts) < 0:
+                    pts = pts[::-1]
+                self.polygons.append(pts)
+                self._poly_entry.append(i)
+                for k in range(len(pts)):
+                    a, b = pts[k], pts[(k + 1) % len(pts)]
+                    segs.append([a[0], a[1], b[0], b[1]])
+                    entry.append(i)
+        self.segments = np.asarray(segs, dtype=float).reshape(-1, 4)
+        self.segment_entry = np.asarray(entry, dtype=int)
+        self._prepare()
+
+    # ------------------------------------------------------------------ set-up
+    def _prepare(self) -> None:
+        s = self.segments
+        m = len(s)
+        a = s[:, :2]
+        e = s[:, 2:] - s[:, :2]
+        self._a = a
+        self._e = e
+        self._len2 = np.maximum((e * e).sum(1), _EPS * _EPS)
+        normal = np.stack([e[:, 1], -e[:, 0]], 1) / np.sqrt(self._len2)[:, None]
+        self._normal = normal  # unit, right of a->b (outward for counter-clockwise polygons)
+        # Ray o + t d against segment a + s e (module docstring of _ray_terms):
+        # features f = [dx, dy, ox, oy, 1, ox*dy - oy*dx]; f @ W gives, per wall,
+        # den = d x e, tnum = t*den, unum = (s - 1/2)*den and dot = d . e.
+        w = np.zeros((6, 4, m))
+        ex, ey, ax, ay = e[:, 0], e[:, 1], a[:, 0], a[:, 1]
+        w[0, 0], w[1, 0] = ey, -ex  # den
+        w[2, 1], w[3, 1], w[4, 1] = -ey, ex, ax * ey - ay * ex  # tnum
+        w[0, 2], w[1, 2], w[5, 2] = -ay - 0.5 * ey, ax + 0.5 * ex, -1.0  # unum
+        w[0, 3], w[1, 3] = ex, ey  # dot
+        self._w = w.reshape(6, 4 * m)
+        self._robot_kernels: dict[tuple[float, ...], np.ndarray] = {}
+        self._offsets: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        # Half-planes of the convex obstacles: n . p <= c inside, one row per edge.
+        rows, cs, starts = [], [], []
+        for pts in self.polygons:
+            starts.append(len(rows))
+            for k in range(len(pts)):
+                p0, p1 = pts[k], pts[(k + 1) % len(pts)]
+                ed = p1 - p0
+                n = np.array([ed[1], -ed[0]]) / math.hypot(*ed)
+                rows.append(n)
+                cs.append(float(n @ p0))
+        self._hp_n = np.asarray(rows, dtype=float).reshape(-1, 2)
+        self._hp_c = np.asarray(cs, dtype=float)
+        self._hp_starts = np.asarray(starts, dtype=int)
+
+    # ------------------------------------------------------------------ basics
+    @property
+    def n_walls(self) -> int:
+        """Number of wall segments, polygon edges included."""
+        return len(self.segments)
+
+    @property
+    def width(self) -> float:
+        return self.size[0]
+
+    @property
+    def height(self) -> float:
+        return self.size[1]
+
+    def outside(self, points: np.ndarray) -> np.ndarray:
+        """True where a point lies outside the area of interest [0, w] x [0, h]."""
+        p = np.asarray(points, dtype=float)
+        return (p[..., 0] < 0) | (p[..., 0] > self.size[0]) | (p[..., 1] < 0) | (p[..., 1] > self.size[1])
+
+    def to_dict(self) -> dict[str, Any]:
+        """The world as its JSON file holds it (save with `save_world`)."""
+        d: dict[str, Any] = {"name": self.name}
+        if self.description:
+            d["description"] = self.description
+        d["size"] = list(self.size)
+        d["walls"] = [dict(w) for w in self.walls]
+        d["start"] = {"x": self.start[0], "y": self.start[1], "phi": self.start[2]}
+        if self.lamps:
+            d["lamps"] = [lamp.to_dict() for lamp in self.lamps]
+        if self.ambient is not None:
+            d["ambient"] = self.ambient
+        return d
+
+    def with_changes(self, **changes: Any) -> World:
+        """A copy with some of name, size, walls, start, lamps, ambient replaced."""
+        d = {"name": self.name, "size": self.size, "walls": self.walls, "start": self.start,
+             "lamps": self.lamps, "ambient": self.ambient, "description": self.description, "source": self.source}
+        d.update(changes)
+        return World(**d)
+
+    # ------------------------------------------------------------------ rays
+    def ray_cast(self, origins: np.ndarray, directions: np.ndarray,
+                 max_range: float = math.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Cast rays o + t d (t >= 0) and return the nearest wall hit of each.
+
+        origins (..., 2) and directions (..., 2) broadcast together; directions
+        must be unit vectors (distance is then in metres).  Returns arrays of
+        the broadcast batch shape:
+
+        distance   metres to the hit point; inf where nothing is hit within
+                   max_range;
+        incidence  signed angle (rad, in [-pi/2, pi/2]) between the wall's
+                   normal and the ray: atan((d . e) / (d x e)) with e the wall's
+                   direction; 0 along the normal, +-pi/2 grazing; its sign says
+                   on which side the wall recedes (the sensor model uses |angle|);
+                   0 where nothing is hit;
+        hit        True where a wall was hit within max_range.
+
+        A ray parallel to a wall never hits it; a ray through a wall's end
+        point does.
+        """
+        o = np.asarray(origins, dtype=float)
+        d = np.asarray(directions, dtype=float)
+        shape = np.broadcast_shapes(o.shape, d.shape)
+        o = np.broadcast_to(o, shape).reshape(-1, 2)
+        d = np.broadcast_to(d, shape).reshape(-1, 2)
+        f = np.empty((len(o), 6))
+        f[:, 0:2] = d
+        f[:, 2:4] = o
+        f[:, 4] = 1.0
+        f[:, 5] = o[:, 0] * d[:, 1] - o[:, 1] * d[:, 0]
+        dist, inc, hit = self._solve(f @ self._w, len(o), max_range)
+        return dist.reshape(shape[:-1]), inc.reshape(shape[:-1]), hit.reshape(shape[:-1])
+
+    def _solve(self, prod: np.ndarray, n_rays: int, max_range: float
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Nearest valid hit of each ray from the ray terms prod (n_rays, 4*M)."""
+        m = len(self.segments)
+        if m == 0:
+            return np.full(n_rays, np.inf), np.zeros(n_rays), np.zeros(n_rays, dtype=bool)
+        p = prod.reshape(n_rays, 4, m)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r = p[:, 1:3] / p[:, 0:1]  # t and (s - 1/2); nan or inf for parallel walls
+        t = r[:, 0]
+        valid = np.abs(r[:, 1]) <= 0.5
+        valid &= t >= 0.0
+        key = np.where(valid, t, np.inf)
+        idx = key.argmin(1)
+        offsets = self._offsets.get(n_rays)
+        if offsets is None:
+            rows = np.arange(n_rays)
+            offsets = self._offsets[n_rays] = (rows * m, np.stack([rows * 4 * m + 3 * m, rows * 4 * m]))
+        dist = key.ravel()[offsets[0] + idx]
+        hit = dist <= max_range
+        dot, den = prod.ravel()[offsets[1] + idx]  # d . e and d x e of the wall hit
+        inc = np.arctan(dot / np.where(hit, den, 1.0))
+        return np.where(hit, dist, np.inf), np.where(hit, inc, 0.0), hit
+
+    def robot_kernel(self, bearings: Sequence[float]) -> np.ndarray:
+        """(9, R*4*M) matrix turning a pose into the ray terms of R fixed-bearing rays.
+
+        Ray k leaves the centre (x, y) in direction phi + bearing[k].  Its
+        features f are linear in h = [cos, sin, x cos, x sin, y cos, y sin, x,
+        y, 1] (of phi), so f @ W = h @ K with K = G @ W computed once.
+        """
+        key = tuple(float(b) for b in bearings)
+        kern = self._robot_kernels.get(key)
+        if kern is None:
+            b = np.asarray(key)
+            bx, by = np.cos(b), np.sin(b)
+            n = len(b)
+            g = np.zeros((n, 6, 9))
+            # dx = c bx - s by ; dy = s bx + c by
+            g[:, 0, 0], g[:, 0, 1] = bx, -by
+            g[:, 1, 0], g[:, 1, 1] = by, bx
+            g[:, 2, 6] = 1.0  # ox = x
+            g[:, 3, 7] = 1.0  # oy = y
+            g[:, 4, 8] = 1.0
+            # x dy - y dx = x c by + x s bx - y c bx + y s by
+            g[:, 5, 2], g[:, 5, 3], g[:, 5, 4], g[:, 5, 5] = by, bx, -bx, by
+            kern = np.einsum("njk,jc->knc", g, self._w).reshape(9, -1)
+            self._robot_kernels[key] = kern
+        return kern
+
+    def cast_robots(self, poses: np.ndarray, bearings: Sequence[float],
+                    max_range: float = math.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Rays from robot centres at fixed bearings: poses (..., 3) -> arrays (..., R).
+
+        Same results as ray_cast from (x, y) along phi + bearing, faster: one
+        matrix product does the whole front end.
+        """
+        q = np.asarray(poses, dtype=float)
+        batch = q.shape[:-1]
+        q = q.reshape(-1, 3)
+        n_rob = len(q)
+        c, s = np.cos(q[:, 2]), np.sin(q[:, 2])
+        x, y = q[:, 0], q[:, 1]
+        h = np.stack([c, s, x * c, x * s, y * c, y * s, x, y, np.ones(n_rob)], 1)
+        n = len(bearings)
+        dist, inc, hit = self._solve(h @ self.robot_kernel(bearings), n_rob * n, max_range)
+        return dist.reshape(batch + (n,)), inc.reshape(batch + (n,)), hit.reshape(batch + (n,))
+
+    def cast_robot(self, x: float, y: float, phi: float, bearings: Sequence[float],
+                   max_range: float = math.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """One robot: arrays (R,).  The single-robot fast path of `cast_robots`."""
+        c, s = math.cos(phi), math.sin(phi)
+        h = np.array([c, s, x * c, x * s, y * c, y * s, x, y, 1.0])
+        return self._solve(h @ self.robot_kernel(bearings), len(bearings), max_range)
+
+    # ------------------------------------------------------------------ distances
+    def nearest_wall(self, points: np.ndarray, return_index: bool = False
+                     ) -> tuple[np.ndarray, np.ndarray] | tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Signed distance to the nearest wall and the unit normal from that wall to the point.
+
+        points (..., 2) -> distance (...), normal (..., 2) [, segment index (...)].
+        The distance is negative for a point inside a convex obstacle; the
+        normal then still points out of the obstacle: moving a point by
+        (clearance - distance) along the normal always puts it `clearance`
+        from that wall.  A point exactly on a wall gets that wall's geometric
+        normal (right of x1,y1 -> x2,y2; outward for a polygon).  No walls:
+        distance inf, normal (0, 0).
+        """
+        p = np.asarray(points, dtype=float)
+        batch = p.shape[:-1]
+        q = p.reshape(-1, 2)
+        m = len(self.segments)
+        if m == 0:
+            out = (np.full(batch, np.inf), np.zeros(batch + (2,)))
+            return out + (np.full(batch, -1),) if return_index else out
+        rel = q[:, None, :] - self._a[None]  # (P, M, 2)
+        u = np.clip((rel * self._e[None]).sum(-1) / self._len2, 0.0, 1.0)
+        diff = rel - u[..., None] * self._e[None]
+        d2 = (diff * diff).sum(-1)
+        idx = d2.argmin(1)
+        rows = np.arange(len(q))
+        dist = np.sqrt(d2[rows, idx])
+        vec = diff[rows, idx]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            normal = vec / dist[:, None]
+        on_wall = dist < 1e-12
+        if on_wall.any():
+            normal[on_wall] = self._normal[idx[on_wall]]
+        inside = self.inside_obstacle(q)
+        if inside.any():
+            dist = np.where(inside, -dist, dist)
+            normal[inside] = -normal[inside]
+        out = (dist.reshape(batch), normal.reshape(batch + (2,)))
+        return out + (idx.reshape(batch),) if return_index else out
+
+    def inside_obstacle(self, points: np.ndarray) -> np.ndarray:
+        """True where a point is strictly inside one of the convex polygons."""
+        p = np.asarray(points, dtype=float)
+        batch = p.shape[:-1]
+        if not self.polygons:
+            return np.zeros(batch, dtype=bool)
+        q = p.reshape(-1, 2)
+        excess = q @ self._hp_n.T - self._hp_c  # (P, E): > 0 outside that edge
+        worst = np.maximum.reduceat(excess, self._hp_starts, axis=1)  # (P, n_polygons)
+        return (worst < -_EPS).any(1).reshape(batch)
+
+    # ------------------------------------------------------------------ grids
+    def grid_shape(self, resolution: float) -> tuple[int, int]:
+        """(ny, nx) of the coverage grid of square cells of side `resolution` over the size."""
+        return (max(1, int(math.ceil(self.size[1] / resolution - 1e-9))),
+                max(1, int(math.ceil(self.size[0] / resolution - 1e-9))))
+
+    def cell_centres(self, resolution: float) -> tuple[np.ndarray, np.ndarray]:
+        """x (nx,) and y (ny,) of the cell centres; cell [iy, ix] is at (x[ix], y[iy])."""
+        ny, nx = self.grid_shape(resolution)
+        return (np.arange(nx) + 0.5) * resolution, (np.arange(ny) + 0.5) * resolution
+
+    def cell_of(self, points: np.ndarray, resolution: float) -> tuple[np.ndarray, np.ndarray]:
+        """(iy, ix) integer cell indices of points, clipped to the grid."""
+        p = np.asarray(points, dtype=float)
+        ny, nx = self.grid_shape(resolution)
+        ix = np.clip(np.floor(p[..., 0] / resolution).astype(int), 0, nx - 1)
+        iy = np.clip(np.floor(p[..., 1] / resolution).astype(int), 0, ny - 1)
+        return iy, ix
+
+    def free_cells(self, resolution: float = 0.02, margin: float = DEFAULT_BODY_RADIUS,
+                   reachable: bool = False) -> np.ndarray:
+        """Boolean grid (ny, nx): cells whose centre a robot centre may occupy.
+
+        A cell is free when its centre is at least `margin` (m; the robot's
+        radius, plus any clearance) from every wall and outside every
+        obstacle.  reachable=True keeps only the free cells connected
+        (4-neighbours) to the start's cell: the area a robot can explore.
+        """
+        xs, ys = self.cell_centres(resolution)
+        gx, gy = np.meshgrid(xs, ys)
+        pts = np.stack([gx, gy], -1)
+        dist, _ = self.nearest_wall(pts)  # type: ignore[misc]
+        free = dist >= margin
+        if reachable:
+            free = _flood(free, self.cell_of(np.array(self.start[:2]), resolution))
+        return free
+
+
+def _flood(free: np.ndarray, seed: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """Cells of `free` connected to `seed` through 4-neighbours."""
+    reach = np.zeros_like(free)
+    iy, ix = int(seed[0]), int(seed[1])
+    if not free[iy, ix]:
+        return reach
+    reach[iy, ix] = True
+    while True:
+        grown = reach.copy()
+        grown[1:] |= reach[:-1]
+        grown[:-1] |= reach[1:]
+        grown[:, 1:] |= reach[:, :-1]
+        grown[:, :-1] |= reach[:, 1:]
+        grown &= free
+        if (grown == reach).all():
+            return reach
+        reach = grown
+
+
+def _signed_area(pts: np.ndarray) -> float:
+    x, y = pts[:, 0], pts[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+# --------------------------------------------------------------------------- #
+# Loading and validation
+# --------------------------------------------------------------------------- #
+def _is_num(v: object) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _numbers(v: object, n: int | None, where: str, what: str) -> list[float]:
+    if not isinstance(v, list) or (n is not None and len(v) != n):
+        count = f"{n} " if n is not None else ""
+        raise WorldError(f"{where}: {what} must be a list of {count}numbers, got {json.dumps(v)}")
+    bad = [i for i, x in enumerate(v) if not _is_num(x)]
+    if bad:
+        raise WorldError(f"{where}: {what} has an item that is not a finite number "
+                         f"(item {bad[0]}: {json.dumps(v[bad[0]])})")
+    return [float(x) for x in v]
+
+
+def _check_polygon(pts_in: object, where: str) -> list[list[float]]:
+    if not isinstance(pts_in, list):
+        raise WorldError(f"{where}: must be a list of [x, y] points, got {json.dumps(pts_in)}")
+    if len(pts_in) < 3:
+        raise WorldError(f"{where}: fewer than 3 points ({len(pts_in)}); a polygon needs at least 3")
+    pts = [_numbers(p, 2, f"{where}[{k}]", "a point") for k, p in enumerate(pts_in)]
+    a = np.asarray(pts)
+    n = len(a)
+    for k in range(n):
+        if math.dist(a[k], a[(k + 1) % n]) < 1e-6:
+            raise WorldError(f"{where}: degenerate: points {k} and {(k + 1) % n} coincide")
+    crosses = []
+    for k in range(n):
+        e1 = a[(k + 1) % n] - a[k]
+        e2 = a[(k + 2) % n] - a[(k + 1) % n]
+        crosses.append(float(e1[0] * e2[1] - e1[1] * e2[0]) / (np.linalg.norm(e1) * np.linalg.norm(e2)))
+    for k, c in enumerate(crosses):
+        if abs(c) < 1e-9:
+            raise WorldError(f"{where}: degenerate: points {k}, {(k + 1) % n} and {(k + 2) % n} are collinear "
+                             f"(remove point {(k + 1) % n})")
+    sign = 1.0 if sum(crosses) > 0 else -1.0
+    for k, c in enumerate(crosses):
+        if c * sign < 0:
+            raise WorldError(f"{where}: not convex: it turns the other way at point {(k + 1) % n} "
+                             f"{pts[(k + 1) % n]} (split it into convex polygons)")
+    # All turns the same way is not enough (a pentagram); the turning must total one revolution.
+    turning = 0.0
+    for k in range(n):
+        e1 = a[(k + 1) % n] - a[k]
+        e2 = a[(k + 2) % n] - a[(k + 1) % n]
+        turning += math.atan2(e1[0] * e2[1] - e1[1] * e2[0], float(e1 @ e2))
+    if abs(abs(turning) - 2 * math.pi) > 1e-6:
+        raise WorldError(f"{where}: not convex: the outline crosses itself "
+                         f"(winds {abs(turning) / (2 * math.pi):.0f} times)")
+    if abs(_signed_area(a)) < 1e-8:
+        raise WorldError(f"{where}: degenerate: zero area")
+    return pts
+
+
+def world_from_dict(data: object, where: str = "world", body_radius: float = DEFAULT_BODY_RADIUS) -> World:
+    """Validate a parsed world file; `where` (the file name) starts every message."""
+    if not isinstance(data, dict):
+        raise WorldError(f"{where}: expected a JSON object with keys name, size, walls, start, ...")
+    unknown = sorted(set(data) - TOP_KEYS)
+    if unknown:
+        raise WorldError(f"{where}: unknown key '{unknown[0]}' (allowed: {', '.join(sorted(TOP_KEYS))})")
+    for key in ("name", "size", "walls", "start"):
+        if key not in data:
+            raise WorldError(f"{where}: missing key '{key}'")
+    name = data["name"]
+    if not isinstance(name, str) or not name:
+        raise WorldError(f"{where}: name: must be a non-empty string, got {json.dumps(name)}")
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise WorldError(f"{where}: description: must be a string")
+    size = _numbers(data["size"], 2, f"{where}: size", "size")
+    if min(size) <= 0:
+        raise WorldError(f"{where}: size: width and height must be positive (m), got {size}")
+
+    walls_in = data["walls"]
+    if not isinstance(walls_in, list):
+        raise WorldError(f"{where}: walls: must be a list of {{\"segment\": ...}} or {{\"polygon\": ...}} entries")
+    walls: list[dict[str, Any]] = []
+    for i, wall in enumerate(walls_in):
+        here = f"{where}: walls[{i}]"
+        if not isinstance(wall, dict) or len(wall) != 1 or next(iter(wall)) not in ("segment", "polygon"):
+            keys = list(wall) if isinstance(wall, dict) else None
+            raise WorldError(f"{here}: must be an object with exactly one key, 'segment' or 'polygon' "
+                             f"(got {json.dumps(keys) if keys is not None else json.dumps(wall)})")
+        if "segment" in wall:
+            seg = _numbers(wall["segment"], 4, f"{here}.segment", "a segment [x1, y1, x2, y2]")
+            if math.hypot(seg[2] - seg[0], seg[3] - seg[1]) < 1e-6:
+                raise WorldError(f"{here}.segment: degenerate: both ends are the same point")
+            walls.append({"segment": seg})
+        else:
+            walls.append({"polygon": _check_polygon(wall["polygon"], f"{here}.polygon")})
+
+    start_in = data["start"]
+    if not isinstance(start_in, dict):
+        raise WorldError(f"{where}: start: must be an object {{\"x\": m, \"y\": m, \"phi\": rad}}")
+    extra = sorted(set(start_in) - {"x", "y", "phi"})
+    if extra:
+        raise WorldError(f"{where}: start: unknown key '{extra[0]}' (allowed: x, y, phi)")
+    for key in ("x", "y", "phi"):
+        if key not in start_in:
+            raise WorldError(f"{where}: start: missing '{key}'")
+        if not _is_num(start_in[key]):
+            raise WorldError(f"{where}: start.{key}: not a finite number ({json.dumps(start_in[key])})")
+    start = (float(start_in["x"]), float(start_in["y"]), float(start_in["phi"]))
+
+    lamps: list[Lamp] = []
+    lamps_in = data.get("lamps", [])
+    if not isinstance(lamps_in, list):
+        raise WorldError(f"{where}: lamps: must be a list of {{\"x\", \"y\", \"level\"}} objects")
+    for i, lamp in enumerate(lamps_in):
+        here = f"{where}: lamps[{i}]"
+        if not isinstance(lamp, dict):
+            raise WorldError(f"{here}: must be an object with x, y, level")
+        extra = sorted(set(lamp) - LAMP_KEYS)
+        if extra:
+            raise WorldError(f"{here}: unknown key '{extra[0]}' (allowed: {', '.join(sorted(LAMP_KEYS))})")
+        for key in ("x", "y", "level"):
+            if key not in lamp:
+                raise WorldError(f"{here}: missing '{key}'")
+        for key, value in lamp.items():
+            if not _is_num(value):
+                raise WorldError(f"{here}.{key}: not a finite number ({json.dumps(value)})")
+        if lamp["level"] < 0:
+            raise WorldError(f"{here}.level: must be >= 0 (ADC counts at 1 m), got {lamp['level']}")
+        if lamp.get("flicker_hz", 0) < 0:
+            raise WorldError(f"{here}.flicker_hz: must be >= 0, got {lamp['flicker_hz']}")
+        depth = lamp.get("flicker_depth", DEFAULT_FLICKER_DEPTH)
+        if not 0 <= depth <= 1:
+            raise WorldError(f"{here}.flicker_depth: must be in [0, 1], got {depth}")
+        lamps.append(Lamp(float(lamp["x"]), float(lamp["y"]), float(lamp["level"]),
+                          float(lamp.get("flicker_hz", 0.0)), float(depth)))
+
+    ambient = data.get("ambient")
+    if ambient is not None and (not _is_num(ambient) or ambient < 0):
+        raise WorldError(f"{where}: ambient: must be a number >= 0 (ADC counts), got {json.dumps(ambient)}")
+
+    world = World(name=name, size=(size[0], size[1]), walls=walls, start=start, lamps=tuple(lamps),
+                  ambient=None if ambient is None else float(ambient), description=description, source=where)
+    # The start pose: inside the area, clear of every wall.
+    if world.outside(np.array(start[:2])):
+        raise WorldError(f"{where}: start: ({start[0]}, {start[1]}) is outside the world's size "
+                         f"[0, {size[0]}] x [0, {size[1]}]")
+    if world.n_walls:
+        dist, _, seg = world.nearest_wall(np.array(start[:2]), return_index=True)  # type: ignore[misc]
+        if dist < body_radius:
+            entry = int(world.segment_entry[int(seg)])
+            kind = "segment" if "segment" in walls[entry] else "polygon"
+            problem = "is inside" if dist < 0 else f"overlaps (centre {float(dist):.3f} m from it)"
+            raise WorldError(f"{where}: start: the robot (radius {body_radius} m) at ({start[0]}, {start[1]}) "
+                             f"{problem} walls[{entry}].{kind}")
+    return world
+
+
+def load_world(path: str | Path, body_radius: float = DEFAULT_BODY_RADIUS) -> World:
+    """Read and validate a world file; WorldError names the file, the entry and the problem."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise WorldError(f"{path}: cannot read: {exc.strerror}") from exc
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise WorldError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from exc
+    return world_from_dict(data, str(path), body_radius)
+
+
+def save_world(world: World, path: str | Path) -> None:
+    """Write a world as JSON; `load_world` reads it back to an equal world."""
+    Path(path).write_text(json.dumps(world.to_dict(), indent=1) + "\n")
+
+
+def builtin_world(name: str, body_radius: float = DEFAULT_BODY_RADIUS) -> World:
+    """One of BUILTIN_NAMES ("paper_room", "maze", "arena")."""
+    path = WORLDS_DIR / f"{name}.json"
+    if name not in BUILTIN_NAMES or not path.is_file():
+        raise WorldError(f"no built-in world '{name}' (built-in: {', '.join(BUILTIN_NAMES)})")
+    return load_world(path, body_radius)
+
+
+def world_by_name_or_path(text: str | Path, body_radius: float = DEFAULT_BODY_RADIUS) -> World:
+    """A built-in world's name, or the path of a world file."""
+    if str(text) in BUILTIN_NAMES:
+        return builtin_world(str(text), body_radius)
+    path = Path(text)
+    if not path.exists() and path.suffix != ".json":
+        raise WorldError(f"{text}: neither a built-in world ({', '.join(BUILTIN_NAMES)}) nor a file")
+    return load_world(path, body_radius)

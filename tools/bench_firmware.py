@@ -1,0 +1,174 @@
+"""`twinbot bench firmware`: the firmware's embedded budgets, measured.
+
+Under the MicroPython unix port (tools/mp_bench_firmware.py):
+  - one full control cycle (IR acquisition with ambient subtraction, fuzzy
+    inference, two wheel PIs, odometry, a TELEMETRY frame): median, p90, max;
+    the parts timed one by one;
+  - heap allocated per cycle in steady state (GC off, mem_alloc before and
+    after), and whether the cycles run under micropython.heap_lock();
+  - heap: every firmware module loaded from .mpy (as flashed) plus a running
+    Robot: the heap in use, and the smallest -X heapsize it runs in.
+On CPython: one fuzzy inference of the firmware engine beside peer fuzzy
+libraries (tools/bench_fuzzy.py), and the cycle time for information.
+
+The unix port is 64-bit: its objects and GC blocks are twice the size of
+an RP2040's, so heap figures here are upper bounds for the robot.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from tools.micropython_rig import REPO_ROOT, mpy_cross_compile, run_micropython
+
+MP_SCRIPT = REPO_ROOT / "tools" / "mp_bench_firmware.py"
+TARGET_CYCLE_US = 250
+TARGET_HEAP_KB = 32
+TARGET_SPEEDUP = 30
+
+
+def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
+    p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1],
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--cycles", type=int, default=5000, help="cycles timed under MicroPython (default 5000)")
+    p.add_argument("--repeats", type=int, default=2000, help="timed calls per fuzzy engine (default 2000)")
+    p.add_argument("--json", metavar="FILE", help="write every figure here")
+    p.set_defaults(func=run)
+
+
+def _progress(text: str) -> None:
+    print(f"  ... {text}", file=sys.stderr, flush=True)
+
+
+def micropython_timing(cycles: int) -> dict[str, object]:
+    r = run_micropython(MP_SCRIPT, "time", str(cycles), heapsize="1m", timeout=600)
+    if r.returncode != 0:
+        raise RuntimeError(f"MicroPython timing run failed: {r.stderr.strip() or r.stdout.strip()}")
+    return json.loads(r.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
+
+
+def compile_for_heap(stage: Path) -> None:
+    """Everything the heap run imports, as .mpy, the way a board holds it."""
+    for pkg, names in (("protocol", None), ("firmware", None), ("tools", ("__init__", "mp_testhal"))):
+        (stage / pkg).mkdir(parents=True, exist_ok=True)
+        for src in sorted((REPO_ROOT / pkg).glob("*.py")):
+            if names is not None and src.stem not in names:
+                continue
+            r = mpy_cross_compile(src, stage / pkg / (src.stem + ".mpy"))
+            if r.returncode != 0:
+                raise RuntimeError(f"mpy-cross failed on {src}: {r.stderr}")
+    r = mpy_cross_compile(MP_SCRIPT, stage / "mp_bench_firmware.mpy")
+    if r.returncode != 0:
+        raise RuntimeError(r.stderr)
+    (stage / "run_heap.py").write_text("import sys\nsys.argv[1:] = ['heap', '200']\nimport mp_bench_firmware\n")
+
+
+def heap_run(stage: Path, heap_kb: int) -> dict[str, object] | None:
+    r = run_micropython(stage / "run_heap.py", heapsize=f"{heap_kb}k", path=[stage], timeout=120)
+    if r.returncode != 0:
+        return None
+    return json.loads(r.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
+
+
+def micropython_heap() -> dict[str, object]:
+    with tempfile.TemporaryDirectory(prefix="twinbot-heap-") as tmp:
+        stage = Path(tmp)
+        compile_for_heap(stage)
+        roomy = heap_run(stage, 1024)
+        if roomy is None:
+            raise RuntimeError("the heap run failed even with a 1 MB heap")
+        lo, hi = 8, 1024  # smallest heap (KB, 2 KB steps) in which load + 200 cycles succeed
+        while hi - lo > 2:
+            mid = (lo + hi) // 2 // 2 * 2
+            if heap_run(stage, mid) is None:
+                lo = mid
+            else:
+                hi = mid
+        return {"in_use_bytes": roomy["heap_in_use"], "smallest_heap_kb": hi}
+
+
+def cpython_cycle_us(cycles: int) -> float:
+    from protocol import wire as W
+    from protocol.framing import FrameEncoder
+    from firmware.robot import Robot
+    from tools.mp_testhal import TestHal
+
+    hal = TestHal()
+    robot = Robot(hal)
+    hal.give(FrameEncoder().encode(W.COMMAND, bytes((W.MODE_AUTONOMOUS, 0, 0, 0, 0))))
+    times = []
+    for k in range(cycles):
+        hal.reflection[k & 7] = (k * 331) % 3000
+        t0 = time.perf_counter()
+        robot.cycle()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times) * 1e6
+
+
+def run(args: argparse.Namespace) -> int:
+    t_start = time.monotonic()
+    command = f"twinbot bench firmware --cycles {args.cycles} --repeats {args.repeats}"
+    _progress(f"MicroPython: {args.cycles} control cycles")
+    mp = micropython_timing(args.cycles)
+    _progress("MicroPython: heap of the firmware loaded from .mpy (bisecting -X heapsize)")
+    heap = micropython_heap()
+    _progress("CPython: control cycle")
+    cp_cycle = cpython_cycle_us(min(args.cycles, 5000))
+    _progress("CPython: one fuzzy inference, firmware engine and peer libraries")
+    try:
+        from tools.bench_fuzzy import bench_inference
+
+        fuzzy = bench_inference(args.repeats)
+    except ImportError as exc:
+        fuzzy = {"error": str(exc)}
+
+    parts = mp["parts_us"]
+    assert isinstance(parts, dict)
+    print("twinbot bench firmware")
+    print(f"command:     {command}")
+    print(f"machine:     {platform.platform()}, {platform.processor() or platform.machine()}")
+    print(f"python:      CPython {platform.python_version()}")
+    print(f"micropython: MicroPython {mp['micropython']} unix port (64-bit)")
+    print()
+    print("MicroPython unix port, one control cycle (IR + fuzzy + 2 PI + odometry + TELEMETRY):")
+    print(f"  median {mp['cycle_us_median']} us   p90 {mp['cycle_us_p90']} us   max {mp['cycle_us_max']} us"
+          f"   over {mp['cycles']} cycles")
+    print("  parts, us per call: " + ", ".join(f"{k} {v:.1f}" for k, v in parts.items()))
+    print(f"  heap allocated per cycle: {mp['alloc_bytes_per_cycle']:.2f} B; "
+          f"cycles under heap_lock(): {'ok' if mp['heap_locked_cycles_ok'] else 'ALLOCATED'}")
+    print(f"  heap, all firmware modules from .mpy + a running Robot: {int(heap['in_use_bytes']) / 1024:.1f} KB "  # type: ignore[call-overload]
+          f"in use; smallest -X heapsize that runs it: {heap['smallest_heap_kb']} KB")
+    print(f"CPython {platform.python_version()}: one control cycle, median {cp_cycle:.1f} us")
+    print()
+    speedup = None
+    if "error" in fuzzy:
+        print(f"fuzzy peers: not measured ({fuzzy['error']})")
+    else:
+        print(fuzzy.get("table", ""))
+        speedup = fuzzy.get("speedup_vs_fastest_peer")
+    cycle_ok = mp["cycle_us_median"] <= TARGET_CYCLE_US  # type: ignore[operator]
+    alloc_ok = mp["alloc_bytes_per_cycle"] == 0 and mp["heap_locked_cycles_ok"]
+    heap_ok = heap["smallest_heap_kb"] <= TARGET_HEAP_KB  # type: ignore[operator]
+    print()
+    print("targets:")
+    print(f"  [{'MET' if cycle_ok else 'MISSED'}]  cycle <= {TARGET_CYCLE_US} us on the unix port: "
+          f"median {mp['cycle_us_median']} us")
+    print(f"  [{'MET' if alloc_ok else 'MISSED'}]  0 allocations per cycle: {mp['alloc_bytes_per_cycle']:.2f} B/cycle")
+    print(f"  [{'MET' if heap_ok else 'MISSED'}]  peak heap <= {TARGET_HEAP_KB} KB with all firmware modules loaded: "
+          f"runs in {heap['smallest_heap_kb']} KB on the 64-bit unix port (objects and GC blocks twice an RP2040's)")
+    if speedup is not None:
+        print(f"  [{'MET' if speedup >= TARGET_SPEEDUP else 'MISSED'}]  one inference >= {TARGET_SPEEDUP}x faster than "
+              f"the fastest peer on CPython: {speedup:.0f}x")
+    print(f"\nelapsed: {time.monotonic() - t_start:.1f} s")
+    if args.json:
+        Path(args.json).write_text(json.dumps({
+            "command": command, "micropython": mp, "heap": heap, "cpython_cycle_us": cp_cycle,
+            "fuzzy": {k: v for k, v in fuzzy.items() if k != "table"},
+        }, indent=2, default=str))
+    return 0

@@ -1,0 +1,150 @@
+"""MicroPython side of `twinbot bench firmware` (run by tools/bench_firmware.py).
+
+usage: micropython tools/mp_bench_firmware.py time N      cycle and part timings, allocations
+       micropython tools/mp_bench_firmware.py heap N      load everything, run N cycles, report heap
+
+Prints one JSON object.  The robot runs on tools/mp_testhal.TestHal, whose
+own work (filling 8 ADC readings twice, copying frames) is part of the
+cycle time measured here, as the real ADC reads are on a board.
+"""
+import gc
+import json
+import sys
+import time
+
+import micropython
+
+
+def make_hal():
+    from tools.mp_testhal import TestHal
+
+    return TestHal(256, 256)
+
+
+def make_robot(hal=None):
+    # Imported here so that `heap` mode counts the firmware's modules.
+    from firmware.robot import Robot
+    from protocol import wire as W
+    from protocol.framing import FrameEncoder
+
+    if hal is None:
+        hal = make_hal()
+    robot = Robot(hal)
+    enc = FrameEncoder()
+    hal.give(enc.encode(W.COMMAND, bytes((W.MODE_AUTONOMOUS, 0, 0, 0, 0))))
+    for k in range(20):
+        hal.reflection[k & 7] = (k * 331) % 3000
+        robot.cycle()
+    return hal, robot
+
+
+def median(xs):
+    s = sorted(xs)
+    return s[len(s) // 2]
+
+
+def time_cycles(robot, hal, n, out):
+    for k in range(n):
+        hal.reflection[k & 7] = (k * 331) % 3000
+        t0 = time.ticks_us()
+        robot.cycle()
+        out[k] = time.ticks_diff(time.ticks_us(), t0)
+
+
+def per_call(fn, n):
+    t0 = time.ticks_us()
+    for _ in range(n):
+        fn()
+    return time.ticks_diff(time.ticks_us(), t0) / n
+
+
+def bench_time(n):
+    hal, robot = make_robot()
+    durations = [0] * n
+    gc.collect()
+    time_cycles(robot, hal, n, durations)
+    durations.sort()
+    result = {
+        "cycles": n,
+        "cycle_us_median": durations[n // 2],
+        "cycle_us_p90": durations[n * 9 // 10],
+        "cycle_us_max": durations[-1],
+    }
+    parts = {}
+    ir = robot.ir
+    parts["ir_acquire"] = per_call(ir.acquire, n)
+    for rs in (0, 1):
+        robot.fuzzy.configure(rs, 200)
+        readings = robot.ir.value
+
+        def infer():
+            robot.fuzzy.infer(readings)
+
+        parts["fuzzy_" + ("first" if rs == 0 else "refined")] = per_call(infer, n)
+    wl = robot.wheel_l
+
+    def pi():
+        wl.measure(1234, 40)
+        wl.control(150, 40)
+
+    parts["wheel_pi_one_wheel"] = per_call(pi, n)
+    odo = robot.odometry
+
+    def step():
+        odo.step(9, 11)
+
+    parts["odometry_step"] = per_call(step, n)
+
+    def telemetry():
+        robot.send_telemetry(100, -100)
+
+    parts["telemetry_frame"] = per_call(telemetry, n)
+    result["parts_us"] = parts
+    # Allocations per cycle: the GC off, heap use before and after.
+    gc.collect()
+    gc.disable()
+    before = gc.mem_alloc()
+    time_cycles(robot, hal, n, durations)
+    after = gc.mem_alloc()
+    gc.enable()
+    result["alloc_bytes_per_cycle"] = (after - before) / n
+    # And under heap_lock: any allocation raises.
+    locked = [0]
+
+    def run_locked():
+        micropython.heap_lock()
+        try:
+            time_cycles(robot, hal, n, durations)
+            locked[0] = 1
+        except MemoryError:
+            locked[0] = 0
+        micropython.heap_unlock()
+
+    run_locked()
+    result["heap_locked_cycles_ok"] = bool(locked[0])
+    result["faults"] = robot.faults
+    return result
+
+
+def bench_heap(n):
+    hal = make_hal()  # the test board is not the firmware: not counted
+    gc.collect()
+    base = gc.mem_alloc()
+    hal, robot = make_robot(hal)
+    for k in range(n):
+        hal.reflection[k & 7] = (k * 331) % 3000
+        robot.cycle()
+    gc.collect()
+    return {"heap_in_use": gc.mem_alloc() - base, "heap_total": gc.mem_alloc() + gc.mem_free(),
+            "cycles": robot.cycles, "faults": robot.faults}
+
+
+def main():
+    what = sys.argv[1]
+    n = int(sys.argv[2])
+    result = bench_time(n) if what == "time" else bench_heap(n)
+    result["micropython"] = ".".join(str(v) for v in sys.implementation.version[:3])
+    print(json.dumps(result))
+
+
+main()

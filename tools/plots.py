@@ -1,0 +1,90 @@
+"""Pictures of worlds and runs (matplotlib, no display needed)."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+
+def _pyplot():  # type: ignore[no-untyped-def]
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def draw_world(ax, world) -> None:  # type: ignore[no-untyped-def]
+    for x1, y1, x2, y2 in world.segments:
+        ax.plot([x1, x2], [y1, y2], color="0.15", lw=2.2, solid_capstyle="round")
+    for poly in world.polygons:
+        ax.fill(poly[:, 0], poly[:, 1], color="0.75", zorder=0)
+    for lamp in world.lamps:
+        ax.plot(lamp.x, lamp.y, marker="*", color="goldenrod", ms=12)
+    ax.set_aspect("equal")
+    ax.set_xlim(-0.05, world.size[0] + 0.05)
+    ax.set_ylim(-0.05, world.size[1] + 0.05)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+
+
+def draw_run(ax, run, body_radius: float, color: str = "tab:blue", label: str | None = None) -> None:  # type: ignore[no-untyped-def]
+    pose = run.pose
+    if not len(pose):
+        return
+    ax.plot(pose[:, 0], pose[:, 1], color=color, lw=1.0, label=label)
+    x, y, phi = pose[0]
+    ax.add_patch(_disc(x, y, body_radius, "tab:green"))
+    x, y, phi = pose[-1]
+    ax.add_patch(_disc(x, y, body_radius, color))
+    ax.arrow(x, y, body_radius * math.cos(phi), body_radius * math.sin(phi), width=0.004, color="k")
+
+
+def _disc(x: float, y: float, r: float, color: str):  # type: ignore[no-untyped-def]
+    from matplotlib.patches import Circle
+
+    return Circle((x, y), r, fill=False, color=color, lw=1.5)
+
+
+def save_runs(path: str | Path, world, runs: Sequence[object], titles: Sequence[str], body_radius: float,  # type: ignore[no-untyped-def]
+              suptitle: str = "") -> Path:
+    """One panel per run, side by side (or 2 x 2 for four)."""
+    plt = _pyplot()
+    n = len(runs)
+    cols = 2 if n == 4 else n
+    rows = 2 if n == 4 else 1
+    fig, axes = plt.subplots(rows, cols, figsize=(5.2 * cols, 4.4 * rows), squeeze=False)
+    for ax, run, title in zip(axes.flat, runs, titles):
+        draw_world(ax, world)
+        draw_run(ax, run, body_radius)
+        ax.set_title(title, fontsize=10)
+    if suptitle:
+        fig.suptitle(suptitle)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def save_coverage(path: str | Path, runs: Sequence[object], labels: Sequence[str]) -> Path:
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6, 3.6))
+    for run, label in zip(runs, labels):
+        ax.plot(run.t, 100 * np.asarray(run.coverage), label=label)  # type: ignore[attr-defined]
+    ax.axhline(90, color="0.6", ls="--", lw=0.8)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("free area covered (%)")
+    ax.set_ylim(0, 100)
+    ax.legend()
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -1,0 +1,176 @@
+"""`twinbot sim`: run the simulated robot, headless, with its firmware in the loop.
+
+The firmware explores the world with the chosen rule set, either in this
+process (SIL, default) or on a virtual board under MicroPython (--pil).
+Prints the coverage of the free area, the time to 90 % coverage, the
+collisions and the real-time factor; --png draws the trajectory, --record
+writes a recording (CSV + JSON sidecar, docs/recordings.md).
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+from tools.cli import CliError
+
+EXAMPLES = """\
+examples:
+  twinbot sim --world paper_room --rules refined --duration 120 --png run.png
+  twinbot sim --world maze --rules first --duration 60 --realtime --speed 10
+  twinbot sim --world my_room.json --pil --record run.csv
+"""
+
+
+def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
+    p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1], epilog=EXAMPLES,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_run_arguments(p)
+    p.add_argument("--record", metavar="FILE", help="write a recording: FILE (CSV) and FILE.json")
+    p.add_argument("--png", metavar="FILE", help="draw the world and the trajectory")
+    p.set_defaults(func=run)
+
+
+def add_run_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--world", default="paper_room",
+                   help="built-in world (paper_room, maze, arena) or a world JSON file (default paper_room)")
+    p.add_argument("--rules", choices=("first", "refined"), default="refined", help="fuzzy rule set (default refined)")
+    p.add_argument("--duration", type=float, default=60.0, help="simulated seconds (default 60)")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--fixed", dest="mode", action="store_const", const="fixed",
+                      help="fixed step: exactly repeatable (default)")
+    mode.add_argument("--realtime", dest="mode", action="store_const", const="realtime",
+                      help="variable step from the wall clock, as the paper's real-time loop")
+    p.set_defaults(mode="fixed")
+    p.add_argument("--speed", default="max",
+                   help="k x real time, or 'max' (fixed step only: as fast as possible; default max, "
+                        "and 1 in --realtime)")
+    p.add_argument("--substeps", type=int, default=8, help="physics substeps per 40 ms control period (default 8)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
+    p.add_argument("--no-noise", action="store_true", help="noise-free sensors")
+    p.add_argument("--params", metavar="FILE", help="robot parameters JSON (any subset; see host_sim/params.py)")
+    p.add_argument("--pil", action="store_true",
+                   help="run the firmware on a virtual board under MicroPython (processor in the loop)")
+
+
+def parse_speed(text: str, mode: str) -> float:
+    if text == "max":
+        if mode == "realtime":
+            return 1.0
+        return math.inf
+    try:
+        speed = float(text)
+    except ValueError:
+        raise CliError(f"--speed must be a number (k x real time) or 'max', not {text!r}") from None
+    if not speed > 0:
+        raise CliError("--speed must be > 0")
+    return speed
+
+
+def load_inputs(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+    from host_sim.params import DEFAULT, ParamsError, load_params
+    from host_sim.world import WorldError, world_by_name_or_path
+
+    try:
+        params = load_params(args.params) if args.params else DEFAULT
+        world = world_by_name_or_path(args.world, params.body_radius)
+    except (ParamsError, WorldError) as exc:
+        raise CliError(str(exc)) from None
+    if args.duration <= 0:
+        raise CliError("--duration must be > 0")
+    if args.substeps < 1:
+        raise CliError("--substeps must be >= 1")
+    return params, world
+
+
+def make_controller(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+    from host_sim.controllers import RULE_SETS, PilController, SilController
+
+    rule_set = RULE_SETS[args.rules]
+    if args.pil:
+        try:
+            return PilController(rule_set)
+        except RuntimeError as exc:
+            raise CliError(f"PIL: {exc}") from None
+    return SilController(rule_set)
+
+
+class Progress:
+    """A progress bar over simulated time (tqdm on stderr; quiet when not a terminal)."""
+
+    def __init__(self, total: float, label: str) -> None:
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=round(total, 2), desc=label, unit="sim s", file=sys.stderr,
+                        disable=not sys.stderr.isatty(), bar_format="{l_bar}{bar}| {n:.1f}/{total:.0f} sim s "
+                                                                    "[{elapsed}<{remaining}]")
+        self.done = 0.0
+
+    def __call__(self, t: float) -> None:
+        self.bar.update(round(t - self.done, 3))
+        self.done = t
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def simulate(args: argparse.Namespace, params, world, recorder=None, label: str = "simulating"):  # type: ignore[no-untyped-def]
+    from host_sim.simulation import Simulation
+
+    speed = parse_speed(args.speed, args.mode)
+    controller = make_controller(args)
+    progress = Progress(args.duration, label)
+    try:
+        sim = Simulation(world, params, controller, seed=args.seed, noise=not args.no_noise,
+                         substeps=args.substeps, recorder=recorder)
+        if args.mode == "realtime":
+            result = sim.run_realtime(args.duration, speed=speed, progress=progress)
+        else:
+            result = sim.run_fixed(args.duration, speed=speed, progress=progress)
+    finally:
+        progress.close()
+        controller.close()
+    return result
+
+
+def summary(result, label: str = "") -> str:  # type: ignore[no-untyped-def]
+    t90 = result.time_to(0.9)
+    return (f"{label}coverage {100 * result.coverage[-1]:.1f} % of the free area, "
+            f"90 % {'at ' + format(t90, '.1f') + ' s' if t90 is not None else 'not reached'}, "
+            f"{result.collisions} collisions; {result.sim_seconds:.1f} sim s in {result.wall_seconds:.2f} s "
+            f"({result.real_time_factor:.0f}x real time, {result.mode} step, {result.controller})")
+
+
+def run(args: argparse.Namespace) -> int:
+    params, world = load_inputs(args)
+    recorder = None
+    if args.record:
+        from host_sim.recording import RecordingError, RecordingWriter
+
+        try:
+            recorder = RecordingWriter(args.record, source="simulator", sample_period=0.04,
+                                       robot=params.to_json(), world=world.to_dict(),
+                                       extra={"controller": "PIL" if args.pil else "SIL", "rules": args.rules,
+                                              "seed": args.seed, "mode": args.mode, "substeps": args.substeps,
+                                              "noise": not args.no_noise, "emitter_pct": 60})
+        except RecordingError as exc:
+            raise CliError(str(exc)) from None
+    try:
+        result = simulate(args, params, world, recorder)
+    finally:
+        if recorder:
+            recorder.close()
+    print(summary(result, f"{world.name}, {args.rules} rules: "))
+    if args.record:
+        print(f"recording: {args.record} (+ .json sidecar), {len(result.t)} rows")
+    if args.png:
+        from tools.plots import save_runs
+
+        save_runs(args.png, world, [result], [f"{world.name}, {args.rules} rule set, {args.duration:.0f} s"],
+                  params.body_radius)
+        print(f"picture: {args.png}")
+    return 0
+
+
+__all__ = ["register", "add_run_arguments", "simulate", "summary", "load_inputs", "Path"]
