@@ -28,21 +28,28 @@ class Coverage:
         self._dy, self._dx = dy[keep], dx[keep]
         self.times: list[float] = []
         self.fractions: list[float] = []
+        self._count = 0  # covered free cells
+        self._last_cell: tuple[int, int] | None = None
 
     def add(self, t: float, x: float, y: float) -> None:
-        iy, ix = self.world.cell_of(np.array([x, y]), self.resolution)
         ny, nx = self.free.shape
-        ys = np.clip(int(iy) + self._dy, 0, ny - 1)
-        xs = np.clip(int(ix) + self._dx, 0, nx - 1)
-        self.covered[ys, xs] = True
+        ix = min(max(math.floor(x / self.resolution), 0), nx - 1)
+        iy = min(max(math.floor(y / self.resolution), 0), ny - 1)
+        if (iy, ix) != self._last_cell:  # the footprint only changes with the cell
+            self._last_cell = (iy, ix)
+            ys = np.clip(iy + self._dy, 0, ny - 1)
+            xs = np.clip(ix + self._dx, 0, nx - 1)
+            new = self.free[ys, xs] & ~self.covered[ys, xs]
+            if new.any():
+                cells = np.unique(ys[new] * nx + xs[new])  # clipping can repeat an edge cell
+                self.covered.flat[cells] = True
+                self._count += len(cells)
         self.times.append(t)
         self.fractions.append(self.fraction)
 
     @property
     def fraction(self) -> float:
-        if not self.n_free:
-            return 0.0
-        return float((self.covered & self.free).sum()) / self.n_free
+        return self._count / self.n_free if self.n_free else 0.0
 
     def time_to(self, level: float) -> float | None:
         for t, f in zip(self.times, self.fractions):

@@ -55,18 +55,17 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, Union
 
 import numpy as np
 
 from host_sim.params import RobotParams
 
-Vec = Sequence[float]
+Vec = Union[Sequence[float], np.ndarray]  # a state vector: tuple, list or numpy array
 
 # ----------------------------------------------------------------------------- #
 # Parameters: the combinations the closed form needs
 # ----------------------------------------------------------------------------- #
-# (r, b, d, g = m_c d, m_t, J_t, 1/m_t, 1/J_t)
 _last: tuple[Any, tuple[float, ...]] | None = None
 
 
@@ -85,7 +84,9 @@ def effective_inertias(p: Any) -> tuple[Any, Any]:
 
 
 def _coeffs(p: Any) -> tuple[Any, ...]:
-    """(r, b, d, g, m_t, J_t, 1/m_t, 1/J_t); cached for the last RobotParams seen (they are frozen)."""
+    """(r, b, d, g = m_c d, m_t, J_t, 1/m_t, 1/J_t, r/2, r/(2b), 1/r, b/r, m_t J_t).
+
+    Cached for the last RobotParams seen (they are frozen); a ParamBatch keeps its own."""
     global _last
     last = _last
     if last is not None and last[0] is p:
@@ -93,8 +94,10 @@ def _coeffs(p: Any) -> tuple[Any, ...]:
     if isinstance(p, ParamBatch):
         return p.dynamics_coeffs()
     m_t, j_t = effective_inertias(p)
-    c = (float(p.wheel_radius), float(p.half_axle), float(p.com_offset), float(p.body_mass * p.com_offset),
-         float(m_t), float(j_t), 1.0 / m_t, 1.0 / j_t)
+    m_t, j_t = float(m_t), float(j_t)
+    r, b = float(p.wheel_radius), float(p.half_axle)
+    c = (r, b, float(p.com_offset), float(p.body_mass * p.com_offset), m_t, j_t, 1.0 / m_t, 1.0 / j_t,
+         0.5 * r, 0.5 * r / b, 1.0 / r, b / r, m_t * j_t)
     _last = (p, c)
     return c
 
@@ -121,7 +124,6 @@ class ParamBatch:
         self.names = list(arrays)
         self.n = 0 if n is None else n
         self._dyn: tuple[np.ndarray, ...] | None = None
-        self._extra: tuple[np.ndarray, ...] | None = None
 
     @classmethod
     def from_params(cls, params: Sequence[RobotParams]) -> ParamBatch:
@@ -150,6 +152,9 @@ class ParamBatch:
     def __len__(self) -> int:
         return self.n
 
+    def __getattr__(self, name: str) -> np.ndarray:  # only for names not set in __init__
+        raise AttributeError(f"ParamBatch has no parameter '{name}'")
+
     def robot(self, i: int, base: RobotParams | None = None) -> RobotParams:
         """The parameters of robot i as a RobotParams (the non-scalar ones from `base`)."""
         return (base or RobotParams()).replace(**{k: float(getattr(self, k)[i]) for k in self.names})
@@ -157,8 +162,9 @@ class ParamBatch:
     def dynamics_coeffs(self) -> tuple[np.ndarray, ...]:
         if self._dyn is None:
             m_t, j_t = effective_inertias(self)
-            self._dyn = (self.wheel_radius, self.half_axle, self.com_offset, self.body_mass * self.com_offset,
-                         m_t, j_t, 1.0 / m_t, 1.0 / j_t)
+            r, b = self.wheel_radius, self.half_axle
+            self._dyn = (r, b, self.com_offset, self.body_mass * self.com_offset, m_t, j_t, 1.0 / m_t, 1.0 / j_t,
+                         0.5 * r, 0.5 * r / b, 1.0 / r, b / r, m_t * j_t)
         return self._dyn
 
 
@@ -250,11 +256,11 @@ def matrices(q: Vec, q_dot: Vec, p: RobotParams) -> tuple[np.ndarray, ...]:
 
 def reduced_accel(q: Vec, v: Vec, tau: Vec, p: RobotParams) -> np.ndarray:
     """v' from  S^T M S v' + S^T (M S' v + V) = S^T E tau, through the matrices (the paper's path)."""
-    v = np.asarray(v, dtype=float)
+    va = np.asarray(v, dtype=float)
     s_mat = null_space(q, p)
-    m, vv, e, _a, s_mat, s_dot = matrices(q, s_mat @ v, p)
+    m, vv, e, _a, s_mat, s_dot = matrices(q, s_mat @ va, p)
     h = s_mat.T @ m @ s_mat
-    rhs = s_mat.T @ (e @ np.asarray(tau, dtype=float)) - s_mat.T @ (m @ (s_dot @ v) + vv)
+    rhs = s_mat.T @ (e @ np.asarray(tau, dtype=float)) - s_mat.T @ (m @ (s_dot @ va) + vv)
     return np.linalg.solve(h, rhs)
 
 
@@ -303,20 +309,20 @@ def _gyroscopic_matrix(q: Vec, q_dot_star: np.ndarray, p: RobotParams, s_mat: np
 
 def step_matrix(q: Vec, v: Vec, tau: Vec, dt: float, p: RobotParams) -> tuple[np.ndarray, np.ndarray]:
     """One step of the integrator (see the module docstring) evaluated through the matrices."""
-    q = np.asarray(q, dtype=float)
-    v = np.asarray(v, dtype=float)
-    tau = np.asarray(tau, dtype=float)
-    s_mat = null_space(q, p)
-    m = mass_matrix(q, p)
+    qa = np.asarray(q, dtype=float)
+    va = np.asarray(v, dtype=float)
+    ta = np.asarray(tau, dtype=float)
+    s_mat = null_space(qa, p)
+    m = mass_matrix(qa, p)
     h = s_mat.T @ m @ s_mat
-    v_star = v + 0.5 * dt * reduced_accel(q, v, tau, p)
-    c_star = _gyroscopic_matrix(q, s_mat @ v_star, p, s_mat, m)
-    f = s_mat.T @ (input_matrix(q, p) @ tau)
-    v_new = np.linalg.solve(h + 0.5 * dt * c_star, (h - 0.5 * dt * c_star) @ v + dt * f)
-    v_bar = 0.5 * (v + v_new)
-    q_mid = q.copy()
+    v_star = va + 0.5 * dt * reduced_accel(qa, va, ta, p)
+    c_star = _gyroscopic_matrix(qa, s_mat @ v_star, p, s_mat, m)
+    f = s_mat.T @ (input_matrix(qa, p) @ ta)
+    v_new = np.linalg.solve(h + 0.5 * dt * c_star, (h - 0.5 * dt * c_star) @ va + dt * f)
+    v_bar = 0.5 * (va + v_new)
+    q_mid = qa.copy()
     q_mid[2] += 0.5 * dt * (s_mat[2] @ v_bar)
-    return q + dt * (null_space(q_mid, p) @ v_bar), v_new
+    return qa + dt * (null_space(q_mid, p) @ v_bar), v_new
 
 
 # ----------------------------------------------------------------------------- #
@@ -346,7 +352,7 @@ def qdot(q: Vec, v: Vec, p: RobotParams) -> tuple[float, float, float, float, fl
 
 def reduced_accel_fast(q: Vec, v: Vec, tau: Vec, p: RobotParams) -> tuple[float, float]:
     """v' in closed form (pure Python floats; q is not needed: the reduced model does not depend on it)."""
-    r, b, _d, g, _mt, _jt, imt, ijt = _coeffs(p)
+    r, b, _d, g, _mt, _jt, imt, ijt = _coeffs(p)[:8]
     wl, wr = v[0], v[1]
     tl, tr = tau[0], tau[1]
     u = 0.5 * r * (wl + wr)
@@ -358,7 +364,7 @@ def reduced_accel_fast(q: Vec, v: Vec, tau: Vec, p: RobotParams) -> tuple[float,
 
 def kinetic_energy_reduced(v: Vec, p: RobotParams) -> float:
     """T = 1/2 m_t u^2 + 1/2 J_t omega^2 = 1/2 v^T H v (J), pure Python."""
-    r, b, _d, _g, mt, jt, _imt, _ijt = _coeffs(p)
+    r, b, _d, _g, mt, jt = _coeffs(p)[:6]
     u = 0.5 * r * (v[0] + v[1])
     w = 0.5 * r * (v[1] - v[0]) / b
     return 0.5 * (mt * u * u + jt * w * w)
@@ -366,28 +372,32 @@ def kinetic_energy_reduced(v: Vec, p: RobotParams) -> float:
 
 def step(q: Vec, v: Vec, tau: Vec, dt: float, p: RobotParams) -> tuple[tuple[float, ...], tuple[float, float]]:
     """One fixed step (module docstring, docs/dynamics.md): returns (q_next, v_next) as tuples of floats."""
-    r, b, d, g, mt, jt, _imt, ijt = _coeffs(p)
+    r, b, d, g, mt, jt, _imt, ijt, hr, kw, ir, bir, mtjt = _coeffs(p)
     wl, wr = v[0], v[1]
     tl, tr = tau[0], tau[1]
-    u = 0.5 * r * (wl + wr)
-    w = 0.5 * r * (wr - wl) / b
-    # predictor of the yaw rate at mid-step, for the gyroscopic coefficient
-    w_star = w + 0.5 * dt * (b * (tr - tl) / r - g * u * w) * ijt
-    al = 0.5 * dt * g * w_star
-    r1 = mt * u + al * w + dt * (tl + tr) / r
-    r2 = jt * w - al * u + dt * b * (tr - tl) / r
-    det = mt * jt + al * al
-    u1 = (jt * r1 + al * r2) / det
-    w1 = (mt * r2 - al * r1) / det
-    wl1 = (u1 - b * w1) / r
-    wr1 = (u1 + b * w1) / r
-    ub = 0.5 * (u + u1)
+    u = hr * (wl + wr)
+    w = kw * (wr - wl)
+    gam = bir * (tr - tl)
+    hdt = 0.5 * dt
+    # yaw rate predicted at mid-step, for the gyroscopic coefficient
+    al = hdt * g * (w + hdt * (gam - g * u * w) * ijt)
+    r1 = mt * u + al * w + dt * ir * (tl + tr)
+    r2 = jt * w - al * u + dt * gam
+    idet = 1.0 / (mtjt + al * al)
+    u1 = (jt * r1 + al * r2) * idet
+    w1 = (mt * r2 - al * r1) * idet
+    x1 = ir * u1
+    y1 = bir * w1
+    wl1 = x1 - y1
+    wr1 = x1 + y1
+    sb = hdt * (u + u1)  # distance along the heading in the step
     wb = 0.5 * (w + w1)
+    dwb = dt * d * wb
     phi = q[2]
-    ph = phi + 0.5 * dt * wb
+    ph = phi + hdt * wb
     c, s = math.cos(ph), math.sin(ph)
-    return ((q[0] + dt * (ub * c - d * wb * s), q[1] + dt * (ub * s + d * wb * c), phi + dt * wb,
-             q[3] + 0.5 * dt * (wl + wl1), q[4] + 0.5 * dt * (wr + wr1)), (wl1, wr1))
+    return ((q[0] + sb * c - dwb * s, q[1] + sb * s + dwb * c, phi + dt * wb,
+             q[3] + hdt * (wl + wl1), q[4] + hdt * (wr + wr1)), (wl1, wr1))
 
 
 # ----------------------------------------------------------------------------- #
@@ -405,7 +415,7 @@ def qdot_batch(q: np.ndarray, v: np.ndarray, p: Any) -> np.ndarray:
 
 def reduced_accel_batch(q: np.ndarray, v: np.ndarray, tau: np.ndarray, p: Any) -> np.ndarray:
     """v' for N robots: v, tau (N, 2) -> (N, 2); p a RobotParams (shared) or a ParamBatch of N."""
-    r, b, _d, g, _mt, _jt, imt, ijt = _coeffs(p)
+    r, b, _d, g, _mt, _jt, imt, ijt = _coeffs(p)[:8]
     wl, wr = v[:, 0], v[:, 1]
     tl, tr = tau[:, 0], tau[:, 1]
     u = 0.5 * r * (wl + wr)
@@ -418,17 +428,6 @@ def reduced_accel_batch(q: np.ndarray, v: np.ndarray, tau: np.ndarray, p: Any) -
     return out
 
 
-def _batch_extra(p: Any) -> tuple[Any, ...]:
-    """(r/2, r/(2b), 1/r, b/r, m_t J_t) for the batch step."""
-    if isinstance(p, ParamBatch):
-        if p._extra is None:
-            r, b, _d, _g, mt, jt = p.dynamics_coeffs()[:6]
-            p._extra = (0.5 * r, 0.5 * r / b, 1.0 / r, b / r, mt * jt)
-        return p._extra
-    r, b, _d, _g, mt, jt = _coeffs(p)[:6]
-    return 0.5 * r, 0.5 * r / b, 1.0 / r, b / r, mt * jt
-
-
 def step_batch(q: np.ndarray, v: np.ndarray, tau: np.ndarray, dt: float, p: Any,
                out: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """`step` for N robots: q (N, 5), v (N, 2), tau (N, 2) -> (q_next, v_next).
@@ -437,8 +436,7 @@ def step_batch(q: np.ndarray, v: np.ndarray, tau: np.ndarray, dt: float, p: Any,
     dt: a float or an array (N,).  out: optional (q_next, v_next) arrays to write into
     (they may be q and v themselves).
     """
-    r, b, d, g, mt, jt, _imt, ijt = _coeffs(p)
-    hr, kw, ir, bir, mtjt = _batch_extra(p)
+    r, b, d, g, mt, jt, _imt, ijt, hr, kw, ir, bir, mtjt = _coeffs(p)
     wl, wr = v[:, 0], v[:, 1]
     tl, tr = tau[:, 0], tau[:, 1]
     u = hr * (wl + wr)

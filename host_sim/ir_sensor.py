@@ -18,8 +18,10 @@ Reflected light (docs/ir-sensor.md has the figures and the derivation):
   second; symmetric on [-pi/2, pi/2] by construction, clipped at 0;
 * F: 1/x^2 far (a fixed solid angle of light), x^2 / x_p^4 near (the
   emitter's and the receiver's cones stop overlapping), the two meeting at
-  the peak x_p = ir_near_peak; a weighted average (smoothstep weight) over
-  ir_blend around x_p; faded to 0 over the last 20 % of sensor_range;
+  the peak x_p = ir_near_peak; in between (x_p/k .. k x_p, k = ir_blend)
+  their weighted geometric average, the far law's weight s rising as a
+  smootherstep of ln x: F = x_p^-2 (x/x_p)^(2 - 4 s); faded to 0 over the
+  last 20 % of sensor_range;
 * P: the pulse width L (%) gives proportional light, min(L/100,
   ir_saturation): flat above the emitter's saturation (Fig. 10);
 * C = ir_gain, counts m^2 at 100 % pulse width (extrapolated linearly).
@@ -114,9 +116,10 @@ class _Consts:
         self.blend_lo, self.blend_hi = p.ir_angle_blend
         self.inv_blend = 1.0 / (self.blend_hi - self.blend_lo)
         xp = p.ir_near_peak
-        self.inv_xp4 = 1.0 / xp ** 4
-        self.near_lo = xp - p.ir_blend / 2
-        self.inv_w = 1.0 / p.ir_blend
+        self.inv_xp = 1.0 / xp
+        self.inv_xp2 = 1.0 / xp ** 2
+        self.ln_k = math.log(p.ir_blend)
+        self.inv_2ln_k = 0.5 / self.ln_k
         self.range = p.sensor_range
         self.inv_taper = 1.0 / (RANGE_TAPER * p.sensor_range)
         self.adc_max = p.adc_max
@@ -140,10 +143,10 @@ def check_params(p: RobotParams) -> None:
     problems = []
     if not p.ir_near_peak > 0:
         problems.append(f"ir_near_peak must be > 0 m, got {p.ir_near_peak}")
-    if not 0 < p.ir_blend < 2 * p.ir_near_peak:
-        problems.append(f"ir_blend must be in (0, 2 * ir_near_peak), got {p.ir_blend}")
-    if not p.sensor_range > p.ir_near_peak + p.ir_blend:
-        problems.append("sensor_range must exceed ir_near_peak + ir_blend")
+    if not p.ir_blend > 1:
+        problems.append(f"ir_blend (a ratio) must be > 1, got {p.ir_blend}")
+    elif not p.sensor_range > p.ir_near_peak * p.ir_blend / (1 - RANGE_TAPER):
+        problems.append("sensor_range must reach well beyond ir_near_peak * ir_blend")
     if not 0 < p.ir_saturation <= 1:
         problems.append(f"ir_saturation must be in (0, 1], got {p.ir_saturation}")
     lo, hi = p.ir_angle_blend
@@ -162,6 +165,12 @@ def _smoothstep(u: np.ndarray) -> np.ndarray:
     return u * u * (3.0 - 2.0 * u)
 
 
+def _smootherstep(u: np.ndarray) -> np.ndarray:
+    """6u^5 - 15u^4 + 10u^3 on [0, 1]: the blend weight with continuous curvature."""
+    u = np.minimum(np.maximum(u, 0.0), 1.0)
+    return u * u * u * (u * (6.0 * u - 15.0) + 10.0)
+
+
 def domes(angle: Any, p: RobotParams = DEFAULT) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(big dome, small dome, blend weight of the big dome) at |angle| (rad)."""
     c = _consts(p)
@@ -174,18 +183,29 @@ def angle_term(angle: Any, p: RobotParams = DEFAULT) -> np.ndarray:
     """A(angle): relative response to a wall seen at `angle` (rad) from its normal; A(0) ~ 1."""
     c = _consts(p)
     a = np.abs(np.asarray(angle, dtype=float))
-    v = np.power.outer(a, c.powers) @ c.coef_blend
+    cs, cd = c.coef_blend[:, 0], c.coef_blend[:, 1]  # small, big - small
+    vs = cs[5] * a + cs[4]  # Horner: faster than powers for large batches
+    vd = cd[5] * a + cd[4]
+    for k in (3, 2, 1, 0):
+        vs = vs * a + cs[k]
+        vd = vd * a + cd[k]
     w = _smoothstep((a - c.blend_lo) * c.inv_blend)
-    return np.maximum(v[..., 0] + w * v[..., 1], 0.0)
+    return np.maximum(vs + w * vd, 0.0)
 
 
 def distance_term(distance: Any, p: RobotParams = DEFAULT) -> np.ndarray:
-    """F(x) in 1/m^2: x^2/x_p^4 near, 1/x^2 far, averaged over ir_blend around x_p; 0 beyond range."""
+    """F(x) in 1/m^2: x^2/x_p^4 near, 1/x^2 far, averaged in between; 0 beyond sensor_range.
+
+    Between x_p/k and k x_p (k = ir_blend) the two laws are averaged
+    geometrically, the far law's weight s rising as a smootherstep of ln x:
+    F = near^(1-s) far^s = x_p^-2 (x/x_p)^(2 - 4 s).  Smooth everywhere,
+    maximum 1/x_p^2 at x_p.
+    """
     c = _consts(p)
     x = np.maximum(np.minimum(distance, c.range), 1e-6)  # inf (no wall) -> range -> 0
-    x2 = x * x
-    near = x2 * c.inv_xp4
-    f = near + _smoothstep((x - c.near_lo) * c.inv_w) * (1.0 / x2 - near)
+    lx = np.log(x * c.inv_xp)
+    s = _smootherstep((lx + c.ln_k) * c.inv_2ln_k)
+    f = c.inv_xp2 * np.exp(lx * (2.0 - 4.0 * s))
     u = np.minimum((c.range - x) * c.inv_taper, 1.0)  # >= 0 already
     return f * (u * u * (3.0 - 2.0 * u))
 
@@ -234,41 +254,87 @@ def reflection(world: World, poses: Any, p: RobotParams = DEFAULT) -> tuple[np.n
     return np.maximum(d - p.body_radius, 0.0), a, h
 
 
+def lamp_gains(world: World, positions: Any, axes: Any, occlusion: bool = True,
+               viewpoints: Any = None) -> list[np.ndarray]:
+    """Per lamp, the geometric factor max(0, cos(axis, to lamp)) / d^2 (1/m^2) of sensors at positions (..., 2).
+
+    d is at least LAMP_MIN_DISTANCE.  With occlusion, a lamp hidden by a
+    wall gives 0; the line of sight is tested from `viewpoints` (default:
+    the sensors themselves; the robot's centre, broadcast over its
+    sensors, is what read_sensors uses: 8 times fewer tests, the same
+    answer except at the edge of a shadow).
+    """
+    pos = np.asarray(positions, dtype=float)
+    ax = np.asarray(axes, dtype=float)
+    gains = []
+    for lamp in world.lamps:
+        vec = np.array([lamp.x, lamp.y]) - pos
+        d = np.sqrt((vec * vec).sum(-1))
+        cos = (vec * ax).sum(-1) / np.maximum(d, 1e-12)
+        g = np.maximum(cos, 0.0) / np.maximum(d, LAMP_MIN_DISTANCE) ** 2
+        if occlusion and world.n_walls:
+            seen = world.visible(pos if viewpoints is None else np.asarray(viewpoints, dtype=float),
+                                 (lamp.x, lamp.y))
+            g = g * seen
+        gains.append(g)
+    return gains
+
+
+def _ambient(world: World, gains: list[np.ndarray], t: Any, p: RobotParams) -> Any:
+    level: Any = p.ir_ambient if world.ambient is None else world.ambient
+    for lamp, g in zip(world.lamps, gains):
+        level = level + lamp.level_at(t) * g
+    return level
+
+
 def ambient_level(world: World, positions: Any, axes: Any, t: Any = 0.0, p: RobotParams = DEFAULT,
                   occlusion: bool = True) -> np.ndarray:
     """Ambient light (ADC counts) seen by sensors at positions (..., 2) looking along axes (..., 2) at time t (s).
 
     The world's global level (ir_ambient when the world sets none) plus, for
     each lamp not hidden by a wall (occlusion=True), level(t) * max(0,
-    cos(axis, direction to the lamp)) / d^2 with d in m, at least
-    LAMP_MIN_DISTANCE.  t broadcasts against the batch shape.
+    cos(axis, direction to the lamp)) / d^2, d in m (at least
+    LAMP_MIN_DISTANCE), level(t) = level (1 + depth sin(2 pi f t)) for a
+    flickering lamp.  t broadcasts against the batch shape.
     """
-    pos = np.asarray(positions, dtype=float)
-    ax = np.asarray(axes, dtype=float)
-    base = p.ir_ambient if world.ambient is None else world.ambient
-    level = np.full(np.broadcast_shapes(pos.shape, ax.shape)[:-1], float(base))
-    for lamp in world.lamps:
-        vec = np.array([lamp.x, lamp.y]) - pos
-        d = np.sqrt((vec * vec).sum(-1))
-        cos = (vec * ax).sum(-1) / np.maximum(d, 1e-12)
-        light = np.asarray(lamp.level_at(t)) * np.maximum(cos, 0.0) / np.maximum(d, LAMP_MIN_DISTANCE) ** 2
-        if occlusion and world.n_walls:
-            lit = light > 0
-            if lit.any():
-                # A wall between the sensor and the lamp hides it.
-                pos_b = np.broadcast_to(pos, vec.shape)
-                dist, _, _ = world.ray_cast(pos_b[lit], vec[lit] / d[lit, None])
-                light = np.array(light, dtype=float)
-                light[lit] = np.where(dist < d[lit] - 1e-9, 0.0, light[lit])
-        level = level + light
-    return level
+    shape = np.broadcast_shapes(np.shape(positions), np.shape(axes))[:-1]
+    level = _ambient(world, lamp_gains(world, positions, axes, occlusion), t, p)
+    return np.broadcast_to(np.asarray(level, dtype=float), np.broadcast_shapes(shape, np.shape(level))).copy()
 
 
 # --------------------------------------------------------------------------- #
 # Readings
 # --------------------------------------------------------------------------- #
 def _quantise(v: np.ndarray, adc_max: int) -> np.ndarray:
+    """Round half to even, clip to 0..adc_max: the ADC's integer counts."""
     return np.minimum(np.maximum(np.rint(v), 0.0), adc_max).astype(np.int64)
+
+
+def _robot_lamp_gains(world: World, poses: np.ndarray, axes: np.ndarray, p: RobotParams) -> np.ndarray:
+    """lamp_gains for whole robots: (..., 8, n_lamps), line of sight from each robot's centre.
+
+    Sensor k sits at C + R u_k; with v = lamp - C, the sensor-to-lamp
+    vector is v - R u_k, so u_k . (lamp - sensor) = u_k . v - R and
+    |lamp - sensor|^2 = |v|^2 - 2 R u_k . v + R^2: one product for all.
+    """
+    centre = poses[..., :2]
+    vx = world.lamp_xy[:, 0] - centre[..., 0:1]  # (..., L)
+    vy = world.lamp_xy[:, 1] - centre[..., 1:2]
+    dot = axes[..., 0:1] * vx[..., None, :] + axes[..., 1:2] * vy[..., None, :]  # (..., 8, L)
+    r = p.body_radius
+    d2 = np.maximum((vx * vx + vy * vy)[..., None, :] - 2.0 * r * dot + r * r, 1e-24)
+    g = np.maximum(dot - r, 0.0) / (np.sqrt(d2) * np.maximum(d2, LAMP_MIN_DISTANCE ** 2))
+    if world.n_walls:
+        g = g * world.lamps_visible(centre)[..., None, :]
+    return g
+
+
+def _axes(poses: np.ndarray) -> np.ndarray:
+    ang = poses[..., 2:3] + _BEAR
+    axes = np.empty(ang.shape + (2,))
+    axes[..., 0] = np.cos(ang)
+    axes[..., 1] = np.sin(ang)
+    return axes
 
 
 def _read(world: World, poses: np.ndarray, power_pct: Any, t: Any, p: RobotParams,
@@ -276,16 +342,17 @@ def _read(world: World, poses: np.ndarray, power_pct: Any, t: Any, p: RobotParam
     c = _consts(p)
     dist, ang, _hit = reflection(world, poses, p)
     refl = response(dist, ang, power_pct, p)
+    base = p.ir_ambient if world.ambient is None else world.ambient
     if world.lamps:
-        pos, axes = sensor_rays(poses, p)
-        t_arr = np.asarray(t, dtype=float)
-        if t_arr.ndim:
-            t_arr = t_arr[..., None]  # one time per robot
-        amb_off = ambient_level(world, pos, axes, t_arr, p)
-        flicker = any(lamp.flicker_hz for lamp in world.lamps)
-        amb_on = ambient_level(world, pos, axes, t_arr + p.ir_on_delay, p) if flicker else amb_off
+        gains = _robot_lamp_gains(world, poses, _axes(poses), p)
+        t_arr = np.asarray(t, dtype=float)  # scalar, or one time per robot
+        amb_off = base + (gains * world.lamp_levels(t_arr)[..., None, :]).sum(-1)
+        if world.flickers:
+            amb_on = base + (gains * world.lamp_levels(t_arr + p.ir_on_delay)[..., None, :]).sum(-1)
+        else:
+            amb_on = amb_off
     else:
-        amb_off = amb_on = p.ir_ambient if world.ambient is None else world.ambient
+        amb_off = amb_on = base
     off = amb_off + np.zeros_like(refl)
     on = amb_on + refl
     if rng is not None and p.ir_noise > 0:
@@ -295,18 +362,102 @@ def _read(world: World, poses: np.ndarray, power_pct: Any, t: Any, p: RobotParam
     return _quantise(off, c.adc_max), _quantise(on, c.adc_max)
 
 
+def _read_one(world: World, x: float, y: float, phi: float, power_pct: float, t: float, p: RobotParams,
+              rng: np.random.Generator | None) -> tuple[np.ndarray, np.ndarray]:
+    """read_sensors for one robot: numpy for the rays, plain floats for the rest.
+
+    Eight values are too few for numpy's per-call overhead; this computes the
+    same formulas as response / _robot_lamp_gains / _quantise, so it agrees
+    with the batch path to the last bit or, in a rare rounding tie, 1 count.
+    """
+    c = _consts(p)
+    r = p.body_radius
+    dist, ang, _hit = world.cast_robot(x, y, phi, BEARINGS, p.sensor_range + r)
+    gain = p.ir_gain * power_term(power_pct, p)
+    s0, s1, s2, s3, s4, s5 = c.coef_blend[:, 0].tolist()  # small dome
+    d0, d1, d2_, d3, d4, d5 = c.coef_blend[:, 1].tolist()  # big - small
+    lo, inv_blend = c.blend_lo, c.inv_blend
+    rng_x, ln_k, inv_2ln_k, inv_xp, inv_xp2, inv_taper = c.range, c.ln_k, c.inv_2ln_k, c.inv_xp, c.inv_xp2, c.inv_taper
+    log, exp = math.log, math.exp
+    refl = []
+    for d, a in zip(dist.tolist(), ang.tolist()):
+        xd = d - r
+        if not xd < rng_x or gain == 0.0:  # nothing within range (inf included)
+            refl.append(0.0)
+            continue
+        if xd < 1e-6:
+            xd = 1e-6
+        lx = log(xd * inv_xp)
+        u = (lx + ln_k) * inv_2ln_k
+        u = 0.0 if u < 0.0 else (1.0 if u > 1.0 else u)
+        sw = u * u * u * (u * (6.0 * u - 15.0) + 10.0)
+        f = inv_xp2 * exp(lx * (2.0 - 4.0 * sw))
+        u = (rng_x - xd) * inv_taper
+        if u > 1.0:
+            u = 1.0
+        f = f * (u * u * (3.0 - 2.0 * u))
+        a = -a if a < 0.0 else a
+        vs = ((((s5 * a + s4) * a + s3) * a + s2) * a + s1) * a + s0
+        if a <= lo:
+            va = vs
+        else:
+            vd = ((((d5 * a + d4) * a + d3) * a + d2_) * a + d1) * a + d0
+            u = (a - lo) * inv_blend
+            if u > 1.0:
+                u = 1.0
+            va = vs + (u * u * (3.0 - 2.0 * u)) * vd
+        refl.append(gain * (va if va > 0.0 else 0.0) * f)
+    base = p.ir_ambient if world.ambient is None else world.ambient
+    amb_off = [base] * N_SENSORS
+    amb_on = amb_off
+    if world.lamps:
+        seen = world.lamps_visible(np.array([x, y])).tolist()
+        levels_off = np.asarray(world.lamp_levels(t)).tolist()
+        levels_on = np.asarray(world.lamp_levels(t + p.ir_on_delay)).tolist() if world.flickers else levels_off
+        amb_off = list(amb_off)
+        amb_on = list(amb_on) if world.flickers else amb_off
+        axes = [(math.cos(phi + b), math.sin(phi + b)) for b in BEARINGS]
+        dmin2 = LAMP_MIN_DISTANCE ** 2
+        for (lx_, ly_), vis, lev_off, lev_on in zip(world.lamp_xy.tolist(), seen, levels_off, levels_on):
+            if not vis:
+                continue
+            vx, vy = lx_ - x, ly_ - y
+            v2 = vx * vx + vy * vy
+            for k, (ux, uy) in enumerate(axes):
+                dot = ux * vx + uy * vy
+                if dot <= r:
+                    continue
+                d2 = v2 - 2.0 * r * dot + r * r
+                g = (dot - r) / (math.sqrt(d2 if d2 > 1e-24 else 1e-24) * (d2 if d2 > dmin2 else dmin2))
+                amb_off[k] += lev_off * g
+                if amb_on is not amb_off:
+                    amb_on[k] += lev_on * g
+    top = c.adc_max
+    if rng is not None and p.ir_noise > 0:
+        noise = (rng.standard_normal(2 * N_SENSORS) * p.ir_noise).tolist()
+    else:
+        noise = [0.0] * (2 * N_SENSORS)
+    off = [round(amb_off[k] + noise[k]) for k in range(N_SENSORS)]
+    on = [round(amb_on[k] + refl[k] + noise[N_SENSORS + k]) for k in range(N_SENSORS)]
+    return (np.array([v if 0 <= v <= top else (0 if v < 0 else top) for v in off], dtype=np.int64),
+            np.array([v if 0 <= v <= top else (0 if v < 0 else top) for v in on], dtype=np.int64))
+
+
+
+
 def read_sensors(world: World, pose: Any, power_pct: float = 60.0, t: float = 0.0, p: RobotParams = DEFAULT,
                  rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
     """One robot at pose (x, y, phi): (adc_off[8], adc_on[8]) integer ADC counts, S1..S8.
 
     off = ambient + noise; on = ambient (ir_on_delay later) + reflected +
-    noise; each clipped to 0..adc_max and rounded.  rng: a numpy Generator
-    for the noise (None = no noise).
+    noise; each clipped to 0..adc_max and rounded (half to even).  rng: a
+    numpy Generator for the noise (None = no noise); it draws 16 normals
+    per call, off then on, like read_sensors_batch for one robot.
     """
-    q = np.asarray(pose, dtype=float)
-    if q.shape != (3,):
-        raise ValueError(f"pose must be (x, y, phi), got shape {q.shape}")
-    return _read(world, q, power_pct, t, p, rng)
+    if len(pose) != 3:
+        raise ValueError(f"pose must be (x, y, phi), got {len(pose)} values")
+    x, y, phi = (float(v) for v in pose)
+    return _read_one(world, x, y, phi, float(power_pct), float(t), p, rng)
 
 
 def read_sensors_batch(world: World, poses: Any, power_pct: Any = 60.0, t: Any = 0.0, p: RobotParams = DEFAULT,

@@ -32,7 +32,8 @@ class RobotParams:
     # --- geometry (paper Fig. 3) ------------------------------------------------
     wheel_radius: float = _p(0.021, "m", "wheel radius r")
     half_axle: float = _p(0.048, "m", "half the distance between the wheels, b")
-    com_offset: float = _p(0.015, "m", "distance d from the wheel-axle centre C forward to the centre of mass G")
+    com_offset: float = _p(0.015, "m", "distance d from the wheel-axle centre C forward to G, the centre of mass "
+                                       "of the body without its wheels (the point q's x, y describe)")
     body_radius: float = _p(0.060, "m", "radius of the round body (collisions, sensor ring)")
     # --- masses and inertias ------------------------------------------------------
     body_mass: float = _p(0.46, "kg", "mass of the body without the wheels, m_c")
@@ -40,7 +41,7 @@ class RobotParams:
     body_inertia: float = _p(8.3e-4, "kg m^2", "body's moment of inertia about the vertical axis through G, I_c")
     wheel_inertia: float = _p(1.2e-5, "kg m^2",
                               "one wheel's inertia about its axle, rotor reflected through the gear, I_w")
-    wheel_inertia_diam: float = _p(3.0e-6, "kg m^2", "one wheel's inertia about a diameter, I_m")
+    wheel_inertia_diam: float = _p(1.2e-6, "kg m^2", "one wheel's inertia about a diameter, I_m")
     # --- motors and drivers (paper 3.2) --------------------------------------------
     torque_constant: float = _p(0.0038, "N m/A", "motor torque constant k_t (= back-EMF constant k_e, V s/rad)")
     armature_resistance: float = _p(10.0, "ohm", "motor armature resistance R")
@@ -56,15 +57,15 @@ class RobotParams:
     # reflected = ir_gain * min(L/100, ir_saturation) * A(angle) * F(x), in ADC
     # counts.  Calibrated on a white matte wall straight ahead at L = 60 %:
     # ~700 counts at 5 cm, ~78 at 15 cm, ~28 at 25 cm; maximum at 1.5 cm
-    # (7800 counts: the 12-bit ADC saturates from ~1.1 to ~2.1 cm), 0 at contact.
+    # (7760 counts: the 12-bit ADC saturates from ~1.0 to ~2.3 cm), 0 at contact.
     sensor_range: float = _p(0.50, "m", "farthest reflection considered, from the sensor; the response "
                                         "fades to 0 over the last 20 % of it")
     ir_gain: float = _p(2.9, "counts m^2", "C of the far-field law C/x^2 at normal incidence and 100 % "
                                            "pulse width (linear extrapolation; the emitter saturates first)")
     ir_near_peak: float = _p(0.015, "m", "distance of the response maximum, where the near law D x^2 "
                                          "(D = C/x_p^4) meets C/x^2")
-    ir_blend: float = _p(0.012, "m", "width, centred on ir_near_peak, over which the near and the far law "
-                                     "are averaged (smoothstep weight)")
+    ir_blend: float = _p(2.5, "-", "k: between x_p/k and k x_p the near and the far law are averaged "
+                                   "(geometric mean, the far law's weight a smootherstep of ln x)")
     ir_saturation: float = _p(0.85, "-", "emitter pulse-width fraction above which more pulse width adds "
                                          "no light (Fig. 10)")
     ir_ambient: float = _p(150.0, "counts", "global ambient light seen by every phototransistor, when the "

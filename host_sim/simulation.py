@@ -112,15 +112,19 @@ class Simulation:
         return self._result("fixed", time.perf_counter() - start)
 
     def run_realtime(self, duration: float, speed: float = 1.0, min_wall_step: float = 0.002,
-                     progress: Callable[[float], None] | None = None) -> RunResult:
-        """Variable step from the wall clock: Dt = elapsed * speed, split into n substeps."""
+                     progress: Callable[[float], None] | None = None,
+                     stop: Callable[[], bool] | None = None) -> RunResult:
+        """Variable step from the wall clock: Dt = elapsed * speed, split into n substeps.
+
+        Runs until `duration` simulated seconds, or until stop() says so.
+        """
         if not speed > 0 or math.isinf(speed):
             raise ValueError("real-time mode needs a finite speed factor > 0")
         robot = self.robot
         start = last = time.perf_counter()
-        next_control = 0.0
+        next_control = robot.t
         n = self.substeps
-        while robot.t < duration - 1e-12:
+        while robot.t < duration - 1e-12 and not (stop and stop()):
             now = time.perf_counter()
             if now - last < min_wall_step:
                 time.sleep(min_wall_step - (now - last))

@@ -28,7 +28,8 @@ of `World.segments`, shape (M, 4)):
   one matrix product: the fast path of the sensor model;
 * `World.nearest_wall(points)` -> (signed distance, unit normal) for
   collisions;
-* `World.inside_obstacle(points)`;
+* `World.inside_obstacle(points)`; `World.visible(points, targets)` (line of
+  sight, for lamps);
 * `World.free_cells(resolution, margin)` -> boolean occupancy grid of the
   places a robot centre may occupy, for coverage.
 """
@@ -91,6 +92,8 @@ class World:
     # Derived, filled by __post_init__.
     segments: np.ndarray = field(init=False, repr=False)  # (M, 4) x1, y1, x2, y2
     segment_entry: np.ndarray = field(init=False, repr=False)  # (M,) index into walls
+    lamp_xy: np.ndarray = field(init=False, repr=False)  # (L, 2)
+    flickers: bool = field(init=False, repr=False)  # some lamp flickers
     polygons: list[np.ndarray] = field(init=False, repr=False)  # counter-clockwise (K, 2) vertices
 
     def __post_init__(self) -> None:
@@ -114,6 +117,11 @@ class World:
                     entry.append(i)
         self.segments = np.asarray(segs, dtype=float).reshape(-1, 4)
         self.segment_entry = np.asarray(entry, dtype=int)
+        self.lamp_xy = np.array([[lamp.x, lamp.y] for lamp in self.lamps], dtype=float).reshape(-1, 2)
+        self._lamp_level = np.array([lamp.level for lamp in self.lamps], dtype=float)
+        self._lamp_omega = np.array([2 * math.pi * lamp.flicker_hz for lamp in self.lamps], dtype=float)
+        self._lamp_depth = np.array([lamp.flicker_depth if lamp.flicker_hz else 0.0 for lamp in self.lamps])
+        self.flickers = bool(self._lamp_depth.any())
         self._prepare()
 
     # ------------------------------------------------------------------ set-up
@@ -127,7 +135,7 @@ class World:
         self._len2 = np.maximum((e * e).sum(1), _EPS * _EPS)
         normal = np.stack([e[:, 1], -e[:, 0]], 1) / np.sqrt(self._len2)[:, None]
         self._normal = normal  # unit, right of a->b (outward for counter-clockwise polygons)
-        # Ray o + t d against segment a + s e (module docstring of _ray_terms):
+        # Ray o + t d against segment a + s e (docs/worlds.md, "How the ray cast works"):
         # features f = [dx, dy, ox, oy, 1, ox*dy - oy*dx]; f @ W gives, per wall,
         # den = d x e, tnum = t*den, unum = (s - 1/2)*den and dot = d . e.
         w = np.zeros((6, 4, m))
@@ -139,8 +147,13 @@ class World:
         self._w = w.reshape(6, 4 * m)
         self._robot_kernels: dict[tuple[float, ...], np.ndarray] = {}
         self._offsets: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._ws: dict[int, dict[str, np.ndarray]] = {}
+        self._visibility: dict[tuple[float, ...], Any] = {}
+        self._lamp_vis: Any = None
         # Half-planes of the convex obstacles: n . p <= c inside, one row per edge.
-        rows, cs, starts = [], [], []
+        rows: list[np.ndarray] = []
+        cs: list[float] = []
+        starts: list[int] = []
         for pts in self.polygons:
             starts.append(len(rows))
             for k in range(len(pts)):
@@ -154,6 +167,15 @@ class World:
         self._hp_starts = np.asarray(starts, dtype=int)
 
     # ------------------------------------------------------------------ basics
+    def lamp_levels(self, t: Any = 0.0) -> np.ndarray:
+        """Every lamp's level (counts at 1 m) at time t (s): shape t.shape + (n_lamps,)."""
+        if not self.flickers:
+            if isinstance(t, (int, float)):
+                return self._lamp_level
+            return np.broadcast_to(self._lamp_level, np.shape(t) + self._lamp_level.shape)
+        t = np.asarray(t, dtype=float)[..., None]
+        return self._lamp_level * (1.0 + self._lamp_depth * np.sin(self._lamp_omega * t))
+
     @property
     def n_walls(self) -> int:
         """Number of wall segments, polygon edges included."""
@@ -188,7 +210,7 @@ class World:
 
     def with_changes(self, **changes: Any) -> World:
         """A copy with some of name, size, walls, start, lamps, ambient replaced."""
-        d = {"name": self.name, "size": self.size, "walls": self.walls, "start": self.start,
+        d: dict[str, Any] = {"name": self.name, "size": self.size, "walls": self.walls, "start": self.start,
              "lamps": self.lamps, "ambient": self.ambient, "description": self.description, "source": self.source}
         d.update(changes)
         return World(**d)
@@ -224,35 +246,81 @@ class World:
         f[:, 2:4] = o
         f[:, 4] = 1.0
         f[:, 5] = o[:, 0] * d[:, 1] - o[:, 1] * d[:, 0]
-        dist, inc, hit = self._solve(f @ self._w, len(o), max_range)
+        dist, inc, hit = self._solve(self._terms(f, self._w, len(o)), len(o), max_range)
         return dist.reshape(shape[:-1]), inc.reshape(shape[:-1]), hit.reshape(shape[:-1])
+
+    _BIG = 4096  # ray-wall pairs above which _solve works in preallocated buffers
+
+    def _workspace(self, n_rays: int) -> dict[str, np.ndarray]:
+        """Buffers for a batch of n_rays rays, kept between calls.
+
+        Large temporaries are otherwise mapped and unmapped by the C library
+        on every call, and the page faults cost more than the arithmetic
+        (2 to 3 times the time of a 1000-robot cast).
+        """
+        ws = self._ws.get(n_rays)
+        if ws is None:
+            if len(self._ws) > 8:
+                self._ws.clear()
+            m = len(self.segments)
+            ws = self._ws[n_rays] = {
+                "terms": np.empty((4, n_rays, m)), "r": np.empty((2, n_rays, m)), "key": np.empty((n_rays, m)),
+                "valid": np.empty((n_rays, m), dtype=bool), "tmp": np.empty((n_rays, m), dtype=bool)}
+        return ws
 
     def _solve(self, prod: np.ndarray, n_rays: int, max_range: float
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Nearest valid hit of each ray from the ray terms prod (n_rays, 4*M)."""
+        """Nearest valid hit of each ray from the ray terms prod, laid out (4, n_rays, M) contiguous:
+
+        den = d x e, tnum = t den, unum = (s - 1/2) den, dot = d . e.
+        """
         m = len(self.segments)
         if m == 0:
             return np.full(n_rays, np.inf), np.zeros(n_rays), np.zeros(n_rays, dtype=bool)
-        p = prod.reshape(n_rays, 4, m)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            r = p[:, 1:3] / p[:, 0:1]  # t and (s - 1/2); nan or inf for parallel walls
-        t = r[:, 0]
-        valid = np.abs(r[:, 1]) <= 0.5
-        valid &= t >= 0.0
-        key = np.where(valid, t, np.inf)
+        p = prod.reshape(4, n_rays, m)
+        if n_rays * m <= self._BIG:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                r = p[1:3] / p[0]  # t and (s - 1/2); nan or inf for parallel walls
+            t = r[0]
+            valid = np.abs(r[1]) <= 0.5
+            valid &= t >= 0.0
+            key = np.where(valid, t, np.inf)
+        else:  # the same in place
+            ws = self._workspace(n_rays)
+            r, key, valid, tmp = ws["r"], ws["key"], ws["valid"], ws["tmp"]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                np.divide(p[1:3], p[0], out=r)
+            t = r[0]
+            np.less_equal(np.abs(r[1], out=key), 0.5, out=valid)
+            valid &= np.greater_equal(t, 0.0, out=tmp)
+            key.fill(np.inf)
+            np.copyto(key, t, where=valid)
         idx = key.argmin(1)
         offsets = self._offsets.get(n_rays)
         if offsets is None:
-            rows = np.arange(n_rays)
-            offsets = self._offsets[n_rays] = (rows * m, np.stack([rows * 4 * m + 3 * m, rows * 4 * m]))
+            if len(self._offsets) > 8:
+                self._offsets.clear()
+            rows = np.arange(n_rays) * m
+            offsets = self._offsets[n_rays] = (rows, np.stack([rows + 3 * n_rays * m, rows]))
         dist = key.ravel()[offsets[0] + idx]
-        hit = dist <= max_range
+        hit = dist <= min(max_range, 1e300)  # inf (no hit) is never within range
         dot, den = prod.ravel()[offsets[1] + idx]  # d . e and d x e of the wall hit
         inc = np.arctan(dot / np.where(hit, den, 1.0))
         return np.where(hit, dist, np.inf), np.where(hit, inc, 0.0), hit
 
+    def _terms(self, feats: np.ndarray, matrix: np.ndarray, n_rays: int) -> np.ndarray:
+        """feats (B, F) @ matrix (F, 4 * B'), laid out block-major (4, n_rays, M) for _solve."""
+        m = len(self.segments)
+        blocks = matrix.reshape(len(matrix), 4, -1)
+        if n_rays * m <= self._BIG:
+            return np.ascontiguousarray((feats @ matrix).reshape(len(feats), 4, -1).transpose(1, 0, 2))
+        terms = self._workspace(n_rays)["terms"].reshape(4, len(feats), -1)
+        for b in range(4):
+            np.matmul(feats, blocks[:, b], out=terms[b])
+        return terms
+
     def robot_kernel(self, bearings: Sequence[float]) -> np.ndarray:
-        """(9, R*4*M) matrix turning a pose into the ray terms of R fixed-bearing rays.
+        """(9, 4*R*M) matrix turning a pose into the ray terms of R fixed-bearing rays.
 
         Ray k leaves the centre (x, y) in direction phi + bearing[k].  Its
         features f are linear in h = [cos, sin, x cos, x sin, y cos, y sin, x,
@@ -273,7 +341,8 @@ class World:
             g[:, 4, 8] = 1.0
             # x dy - y dx = x c by + x s bx - y c bx + y s by
             g[:, 5, 2], g[:, 5, 3], g[:, 5, 4], g[:, 5, 5] = by, bx, -bx, by
-            kern = np.einsum("njk,jc->knc", g, self._w).reshape(9, -1)
+            # K[k, block, ray, wall]: the terms come out block-major, as _solve wants them.
+            kern = np.einsum("njk,jbm->kbnm", g, self._w.reshape(6, 4, -1)).reshape(9, -1)
             self._robot_kernels[key] = kern
         return kern
 
@@ -292,7 +361,7 @@ class World:
         x, y = q[:, 0], q[:, 1]
         h = np.stack([c, s, x * c, x * s, y * c, y * s, x, y, np.ones(n_rob)], 1)
         n = len(bearings)
-        dist, inc, hit = self._solve(h @ self.robot_kernel(bearings), n_rob * n, max_range)
+        dist, inc, hit = self._solve(self._terms(h, self.robot_kernel(bearings), n_rob * n), n_rob * n, max_range)
         return dist.reshape(batch + (n,)), inc.reshape(batch + (n,)), hit.reshape(batch + (n,))
 
     def cast_robot(self, x: float, y: float, phi: float, bearings: Sequence[float],
@@ -301,6 +370,53 @@ class World:
         c, s = math.cos(phi), math.sin(phi)
         h = np.array([c, s, x * c, x * s, y * c, y * s, x, y, 1.0])
         return self._solve(h @ self.robot_kernel(bearings), len(bearings), max_range)
+
+    def visible(self, points: np.ndarray, targets: Sequence[float] | np.ndarray) -> np.ndarray:
+        """True where no wall properly crosses the straight line from a point to a target.
+
+        points (..., 2); targets (2,) -> result (...), or (T, 2) -> (..., T).
+        For line of sight to lamps: orientation tests, linear in the point,
+        so one matrix product per call (the per-target matrices are cached).
+        Grazing a wall's end point does not block.
+        """
+        tg = np.asarray(targets, dtype=float)
+        single = tg.ndim == 1
+        tg = tg.reshape(-1, 2)
+        key = tuple(tg.ravel().tolist())
+        mats = self._visibility.get(key)
+        if mats is None:
+            mats = self._visibility[key] = self._visibility_matrices(tg)
+        seen = self._visible(np.asarray(points, dtype=float), mats, len(tg))
+        return seen[..., 0] if single else seen
+
+    def lamps_visible(self, points: np.ndarray) -> np.ndarray:
+        """visible(points, lamp_xy): (..., n_lamps)."""
+        if self._lamp_vis is None:
+            self._lamp_vis = self._visibility_matrices(self.lamp_xy)
+        return self._visible(np.asarray(points, dtype=float), self._lamp_vis, len(self.lamp_xy))
+
+    def _visibility_matrices(self, tg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        ax, ay, bx, by = (v[None, :] for v in self.segments.T)  # (1, M)
+        lx, ly = tg[:, 0:1], tg[:, 1:2]  # (T, 1)
+        ex, ey = bx - ax, by - ay
+        one = np.ones_like(lx)
+        # orient(A, B, P) = ex (Py - Ay) - ey (Px - Ax), the same for every target
+        o_abp = np.stack([-ey * one, ex * one, (ey * ax - ex * ay) * one])
+        # orient(P, L, A) = (L - P) x (A - P) = (Lx Ay - Ly Ax) + Px (Ly - Ay) + Py (Ax - Lx)
+        o_pla = np.stack([ly - ay, ax - lx, lx * ay - ly * ax])
+        o_plb = np.stack([ly - by, bx - lx, lx * by - ly * bx])
+        side_l = ex * (ly - ay) - ey * (lx - ax)  # orient(A, B, L), (T, M)
+        mat = np.stack([o_abp, o_pla, o_plb], 2)  # (3 features, T, 3, M)
+        return mat[:2].reshape(2, -1), (mat[2].reshape(-1), side_l)  # type: ignore[return-value]
+
+    def _visible(self, p: np.ndarray, mats: Any, n_t: int) -> np.ndarray:
+        batch = p.shape[:-1]
+        m = len(self.segments)
+        if m == 0 or n_t == 0:
+            return np.ones(batch + (n_t,), dtype=bool)
+        o = (p @ mats[0] + mats[1][0]).reshape(batch + (n_t, 3, m))
+        crosses = (o[..., 0, :] * mats[1][1] < 0) & (o[..., 1, :] * o[..., 2, :] < 0)
+        return ~crosses.any(-1)
 
     # ------------------------------------------------------------------ distances
     def nearest_wall(self, points: np.ndarray, return_index: bool = False
@@ -351,7 +467,7 @@ class World:
         q = p.reshape(-1, 2)
         excess = q @ self._hp_n.T - self._hp_c  # (P, E): > 0 outside that edge
         worst = np.maximum.reduceat(excess, self._hp_starts, axis=1)  # (P, n_polygons)
-        return (worst < -_EPS).any(1).reshape(batch)
+        return np.asarray((worst < -_EPS).any(1)).reshape(batch)
 
     # ------------------------------------------------------------------ grids
     def grid_shape(self, resolution: float) -> tuple[int, int]:
@@ -389,6 +505,35 @@ class World:
         if reachable:
             free = _flood(free, self.cell_of(np.array(self.start[:2]), resolution))
         return free
+
+
+def draw_world(ax: Any, world: World, robot_radius: float = DEFAULT_BODY_RADIUS, start: bool = True,
+               lamps: bool = True, area: bool = True) -> None:
+    """Draw a world on a matplotlib Axes: walls, obstacles, the area of interest, start pose, lamps.
+
+    Needs no matplotlib import here: it only calls methods of `ax`.
+    """
+    if area:
+        w, h = world.size
+        ax.plot([0, w, w, 0, 0], [0, 0, h, h, 0], color="0.75", lw=0.8, ls=":", zorder=1)
+    for wall in world.walls:
+        if "segment" in wall:
+            x1, y1, x2, y2 = wall["segment"]
+            ax.plot([x1, x2], [y1, y2], color="0.15", lw=2.2, solid_capstyle="round", zorder=3)
+        else:
+            pts = np.asarray(wall["polygon"])
+            ax.fill(pts[:, 0], pts[:, 1], facecolor="0.55", edgecolor="0.15", lw=1.5, zorder=3)
+    if start:
+        x, y, phi = world.start
+        circle = np.linspace(0, 2 * np.pi, 60)
+        ax.plot(x + robot_radius * np.cos(circle), y + robot_radius * np.sin(circle), color="tab:blue", lw=1.2,
+                zorder=4)
+        ax.plot([x, x + robot_radius * math.cos(phi)], [y, y + robot_radius * math.sin(phi)], color="tab:blue",
+                lw=1.2, zorder=4)
+    if lamps:
+        for lamp in world.lamps:
+            ax.plot(lamp.x, lamp.y, marker="*", ms=12, color="gold", mec="darkorange", zorder=5, clip_on=False)
+    ax.set_aspect("equal")
 
 
 def _flood(free: np.ndarray, seed: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
@@ -561,9 +706,9 @@ def world_from_dict(data: object, where: str = "world", body_radius: float = DEF
         raise WorldError(f"{where}: start: ({start[0]}, {start[1]}) is outside the world's size "
                          f"[0, {size[0]}] x [0, {size[1]}]")
     if world.n_walls:
-        dist, _, seg = world.nearest_wall(np.array(start[:2]), return_index=True)  # type: ignore[misc]
+        dist, _, nearest = world.nearest_wall(np.array(start[:2]), return_index=True)  # type: ignore[misc]
         if dist < body_radius:
-            entry = int(world.segment_entry[int(seg)])
+            entry = int(world.segment_entry[int(nearest)])
             kind = "segment" if "segment" in walls[entry] else "polygon"
             problem = "is inside" if dist < 0 else f"overlaps (centre {float(dist):.3f} m from it)"
             raise WorldError(f"{where}: start: the robot (radius {body_radius} m) at ({start[0]}, {start[1]}) "

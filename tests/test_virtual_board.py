@@ -170,3 +170,34 @@ def test_mpy_version_mismatch_is_named(board):
         check_mpy_compatible(older, emitted)
     with pytest.raises(CliError, match="too old"):
         check_mpy_compatible(BoardInfo(-1, "rp2", 4096, 100), emitted)
+
+
+def test_board_attached_to_the_twin_explores(tmp_path):
+    """`twinbot board`'s default: the simulator, in real time, is the board's hardware."""
+    from host_sim.params import DEFAULT
+    from host_sim.twin import BoardTwin
+    from host_sim.world import builtin_world
+
+    twin = BoardTwin(builtin_world("paper_room"), DEFAULT)
+    twin.start()
+    flash = tmp_path / "flash"
+    flash.mkdir()
+    factory_image(flash)
+    vb = VirtualBoard(str(flash), twin.port, tmp_path / "board.log")
+    try:
+        start = twin.pose
+        link = SerialLink.open(vb.path)
+        try:
+            link.send(M.COMMAND, {"mode": M.MODE_AUTONOMOUS, "left": 0, "right": 0})
+            frames = collect(link, 2.0)
+        finally:
+            link.close()
+        end = twin.pose
+    finally:
+        vb.close()
+        twin.stop()
+    assert frames[-1].fields["mode"] == M.MODE_AUTONOMOUS
+    assert frames[-1].fields["enc_l"] > 100 and frames[-1].fields["enc_r"] > 100  # the wheels turn
+    assert ((end[0] - start[0]) ** 2 + (end[1] - start[1]) ** 2) ** 0.5 > 0.05  # and the twin moved
+    ambient = frames[-1].fields["ir_amb"]
+    assert all(100 < a < 300 for a in ambient)  # the room's ambient light, with noise

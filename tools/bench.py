@@ -20,6 +20,9 @@ BENCHMARKS = (
     ("firmware", "tools.bench_firmware",
      "firmware: control-cycle time and allocations under MicroPython, heap of the loaded firmware, "
      "one fuzzy inference on CPython against peer fuzzy libraries"),
+    ("sim", "tools.bench_sim",
+     "host simulator: real-time factor of one robot replaying a recording and with the firmware in SIL, "
+     "batch robot-steps/s at N = 1000, and IR-SIM on the same room"),
 )
 
 

@@ -7,9 +7,11 @@ link is the board's stdin/stdout.  This module relays those to a
 pseudo-terminal, so `twinbot serial`, mpremote or any terminal program
 opens the printed /dev/pts/N as they would a Pico's /dev/ttyACM0.
 
-The firmware's electrical I/O (HW_SENSE / HW_ACTUATE) goes to a TCP port
-on 127.0.0.1.  Without a simulator, a stand-in serves it: fixed IR
-readings (a wall in front), encoders that do not move, a full battery.
+The firmware's electrical I/O (HW_SENSE / HW_ACTUATE) goes to the robot's
+twin: the simulator, in real time, in the world of --world (the paper's
+room by default).  Drive the board as the real robot: `twinbot serial
+/dev/pts/N --command autonomous 0 0` and it explores.  --standin serves
+fixed readings instead (a wall in front, wheels that do not turn).
 """
 from __future__ import annotations
 
@@ -123,8 +125,10 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
     p.add_argument("--image", metavar="FILE", help="the board's flash as a littlefs image file (blank if new)")
     p.add_argument("--flash-kb", type=int, default=1024, help="size of a new --image, KB (default 1024)")
     p.add_argument("--blank", action="store_true", help="start with empty flash (nothing to run until flashed)")
+    p.add_argument("--world", default="paper_room", help="the twin's world (default paper_room)")
+    p.add_argument("--standin", action="store_true", help="fixed readings instead of the simulated twin")
     p.add_argument("--hw-port", type=int,
-                   help="TCP port on 127.0.0.1 of a simulator serving the hardware link (default: the stand-in)")
+                   help="TCP port on 127.0.0.1 of another simulator serving the hardware link")
     p.add_argument("--log", metavar="FILE", help="append the board's stderr here (tracebacks of the supervisor)")
     p.set_defaults(func=run)
 
@@ -155,18 +159,33 @@ def prepare_flash(args: argparse.Namespace) -> tuple[str, str]:
 def run(args: argparse.Namespace) -> int:
     flash, described = prepare_flash(args)
     standin = None
-    if args.hw_port is None:
+    twin = None
+    if args.hw_port is not None:
+        hw_port = args.hw_port
+    elif args.standin:
         standin = StandInHardware()
         standin.start()
         hw_port = standin.port
     else:
-        hw_port = args.hw_port
+        from host_sim.params import DEFAULT
+        from host_sim.twin import BoardTwin
+        from host_sim.world import WorldError, world_by_name_or_path
+
+        try:
+            world = world_by_name_or_path(args.world, DEFAULT.body_radius)
+        except WorldError as exc:
+            raise CliError(str(exc)) from None
+        twin = BoardTwin(world, DEFAULT)
+        twin.start()
+        hw_port = twin.port
     board = VirtualBoard(flash, hw_port, Path(args.log) if args.log else None)
     print(f"twinbot board: {board.path}", flush=True)
     print(f"  flash: {described}")
     if standin:
-        print("  hardware: STAND-IN with fixed readings (a wall ahead, wheels that do not turn); "
-              "attach the simulator with --hw-port")
+        print("  hardware: STAND-IN with fixed readings (a wall ahead, wheels that do not turn)")
+    elif twin:
+        print(f"  hardware: the simulated twin in {world.name}, real time "
+              f"(start at x={world.start[0]:.2f} m, y={world.start[1]:.2f} m)")
     else:
         print(f"  hardware: simulator at 127.0.0.1:{hw_port}")
     print(f"  talk to it: twinbot serial {board.path}   |   flash it: twinbot flash --port {board.path}")
@@ -182,4 +201,9 @@ def run(args: argparse.Namespace) -> int:
         board.close()
         if standin:
             standin.stop()
+        if twin:
+            x, y, phi = twin.pose
+            print(f"twinbot board: the twin ended at x={x:.3f} m, y={y:.3f} m, heading {phi:.2f} rad, "
+                  f"{twin.sim.robot.collisions} collisions")
+            twin.stop()
 
