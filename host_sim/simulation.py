@@ -45,6 +45,7 @@ class RunResult:
     mode: str
     controller: str
     steps: int  # physics substeps taken
+    exit_time: float | None = None  # when the robot's centre first left the world's area (found the exit)
     extra: dict[str, object] = field(default_factory=dict)
 
     @property
@@ -75,6 +76,13 @@ class Simulation:
         self._pose: list[tuple[float, float, float]] = []
         self._cmd: list[tuple[float, float]] = []
         self.steps = 0
+        self.exit_time: float | None = None
+        w, h = world.size
+
+        def outside(x: float, y: float) -> bool:
+            return x < 0.0 or y < 0.0 or x > w or y > h
+
+        self._outside = outside
 
     # One control instant: readings -> controller -> currents; log it.
     def control(self) -> None:
@@ -88,6 +96,8 @@ class Simulation:
         self._pose.append(pose)
         self._cmd.append(cmd)
         self.coverage.add(robot.t, pose[0], pose[1])
+        if self.exit_time is None and self._outside(pose[0], pose[1]):
+            self.exit_time = robot.t
         if self.recorder is not None:
             self.recorder.row(robot.t, cmd, (s.enc_l, s.enc_r), s.adc_on, s.adc_off, s.vbat_mv / 1000.0, pose)
 
@@ -151,4 +161,5 @@ class Simulation:
             t=np.array(self._t), pose=np.array(self._pose).reshape(-1, 3), cmd=np.array(self._cmd).reshape(-1, 2),
             coverage=np.array(self.coverage.fractions), collisions=self.robot.collisions, wall_seconds=wall,
             sim_seconds=self.robot.t, mode=mode, controller=getattr(self.controller, "name", "?"), steps=self.steps,
+            exit_time=self.exit_time,
         )

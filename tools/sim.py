@@ -138,7 +138,9 @@ def summary(result, label: str = "") -> str:  # type: ignore[no-untyped-def]
     t90 = result.time_to(0.9)
     return (f"{label}coverage {100 * result.coverage[-1]:.1f} % of the free area, "
             f"90 % {'at ' + format(t90, '.1f') + ' s' if t90 is not None else 'not reached'}, "
-            f"{result.collisions} collisions; {result.sim_seconds:.1f} sim s in {result.wall_seconds:.2f} s "
+            f"{result.collisions} collisions, "
+            f"{'exit found at ' + format(result.exit_time, '.1f') + ' s' if result.exit_time is not None else 'no exit'}"
+            f"; {result.sim_seconds:.1f} sim s in {result.wall_seconds:.2f} s "
             f"({result.real_time_factor:.0f}x real time, {result.mode} step, {result.controller})")
 
 
