@@ -129,36 +129,57 @@ class FuzzyController:
         self.right = 0
         self.rule_set = 0
         self.max_speed = 0
-        self._rules: list[int] = []
+        self._sum_l: list[int] = []
+        self._sum_r: list[int] = []
+        self._count: list[int] = []
         self.configure(rule_set, max_speed)
 
     def configure(self, rule_set: int, max_speed: int) -> None:
-        """Select a rule set and speed scale (flattens the rules once)."""
+        """Select a rule set and speed scale.
+
+        Rules sharing an antecedent share its firing strength, so their
+        singletons are summed once here: per antecedent a, the sums of the
+        left and right singletons and the number of rules.  infer() then
+        adds w_a * sum instead of one term per rule; the integers are the
+        same, in fewer steps.
+        """
         if rule_set not in (0, 1):
             raise ValueError("rule_set must be 0 (first) or 1 (refined)")
         self.rule_set = rule_set
         self.max_speed = max_speed
-        flat = []
+        sum_l = [0] * (ALWAYS + 1)
+        sum_r = [0] * (ALWAYS + 1)
+        count = [0] * (ALWAYS + 1)
         for antecedent, action in RULE_SETS[rule_set]:
             lt, rt = ACTIONS[action]
-            flat.append(antecedent)
-            flat.append(TERMS[lt] * max_speed // 100)
-            flat.append(TERMS[rt] * max_speed // 100)
-        self._rules = flat
+            sum_l[antecedent] += TERMS[lt] * max_speed // 100
+            sum_r[antecedent] += TERMS[rt] * max_speed // 100
+            count[antecedent] += 1
+        self._sum_l = sum_l
+        self._sum_r = sum_r
+        self._count = count
 
     def infer(self, reflected: list[int]) -> None:
         """Set self.left, self.right (mm/s) from the 8 reflected readings."""
         mu = self.mu
         lo = self.lo
         span = self.hi - lo
+        sum_l = self._sum_l
+        sum_r = self._sum_r
+        count = self._count
+        num_l = ONE * sum_l[ALWAYS]
+        num_r = ONE * sum_r[ALWAYS]
+        den = ONE * count[ALWAYS]
         for i in range(N_SENSORS):
             r = reflected[i]
             if r <= lo:
                 mu[i] = 0
-            elif r >= lo + span:
-                mu[i] = ONE
-            else:
-                mu[i] = ((r - lo) * ONE) // span
+                continue
+            w = ONE if r >= lo + span else ((r - lo) * ONE) // span
+            mu[i] = w
+            num_l += w * sum_l[i]
+            num_r += w * sum_r[i]
+            den += w * count[i]
         dmu = self.direction_mu
         if self.rule_set == 0:
             dirw = self._dirw
@@ -173,21 +194,10 @@ class FuzzyController:
                     if v > best:
                         best = v
                 dmu[d] = best
-        rules = self._rules
-        num_l = 0
-        num_r = 0
-        den = 0
-        for k in range(0, len(rules), 3):
-            a = rules[k]
-            if a == ALWAYS:
-                w = ONE
-            elif a < N_SENSORS:
-                w = mu[a]
-            else:
-                w = dmu[a - N_SENSORS]
-            num_l += w * rules[k + 1]
-            num_r += w * rules[k + 2]
-            den += w
+                a = N_SENSORS + d
+                num_l += best * sum_l[a]
+                num_r += best * sum_r[a]
+                den += best * count[a]
         # den >= ONE: the unconditional rule always fires.  Round half up.
         self.left = (2 * num_l + den) // (2 * den)
         self.right = (2 * num_r + den) // (2 * den)

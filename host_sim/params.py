@@ -145,7 +145,9 @@ def params_from_dict(data: object, where: str = "parameters") -> RobotParams:
     changes: dict[str, object] = {}
     for name, value in data.items():
         if name not in known:
-            close = [k for k in known if k.split("_")[0] == str(name).split("_")[0]]
+            import difflib
+
+            close = difflib.get_close_matches(str(name), list(known), n=1, cutoff=0.8)
             hint = f" (did you mean {', '.join(close)}?)" if close else ""
             raise ParamsError(f"{where}: unknown parameter '{name}'{hint}")
         default = known[name].default

@@ -102,14 +102,19 @@ class Simulation:
             self.recorder.row(robot.t, cmd, (s.enc_l, s.enc_r), s.adc_on, s.adc_off, s.vbat_mv / 1000.0, pose)
 
     def run_fixed(self, duration: float, speed: float = math.inf,
-                  progress: Callable[[float], None] | None = None) -> RunResult:
-        """Fixed step: n substeps of cycle/n per control period; exactly repeatable."""
+                  progress: Callable[[float], None] | None = None, stop_at_exit: bool = False) -> RunResult:
+        """Fixed step: n substeps of cycle/n per control period; exactly repeatable.
+
+        stop_at_exit: end the run when the robot leaves the world's area (it found the exit).
+        """
         n_cycles = int(round(duration / self.cycle_s))
         dt = self.cycle_s / self.substeps
         robot = self.robot
         start = time.perf_counter()
         for k in range(n_cycles):
             self.control()
+            if stop_at_exit and self.exit_time is not None:
+                break
             for _ in range(self.substeps):
                 robot.advance(dt)
             self.steps += self.substeps
@@ -123,7 +128,7 @@ class Simulation:
 
     def run_realtime(self, duration: float, speed: float = 1.0, min_wall_step: float = 0.002,
                      progress: Callable[[float], None] | None = None,
-                     stop: Callable[[], bool] | None = None) -> RunResult:
+                     stop: Callable[[], bool] | None = None, stop_at_exit: bool = False) -> RunResult:
         """Variable step from the wall clock: Dt = elapsed * speed, split into n substeps.
 
         Runs until `duration` simulated seconds, or until stop() says so.
@@ -135,6 +140,8 @@ class Simulation:
         next_control = robot.t
         n = self.substeps
         while robot.t < duration - 1e-12 and not (stop and stop()):
+            if stop_at_exit and self.exit_time is not None:
+                break
             now = time.perf_counter()
             if now - last < min_wall_step:
                 time.sleep(min_wall_step - (now - last))

