@@ -17,6 +17,15 @@ def _pyplot():  # type: ignore[no-untyped-def]
     return plt
 
 
+def _save(plt, fig, path: str | Path) -> Path:  # type: ignore[no-untyped-def]
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def draw_world(ax, world) -> None:  # type: ignore[no-untyped-def]
     for x1, y1, x2, y2 in world.segments:
         ax.plot([x1, x2], [y1, y2], color="0.15", lw=2.2, solid_capstyle="round")
@@ -63,12 +72,7 @@ def save_runs(path: str | Path, world, runs: Sequence[object], titles: Sequence[
         ax.set_title(title, fontsize=10)
     if suptitle:
         fig.suptitle(suptitle)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path)
 
 
 def save_coverage(path: str | Path, runs: Sequence[object], labels: Sequence[str]) -> Path:
@@ -82,9 +86,4 @@ def save_coverage(path: str | Path, runs: Sequence[object], labels: Sequence[str
     ax.set_ylim(0, 100)
     ax.legend()
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path)

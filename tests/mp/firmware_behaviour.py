@@ -257,15 +257,19 @@ def check_exception_in_a_cycle_is_survived():
     assert tms[0][2] & W.FLAG_FAULT and not tms[-1][2] & W.FLAG_FAULT
 
 
-def check_break_request_stops_and_leaves_the_rest():
-    hal, robot = robot_with(1, W.MODE_HOST)
-    hal.give(b"\r\x03\r\x01")  # mpremote: Ctrl-C, then Ctrl-A for the raw REPL
-    raised = False
+def breaks(robot):
+    """True if the next cycle stops the firmware for the REPL."""
     try:
         robot.cycle()
     except BreakToRepl:
-        raised = True
-    assert raised
+        return True
+    return False
+
+
+def check_break_request_stops_and_leaves_the_rest():
+    hal, robot = robot_with(1, W.MODE_HOST)
+    hal.give(b"\r\x03\r\x01")  # mpremote: Ctrl-C, then Ctrl-A for the raw REPL
+    assert breaks(robot)
     assert bytes(hal.inbox[hal.in_pos:hal.in_len]) == b"\r\x01"  # left for the REPL
 
 
@@ -277,12 +281,7 @@ def check_partial_frame_abandoned_after_silence():
     robot.cycle()  # a silent cycle: the partial frame is dropped
     assert robot.rx.abandoned == 1
     hal.give(b"\r\x03")
-    raised = False
-    try:
-        robot.cycle()
-    except BreakToRepl:
-        raised = True
-    assert raised
+    assert breaks(robot)
 
 
 def check_odometry_follows_the_wheels():
