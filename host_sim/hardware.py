@@ -57,10 +57,12 @@ class SimRobot:
         return motors.encoder_ticks(self.q[3], self.p), motors.encoder_ticks(self.q[4], self.p)
 
     def sense(self) -> Sense:
-        off, on = ir_sensor.read_sensors(self.world, self.pose, self.emitter_pct, self.t, self.p, self.rng)
+        x, y, phi = self.pose
+        off, on = ir_sensor.read_sensors_lists(self.world, x, y, phi, float(self.emitter_pct), self.t, self.p,
+                                               self.rng)
         enc_l, enc_r = self.encoder_ticks()
-        s = Sense(int(round(self.t * 1000)) & TICK_MASK, [int(v) for v in off], [int(v) for v in on],
-                  enc_l, enc_r, int(round(self.p.battery_voltage * 1000)))
+        s = Sense(int(round(self.t * 1000)) & TICK_MASK, off, on, enc_l, enc_r,
+                  int(round(self.p.battery_voltage * 1000)))
         self.last_sense = s
         return s
 

@@ -363,7 +363,7 @@ def _read(world: World, poses: np.ndarray, power_pct: Any, t: Any, p: RobotParam
 
 
 def _read_one(world: World, x: float, y: float, phi: float, power_pct: float, t: float, p: RobotParams,
-              rng: np.random.Generator | None) -> tuple[np.ndarray, np.ndarray]:
+              rng: np.random.Generator | None) -> tuple[list[int], list[int]]:
     """read_sensors for one robot: numpy for the rays, plain floats for the rest.
 
     Eight values are too few for numpy's per-call overhead; this computes the
@@ -439,8 +439,14 @@ def _read_one(world: World, x: float, y: float, phi: float, power_pct: float, t:
         noise = [0.0] * (2 * N_SENSORS)
     off = [round(amb_off[k] + noise[k]) for k in range(N_SENSORS)]
     on = [round(amb_on[k] + refl[k] + noise[N_SENSORS + k]) for k in range(N_SENSORS)]
-    return (np.array([v if 0 <= v <= top else (0 if v < 0 else top) for v in off], dtype=np.int64),
-            np.array([v if 0 <= v <= top else (0 if v < 0 else top) for v in on], dtype=np.int64))
+    return ([v if 0 <= v <= top else (0 if v < 0 else top) for v in off],
+            [v if 0 <= v <= top else (0 if v < 0 else top) for v in on])
+
+
+def read_sensors_lists(world: World, x: float, y: float, phi: float, power_pct: float, t: float, p: RobotParams,
+                       rng: np.random.Generator | None) -> tuple[list[int], list[int]]:
+    """read_sensors as two lists of Python ints: the simulator's per-cycle hot path."""
+    return _read_one(world, x, y, phi, power_pct, t, p, rng)
 
 
 
@@ -457,7 +463,8 @@ def read_sensors(world: World, pose: Any, power_pct: float = 60.0, t: float = 0.
     if len(pose) != 3:
         raise ValueError(f"pose must be (x, y, phi), got {len(pose)} values")
     x, y, phi = (float(v) for v in pose)
-    return _read_one(world, x, y, phi, float(power_pct), float(t), p, rng)
+    off, on = _read_one(world, x, y, phi, float(power_pct), float(t), p, rng)
+    return np.array(off, dtype=np.int64), np.array(on, dtype=np.int64)
 
 
 def read_sensors_batch(world: World, poses: Any, power_pct: Any = 60.0, t: Any = 0.0, p: RobotParams = DEFAULT,
