@@ -71,33 +71,32 @@ def accel_scale(v, tau, p, q=(0.0, 0.0, 0.0, 0.0, 0.0)) -> float:
 # --------------------------------------------------------------------------- #
 # reference integrators (RK4), used only here
 # --------------------------------------------------------------------------- #
-def rk4_reduced(q, v, tau, dt, p):
-    """Classical RK4 on X = (q, v), X' = (S(q) v, v'(v, tau)), tau held over the step."""
-    x = np.array([*q, *v], dtype=float)
-
-    def f(x):
-        return np.array([*dy.qdot(x[:5], x[5:], p), *dy.reduced_accel_fast(x[:5], x[5:], tau, p)])
-
+def rk4(f, x, dt):
+    """One classical RK4 step of X' = f(X)."""
     k1 = f(x)
     k2 = f(x + 0.5 * dt * k1)
     k3 = f(x + 0.5 * dt * k2)
     k4 = f(x + dt * k3)
-    x = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+def rk4_reduced(q, v, tau, dt, p):
+    """Classical RK4 on X = (q, v), X' = (S(q) v, v'(v, tau)), tau held over the step."""
+
+    def f(x):
+        return np.array([*dy.qdot(x[:5], x[5:], p), *dy.reduced_accel_fast(x[:5], x[5:], tau, p)])
+
+    x = rk4(f, np.array([*q, *v], dtype=float), dt)
     return x[:5], x[5:]
 
 
 def rk4_full(q, qd, tau, dt, p):
     """RK4 on the full constrained system X = (q, q'), X' = (q', q''_KKT): no S anywhere."""
-    x = np.concatenate([q, qd])
 
     def f(x):
         return np.concatenate([x[5:], dy.full_constrained_accel(x[:5], x[5:], tau, p)[0]])
 
-    k1 = f(x)
-    k2 = f(x + 0.5 * dt * k1)
-    k3 = f(x + 0.5 * dt * k2)
-    k4 = f(x + dt * k3)
-    x = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    x = rk4(f, np.concatenate([q, qd]), dt)
     return x[:5], x[5:]
 
 
