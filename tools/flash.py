@@ -22,12 +22,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from firmware import config
+from host_sim.virtual_board import MAIN_PY
 from protocol import messages as M
 from tools.cli import CliError
 from tools.micropython_rig import REPO_ROOT, mpy_cross_compile, mpy_cross_exe
 from tools.serial_link import LinkError, SerialLink, open_port
 
-MAIN_PY = "import firmware.main\nfirmware.main.start()\n"
 # Files a robot does not need: the virtual board's supervisor lives outside its flash.
 NOT_FLASHED = {"firmware/vboard.py"}
 PROBE_TIMEOUT_S = 12
