@@ -15,20 +15,10 @@ from firmware.hal import TICK_MASK
 from firmware.hal_sensed import SensedHal
 from firmware.hostlink import StdioLink
 from protocol import wire
+from protocol.fields import read_i32, read_u16
 from protocol.framing import FrameDecoder, FrameEncoder
 
 _ACTUATE_FMT = "<IhhB"
-
-
-def _u16(b: bytearray, o: int) -> int:
-    return b[o] | (b[o + 1] << 8)
-
-
-def _i32(b: bytearray, o: int) -> int:
-    hi = b[o + 3]
-    if hi & 0x80:
-        hi -= 256
-    return (hi << 24) | (b[o + 2] << 16) | (b[o + 1] << 8) | b[o]
 
 
 class HardwareGone(SystemExit):
@@ -75,13 +65,13 @@ class VirtualHal(SensedHal):
             if dec.ready and dec.msg_type == wire.HW_SENSE:
                 self.begin()
                 b = dec.body
-                self.tick = _i32(b, 3) & TICK_MASK
+                self.tick = read_i32(b, 3) & TICK_MASK
                 for k in range(8):
-                    self.adc_off[k] = _u16(b, 7 + 2 * k)
-                    self.adc_on[k] = _u16(b, 23 + 2 * k)
-                self.enc[0] = _i32(b, 39)
-                self.enc[1] = _i32(b, 43)
-                self.vbat = _u16(b, 47)
+                    self.adc_off[k] = read_u16(b, 7 + 2 * k)
+                    self.adc_on[k] = read_u16(b, 23 + 2 * k)
+                self.enc[0] = read_i32(b, 39)
+                self.enc[1] = read_i32(b, 43)
+                self.vbat = read_u16(b, 47)
                 return self.tick
 
     def host_read(self, buf: bytearray) -> int:

@@ -25,6 +25,7 @@ from firmware.odometry import Odometry
 from firmware.wheels import WheelLoop
 from protocol import wire as M
 from protocol.compat import const
+from protocol.fields import read_i16, read_i32
 from protocol.framing import FrameDecoder, FrameEncoder
 
 # Parameter ids (protocol/SPEC.md).
@@ -50,18 +51,6 @@ _NACK_FMT = "<3B"
 
 class BreakToRepl(Exception):
     """The host asked for the REPL (mpremote's Ctrl-C on the protocol port)."""
-
-
-def _i16(b: bytearray, o: int) -> int:
-    v = b[o] | (b[o + 1] << 8)
-    return v - 65536 if v & 0x8000 else v
-
-
-def _i32(b: bytearray, o: int) -> int:
-    hi = b[o + 3]
-    if hi & 0x80:
-        hi -= 256
-    return (hi << 24) | (b[o + 2] << 16) | (b[o + 1] << 8) | b[o]
 
 
 class Robot:
@@ -235,8 +224,8 @@ class Robot:
                 self.nack(seq, msg_type, M.ERR_BAD_MODE)
                 return
             limit = self.params[P_MAX_SPEED]
-            left = _i16(b, 4)
-            right = _i16(b, 6)
+            left = read_i16(b, 4)
+            right = read_i16(b, 6)
             self.cmd_left = limit if left > limit else -limit if left < -limit else left
             self.cmd_right = limit if right > limit else -limit if right < -limit else right
             if mode != self.mode:
@@ -247,7 +236,7 @@ class Robot:
             self.watchdog_tripped = False
         elif msg_type == M.PARAM_SET:
             pid = b[3]
-            err = self.set_param(pid, _i32(b, 4))
+            err = self.set_param(pid, read_i32(b, 4))
             if err:
                 self.nack(seq, msg_type, err)
             else:

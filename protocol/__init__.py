@@ -7,4 +7,5 @@ wire format.  Modules, in the order bytes flow through them:
     cobs      Consistent Overhead Byte Stuffing (frames end at the only 0x00)
     messages  message types, payload layouts, parameter and mode numbers
     framing   FrameEncoder / FrameDecoder (streaming, bounded, counting)
+    fields    reading a decoded body's fields without allocating (firmware)
 """
