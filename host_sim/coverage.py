@@ -4,7 +4,7 @@ The free area is the grid of cells (5 cm by default) whose centre a robot
 centre can reach from the start without touching a wall.  A cell counts as
 covered once the robot's body has been over its centre (centre within one
 body radius) at a control cycle.  Coverage is the covered fraction of the
-free cells; `time_to(0.9)` is the time to 90 % coverage.
+free cells, recorded at every control instant in `fractions`.
 """
 from __future__ import annotations
 
@@ -26,12 +26,11 @@ class Coverage:
         dy, dx = np.mgrid[-r:r + 1, -r:r + 1]
         keep = (dx * resolution) ** 2 + (dy * resolution) ** 2 <= body_radius ** 2
         self._dy, self._dx = dy[keep], dx[keep]
-        self.times: list[float] = []
         self.fractions: list[float] = []
         self._count = 0  # covered free cells
         self._last_cell: tuple[int, int] | None = None
 
-    def add(self, t: float, x: float, y: float) -> None:
+    def add(self, x: float, y: float) -> None:
         ny, nx = self.free.shape
         ix = min(max(math.floor(x / self.resolution), 0), nx - 1)
         iy = min(max(math.floor(y / self.resolution), 0), ny - 1)
@@ -44,15 +43,8 @@ class Coverage:
                 cells = np.unique(ys[new] * nx + xs[new])  # clipping can repeat an edge cell
                 self.covered.flat[cells] = True
                 self._count += len(cells)
-        self.times.append(t)
         self.fractions.append(self.fraction)
 
     @property
     def fraction(self) -> float:
         return self._count / self.n_free if self.n_free else 0.0
-
-    def time_to(self, level: float) -> float | None:
-        for t, f in zip(self.times, self.fractions):
-            if f >= level:
-                return t
-        return None

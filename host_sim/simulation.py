@@ -95,7 +95,7 @@ class Simulation:
         self._t.append(robot.t)
         self._pose.append(pose)
         self._cmd.append(cmd)
-        self.coverage.add(robot.t, pose[0], pose[1])
+        self.coverage.add(pose[0], pose[1])
         if self.exit_time is None and self._outside(pose[0], pose[1]):
             self.exit_time = robot.t
         if self.recorder is not None:
