@@ -130,7 +130,7 @@ def pack_payload(
     """
     layout = _layout(msg_type)
     name = NAMES[msg_type]
-    if len(fields) > len(layout):
+    if len(fields) > len(layout):  # with every layout field present (checked below), extras are this
         known = [f[0] for f in layout]
         unknown = [k for k in fields if k not in known]
         raise ValueError("{}: unknown field(s) {}".format(name, ", ".join(sorted(unknown))))
@@ -166,10 +166,6 @@ def pack_payload(
                 raise ValueError("{}.{}[{}] = {!r} does not fit a '{}' field ({})".format(
                     name, fname, k, item, code, what))
         values.extend(items)
-    if len(fields) != len(layout):
-        known = [f[0] for f in layout]
-        unknown = [k for k in fields if k not in known]
-        raise ValueError("{}: unknown field(s) {}".format(name, ", ".join(sorted(unknown))))
     payload = struct.pack(FORMATS[msg_type], *values) + text
     if len(payload) > MAX_PAYLOAD:
         raise ValueError("{}: payload of {} bytes exceeds {}".format(name, len(payload), MAX_PAYLOAD))
