@@ -123,7 +123,6 @@ class PilLink:
         self.conn: socket.socket | None = None
         self.enc = FrameEncoder()
         self.dec = FrameDecoder()
-        self._pending: list[tuple[int, int, bytes]] = []
 
     def accept(self, timeout: float) -> None:
         self.server.settimeout(timeout)
@@ -135,24 +134,25 @@ class PilLink:
         self.conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 
     def exchange(self, s: Sense) -> Actuate:
+        """Send one HW_SENSE, wait for the board's HW_ACTUATE (one answers each, in lockstep)."""
         assert self.conn is not None
-        payload = struct.pack("<I8H8HiiH", s.tick_ms & 0x3FFFFFFF, *s.adc_off, *s.adc_on, s.enc_l, s.enc_r,
-                              s.vbat_mv)
+        payload = struct.pack(M.FORMATS[M.HW_SENSE], s.tick_ms & 0x3FFFFFFF, *s.adc_off, *s.adc_on,
+                              s.enc_l, s.enc_r, s.vbat_mv)
         self.conn.sendall(self.enc.encode(M.HW_SENSE, payload))
+        dec = self.dec
         while True:
-            for t, _seq, p in self._pending:
-                if t == M.HW_ACTUATE:
-                    self._pending.clear()
-                    tick, il, ir, pct = struct.unpack("<IhhB", p)
-                    return Actuate(il, ir, pct)
-            self._pending.clear()
             try:
                 data = self.conn.recv(4096)
             except socket.timeout:
                 raise RuntimeError("the virtual board did not answer HW_SENSE within 10 s") from None
             if not data:
                 raise RuntimeError("the virtual board closed its hardware link (it stopped or was reset)")
-            self._pending = self.dec.decode_all(data)
+            i, end = 0, len(data)
+            while i < end:
+                i = dec.feed(data, i, end)
+                if dec.ready and dec.msg_type == M.HW_ACTUATE:
+                    _tick, il, ir, pct = struct.unpack_from(M.FORMATS[M.HW_ACTUATE], dec.body, 3)
+                    return Actuate(il, ir, pct)
 
     def close(self) -> None:
         if self.conn:
