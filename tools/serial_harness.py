@@ -203,9 +203,10 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         return 0
     finally:
-        if display.tty:
-            display.stream.write("\n")
-        display.status(force=True) if not display.tty else print(status_text(link))
+        if display.tty:  # end the live status line, then leave the counts on one of their own
+            display.stream.write("\n" + status_text(link) + "\n")
+        else:
+            display.status(force=True)
         if log:
             log.stats(link.now(), link.decoder.stats())
             log.close()
