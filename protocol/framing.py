@@ -83,7 +83,6 @@ class FrameDecoder:
         self.msg_type = 0
         self.seq = 0
         self.payload_len = 0
-        self.wire_len = 0
         self._last_seq = -1
         self.frames = 0  # valid frames delivered
         self.cobs_errors = 0
@@ -186,14 +185,9 @@ class FrameDecoder:
         self.msg_type = msg_type
         self.seq = seq
         self.payload_len = plen
-        self.wire_len = n  # the frame's COBS bytes are _raw[:n] until the next byte arrives
         self.frames += 1
         self.ready = True
         return True
-
-    def wire_bytes(self) -> bytes:
-        """Host convenience, while `ready`: the frame as it was on the wire, delimiter included."""
-        return bytes(self._raw[: self.wire_len]) + b"\x00"
 
     def stats(self) -> dict[str, int]:
         return {

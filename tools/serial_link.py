@@ -120,7 +120,7 @@ class SerialLink:
             if dec.ready:
                 payload = bytes(dec.body[3 : 3 + dec.payload_len])
                 frame = Frame("rx", now, dec.msg_type, dec.seq, M.unpack_payload(dec.msg_type, payload),
-                              dec.wire_bytes())
+                              _reframe(dec))
                 frames.append(frame)
                 if self.on_frame:
                     self.on_frame(frame)
@@ -135,3 +135,12 @@ class SerialLink:
                 if frame.msg_type == msg_type:
                     return frame
         return None
+
+
+def _reframe(dec: FrameDecoder) -> bytes:
+    # The decoded body re-encoded is the frame exactly as it was on the wire
+    # (COBS is canonical for bodies <= 254 bytes).
+    from protocol.cobs import encode
+
+    n = 3 + dec.payload_len + 2
+    return encode(bytes(dec.body[:n])) + b"\x00"
