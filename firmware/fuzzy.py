@@ -91,6 +91,7 @@ RULES_REFINED = (
     (7, _QUICK_LEFT),  # S8 front-right
 )
 RULE_SETS = (RULES_FIRST, RULES_REFINED)
+RULE_SET_NAMES = ("first", "refined")  # the rule_set parameter's values, by index
 
 
 def direction_weight(direction: int, sensor: int) -> int:

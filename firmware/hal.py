@@ -1,7 +1,7 @@
 """The hardware abstraction layer: all that the firmware asks of a board.
 
 Two real implementations: hal_rp2040.Rp2040Hal (the robot) and
-hal_virtual.VirtualHal (the virtual board, whose electrical I/O travels as
+hal_sim_link.SimLinkHal (the virtual board, whose electrical I/O travels as
 HW_SENSE / HW_ACTUATE frames to a simulator).  The simulator's SIL mode
 implements the same interface in-process.  The firmware cannot tell them
 apart.  Every method is called once or twice per control cycle and must not

@@ -25,9 +25,9 @@ def make_hal() -> object:
     if not address or ":" not in address:
         raise RuntimeError("virtual board: set TWINBOT_HW=host:port of the simulator (twinbot board does)")
     host, port = address.rsplit(":", 1)
-    from firmware.hal_virtual import VirtualHal
+    from firmware.hal_sim_link import SimLinkHal
 
-    return VirtualHal(host, int(port))
+    return SimLinkHal(host, int(port))
 
 
 def start() -> None:

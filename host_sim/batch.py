@@ -69,10 +69,11 @@ import numpy as np
 
 from host_sim import dynamics, ir_sensor, motors
 from host_sim.dynamics import ParamBatch
+from host_sim.interface import CYCLE_S
 from host_sim.params import RobotParams
 from host_sim.world import World
 
-CYCLE_S = 0.040  # s, the firmware's control period
+
 SUBSTEPS = 8
 N_SENSORS = ir_sensor.N_SENSORS
 # RobotParams fields the IR model reads: robots that agree on all of them

@@ -23,14 +23,14 @@ from typing import Callable
 
 import numpy as np
 
-from host_sim.controllers import Actuate, Sense
+from host_sim.interface import CYCLE_S, Actuate, Sense
 from host_sim.coverage import Coverage
-from host_sim.hardware import SimRobot
+from host_sim.sim_robot import SimRobot
 from host_sim.params import RobotParams
 from host_sim.recording import RecordingWriter
 from host_sim.world import World
 
-CYCLE_S = 0.040  # the firmware's default control period
+
 
 
 @dataclass

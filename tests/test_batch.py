@@ -21,9 +21,10 @@ import numpy as np
 import pytest
 
 from host_sim.batch import BatchSim, from_recording
-from host_sim.controllers import Actuate, SilController
+from host_sim.interface import Actuate
+from host_sim.sil import SilController
 from host_sim.dynamics import ParamBatch
-from host_sim.hardware import SimRobot
+from host_sim.sim_robot import SimRobot
 from host_sim.params import DEFAULT
 from host_sim.recording import RecordingWriter, load_recording
 from host_sim.replay import replay

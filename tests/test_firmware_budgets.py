@@ -13,7 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from tools.bench_firmware import compile_for_heap, heap_run
-from tools.micropython_rig import run_micropython
+from host_sim.micropython_tools import run_micropython
 
 MP_DIR = Path(__file__).resolve().parent / "mp"
 HEAP_BUDGET_KB_UNIX64 = 64

@@ -20,7 +20,7 @@ import pytest
 
 from firmware import fuzzy, ir, odometry
 from tools import make_firmware_vectors as gen
-from tools.micropython_rig import run_micropython
+from host_sim.micropython_tools import run_micropython
 
 HERE = Path(__file__).resolve().parent
 GOLDEN = HERE / "data" / "firmware_golden.jsonl"

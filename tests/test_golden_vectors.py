@@ -15,7 +15,7 @@ from cobs import cobs as ref
 
 from protocol import framing, messages
 from tools import make_golden_vectors
-from tools.micropython_rig import run_micropython
+from host_sim.micropython_tools import run_micropython
 
 HERE = Path(__file__).resolve().parent
 GOLDEN = HERE / "data" / "protocol_golden.json"

@@ -18,7 +18,7 @@ import serial
 from protocol import messages as M
 from protocol.framing import FrameDecoder, FrameEncoder
 from tests.helpers import REPO, run_twinbot, twinbot_cmd
-from tools.frame_log import FrameLogError, read_frame_log
+from host_sim.frame_log import FrameLogError, read_frame_log
 
 
 def telemetry_frame(enc: FrameEncoder, k: int) -> bytes:

@@ -10,7 +10,8 @@ import json
 import numpy as np
 import pytest
 
-from host_sim.controllers import PilController, SilController
+from host_sim.pil import PilController
+from host_sim.sil import SilController
 from host_sim.params import DEFAULT
 from host_sim.recording import RecordingError, RecordingWriter, load_recording
 from host_sim.replay import ReplayError, replay

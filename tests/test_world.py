@@ -194,8 +194,12 @@ def test_batch_equals_scalar_and_robot_fast_path():
     dr, ar, hr = w.cast_robots(poses, bearings, 1.0)
     assert np.array_equal(h, hr)
     assert np.allclose(d[h], dr[h], rtol=0, atol=1e-12) and np.allclose(a, ar, atol=1e-12)
-    small = w.cast_robots(poses[:5], bearings, 1.0)  # the small-batch path agrees
-    assert all(np.array_equal(u, v[:5]) for u, v in zip(small, (dr, ar, hr)))
+    # The small-batch path agrees: the same hits, the same numbers to rounding.  Not
+    # bit for bit: BLAS picks other kernels for other matrix shapes, and on some CPUs
+    # (OpenBLAS, Haswell) they round the 9-term sums differently in the last bit.
+    ds, as_, hs = w.cast_robots(poses[:5], bearings, 1.0)
+    assert np.array_equal(hs, hr[:5])
+    assert np.allclose(ds[hs], dr[:5][hs], rtol=0, atol=1e-12) and np.allclose(as_, ar[:5], atol=1e-12)
     again = w.cast_robots(poses, bearings, 1.0)  # buffers reused: same answer
     assert all(np.array_equal(u, v) for u, v in zip(again, (dr, ar, hr)))
     for i in range(0, n, 37):

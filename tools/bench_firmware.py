@@ -25,7 +25,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from tools.micropython_rig import REPO_ROOT, mpy_cross_compile, run_micropython
+from firmware.manifest import BOARD_FILES
+from host_sim.micropython_tools import REPO_ROOT, mpy_cross_compile, run_micropython
 
 MP_SCRIPT = REPO_ROOT / "tools" / "mp_bench_firmware.py"
 TARGET_CYCLE_US = 250
@@ -55,14 +56,12 @@ def micropython_timing(cycles: int) -> dict[str, object]:
 
 def compile_for_heap(stage: Path) -> None:
     """Everything the heap run imports, as .mpy, the way a board holds it."""
-    for pkg, names in (("protocol", None), ("firmware", None), ("tools", ("__init__", "mp_testhal"))):
-        (stage / pkg).mkdir(parents=True, exist_ok=True)
-        for src in sorted((REPO_ROOT / pkg).glob("*.py")):
-            if names is not None and src.stem not in names:
-                continue
-            r = mpy_cross_compile(src, stage / pkg / (src.stem + ".mpy"))
-            if r.returncode != 0:
-                raise RuntimeError(f"mpy-cross failed on {src}: {r.stderr}")
+    for rel in BOARD_FILES + ("firmware/hal_testbench.py",):
+        dst = stage / (rel[:-3] + ".mpy")
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        r = mpy_cross_compile(REPO_ROOT / rel, dst)
+        if r.returncode != 0:
+            raise RuntimeError(f"mpy-cross failed on {rel}: {r.stderr}")
     r = mpy_cross_compile(MP_SCRIPT, stage / "mp_bench_firmware.mpy")
     if r.returncode != 0:
         raise RuntimeError(r.stderr)
@@ -97,7 +96,7 @@ def cpython_cycle_us(cycles: int) -> float:
     from protocol import wire as W
     from protocol.framing import FrameEncoder
     from firmware.robot import Robot
-    from tools.mp_testhal import TestHal
+    from firmware.hal_testbench import TestHal
 
     hal = TestHal()
     robot = Robot(hal)

@@ -256,7 +256,7 @@ def run_micropython_part(frames: int, repeats: int, workdir: Path) -> dict[str, 
     """Run tools/mp_bench_protocol.py; return its figures plus the chunk it encoded."""
     import json
 
-    from tools.micropython_rig import REPO_ROOT, run_micropython
+    from host_sim.micropython_tools import REPO_ROOT, run_micropython
 
     chunk_file = workdir / "mp_chunk.bin"
     script = REPO_ROOT / "tools" / "mp_bench_protocol.py"

@@ -115,16 +115,16 @@ def _median_time(fn: Callable[[], object], repeats: int) -> tuple[float, list[fl
 # (label, file, function): the parts each profiled workload is split into (cumulative time).
 COMPONENTS = {
     "(a) replay": [
-        ("IR sensors + encoders (SimRobot.sense)", "host_sim/hardware.py", "sense"),
-        ("8 physics steps (SimRobot.advance)", "host_sim/hardware.py", "advance"),
-        ("  of which the wall test (_resolve_contact)", "host_sim/hardware.py", "_resolve_contact"),
+        ("IR sensors + encoders (SimRobot.sense)", "host_sim/sim_robot.py", "sense"),
+        ("8 physics steps (SimRobot.advance)", "host_sim/sim_robot.py", "advance"),
+        ("  of which the wall test (_resolve_contact)", "host_sim/sim_robot.py", "_resolve_contact"),
         ("  of which dynamics.step", "host_sim/dynamics.py", "step"),
         ("  of which motors.wheel_torque", "host_sim/motors.py", "wheel_torque"),
     ],
     "(b) SIL": [
-        ("IR sensors + encoders (SimRobot.sense)", "host_sim/hardware.py", "sense"),
-        ("8 physics steps (SimRobot.advance)", "host_sim/hardware.py", "advance"),
-        ("firmware cycle (SilController.cycle)", "host_sim/controllers.py", "cycle"),
+        ("IR sensors + encoders (SimRobot.sense)", "host_sim/sim_robot.py", "sense"),
+        ("8 physics steps (SimRobot.advance)", "host_sim/sim_robot.py", "advance"),
+        ("firmware cycle (SilController.cycle)", "host_sim/sil.py", "cycle"),
         ("coverage bookkeeping (Coverage.add)", "host_sim/coverage.py", "add"),
     ],
     "(c) batch with IR": [
@@ -202,7 +202,7 @@ def format_profile(name: str, prof: dict[str, Any]) -> str:
 # --------------------------------------------------------------------------- #
 def make_recording(path: Path, seconds: float) -> Any:
     """A SIL run in the paper's room, recorded (the input of (a), (c) and (d))."""
-    from host_sim.controllers import SilController
+    from host_sim.sil import SilController
     from host_sim.params import DEFAULT
     from host_sim.recording import RecordingWriter, load_recording
     from host_sim.simulation import Simulation
@@ -239,7 +239,7 @@ def bench_replay(rec: Any, repeats: int) -> dict[str, Any]:
 
 
 def bench_sil(seconds: float, repeats: int) -> dict[str, Any]:
-    from host_sim.controllers import SilController
+    from host_sim.sil import SilController
     from host_sim.params import DEFAULT
     from host_sim.simulation import Simulation
     from host_sim.world import builtin_world
@@ -583,7 +583,7 @@ def run(args: argparse.Namespace) -> int:
         missed = {t["name"] for t in report["targets"] if t["met"] is False}
         profiles: dict[str, Any] = {}
         if args.profile or missed:
-            from host_sim.controllers import SilController
+            from host_sim.sil import SilController
             from host_sim.params import DEFAULT
             from host_sim.replay import replay
             from host_sim.simulation import Simulation

@@ -1,6 +1,6 @@
 """`twinbot board`: the firmware on a virtual board, behind a pseudo-terminal.
 
-The board is the MicroPython unix port running firmware/vboard.py: it boots
+The board is the MicroPython unix port running firmware/unix_board.py: it boots
 main.py from its own flash (a folder, or a littlefs image of a given size),
 offers the REPL that mpremote drives, and runs the firmware, whose host
 link is the board's stdin/stdout.  This module relays those to a
@@ -24,7 +24,8 @@ import threading
 import time
 from pathlib import Path
 
-from host_sim.virtual_board import VirtualBoard, factory_image
+from host_sim.board_process import VirtualBoard, factory_image
+from host_sim.interface import TICK_MASK
 from protocol import messages as M
 from protocol.framing import FrameDecoder, FrameEncoder
 from tools.cli import CliError
@@ -59,7 +60,7 @@ class StandInHardware:
     def sense_payload(self, tick_ms: int, emitter_pct: int) -> bytes:
         on = [min(4095, a + r * emitter_pct // 100) for a, r in zip(STANDIN_AMBIENT, STANDIN_REFLECTION)]
         return M.pack_payload(M.HW_SENSE, {
-            "tick_ms": tick_ms & 0x3FFFFFFF, "adc_off": list(STANDIN_AMBIENT), "adc_on": on,
+            "tick_ms": tick_ms & TICK_MASK, "adc_off": list(STANDIN_AMBIENT), "adc_on": on,
             "enc_l": 0, "enc_r": 0, "vbat_mv": STANDIN_VBAT_MV,
         })
 
@@ -168,7 +169,7 @@ def run(args: argparse.Namespace) -> int:
         hw_port = standin.port
     else:
         from host_sim.params import DEFAULT
-        from host_sim.twin import BoardTwin
+        from host_sim.board_twin import BoardTwin
         from host_sim.world import WorldError, world_by_name_or_path
 
         try:

@@ -47,11 +47,11 @@ def run(args: argparse.Namespace) -> int:
         from tools import loopback_demo
 
         return loopback_demo.run(args)
-    from host_sim.controllers import SilController
+    from host_sim.sil import SilController
     from host_sim.params import DEFAULT
     from host_sim.simulation import Simulation
     from host_sim.world import WorldError, world_by_name_or_path
-    from tools.plots import save_coverage, save_runs
+    from host_sim.figures import save_coverage, save_runs
     from tools.sim import Progress, summary
 
     try:

@@ -22,14 +22,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from firmware import config
-from host_sim.virtual_board import MAIN_PY
+from firmware.manifest import BOARD_FILES, MAIN_PY
 from protocol import messages as M
 from tools.cli import CliError
-from tools.micropython_rig import REPO_ROOT, mpy_cross_compile, mpy_cross_exe
-from tools.serial_link import LinkError, SerialLink, open_port
+from host_sim.micropython_tools import REPO_ROOT, mpy_cross_compile, mpy_cross_exe
+from host_sim.serial_link import LinkError, SerialLink, open_port
 
-# Files a robot does not need: the virtual board's supervisor lives outside its flash.
-NOT_FLASHED = {"firmware/vboard.py"}
 PROBE_TIMEOUT_S = 12
 PROBE = ("import sys, os\n"
          "s = os.statvfs('/')\n"
@@ -110,19 +108,15 @@ def check_mpy_compatible(board: BoardInfo, emitted: tuple[int, int]) -> None:
 
 
 def compile_tree(stage: Path) -> list[Path]:
-    """Compile every firmware/protocol module to stage/; returns the files to copy."""
+    """Compile the manifest's modules to stage/; returns the files to copy."""
     out = []
-    for pkg in ("protocol", "firmware"):
-        (stage / pkg).mkdir(parents=True, exist_ok=True)
-        for src in sorted((REPO_ROOT / pkg).glob("*.py")):
-            rel = f"{pkg}/{src.name}"
-            if rel in NOT_FLASHED:
-                continue
-            dst = stage / pkg / (src.stem + ".mpy")
-            r = mpy_cross_compile(src, dst)
-            if r.returncode != 0:
-                raise CliError(f"mpy-cross failed on {rel}: {r.stderr.strip()}")
-            out.append(dst)
+    for rel in BOARD_FILES:
+        dst = stage / (rel[:-3] + ".mpy")
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        r = mpy_cross_compile(REPO_ROOT / rel, dst)
+        if r.returncode != 0:
+            raise CliError(f"mpy-cross failed on {rel}: {r.stderr.strip()}")
+        out.append(dst)
     main = stage / "main.py"
     main.write_text(MAIN_PY)
     out.append(main)

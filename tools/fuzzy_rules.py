@@ -33,7 +33,7 @@ ANTECEDENT_NAMES = (  # 0..7 sensors, 8..11 circular directions, 12 = fz.ALWAYS
     "front", "left", "back", "right",
     "always",
 )
-RULE_SET_NAMES = ("first", "refined")  # fz.RULE_SETS
+RULE_SET_NAMES = fz.RULE_SET_NAMES
 # Where each sensor looks (paper section 3.3): S1 front, then counter-clockwise.
 SENSOR_PLACES = ("front", "front-left", "left", "back-left", "back", "back-right", "right", "front-right")
 DIRECTION_BEARINGS = (0, 90, 180, 270)  # front, left, back, right, degrees counter-clockwise

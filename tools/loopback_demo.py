@@ -11,9 +11,9 @@ import argparse
 from pathlib import Path
 
 from protocol import messages as M
-from tools.frame_log import FrameLogWriter, read_frame_log
+from host_sim.frame_log import FrameLogWriter, read_frame_log
 from tools.serial_harness import Display, status_text
-from tools.serial_link import Frame, SerialLink
+from host_sim.serial_link import Frame, SerialLink
 
 
 def script() -> list[tuple[int, dict[str, object]]]:

@@ -16,7 +16,7 @@ import micropython
 
 
 def make_hal():
-    from tools.mp_testhal import TestHal
+    from firmware.hal_testbench import TestHal
 
     return TestHal(256, 256)
 

@@ -3,7 +3,7 @@
     micropython tools/mp_bench_protocol.py [FRAMES [REPEATS [CHUNK_OUT]]]
 
 (with the repository root on MICROPYPATH; `twinbot bench protocol` runs it
-through tools.micropython_rig and parses the one JSON line it prints last.)
+through host_sim.micropython_tools and parses the one JSON line it prints last.)
 
 What it times, each as the median over REPEATS runs with time.ticks_us:
 

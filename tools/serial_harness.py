@@ -12,8 +12,9 @@ import time
 
 from protocol import messages as M
 from tools.cli import CliError
-from tools.frame_log import FrameLogError, FrameLogWriter
-from tools.serial_link import Frame, LinkError, SerialLink
+from host_sim.frame_log import FrameLogError, FrameLogWriter
+from host_sim.interface import TICK_MASK
+from host_sim.serial_link import Frame, LinkError, SerialLink
 
 MODES = {name.lower(): i for i, name in enumerate(M.MODE_NAMES)}
 
@@ -229,7 +230,7 @@ class TelemetryRecorder:
         f = frame.fields
         tick = int(f["tick_ms"])  # type: ignore[call-overload]
         if self.last_tick is not None:
-            step = (tick - self.last_tick) & 0x3FFFFFFF
+            step = (tick - self.last_tick) & TICK_MASK
             if step == 0 or step > 0x20000000:  # a repeat, or the clock went back (a reset)
                 return
             self.t_ms += step

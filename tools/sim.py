@@ -85,7 +85,9 @@ def load_inputs(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 
 
 def make_controller(args: argparse.Namespace):  # type: ignore[no-untyped-def]
-    from host_sim.controllers import RULE_SETS, PilController, SilController
+    from host_sim.interface import RULE_SETS
+    from host_sim.pil import PilController
+    from host_sim.sil import SilController
 
     rule_set = RULE_SETS[args.rules]
     if args.pil:
@@ -167,7 +169,7 @@ def run(args: argparse.Namespace) -> int:
     if args.record:
         print(f"recording: {args.record} (+ .json sidecar), {len(result.t)} rows")
     if args.png:
-        from tools.plots import save_runs
+        from host_sim.figures import save_runs
 
         save_runs(args.png, world, [result], [f"{world.name}, {args.rules} rule set, {args.duration:.0f} s"],
                   params.body_radius)

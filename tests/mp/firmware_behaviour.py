@@ -12,7 +12,7 @@ from firmware.fuzzy import FuzzyController
 from firmware.robot import BreakToRepl, Robot
 from protocol import wire as W
 from protocol.framing import FrameDecoder, FrameEncoder
-from tools.mp_testhal import TestHal
+from firmware.hal_testbench import TestHal
 
 ENC = FrameEncoder()
 

@@ -1,6 +1,6 @@
 """One control cycle allocates nothing: micropython tests/mp/firmware_cycle_check.py
 
-Runs the firmware's Robot on the test HAL (tools/mp_testhal.py), whose methods allocate nothing,
+Runs the firmware's Robot on the test HAL (firmware/hal_testbench.py), whose methods allocate nothing,
 warms every path up (autonomous with obstacles, host commands, a parameter
 change, the watchdog), then runs cycles inside micropython.heap_lock(): any
 heap allocation raises MemoryError.  Host bytes (COMMAND frames) arrive
@@ -16,7 +16,7 @@ import micropython
 from firmware.robot import Robot
 from protocol import wire as M
 from protocol.framing import FrameEncoder
-from tools.mp_testhal import TestHal
+from firmware.hal_testbench import TestHal
 
 
 def command_frame(enc, mode, left, right):

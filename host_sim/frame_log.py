@@ -20,7 +20,7 @@ from pathlib import Path
 
 from protocol import messages as M
 from protocol.framing import FrameDecoder
-from tools.serial_link import Frame
+from host_sim.serial_link import Frame
 
 FORMAT = "twinbot-frames"
 VERSION = 1

@@ -1,4 +1,4 @@
-"""The virtual board as a process: MicroPython running firmware/vboard.py,
+"""The virtual board as a process: MicroPython running firmware/unix_board.py,
 its stdin/stdout relayed to a pseudo-terminal.
 
 `twinbot board` and the simulator's PIL mode both start boards through
@@ -17,19 +17,18 @@ import threading
 import tty
 from pathlib import Path
 
-from tools.micropython_rig import REPO_ROOT, micropython_exe
+from firmware.manifest import BOARD_FILES, MAIN_PY
+from host_sim.micropython_tools import REPO_ROOT, micropython_exe
 
-MAIN_PY = "import firmware.main\nfirmware.main.start()\n"
-SUPERVISOR = REPO_ROOT / "firmware" / "vboard.py"
+SUPERVISOR = REPO_ROOT / "firmware" / "unix_board.py"
 
 
 def factory_image(folder: Path) -> None:
-    """Write what a freshly flashed board holds: the sources and main.py."""
-    for pkg in ("protocol", "firmware"):
-        dst = folder / pkg
-        dst.mkdir(parents=True, exist_ok=True)
-        for src in sorted((REPO_ROOT / pkg).glob("*.py")):
-            shutil.copy2(src, dst / src.name)
+    """Write what a freshly flashed board holds: the manifest's sources and main.py."""
+    for rel in BOARD_FILES:
+        dst = folder / rel
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(REPO_ROOT / rel, dst)
     (folder / "main.py").write_text(MAIN_PY)
 
 

@@ -12,7 +12,7 @@ import socket
 import struct
 
 from firmware.hal import TICK_MASK
-from firmware.hal_sensed import SensedHal
+from firmware.hal_buffered import BufferedHal
 from firmware.hostlink import StdioLink
 from protocol import wire
 from protocol.fields import read_i32, read_u16
@@ -25,11 +25,11 @@ class HardwareGone(SystemExit):
     """The simulator closed the hardware link: the board powers off."""
 
 
-class VirtualHal(SensedHal):
-    """SensedHal whose readings arrive as HW_SENSE frames and whose outputs leave as HW_ACTUATE."""
+class SimLinkHal(BufferedHal):
+    """BufferedHal whose readings arrive as HW_SENSE frames and whose outputs leave as HW_ACTUATE."""
 
     def __init__(self, host: str, port: int) -> None:
-        SensedHal.__init__(self)
+        BufferedHal.__init__(self)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         self.sock.connect(socket.getaddrinfo(host, port)[0][-1])
         # Non-blocking, waited on with poll: a blocking readinto() would wait

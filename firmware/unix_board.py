@@ -12,7 +12,7 @@ port.  It gives the board:
 - resets: Ctrl-D (soft reset) and machine.reset() (hard reset), which clear
   every module loaded from flash and start again.
 
-usage: micropython firmware/vboard.py FLASH
+usage: micropython firmware/unix_board.py FLASH
   FLASH is a folder, or IMAGE_FILE:SIZE_KB for a littlefs image (created
   blank when missing).  The firmware finds its simulator through the
   TWINBOT_HW environment variable (host:port).
@@ -264,7 +264,7 @@ def _traceback(exc: BaseException) -> bytes:
 
 def main() -> None:
     if len(sys.argv) < 2:
-        print("usage: micropython firmware/vboard.py FLASH_DIR | IMAGE:SIZE_KB")
+        print("usage: micropython firmware/unix_board.py FLASH_DIR | IMAGE:SIZE_KB")
         sys.exit(2)
     mount_flash(sys.argv[1])
     board = Board()

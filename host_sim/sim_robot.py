@@ -21,11 +21,10 @@ import math
 import numpy as np
 
 from host_sim import dynamics, ir_sensor, motors
-from host_sim.controllers import Actuate, Sense
+from host_sim.interface import TICK_MASK, Actuate, Sense
 from host_sim.params import RobotParams
 from host_sim.world import World
 
-TICK_MASK = 0x3FFFFFFF
 
 
 class SimRobot:

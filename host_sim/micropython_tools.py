@@ -64,11 +64,10 @@ def run_micropython(
 
 
 def micropython_sources() -> list[Path]:
-    """Every .py file that must run on the robot."""
-    files: list[Path] = []
-    for pkg in MICROPYTHON_PACKAGES:
-        files += sorted((REPO_ROOT / pkg).rglob("*.py"))
-    return files
+    """Every .py file that runs under MicroPython: on the robot, or on the virtual board and test benches."""
+    from firmware.manifest import BOARD_FILES, OFF_BOARD_FILES
+
+    return [REPO_ROOT / rel for rel in BOARD_FILES + OFF_BOARD_FILES]
 
 
 def mpy_cross_compile(source: Path, output: Path, march: str | None = None) -> subprocess.CompletedProcess[str]:

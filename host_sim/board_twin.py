@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import threading
 
-from host_sim.controllers import Actuate, PilLink, Sense
+from host_sim.interface import Actuate, Sense
+from host_sim.pil import PilLink
 from host_sim.params import RobotParams
 from host_sim.simulation import Simulation
 from host_sim.world import World

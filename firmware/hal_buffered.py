@@ -3,7 +3,7 @@
 The values of a HW_SENSE frame (tick, ADC readings with the emitters off and
 on, encoder counts, battery) are loaded before each cycle; the firmware's
 outputs are collected as a HW_ACTUATE (currents, and the emitter power its
-"on" reading used).  The virtual board (hal_virtual.VirtualHal) receives
+"on" reading used).  The virtual board (hal_sim_link.SimLinkHal) receives
 and sends those as frames; the simulator's SIL mode loads them in-process.
 Both share this class, so SIL and PIL behave the same bit for bit.
 """
@@ -11,7 +11,7 @@ from firmware.hal import Hal
 from protocol import wire
 
 
-class SensedHal(Hal):
+class BufferedHal(Hal):
     board = wire.BOARD_VIRTUAL
 
     def __init__(self) -> None:

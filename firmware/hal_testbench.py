@@ -5,13 +5,14 @@ the ADC ceiling.  Wheels: encoder ticks advance with the current reference
 (a crude motor).  Host link: bytes queued with give(); frames sent collected
 in `out`.  No method allocates once the buffers exist.
 """
+from firmware.hal import TICK_MASK
 
 
 class TestHal:
     board = 2  # BOARD_VIRTUAL
     overrun = False
 
-    def __init__(self, in_size=2048, out_size=8192):
+    def __init__(self, in_size: int = 2048, out_size: int = 8192) -> None:
         self.t = 0
         self.emitters = 0
         self.ambient = [100] * 8
@@ -25,32 +26,32 @@ class TestHal:
         self.out_len = 0
         self.vbat = 7400
 
-    def wait_cycle(self, period):
+    def wait_cycle(self, period: int) -> int:
         self.t += period
-        return self.t & 0x3FFFFFFF
+        return self.t & TICK_MASK
 
-    def set_emitters(self, pct):
+    def set_emitters(self, pct: int) -> None:
         self.emitters = pct
 
-    def read_ir(self, out):
+    def read_ir(self, out: list[int]) -> None:
         for i in range(8):
             v = self.ambient[i] + (self.reflection[i] * self.emitters) // 100
             out[i] = v if v < 4095 else 4095
 
-    def read_encoders(self, out):
+    def read_encoders(self, out: list[int]) -> None:
         out[0] = self.encs[0]
         out[1] = self.encs[1]
 
-    def battery_mv(self):
+    def battery_mv(self) -> int:
         return self.vbat
 
-    def set_currents(self, left, right):
+    def set_currents(self, left: int, right: int) -> None:
         self.current[0] = left
         self.current[1] = right
         self.encs[0] += left // 16
         self.encs[1] += right // 16
 
-    def host_read(self, buf):
+    def host_read(self, buf: bytearray) -> int:
         n = self.in_len - self.in_pos
         if n > len(buf):
             n = len(buf)
@@ -59,7 +60,7 @@ class TestHal:
         self.in_pos += n
         return n
 
-    def host_write(self, data):
+    def host_write(self, data: memoryview) -> None:
         n = len(data)
         if self.out_len + n > len(self.out):
             self.out_len = 0  # keep the newest frames
@@ -67,13 +68,13 @@ class TestHal:
             self.out[self.out_len + k] = data[k]
         self.out_len += n
 
-    def end_cycle(self):
+    def end_cycle(self) -> None:
         pass
 
-    def close(self):
+    def close(self) -> None:
         pass
 
-    def give(self, data):
+    def give(self, data: bytes) -> None:
         """Queue bytes from the host (appended to what is still unread)."""
         rest = self.in_len - self.in_pos
         for k in range(rest):
@@ -83,7 +84,7 @@ class TestHal:
         self.in_pos = 0
         self.in_len = rest + len(data)
 
-    def take_output(self):
+    def take_output(self) -> bytes:
         data = bytes(self.out[:self.out_len])
         self.out_len = 0
         return data
