@@ -8,7 +8,7 @@ compare what each one's encoders, sensors and pose do with the recording.
     res = sim.run_inputs(cmd)                       # cmd: (T, 2) or (T, N, 2), A
     res.enc (T, N, 2), res.pose (T, N, 3), res.ir_on / res.ir_amb (T, N, 8)
 
-    res = from_recording(rec, params_list, start=k)  # replay row k.. for N sets
+    res = host_sim.replay.replay_batch(rec, params_list, start=k)  # replay row k.. for N sets
 
 `params` is one RobotParams (N copies), a sequence of N RobotParams, or a
 dynamics.ParamBatch (one value per robot for every scalar parameter; the
@@ -96,7 +96,7 @@ class BatchResult:
     ir_amb: np.ndarray | None  # (T, N, 8) ADC counts, emitters off
     collisions: np.ndarray  # (N,) contacts started during the run
     substeps: int
-    start: int = 0  # the recording row it started from (from_recording)
+    start: int = 0  # the recording row it started from (replay_batch)
 
     @property
     def n_robots(self) -> int:
@@ -324,7 +324,8 @@ class BatchSim:
 
     # ------------------------------------------------------------------ runs
     def run_inputs(self, cmd: Any, substeps: int | None = None, sensors: bool = True,
-                   seed: int | np.random.Generator | None = None, period: Any = None) -> BatchResult:
+                   seed: int | np.random.Generator | None = None, period: Any = None,
+                   emitter: Any = None) -> BatchResult:
         """Apply T rows of current references, one per control period; returns the readings.
 
         cmd: (T, 2) A, the same references for every robot, or (T, N, 2).
@@ -332,7 +333,9 @@ class BatchSim:
         sensors: read the IR ring at every control instant (False: enc and
         pose only, faster).  seed: sensor noise (None: noise-free; an int or
         a numpy Generator).  period: seconds per row, a float or (T,) array
-        (default cycle_s).  The state carries on: call again to continue.
+        (default cycle_s).  emitter: (T,) % emitter power of each row's
+        on-reading (default: as the constructor's emitter_pct and
+        initial_emitter_pct say).  The state carries on: call again to continue.
         """
         cmd = np.asarray(cmd, dtype=float)
         n = self.n
@@ -357,6 +360,8 @@ class BatchSim:
             t_out[j] = self.t
             enc[j] = self.encoder_ticks()
             pose[j] = here = self.pose
+            if emitter is not None:
+                self.emitter_now = float(emitter[j])
             if sensors:
                 ir_on[j], ir_amb[j] = self.read_sensors(rng, here)  # type: ignore[index]
             i_ref = cmd[j]
@@ -370,7 +375,8 @@ class BatchSim:
 # --------------------------------------------------------------------------- #
 # Identification: N parameter sets replaying one recording
 # --------------------------------------------------------------------------- #
-def _robot_params(params: Any, base: RobotParams | None) -> tuple[Any, list[RobotParams]]:
+def robot_params(params: Any, base: RobotParams | None) -> tuple[Any, list[RobotParams]]:
+    """(what BatchSim takes, the N RobotParams) from a RobotParams, a sequence of them or a ParamBatch."""
     if isinstance(params, RobotParams):
         return params, [params]
     if isinstance(params, ParamBatch):
@@ -379,53 +385,4 @@ def _robot_params(params: Any, base: RobotParams | None) -> tuple[Any, list[Robo
     return robots, robots
 
 
-def from_recording(rec: Any, params_list: Any, start: int = 0, *, stop: int | None = None,
-                   world: World | None = None, substeps: int = SUBSTEPS, sensors: bool = True,
-                   seed: int | np.random.Generator | None = None, base: RobotParams | None = None,
-                   nominal_timing: bool | None = None) -> BatchResult:
-    """Replay rows start..stop-1 of a recording for N parameter sets at once (host_sim/replay.replay, batched).
-
-    Every robot starts in the state the recording has at row `start`
-    (host_sim/replay.state_at with that robot's parameters: the tracker
-    pose, the wheel angles from the encoders, the wheel speeds from the
-    encoders around the row) and is fed the recorded current references.
-    params_list: a RobotParams, a sequence of N, or a ParamBatch (with
-    `base`).  world: default the recording's own (its sidecar), no walls
-    when it has none.  Timing as replay: one nominal sample period per row
-    for fixed-step simulator recordings, else the recorded times.
-    """
-    from host_sim.replay import ReplayError, state_at
-    from host_sim.world import world_from_dict
-
-    stop = len(rec) if stop is None else stop
-    if not 0 <= start < stop <= len(rec):
-        raise ReplayError(f"rows {start}..{stop} do not fit the recording (0..{len(rec)})")
-    if world is None and isinstance(rec.meta.get("world"), dict):
-        world = world_from_dict(rec.meta["world"], f"{rec.path or 'recording'} (sidecar world)")
-    params, robots = _robot_params(params_list, base)
-    states = [state_at(rec, start, p) for p in robots]
-    q = np.array([s[0] for s in states], dtype=float)
-    v = np.array([s[1] for s in states], dtype=float)
-    if isinstance(params_list, RobotParams):
-        q = q.reshape(1, 5)
-        v = v.reshape(1, 2)
-    simulator = rec.meta.get("source") == "simulator"
-    if nominal_timing is None:
-        nominal_timing = simulator and rec.meta.get("mode") == "fixed"
-    emitter = float(rec.meta.get("emitter_pct", 60))
-    sim = BatchSim(world, params, q=q, v=v, t=float(rec.t[start]), base=base, cycle_s=rec.sample_period,
-                   substeps=substeps, emitter_pct=emitter,
-                   initial_emitter_pct=0.0 if (start == 0 and simulator) else emitter)
-    n_rows = stop - start
-    if nominal_timing:
-        period: Any = rec.sample_period
-    else:
-        period = np.full(n_rows, rec.sample_period)
-        inner = np.arange(start, stop) + 1 < len(rec)
-        period[inner] = np.diff(rec.t[start:min(stop + 1, len(rec))])[: int(inner.sum())]
-    result = sim.run_inputs(rec.cmd[start:stop], substeps=substeps, sensors=sensors, seed=seed, period=period)
-    result.start = start
-    return result
-
-
-__all__ = ["BatchSim", "BatchResult", "from_recording", "IR_FIELDS", "CYCLE_S", "SUBSTEPS"]
+__all__ = ["BatchSim", "BatchResult", "robot_params", "IR_FIELDS", "CYCLE_S", "SUBSTEPS"]

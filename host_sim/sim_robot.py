@@ -38,7 +38,8 @@ class SimRobot:
         self.t = 0.0  # simulated seconds
         self.i_ref = (0.0, 0.0)  # A
         self.current = (0.0, 0.0)  # A actually flowing
-        self.emitter_pct = 0
+        self.emitter_pct = 0  # set by the last actuation
+        self.emitter_used = 0  # in force for the last sense(): its on-readings' light power
         self.rng = np.random.default_rng(seed) if noise else None
         self.collisions = 0
         self.in_contact = False
@@ -56,6 +57,7 @@ class SimRobot:
         return motors.encoder_ticks(self.q[3], self.p), motors.encoder_ticks(self.q[4], self.p)
 
     def sense(self) -> Sense:
+        self.emitter_used = self.emitter_pct
         x, y, phi = self.pose
         off, on = ir_sensor.read_sensors_lists(self.world, x, y, phi, float(self.emitter_pct), self.t, self.p,
                                                self.rng)

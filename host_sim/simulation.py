@@ -71,6 +71,7 @@ class Simulation:
         self.substeps = substeps
         self.cycle_s = cycle_s
         self.recorder = recorder
+        self._rows = _RecordingRows(recorder, controller) if recorder is not None else None
         self.coverage = Coverage(world, params.body_radius, coverage_resolution)
         self._t: list[float] = []
         self._pose: list[tuple[float, float, float]] = []
@@ -98,8 +99,8 @@ class Simulation:
         self.coverage.add(pose[0], pose[1])
         if self.exit_time is None and self._outside(pose[0], pose[1]):
             self.exit_time = robot.t
-        if self.recorder is not None:
-            self.recorder.row(robot.t, cmd, (s.enc_l, s.enc_r), s.adc_on, s.adc_off, s.vbat_mv / 1000.0, pose)
+        if self._rows is not None:
+            self._rows.cycle(robot.t, pose, s, a, robot.emitter_used)
 
     def run_fixed(self, duration: float, speed: float = math.inf,
                   progress: Callable[[float], None] | None = None, stop_at_exit: bool = False) -> RunResult:
@@ -164,9 +165,46 @@ class Simulation:
         return self._result("realtime", time.perf_counter() - start)
 
     def _result(self, mode: str, wall: float) -> RunResult:
+        if self._rows is not None:
+            self._rows.finish()
         return RunResult(
             t=np.array(self._t), pose=np.array(self._pose).reshape(-1, 3), cmd=np.array(self._cmd).reshape(-1, 2),
             coverage=np.array(self.coverage.fractions), collisions=self.robot.collisions, wall_seconds=wall,
             sim_seconds=self.robot.t, mode=mode, controller=getattr(self.controller, "name", "?"), steps=self.steps,
             exit_time=self.exit_time,
         )
+
+
+class _RecordingRows:
+    """Rows of a recording, one per control cycle, written as the robot would write them.
+
+    With the firmware in the loop (SIL, PIL) a row is the firmware's TELEMETRY
+    for that cycle, exactly what `twinbot serial --record` writes from a real
+    robot, plus the simulator's truth (time and pose) as the tracker columns;
+    TELEMETRY is matched to its cycle by the tick, since over PIL's serial
+    port it may arrive a cycle late.  A controller without firmware (a
+    replay) gives its readings and outputs directly.
+    """
+
+    def __init__(self, writer: RecordingWriter, controller: object) -> None:
+        self.writer = writer
+        self.telemetry: Callable[..., list[dict[str, object]]] | None = getattr(controller, "telemetry", None)
+        self.truth: dict[int, tuple[float, tuple[float, float, float]]] = {}
+
+    def cycle(self, t: float, pose: tuple[float, float, float], s: Sense, a: Actuate, emitter_pct: int) -> None:
+        if self.telemetry is None:
+            self.writer.row(t, (a.i_left_ma / 1000.0, a.i_right_ma / 1000.0), (s.enc_l, s.enc_r), s.adc_on,
+                            s.adc_off, s.vbat_mv / 1000.0, pose, emitter_pct=emitter_pct)
+            return
+        self.truth[s.tick_ms] = (t, pose)
+        self._write(self.telemetry())
+
+    def finish(self) -> None:
+        if self.telemetry is not None and self.truth:
+            self._write(self.telemetry(wait=0.5))  # PIL: the last frames may still be on the wire
+
+    def _write(self, frames: list[dict[str, object]]) -> None:
+        for f in frames:
+            truth = self.truth.pop(int(f["tick_ms"]), None)  # type: ignore[call-overload]
+            if truth is not None:  # else a frame from before this run
+                self.writer.telemetry(f, t=truth[0], pose=truth[1])

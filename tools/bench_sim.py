@@ -288,7 +288,7 @@ def bench_batch(rec: Any, n: int, seconds: float, sensors: bool, repeats: int) -
     collisions = 0
     spread = 0.0
     for _ in range(repeats):
-        # As host_sim.batch.from_recording from row 0 of a simulator recording:
+        # As host_sim.replay.replay_batch from row 0 of a simulator recording:
         # every robot at rest at the recorded start, emitters off until the first command.
         sim = BatchSim(world, params, start, initial_emitter_pct=0, substeps=SUBSTEPS, cycle_s=CYCLE_S)
         t0 = time.perf_counter()

@@ -13,7 +13,7 @@ import time
 from protocol import messages as M
 from tools.cli import CliError
 from host_sim.frame_log import FrameLogError, FrameLogWriter
-from host_sim.interface import TICK_MASK
+from host_sim.interface import CYCLE_S
 from host_sim.serial_link import Frame, LinkError, SerialLink
 
 MODES = {name.lower(): i for i, name in enumerate(M.MODE_NAMES)}
@@ -215,29 +215,16 @@ def run(args: argparse.Namespace) -> int:
 
 
 class TelemetryRecorder:
-    """Writes a robot's TELEMETRY as a recording (the simulator's format), row by row."""
+    """`--record F.csv`: the robot's TELEMETRY as a recording (host_sim.recording, the simulator's format)."""
 
     def __init__(self, path: str, port: str) -> None:
         from host_sim.recording import RecordingWriter
 
-        self.writer = RecordingWriter(path, source="robot", sample_period=0.04, extra={"port": port})
-        self.last_tick: int | None = None
-        self.t_ms = 0  # unwrapped robot clock
+        self.writer = RecordingWriter(path, source="robot", sample_period=CYCLE_S, extra={"port": port})
 
     def frame(self, frame: Frame) -> None:
-        if frame.direction != "rx" or frame.msg_type != M.TELEMETRY:
-            return
-        f = frame.fields
-        tick = int(f["tick_ms"])  # type: ignore[call-overload]
-        if self.last_tick is not None:
-            step = (tick - self.last_tick) & TICK_MASK
-            if step == 0 or step > 0x20000000:  # a repeat, or the clock went back (a reset)
-                return
-            self.t_ms += step
-        self.last_tick = tick
-        self.writer.row(self.t_ms / 1000.0, (int(f["i_ref_l_ma"]) / 1000.0, int(f["i_ref_r_ma"]) / 1000.0),  # type: ignore[call-overload]
-                        (int(f["enc_l"]), int(f["enc_r"])), list(f["ir_on"]), list(f["ir_amb"]),  # type: ignore[call-overload]
-                        int(f["vbat_mv"]) / 1000.0)  # type: ignore[call-overload]
+        if frame.direction == "rx" and frame.msg_type == M.TELEMETRY:
+            self.writer.telemetry(frame.fields)
 
     def stats(self, t: float, counters: dict[str, int]) -> None:
         self.writer.meta["decoder"] = counters
