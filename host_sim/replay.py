@@ -125,16 +125,21 @@ def state_at(rec: Recording, k: int, p: RobotParams) -> tuple[tuple[float, ...],
         raise ReplayError(f"row {k} is outside the recording (0..{n - 1})")
     x, y, phi = (float(v) for v in rec.pose[k])
     theta = [motors.encoder_angle(int(rec.enc[k, i]), p) for i in range(2)]
-    if starts_at_rest(rec, k):
-        v = (0.0, 0.0)
-    else:
-        lo, hi = (k - 1, k + 1) if 0 < k < n - 1 else ((k, k + 1) if k == 0 else (k - 1, k))
-        dt = float(rec.t[hi] - rec.t[lo]) if n > 1 else 0.0
-        per_tick = 2 * math.pi / p.ticks_per_rev
-        v = tuple(float(rec.enc[hi, i] - rec.enc[lo, i]) * per_tick / dt if dt > 0 else 0.0
-                  for i in range(2))  # type: ignore[assignment]
+    v = (0.0, 0.0) if starts_at_rest(rec, k) else wheel_speeds_at(rec, k, p)
     q = dynamics.q_from_axle_pose(x, y, phi, p, theta[0], theta[1])
     return q, (float(v[0]), float(v[1]))
+
+
+def wheel_speeds_at(rec: Recording, k: int, p: RobotParams) -> tuple[float, float]:
+    """Wheel speeds (rad/s) at row k from the encoder counts around it (central differences inside)."""
+    n = len(rec)
+    lo, hi = (k - 1, k + 1) if 0 < k < n - 1 else ((k, k + 1) if k == 0 else (k - 1, k))
+    dt = float(rec.t[hi] - rec.t[lo]) if n > 1 else 0.0
+    if dt <= 0:
+        return (0.0, 0.0)
+    per_tick = 2 * math.pi / p.ticks_per_rev
+    return (float(rec.enc[hi, 0] - rec.enc[lo, 0]) * per_tick / dt,
+            float(rec.enc[hi, 1] - rec.enc[lo, 1]) * per_tick / dt)
 
 
 def replay(rec: Recording, p: RobotParams, world: World, start: int = 0, stop: int | None = None,
