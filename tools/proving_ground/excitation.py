@@ -13,7 +13,8 @@ import math
 
 import numpy as np
 
-CYCLE_S = 0.040
+from host_sim.interface import CYCLE_S
+
 KINDS = ("straight", "spin", "arc", "creep", "burst", "chirp", "coast")
 
 

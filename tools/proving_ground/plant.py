@@ -36,12 +36,11 @@ from collections import deque
 import mujoco
 import numpy as np
 
-from host_sim.controllers import Actuate, Sense
+from host_sim.interface import TICK_MASK, Actuate, Sense
 from host_sim.world import World
 from tools.proving_ground import ir_law
 from tools.proving_ground.robot_model import PlantSpec, build_model, drive_joint, ir_group_mask
 
-TICK_MASK = 0x3FFFFFFF
 N_SENSORS = 8
 RAY_HEIGHT = 0.03  # m above the floor: the IR surfaces' mid-height
 SETTLE_S = 0.3  # s the robot rests on the floor before t = 0

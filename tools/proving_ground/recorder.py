@@ -19,14 +19,13 @@ import math
 from collections.abc import Sequence
 from pathlib import Path
 
-from host_sim.controllers import Actuate, Sense
+from host_sim.interface import CYCLE_S, Actuate, Sense
 from host_sim.params import DEFAULT
 from host_sim.recording import RecordingWriter
 from host_sim.world import World
 from tools.proving_ground.plant import Plant
 from tools.proving_ground.robot_model import PlantSpec
 
-CYCLE_S = 0.040  # s, the firmware's control period
 
 
 class ProgramController:
