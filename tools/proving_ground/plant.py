@@ -85,8 +85,8 @@ class Plant:
         mujoco.mj_forward(self.model, d)
         for _ in range(int(round(SETTLE_S / self.dt))):
             mujoco.mj_step(self.model, d)
-        for k in range(2):  # the encoders count from 0 on the motor shaft
-            zero = float(d.qpos[self._drive_q[k]])
+        for k in range(2):  # the encoders count from 0, mid-tick (no count from a micro-motion at rest)
+            zero = float(d.qpos[self._drive_q[k]]) - math.pi / self.spec.ticks_per_rev[k]
             d.qpos[self._wheel_q[k]] -= zero
             if self._drive_q[k] != self._wheel_q[k]:
                 d.qpos[self._drive_q[k]] -= zero

@@ -199,7 +199,7 @@ def build_mjcf(spec: PlantSpec, world: World | None = None, timestep: float = 0.
     zc = WALL_HEIGHT - r0  # robot's wall capsule centre, relative to C
     caster_condim = 1 if spec.caster_friction <= 0 else 3
     tyre_condim = 3 if spec.torsional_friction <= 0 else 4
-    i_pitch = 0.5 * spec.body_inertia  # a flat disc: half the yaw inertia about each horizontal axis
+    i_pitch = 0.55 * spec.body_inertia  # a disc with some height: a little over half the yaw inertia
     return f"""
 <mujoco model="twinbot_plant">
   <compiler angle="radian" autolimits="true"/>
