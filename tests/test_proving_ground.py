@@ -164,9 +164,9 @@ def test_torque_constant_strengthens_its_motor():
 
 
 def test_current_limit_caps_the_push():
-    limited = drive(with_effect("current_limit", 0.05), [(0.12, 0.12)] * 5)
+    limited = drive(with_effect("current_limit", 0.04), [(0.12, 0.12)] * 5)
     full = drive(EXACT, [(0.12, 0.12)] * 5)
-    at_limit = drive(EXACT, [(0.05, 0.05)] * 5)
+    at_limit = drive(EXACT, [(0.04, 0.04)] * 5)
     assert limited.enc[-1, 0] == pytest.approx(at_limit.enc[-1, 0], abs=2)
     assert limited.enc[-1, 0] < 0.6 * full.enc[-1, 0]
 
@@ -190,17 +190,17 @@ def test_traction_limit_lets_the_wheels_slip():
 
 
 def test_caster_drag_slows_the_robot():
-    run = drive(with_effect("caster_drag", 0.1), [(0.02, 0.02)] * 30)
+    run = drive(with_effect("caster_drag", 0.03), [(0.02, 0.02)] * 30)
     nominal = drive(EXACT, [(0.02, 0.02)] * 30)
     assert travelled(run) < 0.8 * travelled(nominal)
 
 
 def test_turning_resistance_resists_spinning_not_rolling():
     spin = [(-0.025, 0.025)] * 25
-    run, nominal = drive(with_effect("turning_resistance", 0.002), spin), drive(EXACT, spin)
+    run, nominal = drive(with_effect("turning_resistance", 0.0008), spin), drive(EXACT, spin)
     assert run.pose[-1, 2] < 0.8 * nominal.pose[-1, 2]
     straight = [(0.025, 0.025)] * 25
-    assert travelled(drive(with_effect("turning_resistance", 0.002), straight)) == pytest.approx(
+    assert travelled(drive(with_effect("turning_resistance", 0.0008), straight)) == pytest.approx(
         travelled(drive(EXACT, straight)), rel=0.05)
 
 
@@ -267,7 +267,7 @@ def test_ir_latency_shows_the_pose_of_earlier():
 
 
 def test_floor_tilt_turns_the_robot_downhill():
-    tilted = effects.apply(EXACT, "floor_tilt", 0.03).replace(floor_tilt_direction=-math.pi / 2)  # downhill: -y
+    tilted = effects.apply(EXACT, "floor_tilt", 0.015).replace(floor_tilt_direction=-math.pi / 2)  # downhill: -y
     run, nominal = drive(tilted, [(0.02, 0.02)] * 40), drive(EXACT, [(0.02, 0.02)] * 40)
     assert run.pose[-1, 2] < nominal.pose[-1, 2] - 0.02  # G ahead of the axle swings the nose downhill
     assert run.pose[-1, 1] < nominal.pose[-1, 1] - 0.002

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 FADE = 0.2  # fraction of the range over which the response fades out
 
@@ -32,24 +33,24 @@ def _poly(coef: Sequence[float], a: float) -> float:
     return v
 
 
-def angle_factor(angle: float, c: dict[str, object]) -> float:
+def angle_factor(angle: float, c: dict[str, Any]) -> float:
     """A(angle), angle between the ray and the wall's normal (rad)."""
     a = abs(angle)
-    lo, hi = c["angle_blend"]  # type: ignore[misc]
+    lo, hi = c["angle_blend"]
     u = _clip01((a - lo) / (hi - lo))
     w = u * u * (3.0 - 2.0 * u)
-    small = _poly(c["small_dome"], a)  # type: ignore[arg-type]
-    big = _poly(c["big_dome"], a)  # type: ignore[arg-type]
+    small = _poly(c["small_dome"], a)
+    big = _poly(c["big_dome"], a)
     return max(0.0, small + w * (big - small))
 
 
-def distance_factor(x: float, c: dict[str, object]) -> float:
+def distance_factor(x: float, c: dict[str, Any]) -> float:
     """F(x) in 1/m^2 for a wall x metres from the sensor along its axis."""
-    rng = float(c["range"])  # type: ignore[arg-type]
+    rng = float(c["range"])
     if x >= rng:
         return 0.0
-    xp = float(c["near_peak"])  # type: ignore[arg-type]
-    k = float(c["blend"])  # type: ignore[arg-type]
+    xp = float(c["near_peak"])
+    k = float(c["blend"])
     x = max(x, 1e-6)
     lx = math.log(x / xp)
     u = _clip01((lx + math.log(k)) / (2.0 * math.log(k)))
@@ -59,11 +60,11 @@ def distance_factor(x: float, c: dict[str, object]) -> float:
     return f * v * v * (3.0 - 2.0 * v)
 
 
-def power_factor(pct: float, c: dict[str, object]) -> float:
-    return min(max(pct / 100.0, 0.0), float(c["saturation"]))  # type: ignore[arg-type]
+def power_factor(pct: float, c: dict[str, Any]) -> float:
+    return min(max(pct / 100.0, 0.0), float(c["saturation"]))
 
 
-def reflected(x: float, angle: float, pct: float, gain: float, c: dict[str, object]) -> float:
+def reflected(x: float, angle: float, pct: float, gain: float, c: dict[str, Any]) -> float:
     """Reflected light (counts) from a wall at x (m) seen at angle (rad), emitters at pct %, sensor gain C."""
     if not math.isfinite(x):
         return 0.0

@@ -33,7 +33,7 @@ from __future__ import annotations
 import math
 from collections import deque
 
-import mujoco
+import mujoco  # type: ignore[import-untyped]
 import numpy as np
 
 from host_sim.interface import TICK_MASK, Actuate, Sense
@@ -193,10 +193,10 @@ class Plant:
         s, c = self.spec, self.spec.ir
         x, y, phi = self._ir_pose()
         origin = np.array([x, y, RAY_HEIGHT])
-        noise = self.rng.standard_normal(2 * N_SENSORS) * float(c["noise"])  # type: ignore[arg-type]
+        noise = self.rng.standard_normal(2 * N_SENSORS) * float(c["noise"])
         amb_off = self._ambient(x, y, phi, self.t)
-        amb_on = self._ambient(x, y, phi, self.t + float(c["on_delay"]))  # type: ignore[arg-type]
-        adc_max = float(c["adc_max"])  # type: ignore[arg-type]
+        amb_on = self._ambient(x, y, phi, self.t + float(c["on_delay"]))
+        adc_max = float(c["adc_max"])
         off, on = [], []
         for i in range(N_SENSORS):
             bearing = phi + i * math.pi / 4 + s.ir_misalignment[i]
@@ -216,7 +216,7 @@ class Plant:
     def _ambient(self, x: float, y: float, phi: float, t: float) -> list[float]:
         """Ambient light (counts) at each sensor: the global level plus the lamps C can see."""
         w = self.world
-        base = float(self.spec.ir["ambient"]) if w is None or w.ambient is None else w.ambient  # type: ignore[arg-type]
+        base = float(self.spec.ir["ambient"]) if w is None or w.ambient is None else w.ambient
         levels = [base] * N_SENSORS
         if w is None:
             return levels

@@ -33,8 +33,9 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
-import mujoco
+import mujoco  # type: ignore[import-untyped]
 import numpy as np
 
 from host_sim.params import DEFAULT
@@ -97,7 +98,7 @@ class PlantSpec:
     # encoders
     ticks_per_rev: Pair  # counts per wheel turn
     # IR ring
-    ir: dict[str, object] = field(default_factory=dict)  # the law's constants (ir_law.IrConstants fields)
+    ir: dict[str, Any] = field(default_factory=dict)  # the law's constants (ir_law.IrConstants fields)
     ir_gain_scale: Eight = (1.0,) * 8  # -, per sensor
     ir_misalignment: Eight = (0.0,) * 8  # rad, per sensor, counter-clockwise
     ir_offset: Eight = (0.0,) * 8  # counts added to the emitter-on reading
