@@ -39,8 +39,9 @@ GUARD_COUNTS = 150  # reflected counts that pause an excitation program
 
 def _start(world: World, rng: np.random.Generator) -> tuple[float, float, float]:
     res = 0.05
-    free = world.free_cells(res, START_MARGIN, reachable=True)
-    iy, ix = np.nonzero(free)
+    reachable = world.free_cells(res, reachable=True)  # where the robot can go from the world's start
+    clear = reachable & world.free_cells(res, START_MARGIN)
+    iy, ix = np.nonzero(clear if clear.any() else reachable)
     k = int(rng.integers(len(iy)))
     xs, ys = world.cell_centres(res)
     return float(xs[ix[k]]), float(ys[iy[k]]), float(rng.uniform(-math.pi, math.pi))

@@ -105,7 +105,8 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in (
            ((0.0029, 0.0035), (0.0041, 0.0047)), True,
            "the motor's torque constant (= its back-EMF constant)", _wheel_field("torque_constant")),
     Effect("current_limit", "robot", "current_limit", "A", _N.current_limit, ((0.025, 0.045),), True,
-           "the drivers' current limit set low (a wrong current-sense resistor): shows when the references exceed it", _robot_field("current_limit")),
+           "the drivers' current limit set low (a wrong current-sense resistor): shows when the references "
+           "exceed it", _robot_field("current_limit")),
     Effect("battery_resistance", "robot", "battery_resistance", "ohm", 0.0, ((0.5, 3.0),), True,
            "the battery's internal resistance: the voltage sags with the current drawn",
            _robot_field("battery_resistance")),

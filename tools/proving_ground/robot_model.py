@@ -213,7 +213,8 @@ def build_mjcf(spec: PlantSpec, world: World | None = None, timestep: float = 0.
             friction="{_f(spec.floor_friction, max(spec.torsional_friction, 1e-5), 1e-5)}"/>
     </default>
     <default class="caster">
-      <geom contype="0" conaffinity="1" condim="{caster_condim}" friction="{_f(max(spec.caster_friction, 1e-5), 1e-5, 1e-5)}"/>
+      <geom contype="0" conaffinity="1" condim="{caster_condim}"
+            friction="{_f(max(spec.caster_friction, 1e-5), 1e-5, 1e-5)}"/>
     </default>
     <default class="hull">
       <geom contype="0" conaffinity="2" condim="3" friction="{_f(spec.wall_friction, 1e-5, 1e-5)}"/>
