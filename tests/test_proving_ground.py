@@ -74,6 +74,7 @@ def test_plant_is_deterministic_and_its_recording_loads(tmp_path):
     assert len(rec) == 100 and rec.pose is not None
     assert rec.meta["source"] == "robot" and rec.meta["plant"] == "mujoco"
     assert rec.enc[-1].min() > 50  # the firmware drove it
+    assert rec.emitter is not None and rec.emitter[0] == 0 and rec.emitter[-1] > 0  # off until the first actuation
     c = tmp_path / "c.csv"
     record(c, nominal_spec(), world, SilController(1), 4.0, seed=6)
     assert c.read_text() != a.read_text()  # the seed sets the noise

@@ -6,7 +6,7 @@
 Each control period (40 ms): the plant's readings go to the controller
 (anything with `cycle(Sense) -> Actuate`: host_sim's SilController, or
 `ProgramController` below), its currents to the plant, one row to the
-recording (t, the references, the encoders, IR on/ambient, vbat, and the
+recording (t, the references, the encoders, IR on/ambient, vbat, the emitter power, and the
 tracker's noisy pose of C taken at the readings), then the physics runs on.
 
 The sidecar says source "robot" and plant "mujoco", with the twin's
@@ -68,12 +68,13 @@ def run(plant: Plant, controller: object, duration: float, writer: RecordingWrit
     for _ in range(int(round(duration / cycle_s))):
         pose = plant.true_pose()
         seen = plant.tracker_pose()
+        pct = plant.emitter_pct  # the power of this reading's emitter-on sample
         s = plant.sense()
         a: Actuate = controller.cycle(s)  # type: ignore[attr-defined]
         plant.actuate(a)
         if writer is not None:
             writer.row(plant.t, (a.i_left_ma / 1000.0, a.i_right_ma / 1000.0), (s.enc_l, s.enc_r), s.adc_on,
-                       s.adc_off, s.vbat_mv / 1000.0, seen)
+                       s.adc_off, s.vbat_mv / 1000.0, seen, emitter_pct=pct)
         truth.append(pose)
         plant.advance(cycle_s)
     return truth
