@@ -22,8 +22,9 @@ from typing import Callable
 
 import numpy as np
 
-from host_sim.controllers import RULE_SETS, SilController
+from host_sim.interface import RULE_SETS
 from host_sim.params import DEFAULT, RobotParams
+from host_sim.sil import SilController
 from host_sim.simulation import RunResult, Simulation
 from host_sim.world import World, builtin_world
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from host_sim.controllers import SilController
+from host_sim.sil import SilController
 from host_sim.params import DEFAULT
 from host_sim.repeatability import ForkScenario, first_turn, fixed_run, fork_heading, split_experiment
 from host_sim.simulation import Simulation

@@ -87,7 +87,7 @@ def _repeatability(args: argparse.Namespace, out: Path) -> bool:
     from host_sim.params import DEFAULT
     from host_sim.repeatability import ForkScenario, fork_heading, route_gap, split_experiment
     from host_sim.world import builtin_world
-    from tools.plots import save_pairs
+    from host_sim.figures import save_pairs
 
     if args.pairs < 1 or not args.repeat_duration > 0 or not args.repeat_speed > 0:
         raise CliError("--pairs, --repeat-duration and --repeat-speed must be > 0")
