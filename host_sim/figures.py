@@ -40,11 +40,12 @@ def draw_world(ax, world) -> None:  # type: ignore[no-untyped-def]
     ax.set_ylabel("y (m)")
 
 
-def draw_run(ax, run, body_radius: float, color: str = "tab:blue", label: str | None = None) -> None:  # type: ignore[no-untyped-def]
+def draw_run(ax, run, body_radius: float, color: str = "tab:blue", label: str | None = None,  # type: ignore[no-untyped-def]
+             linestyle: object = "-") -> None:
     pose = run.pose
     if not len(pose):
         return
-    ax.plot(pose[:, 0], pose[:, 1], color=color, lw=1.0, label=label)
+    ax.plot(pose[:, 0], pose[:, 1], color=color, lw=1.0, label=label, linestyle=linestyle)
     x, y, phi = pose[0]
     ax.add_patch(_disc(x, y, body_radius, "tab:green"))
     x, y, phi = pose[-1]
@@ -86,4 +87,20 @@ def save_coverage(path: str | Path, runs: Sequence[object], labels: Sequence[str
     ax.set_ylim(0, 100)
     ax.legend()
     ax.grid(alpha=0.3)
+    return _save(plt, fig, path)
+
+
+def save_pairs(path: str | Path, world, pairs: Sequence[tuple[object, object]], titles: Sequence[str],  # type: ignore[no-untyped-def]
+               body_radius: float, suptitle: str = "", labels: tuple[str, str] = ("run A", "run B")) -> Path:
+    """One panel per pair of runs, the two routes drawn over each other (B dashed)."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, len(pairs), figsize=(5.6 * len(pairs), 4.8), squeeze=False)
+    for ax, (a, b), title in zip(axes.flat, pairs, titles):
+        draw_world(ax, world)
+        draw_run(ax, a, body_radius, "tab:blue", labels[0])
+        draw_run(ax, b, body_radius, "tab:orange", labels[1], linestyle=(0, (4, 3)))  # dashed: B over A stays visible
+        ax.set_title(title, fontsize=10)
+        ax.legend(loc="lower right", fontsize=8)
+    if suptitle:
+        fig.suptitle(suptitle)
     return _save(plt, fig, path)

@@ -74,6 +74,10 @@ class RobotParams:
     ir_on_delay: float = _p(4.0e-4, "s", "time from a sensor's emitter-off reading to its emitter-on "
                                          "reading (emitter settling + the 8-way multiplexer)")
     adc_bits: float = _p(12, "bits", "ADC resolution; readings clip at 2^bits - 1")
+    ir_beam_rays: float = _p(1, "rays", "rays per sensor: 1 = along its axis only; n > 1 = a beam of n rays "
+                                        "spread evenly over +-ir_beam_half_angle, weighted by cos^2 of the "
+                                        "angle off the axis (emitter and receiver Lambertian)")
+    ir_beam_half_angle: float = _p(0.35, "rad", "half-angle of the beam (used when ir_beam_rays > 1)")
     # Angle response A (Fig. 7): two 5th-degree polynomials in |angle| (rad),
     # coefficients x^0..x^5, blended by a smoothstep of |angle| over
     # ir_angle_blend.  Least-squares fits (x^1 held at 0) of the target in

@@ -8,7 +8,9 @@ possible, nothing drawn:
       noise + contacts, 8 substeps per 40 ms).  The recording is made first
       by a SIL run of --seconds simulated seconds (refined rules).
   (b) SIL: one robot with the firmware in the loop (Simulation + SilController,
-      Simulation.run_fixed, speed max).
+      Simulation.run_fixed, speed max); and the same with each IR sensor a
+      beam of BEAM_RAYS rays (ir_beam_rays, docs/ir-sensor.md) instead of
+      one ray: the beam's cost.
   (c) batch: host_sim.batch.BatchSim, N robots (--batch-n, 1000) with N
       different parameter sets (mass, wheel radius, half axle, motor constant,
       frictions within +-10 %), replaying the recording's first
@@ -59,6 +61,8 @@ PERTURBED = ("body_mass", "wheel_radius", "half_axle", "torque_constant", "visco
 
 ROW_REPLAY = "(a) replay, 1 robot, physics + motors + IR"
 ROW_SIL = "(b) SIL firmware, 1 robot"
+ROW_SIL_BEAM = "(b) SIL firmware, 1 robot, IR beam of {rays} rays"
+BEAM_RAYS = 5
 ROW_BATCH = "(c) batch, N={n} parameter sets, no IR"
 ROW_BATCH_IR = "(c) batch, N={n} parameter sets, with IR"
 ROW_IRSIM = "(d) IR-SIM {version}, 1 robot + 8-beam lidar"
@@ -238,17 +242,18 @@ def bench_replay(rec: Any, repeats: int) -> dict[str, Any]:
             "reproduces_recording": bool(np.array_equal(res.pose, rec.pose) and np.array_equal(res.enc, rec.enc))}
 
 
-def bench_sil(seconds: float, repeats: int) -> dict[str, Any]:
+def bench_sil(seconds: float, repeats: int, beam_rays: int = 1) -> dict[str, Any]:
     from host_sim.sil import SilController
     from host_sim.params import DEFAULT
     from host_sim.simulation import Simulation
     from host_sim.world import builtin_world
 
     world = builtin_world(WORLD)
+    params = DEFAULT.replace(ir_beam_rays=beam_rays)
     times = []
     result = None
     for _ in range(repeats):
-        sim = Simulation(world, DEFAULT, SilController(1), seed=0, substeps=SUBSTEPS)
+        sim = Simulation(world, params, SilController(1), seed=0, substeps=SUBSTEPS)
         t0 = time.perf_counter()
         result = sim.run_fixed(seconds)
         times.append(time.perf_counter() - t0)
@@ -257,7 +262,7 @@ def bench_sil(seconds: float, repeats: int) -> dict[str, Any]:
     periods = len(result.t)
     return {"sim_s": result.sim_seconds, "wall_s": wall, "times_s": times, "rtf": result.sim_seconds / wall,
             "periods": periods, "robot_steps_per_s": result.steps / wall, "robot_periods_per_s": periods / wall,
-            "collisions": result.collisions, "coverage": float(result.coverage[-1])}
+            "collisions": result.collisions, "coverage": float(result.coverage[-1]), "beam_rays": beam_rays}
 
 
 def batch_params(n: int, seed: int = 0) -> Any:
@@ -440,6 +445,9 @@ def format_table(report: dict[str, Any]) -> str:
                  _num(a["robot_periods_per_s"]), _num(a["robot_steps_per_s"])))
     rows.append((ROW_SIL, _num(b["sim_s"], 1), _secs(b["wall_s"]), _num(b["rtf"]) + "x",
                  _num(b["robot_periods_per_s"]), _num(b["robot_steps_per_s"])))
+    bb = r["sil_beam"]
+    rows.append((ROW_SIL_BEAM.format(rays=bb["beam_rays"]), _num(bb["sim_s"], 1), _secs(bb["wall_s"]),
+                 _num(bb["rtf"]) + "x", _num(bb["robot_periods_per_s"]), _num(bb["robot_steps_per_s"])))
     for key, label in (("batch", ROW_BATCH), ("batch_ir", ROW_BATCH_IR)):
         c = r[key]
         rows.append((label.format(n=n), f"{_num(c['sim_s_per_robot'], 1)} x {n}", _secs(c["wall_s"]),
@@ -492,6 +500,8 @@ def targets(report: dict[str, Any]) -> list[dict[str, Any]]:
 
 
 def print_report(report: dict[str, Any]) -> None:
+    from host_sim.params import DEFAULT
+
     m = report["machine"]
     r = report["results"]
     print("twinbot bench sim")
@@ -513,6 +523,9 @@ def print_report(report: dict[str, Any]) -> None:
     d = r["irsim"]
     note("(a):", f"replays the {r['replay']['sim_s']:.0f} s SIL recording (sensor noise on); reproduces the "
                  f"recording's pose and encoders bit for bit: {'yes' if r['replay']['reproduces_recording'] else 'NO'}")
+    b, bb = r["sil"], r["sil_beam"]
+    note("(b) beam:", f"each IR sensor {bb['beam_rays']} rays over +-{DEFAULT.ir_beam_half_angle:.2f} rad instead "
+                      f"of one: {b['rtf'] / bb['rtf']:.2f} times the wall time of (b)")
     c = r["batch_ir"]
     note("(c):", f"{report['batch_n']} parameter sets ({', '.join(PERTURBED)} x U(0.9, 1.1)) replay the first "
                  f"{c['sim_s_per_robot']:.1f} s of that recording; spread of the end positions "
@@ -561,6 +574,8 @@ def run(args: argparse.Namespace) -> int:
         results["replay"] = bench_replay(rec, args.repeats)
         _progress("(b) SIL, one robot")
         results["sil"] = bench_sil(args.seconds, args.repeats)
+        _progress(f"(b) SIL, one robot, IR beam of {BEAM_RAYS} rays")
+        results["sil_beam"] = bench_sil(args.seconds, args.repeats, BEAM_RAYS)
         _progress(f"(c) batch, N = {args.batch_n}, without and with IR")
         results["batch"] = bench_batch(rec, args.batch_n, args.batch_seconds, False, args.repeats)
         results["batch_ir"] = bench_batch(rec, args.batch_n, args.batch_seconds, True, args.repeats)
