@@ -96,6 +96,35 @@ class RobotParams:
         metadata={"unit": "rad", "doc": "below the first |angle| the small dome alone, above the second the "
                                         "big dome alone, smoothstep in between"})
 
+    # --- effects (host_sim/effects.py, docs/effects.md): physics the nominal twin leaves out.
+    # Each holds the value meaning "absent" by default; diagnosis fits them, a parameter file sets them.
+    coulomb_friction_delta_l: float = _p(0.0, "N m", "left axle's dry friction beyond coulomb_friction")
+    coulomb_friction_delta_r: float = _p(0.0, "N m", "right axle's dry friction beyond coulomb_friction")
+    viscous_friction_delta_l: float = _p(0.0, "N m s/rad", "left axle's viscous friction beyond viscous_friction")
+    viscous_friction_delta_r: float = _p(0.0, "N m s/rad", "right axle's viscous friction beyond viscous_friction")
+    wheel_radius_delta_l: float = _p(0.0, "m", "left wheel's radius minus wheel_radius")
+    wheel_radius_delta_r: float = _p(0.0, "m", "right wheel's radius minus wheel_radius")
+    torque_constant_delta_l: float = _p(0.0, "N m/A", "left motor's torque constant minus torque_constant")
+    torque_constant_delta_r: float = _p(0.0, "N m/A", "right motor's torque constant minus torque_constant")
+    ticks_per_rev_delta_l: float = _p(0.0, "ticks", "left encoder's counts per wheel turn minus ticks_per_rev")
+    ticks_per_rev_delta_r: float = _p(0.0, "ticks", "right encoder's counts per wheel turn minus ticks_per_rev")
+    backlash_l: float = _p(0.0, "rad", "play in the left gear, at the wheel")
+    backlash_r: float = _p(0.0, "rad", "play in the right gear, at the wheel")
+    actuator_delay: float = _p(0.0, "s", "a new current reference reaches the drivers this late")
+    battery_resistance: float = _p(0.0, "ohm", "battery internal resistance: the voltage sags with the current")
+    caster_drag: float = _p(0.0, "N", "the caster's drag force, against the direction of motion")
+    turning_resistance: float = _p(0.0, "N m", "the tyres' scrub torque, against turning")
+    ir_gain_scale: tuple[float, ...] = field(
+        default=(1.0,) * 8, metadata={"unit": "-", "doc": "each IR pair's optical efficiency relative to ir_gain"})
+    ir_misalignment: tuple[float, ...] = field(
+        default=(0.0,) * 8, metadata={"unit": "rad", "doc": "each IR pair's axis turned counter-clockwise"})
+    ir_offset: tuple[float, ...] = field(
+        default=(0.0,) * 8, metadata={"unit": "counts", "doc": "added to each emitter-on reading"})
+    ambient_leakage: tuple[float, ...] = field(
+        default=(0.0,) * 8, metadata={"unit": "-", "doc": "fraction of the ambient light each emitter-on reading "
+                                                          "sees on top of the emitter-off one"})
+    ir_latency: float = _p(0.0, "s", "the IR readings describe the pose this long ago")
+
     # ------------------------------------------------------------------------------
     @property
     def wheel_base(self) -> float:
