@@ -97,6 +97,7 @@ class BatchResult:
     collisions: np.ndarray  # (N,) contacts started during the run
     substeps: int
     start: int = 0  # the recording row it started from (replay_batch)
+    theta: np.ndarray | None = None  # (T, N, 2) wheel angles (rad), unquantised: what the encoders count
 
     @property
     def n_robots(self) -> int:
@@ -352,6 +353,7 @@ class BatchSim:
             np.random.default_rng(seed) if seed is not None else None)
         t_out = np.empty(n_rows)
         enc = np.empty((n_rows, n, 2), dtype=np.int64)
+        theta = np.empty((n_rows, n, 2))
         pose = np.empty((n_rows, n, 3))
         ir_on = np.empty((n_rows, n, N_SENSORS), dtype=np.int64) if sensors else None
         ir_amb = np.empty((n_rows, n, N_SENSORS), dtype=np.int64) if sensors else None
@@ -359,6 +361,7 @@ class BatchSim:
         for j in range(n_rows):
             t_out[j] = self.t
             enc[j] = self.encoder_ticks()
+            theta[j] = self.q[:, 3:5]
             pose[j] = here = self.pose
             if emitter is not None:
                 self.emitter_now = float(emitter[j])
@@ -369,7 +372,7 @@ class BatchSim:
             dt = float(periods[j]) / substeps
             for _ in range(substeps):
                 self.substep(i_ref, dt)
-        return BatchResult(t_out, enc, pose, ir_on, ir_amb, self.collisions - collisions0, substeps)
+        return BatchResult(t_out, enc, pose, ir_on, ir_amb, self.collisions - collisions0, substeps, theta=theta)
 
 
 # --------------------------------------------------------------------------- #

@@ -43,6 +43,7 @@ class Channel:
     y_hat: np.ndarray  # (W, N, T - 1) the twin, one row per parameter set
     noise_floor: float  # the residual's standard deviation when the twin is right (quantisation, sensor noise)
     locate: bool = True  # residuals per period (True) or accumulated along the window (pose)
+    relative: bool = True  # a mismatch must also be large against the signal (not for levels: vbat, ambient)
 
     def residual(self, s: int = 0) -> np.ndarray:
         """(W, T - 1) recorded minus the twin with parameter set s."""
@@ -70,15 +71,15 @@ def build_channels(rec: Recording, windows: Windows, run: WindowRun, robots: lis
     enc_rec = np.diff(rec.enc[idx], axis=1).astype(float)
     enc_twin = np.diff(run.enc, axis=2).astype(float)
     for w, name in enumerate(WHEELS):
-        # Two floors of a count (recording, twin), each off by up to a tick: 1/6 tick^2 each.
-        chans.append(Channel(name, "ticks/period", enc_rec[..., w], enc_twin[..., w], float(np.sqrt(1 / 3))))
+        # The recorded counts are floors, the twin's are not: an increment is off by up to a tick (1/6 tick^2).
+        chans.append(Channel(name, "ticks/period", enc_rec[..., w], enc_twin[..., w], float(np.sqrt(1 / 6))))
     if rec.pose is not None:
         chans += _motion_channels(rec, idx, run, p)
         if world is not None and world.n_walls:
             chans += _sensor_channels(rec, idx[:, 1:], robots, world)
     vb = rec.vbat[idx[:, 1:]]
     chans.append(Channel("vbat", "V", vb, np.repeat(np.full_like(vb, p.battery_voltage)[:, None], run.enc.shape[1], 1),
-                         0.005))
+                         0.005, relative=False))
     return chans
 
 
@@ -107,7 +108,7 @@ def _sensor_channels(rec: Recording, rows: np.ndarray, robots: list[RobotParams]
     for k in range(8):
         chans.append(Channel(IR[k], "counts", refl_rec[..., k], refl_twin[..., k], float(np.sqrt(2) * p.ir_noise + 0.5)))
         chans.append(Channel(AMBIENT[k], "counts", rec.ir_amb[rows][..., k].astype(float), amb_twin[..., k],
-                             float(p.ir_noise + 0.5)))
+                             float(p.ir_noise + 0.5), relative=False))
     return chans
 
 

@@ -4,9 +4,11 @@ For every channel the residual (recorded minus twin, per period) is cut by
 regime — the wheel's speed, accelerating or cruising, turning or straight,
 direction of motion, sign of the command, heading in the world, battery
 level, distance to the wall seen by a sensor — and by time.  A regime bin is
-a mismatch when its mean residual is both significant against the channel's
-noise (|z| >= Z_MIN, counting one sample per window and period) and large
-against that noise (|mean| >= EFFECT_MIN noise floors).  Spans are the
+a mismatch when its mean residual is significant against the channel's
+noise (|z| >= Z_MIN, counting one sample per window and period), large
+against that noise (|mean| >= EFFECT_MIN noise levels) and large against
+the signal (|mean| >= RELATIVE_MIN of the recorded values' mean size): a
+long recording makes a tiny bias significant, and a tiny bias is no finding.  Spans are the
 stretches of time where the residual, smoothed over half a second, stays
 beyond the same size.
 
@@ -28,7 +30,8 @@ from host_sim.recording import Recording
 from host_sim.world import World
 
 Z_MIN = 5.0
-EFFECT_MIN = 0.5  # noise floors
+EFFECT_MIN = 1.0  # noise levels: a smaller mean mismatch is within the noise of a single period
+RELATIVE_MIN = 0.05  # of the recorded signal's mean size in the bin: smaller does not matter to the robot
 SPAN_MIN_S = 0.4
 SMOOTH_S = 0.5
 REGIME_SHARE_MIN = 0.05  # a regime variable must explain this share of the residual's variation to be named
@@ -154,7 +157,8 @@ def locate_channel(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regime
         return None
     sigma = noise_level(ch, r)
     bins: list[dict[str, object]] = []
-    overall = _bin_stats(r.ravel(), sigma)
+    y = ch.y[keep] if ch.relative else np.zeros_like(r)
+    overall = _bin_stats(r.ravel(), sigma, y.ravel())
     if overall is not None:
         bins.append({"regime": "", "key": "all", **overall})
     best_share, best_bin = 0.0, None
@@ -170,7 +174,7 @@ def locate_channel(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regime
             part = r[lab == value]
             if part.size:
                 between += part.size * (float(part.mean()) - float(r.mean())) ** 2
-            stat = _bin_stats(part, sigma)
+            stat = _bin_stats(part, sigma, y[lab == value])
             if stat is not None:
                 found.append({"regime": text, "key": f"{name}={value}", **stat})
         bins += found
@@ -186,14 +190,15 @@ def locate_channel(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regime
                    float(chosen["mean"]), float(chosen["z"]), sigma, bins)  # type: ignore[arg-type]
 
 
-def _bin_stats(r: np.ndarray, sigma: float) -> dict[str, float] | None:
-    """Mean and z of a bin's residuals if they are a mismatch (significant and large), else None."""
+def _bin_stats(r: np.ndarray, sigma: float, y: np.ndarray) -> dict[str, float] | None:
+    """Mean and z of a bin's residuals if they are a mismatch (significant, and large against the noise
+    and against the signal), else None."""
     n = r.size
     if n < 10:
         return None
     mean = float(r.mean())
     z = mean / (max(float(r.std()), sigma) / np.sqrt(n))
-    if abs(z) < Z_MIN or abs(mean) < EFFECT_MIN * sigma:
+    if abs(z) < Z_MIN or abs(mean) < EFFECT_MIN * sigma or abs(mean) < RELATIVE_MIN * float(np.abs(y).mean()):
         return None
     return {"mean": mean, "z": z, "n": float(n)}
 

@@ -13,7 +13,10 @@ from typing import Any, Callable
 
 import numpy as np
 
+from host_sim import effects as E
 from host_sim.diagnosis.compare import Comparison, compare_all
+from host_sim.diagnosis.fit import Model, Objective, candidates_for, objective_channels, select
+from host_sim.diagnosis.locate import Finding, noise_level
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
 from host_sim.diagnosis.words import sentence
 from host_sim.params import RobotParams
@@ -39,6 +42,7 @@ class Diagnosis:
     fit_after: dict[str, float] = field(default_factory=dict)
     unexplained: list[dict[str, Any]] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    model: Model | None = None  # the fitted twin, when effects were tried
 
     def to_json(self) -> dict[str, Any]:
         return {"recording": self.recording, "verdict": self.verdict, "located": self.located,
@@ -50,8 +54,18 @@ class Diagnosis:
         lines += [f"  note: {n}" for n in self.notes]
         for item in self.located:
             lines.append(f"  - {item['words']} (fit {item['fit_before']:.0f} %)")
-        lines.append("  held-out fit % per channel (1 s windows): " + ", ".join(
-            f"{k} {v:.0f}" for k, v in self.fit_before.items() if not k.startswith("amb_")))
+        for e in self.effects:
+            where = f" ({e['wheel']} wheel)" if "wheel" in e else (f" (sensor {e['sensor']})" if "sensor" in e else "")
+            values = ", ".join(f"{k} = {v['value']:.4g} {v['unit']} [{v['ci95'][0]:.4g}, {v['ci95'][1]:.4g}]"
+                               for k, v in e["params"].items())
+            alt = e["evidence"]["explains_equally_well"]
+            lines.append(f"  effect: {e['name']}{where}: {values}" + (f"; as well: {', '.join(alt)}" if alt else ""))
+        for item in self.unexplained:
+            lines.append(f"  unexplained: {item['words']}")
+        shown = [k for k in self.fit_before if not k.startswith("amb_")]
+        lines.append("  held-out fit % per channel (1 s windows), before" + (" -> after" if self.effects else "") + ": "
+                     + ", ".join(f"{k} {self.fit_before[k]:.0f}" + (f" -> {self.fit_after.get(k, float('nan')):.0f}"
+                                                                    if self.effects else "") for k in shown))
         return "\n".join(lines)
 
 
@@ -82,24 +96,70 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
              seconds: tuple[float, ...] = DEFAULT_SECONDS, progress: Callable[[str], None] | None = None) -> Diagnosis:
     notes = check_data(rec, world)
     say = progress or (lambda _text: None)
-    say("comparing")
+    say("comparing the twin with the recording")
     comparisons = compare_all(rec, params, world, seconds)
     first = comparisons[0]
     if first.contact.all():
         raise DiagnosisError("the robot touches a wall in every window: stuck against a wall the whole time, "
                              "nothing else can be judged")
-    located = [{"channel": f.channel, "regime": f.regime, "spans": [list(s) for s in f.spans],
-                "fit_before": first.fit.get(f.channel, float("nan")), "words": sentence(f),
-                "mean_residual": f.mean, "z": f.z, "whiteness_p": first.whiteness.get(f.channel),
-                "input_lag_periods": first.lag.get(f.channel, (None,))[0]}
-               for f in first.findings]
-    verdict = "match" if not located else "unexplained"
-    result = Diagnosis(str(rec.path or "recording"), verdict, comparisons, located, fit_before=dict(first.fit),
-                       notes=notes)
-    if located:
-        result.unexplained = [{"channel": item["channel"], "regime": item["regime"], "spans": item["spans"],
-                               "words": item["words"]} for item in located]
+    result = Diagnosis(str(rec.path or "recording"), "match", comparisons, [_located(first, f) for f in first.findings],
+                       fit_before=dict(first.fit), notes=notes)
     if int(first.contact.sum()):
         result.notes.append(f"{int(first.contact.sum())} of {len(first.contact)} windows touch a wall: judged apart "
                             f"(channel 'contact')")
+    if not result.located:
+        result.fit_after = dict(first.fit)
+        return result
+    chain = _fit(rec, params, world, first, say)
+    final = chain[-1]
+    result.model = final
+    say("judging the fitted twin")
+    after = compare_all(rec, final.params, world, seconds)[0]
+    result.fit_after = dict(after.fit)
+    result.effects = [_effect_entry(final, i, chain) for i in range(len(final.effects))]
+    remaining = [_located(after, f) for f in after.findings]
+    result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")} for item in remaining]
+    if not final.effects:
+        result.verdict = "unexplained"
+        result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")} for item in result.located]
+    else:
+        result.verdict = "explained" if not remaining else "partly explained"
     return result
+
+
+def _located(cmp: Comparison, f: Finding) -> dict[str, Any]:
+    return {"channel": f.channel, "regime": f.regime, "spans": [list(s) for s in f.spans],
+            "fit_before": cmp.fit.get(f.channel, float("nan")), "words": sentence(f),
+            "mean_residual": f.mean, "z": f.z, "whiteness_p": cmp.whiteness.get(f.channel),
+            "input_lag_periods": cmp.lag.get(f.channel, (None,))[0]}
+
+
+def _fit(rec: Recording, params: RobotParams, world: World | None, first: Comparison,
+         say: Callable[[str], None]) -> list[Model]:
+    located = [f.channel for f in first.findings]
+    names = objective_channels(located, [c.name for c in first.channels])
+    keep = ~first.contact
+    sigma = {c.name: noise_level(c, c.residual()[keep]) for c in first.channels if c.name in names}
+    obj = Objective(rec, first.windows, world, names, sigma, keep)
+    return select(obj, params, candidates_for(located), progress=say)
+
+
+def _effect_entry(model: Model, i: int, chain: list[Model]) -> dict[str, Any]:
+    cand = model.effects[i]
+    effect = E.LIBRARY[cand.name]
+    entry: dict[str, Any] = {"name": cand.name}
+    if effect.site == "wheel":
+        entry["wheel"] = cand.site
+    elif effect.site == "sensor":
+        entry["sensor"] = cand.site
+    entry["params"] = {prm.name: {"value": model.values[i][j], "unit": prm.unit,
+                                  "ci95": list(model.ci95[i][j]) if model.ci95 else None,
+                                  "field": prm.field.format(w="l" if cand.site == "left" else "r")
+                                  if effect.site == "wheel" and cand.site != "both" else prm.field}
+                       for j, prm in enumerate(effect.params)}
+    step = chain[i + 1] if i + 1 < len(chain) else model
+    before = chain[i]
+    entry["evidence"] = {"doc": effect.doc, "p_value": step.p_value,
+                         "held_out_cost_before": before.cost_test, "held_out_cost_after": step.cost_test,
+                         "explains_equally_well": step.alternatives}
+    return entry

@@ -68,7 +68,7 @@ class WindowRun:
 
     With N parameter sets, axis 1 is the set: arrays (W, N, T, ...)."""
 
-    enc: np.ndarray  # (W, N, T, 2) ticks
+    enc: np.ndarray  # (W, N, T, 2) encoder counts, unquantised (float): smooth in the parameters, for fitting
     pose: np.ndarray  # (W, N, T, 3) pose of C
 
 
@@ -110,9 +110,18 @@ def run_windows(rec: Recording, windows: Windows, params: Any, world: World | No
     # recording's periods are equal but for overruns, which the median over the windows ignores.
     period = np.median(inputs.period[idx], axis=0)
     res = sim.run_inputs(cmd, substeps=substeps, sensors=False, period=period)
-    enc = res.enc.reshape(n_rows, n_win, n_sets, 2).transpose(1, 2, 0, 3)
+    assert res.theta is not None
+    counts = res.theta * (_ticks_per_rev(robots, n_win) / (2 * np.pi))
+    enc = counts.reshape(n_rows, n_win, n_sets, 2).transpose(1, 2, 0, 3)
     pose = res.pose.reshape(n_rows, n_win, n_sets, 3).transpose(1, 2, 0, 3)
     return WindowRun(enc, pose)
+
+
+def _ticks_per_rev(robots: list[RobotParams], n_win: int) -> np.ndarray:
+    """(W * N, 2) counts per wheel turn of every batch robot (window-major), each wheel's own."""
+    per_set = np.array([[p.ticks_per_rev + p.ticks_per_rev_delta_l, p.ticks_per_rev + p.ticks_per_rev_delta_r]
+                        for p in robots])
+    return np.tile(per_set, (n_win, 1))
 
 
 def sensors_on_track(rec: Recording, rows: np.ndarray, robots: list[RobotParams], world: World,
