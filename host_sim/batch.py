@@ -99,10 +99,6 @@ class BatchResult:
     start: int = 0  # the recording row it started from (replay_batch)
 
     @property
-    def n_robots(self) -> int:
-        return int(self.enc.shape[1])
-
-    @property
     def periods(self) -> int:
         return int(self.enc.shape[0])
 
