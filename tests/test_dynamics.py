@@ -4,8 +4,9 @@ The checks of issue 4, item 2-3:
 (a) symmetric torques -> straight line; (b) d = 0 is the textbook model; (c) no input,
 no friction -> kinetic energy conserved, and the fixed-step integrator converges;
 (d) an independent KKT solve of M q'' + V = E tau - A^T lambda agrees with the reduced
-model, and the constraints hold along a trajectory; (e) batch == scalar; (f) the matrix
-path == the closed form; (g) motors and encoders.
+model, and the constraints hold along a trajectory; (e) batch == scalar: in
+tests/test_scalar_batch_pairs.py with the other pairs; (f) the matrix path == the closed
+form; (g) motors and encoders.
 """
 from __future__ import annotations
 
@@ -442,7 +443,7 @@ def test_kkt_trajectory_keeps_the_constraints_and_follows_the_reduced_model():
 
 
 # --------------------------------------------------------------------------- #
-# (e) batch == scalar, (f) matrix path == closed form
+# (f) matrix path == closed form (batch == scalar: tests/test_scalar_batch_pairs.py)
 # --------------------------------------------------------------------------- #
 @SETTINGS
 @given(states, speeds, torques, robots())
@@ -463,48 +464,6 @@ def test_matrix_step_equals_fast_step(q, v, tau, dt, p):
     assert np.abs(va - np.array(vb)).max() <= 1e-12 * vscale
     qscale = np.abs(q).max() + dt * vscale * (1 + p.wheel_radius)
     assert np.abs(qa - np.array(qb)).max() <= 1e-12 * qscale
-
-
-def test_batch_equals_scalar_with_per_robot_parameters():
-    rng = np.random.default_rng(4)
-    n = 64
-    params = [random_params(rng) for _ in range(n)]
-    pb = dy.ParamBatch.from_params(params)
-    q = np.column_stack([rng.uniform(-5, 5, n), rng.uniform(-5, 5, n), rng.uniform(-40, 40, n),
-                         rng.uniform(-500, 500, n), rng.uniform(-500, 500, n)])
-    v = rng.uniform(-50, 50, (n, 2))
-    tau = rng.uniform(-0.1, 0.1, (n, 2))
-    dt = 0.004
-    acc = dy.reduced_accel_batch(q, v, tau, pb)
-    qn, vn = dy.step_batch(q, v, tau, dt, pb)
-    for i, p in enumerate(params):
-        assert pb.robot(i) == p
-        scale = accel_scale(v[i], tau[i], p, q[i])
-        assert np.abs(acc[i] - dy.reduced_accel_fast(q[i], v[i], tau[i], p)).max() <= 1e-12 * scale
-        qs, vs = dy.step(q[i], v[i], tau[i], dt, p)
-        assert np.allclose(vn[i], vs, rtol=1e-12, atol=1e-12 * (np.abs(v[i]).max() + dt * scale))
-        assert np.allclose(qn[i], qs, rtol=1e-12, atol=1e-12)
-    # a shared RobotParams, a float dt, and writing in place give the same
-    qn2, vn2 = dy.step_batch(q, v, tau, dt, dy.ParamBatch.broadcast(P, n))
-    qc, vc = q.copy(), v.copy()
-    dy.step_batch(qc, vc, tau, dt, P, out=(qc, vc))
-    assert np.array_equal(qc, qn2) and np.array_equal(vc, vn2)
-    # per-robot dt
-    dts = rng.uniform(1e-3, 1e-2, n)
-    qd_, vd_ = dy.step_batch(q, v, tau, dts, pb)
-    for i in (0, 17, 63):
-        qs, vs = dy.step(q[i], v[i], tau[i], float(dts[i]), params[i])
-        assert np.allclose(qd_[i], qs, rtol=1e-12, atol=1e-12) and np.allclose(vd_[i], vs, rtol=1e-12)
-    # motors and encoders
-    i_ref = rng.uniform(-1.5, 1.5, (n, 2))
-    t_b, i_b = mo.wheel_torque_batch(i_ref, v, pb)
-    ticks = mo.encoder_ticks_batch(q[:, 3:], pb)
-    assert ticks.dtype == np.int64 and ticks.shape == (n, 2)
-    for i, p in enumerate(params):
-        for j in range(2):
-            t_s, i_s = mo.wheel_torque(i_ref[i, j], v[i, j], p)
-            assert t_b[i, j] == pytest.approx(t_s, rel=1e-12, abs=1e-15) and i_b[i, j] == pytest.approx(i_s, rel=1e-12)
-            assert ticks[i, j] == mo.encoder_ticks(q[i, 3 + j], p)
 
 
 def test_param_batch_from_vectors():
