@@ -100,10 +100,6 @@ class BatchResult:
     theta: np.ndarray | None = None  # (T, N, 2) wheel angles (rad), unquantised: what the encoders count
 
     @property
-    def n_robots(self) -> int:
-        return int(self.enc.shape[1])
-
-    @property
     def periods(self) -> int:
         return int(self.enc.shape[0])
 

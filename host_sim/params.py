@@ -127,16 +127,8 @@ class RobotParams:
 
     # ------------------------------------------------------------------------------
     @property
-    def wheel_base(self) -> float:
-        return 2 * self.half_axle
-
-    @property
     def adc_max(self) -> int:
         return (1 << int(self.adc_bits)) - 1
-
-    @property
-    def total_mass(self) -> float:
-        return self.body_mass + 2 * self.wheel_mass
 
     def replace(self, **changes: float) -> RobotParams:
         return dataclasses.replace(self, **changes)  # type: ignore[arg-type]

@@ -25,7 +25,7 @@ import numpy as np
 
 from host_sim import dynamics, ir_sensor, motors
 from host_sim.batch import BatchResult, BatchSim, robot_params
-from host_sim.interface import Actuate, Sense
+from host_sim.interface import Actuate
 from host_sim.sim_robot import SimRobot
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
@@ -34,28 +34,6 @@ from host_sim.world import World
 
 class ReplayError(ValueError):
     pass
-
-
-class ReplayController:
-    """A recording's current references, one row per cycle (open loop)."""
-
-    name = "replay"
-
-    def __init__(self, cmd_amps: list[tuple[float, float]], emitter_pct: int = 60) -> None:
-        self.cmd = cmd_amps
-        self.k = 0
-        self.emitter_pct = emitter_pct
-
-    def cycle(self, s: Sense) -> Actuate:
-        if self.k < len(self.cmd):
-            left, right = self.cmd[self.k]
-        else:
-            left = right = 0.0
-        self.k += 1
-        return Actuate(round(left * 1000), round(right * 1000), self.emitter_pct)
-
-    def close(self) -> None:
-        pass
 
 
 @dataclass

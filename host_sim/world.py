@@ -636,8 +636,21 @@ def world_from_dict(data: object, where: str = "world", body_radius: float = DEF
     size = _numbers(data["size"], 2, f"{where}: size", "size")
     if min(size) <= 0:
         raise WorldError(f"{where}: size: width and height must be positive (m), got {size}")
+    walls = _walls_from_list(data["walls"], where)
+    start = _start_from_dict(data["start"], where)
+    lamps = _lamps_from_list(data.get("lamps", []), where)
+    ambient = data.get("ambient")
+    if ambient is not None and (not _is_num(ambient) or ambient < 0):
+        raise WorldError(f"{where}: ambient: must be a number >= 0 (ADC counts), got {json.dumps(ambient)}")
 
-    walls_in = data["walls"]
+    world = World(name=name, size=(size[0], size[1]), walls=walls, start=start, lamps=tuple(lamps),
+                  ambient=None if ambient is None else float(ambient), description=description, source=where)
+    _check_start_is_clear(world, where, body_radius)
+    return world
+
+
+def _walls_from_list(walls_in: object, where: str) -> list[dict[str, Any]]:
+    """The "walls" entries, each {"segment": [x1, y1, x2, y2]} or {"polygon": [[x, y], ...]}."""
     if not isinstance(walls_in, list):
         raise WorldError(f"{where}: walls: must be a list of {{\"segment\": ...}} or {{\"polygon\": ...}} entries")
     walls: list[dict[str, Any]] = []
@@ -654,8 +667,11 @@ def world_from_dict(data: object, where: str = "world", body_radius: float = DEF
             walls.append({"segment": seg})
         else:
             walls.append({"polygon": _check_polygon(wall["polygon"], f"{here}.polygon")})
+    return walls
 
-    start_in = data["start"]
+
+def _start_from_dict(start_in: object, where: str) -> tuple[float, float, float]:
+    """The "start" pose {"x": m, "y": m, "phi": rad}."""
     if not isinstance(start_in, dict):
         raise WorldError(f"{where}: start: must be an object {{\"x\": m, \"y\": m, \"phi\": rad}}")
     extra = sorted(set(start_in) - {"x", "y", "phi"})
@@ -666,12 +682,14 @@ def world_from_dict(data: object, where: str = "world", body_radius: float = DEF
             raise WorldError(f"{where}: start: missing '{key}'")
         if not _is_num(start_in[key]):
             raise WorldError(f"{where}: start.{key}: not a finite number ({json.dumps(start_in[key])})")
-    start = (float(start_in["x"]), float(start_in["y"]), float(start_in["phi"]))
+    return (float(start_in["x"]), float(start_in["y"]), float(start_in["phi"]))
 
-    lamps: list[Lamp] = []
-    lamps_in = data.get("lamps", [])
+
+def _lamps_from_list(lamps_in: object, where: str) -> list[Lamp]:
+    """The optional "lamps": {"x", "y", "level"[, "flicker_hz", "flicker_depth"]} each."""
     if not isinstance(lamps_in, list):
         raise WorldError(f"{where}: lamps: must be a list of {{\"x\", \"y\", \"level\"}} objects")
+    lamps: list[Lamp] = []
     for i, lamp in enumerate(lamps_in):
         here = f"{where}: lamps[{i}]"
         if not isinstance(lamp, dict):
@@ -694,14 +712,12 @@ def world_from_dict(data: object, where: str = "world", body_radius: float = DEF
             raise WorldError(f"{here}.flicker_depth: must be in [0, 1], got {depth}")
         lamps.append(Lamp(float(lamp["x"]), float(lamp["y"]), float(lamp["level"]),
                           float(lamp.get("flicker_hz", 0.0)), float(depth)))
+    return lamps
 
-    ambient = data.get("ambient")
-    if ambient is not None and (not _is_num(ambient) or ambient < 0):
-        raise WorldError(f"{where}: ambient: must be a number >= 0 (ADC counts), got {json.dumps(ambient)}")
 
-    world = World(name=name, size=(size[0], size[1]), walls=walls, start=start, lamps=tuple(lamps),
-                  ambient=None if ambient is None else float(ambient), description=description, source=where)
-    # The start pose: inside the area, clear of every wall.
+def _check_start_is_clear(world: World, where: str, body_radius: float) -> None:
+    """The start pose: inside the area, clear of every wall."""
+    start, size = world.start, world.size
     if world.outside(np.array(start[:2])):
         raise WorldError(f"{where}: start: ({start[0]}, {start[1]}) is outside the world's size "
                          f"[0, {size[0]}] x [0, {size[1]}]")
@@ -709,11 +725,10 @@ def world_from_dict(data: object, where: str = "world", body_radius: float = DEF
         dist, _, nearest = world.nearest_wall(np.array(start[:2]), return_index=True)  # type: ignore[misc]
         if dist < body_radius:
             entry = int(world.segment_entry[int(nearest)])
-            kind = "segment" if "segment" in walls[entry] else "polygon"
+            kind = "segment" if "segment" in world.walls[entry] else "polygon"
             problem = "is inside" if dist < 0 else f"overlaps (centre {float(dist):.3f} m from it)"
             raise WorldError(f"{where}: start: the robot (radius {body_radius} m) at ({start[0]}, {start[1]}) "
                              f"{problem} walls[{entry}].{kind}")
-    return world
 
 
 def load_world(path: str | Path, body_radius: float = DEFAULT_BODY_RADIUS) -> World:

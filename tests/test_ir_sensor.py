@@ -228,11 +228,11 @@ def test_bad_parameters_are_refused():
 # --------------------------------------------------------------------------- tools
 def test_plot_sensor_cli_writes_the_figures(tmp_path):
     pytest.importorskip("matplotlib")
-    from tools import plot_sensor
+    from tools import plot
 
     parser = argparse.ArgumentParser()
-    plot_sensor.register(parser.add_subparsers(), "sensor", "sensor figures")
-    args = parser.parse_args(["sensor", "--out", str(tmp_path)])
+    plot.register(parser.add_subparsers(), "plot", "figures")
+    args = parser.parse_args(["plot", "sensor", "--out", str(tmp_path)])
     assert args.func(args) == 0
     names = sorted(p.name for p in tmp_path.iterdir())
     assert names == ["fig10_power.png", "fig11_3d_L27.png", "fig12_3d_L78.png", "fig7_angle.png",

@@ -552,8 +552,6 @@ def print_report(report: dict[str, Any]) -> None:
 
 def run(args: argparse.Namespace) -> int:
     blas = pin_blas_threads()
-    import numpy as np
-
     from host_sim.world import builtin_world
     from tools.cli import CliError
 
@@ -565,60 +563,79 @@ def run(args: argparse.Namespace) -> int:
     command = (f"twinbot bench sim --seconds {args.seconds:g} --batch-n {args.batch_n} "
                f"--batch-seconds {args.batch_seconds:g} --repeats {args.repeats}"
                + (" --profile" if args.profile else ""))
-    results: dict[str, Any] = {}
     with tempfile.TemporaryDirectory(prefix="twinbot-bench-sim-") as tmp_name:
         tmp = Path(tmp_name)
         _progress(f"recording a {args.seconds:g} s SIL run in {WORLD}")
         rec = make_recording(tmp / "sil.csv", args.seconds)
-        _progress("(a) replay of the recording, one robot")
-        results["replay"] = bench_replay(rec, args.repeats)
-        _progress("(b) SIL, one robot")
-        results["sil"] = bench_sil(args.seconds, args.repeats)
-        _progress(f"(b) SIL, one robot, IR beam of {BEAM_RAYS} rays")
-        results["sil_beam"] = bench_sil(args.seconds, args.repeats, BEAM_RAYS)
-        _progress(f"(c) batch, N = {args.batch_n}, without and with IR")
-        results["batch"] = bench_batch(rec, args.batch_n, args.batch_seconds, False, args.repeats)
-        results["batch_ir"] = bench_batch(rec, args.batch_n, args.batch_seconds, True, args.repeats)
-        _progress("(d) IR-SIM on the same room")
-        try:
-            results["irsim"] = bench_irsim(rec, args.seconds, args.repeats, tmp)
-        except ImportError as exc:
-            results["irsim"] = {"error": f"ir-sim is not installed ({exc}); pip install ir-sim"}
+        results = _bench_all(args, rec, tmp)
         report: dict[str, Any] = {
             "command": command, "repeats": args.repeats, "batch_n": args.batch_n,
             "walls": len(builtin_world(WORLD).walls), "robot_step": "one robot advanced by one 5 ms physics step",
             "robot_period": "one robot advanced by one 40 ms control period (8 robot-steps + readings)",
-            "machine": {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
-                        "cpus": os.cpu_count(), "python": platform.python_version(), "numpy": np.__version__,
-                        "blas_threads": blas,
-                        "load": " ".join(f"{x:.2f}" for x in os.getloadavg())},
+            "machine": _machine(blas),  # after the runs: the load average they saw
             "results": results,
         }
         report["targets"] = targets(report)
         missed = {t["name"] for t in report["targets"] if t["met"] is False}
-        profiles: dict[str, Any] = {}
-        if args.profile or missed:
-            from host_sim.sil import SilController
-            from host_sim.params import DEFAULT
-            from host_sim.replay import replay
-            from host_sim.simulation import Simulation
-
-            world = builtin_world(WORLD)
-        if args.profile or "replay_rtf" in missed:
-            _progress("profiling (a)")
-            profiles["(a) replay"] = profile(lambda: replay(rec, DEFAULT, world, seed=0), COMPONENTS["(a) replay"])
-        if args.profile or "sil_rtf" in missed:
-            _progress("profiling (b)")
-            profiles["(b) SIL"] = profile(
-                lambda: Simulation(world, DEFAULT, SilController(1), seed=0).run_fixed(args.seconds),
-                COMPONENTS["(b) SIL"])
-        if args.profile or missed & {"batch_robot_steps", "batch_ir_robot_steps"}:
-            _progress("profiling (c)")
-            profiles["(c) batch with IR"] = profile(
-                lambda: bench_batch(rec, args.batch_n, args.batch_seconds, True, 1), COMPONENTS["(c) batch with IR"])
-        report["profiles"] = profiles
+        report["profiles"] = _profiles(args, rec, missed)
     report["elapsed_s"] = time.monotonic() - t_start
     print_report(report)
     if args.json:
         Path(args.json).write_text(json.dumps(report, indent=2, default=str))
     return 0
+
+
+def _bench_all(args: argparse.Namespace, rec: Any, tmp: Path) -> dict[str, Any]:
+    """(a) to (d) on the recording, in that order."""
+    results: dict[str, Any] = {}
+    _progress("(a) replay of the recording, one robot")
+    results["replay"] = bench_replay(rec, args.repeats)
+    _progress("(b) SIL, one robot")
+    results["sil"] = bench_sil(args.seconds, args.repeats)
+    _progress(f"(b) SIL, one robot, IR beam of {BEAM_RAYS} rays")
+    results["sil_beam"] = bench_sil(args.seconds, args.repeats, BEAM_RAYS)
+    _progress(f"(c) batch, N = {args.batch_n}, without and with IR")
+    results["batch"] = bench_batch(rec, args.batch_n, args.batch_seconds, False, args.repeats)
+    results["batch_ir"] = bench_batch(rec, args.batch_n, args.batch_seconds, True, args.repeats)
+    _progress("(d) IR-SIM on the same room")
+    try:
+        results["irsim"] = bench_irsim(rec, args.seconds, args.repeats, tmp)
+    except ImportError as exc:
+        results["irsim"] = {"error": f"ir-sim is not installed ({exc}); pip install ir-sim"}
+    return results
+
+
+def _machine(blas: str) -> dict[str, Any]:
+    import numpy as np
+
+    return {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
+            "cpus": os.cpu_count(), "python": platform.python_version(), "numpy": np.__version__,
+            "blas_threads": blas,
+            "load": " ".join(f"{x:.2f}" for x in os.getloadavg())}
+
+
+def _profiles(args: argparse.Namespace, rec: Any, missed: set[str]) -> dict[str, Any]:
+    """Where the time goes, for each part that missed its target (all of them with --profile)."""
+    profiles: dict[str, Any] = {}
+    if not (args.profile or missed):
+        return profiles
+    from host_sim.params import DEFAULT
+    from host_sim.replay import replay
+    from host_sim.sil import SilController
+    from host_sim.simulation import Simulation
+    from host_sim.world import builtin_world
+
+    world = builtin_world(WORLD)
+    if args.profile or "replay_rtf" in missed:
+        _progress("profiling (a)")
+        profiles["(a) replay"] = profile(lambda: replay(rec, DEFAULT, world, seed=0), COMPONENTS["(a) replay"])
+    if args.profile or "sil_rtf" in missed:
+        _progress("profiling (b)")
+        profiles["(b) SIL"] = profile(
+            lambda: Simulation(world, DEFAULT, SilController(1), seed=0).run_fixed(args.seconds),
+            COMPONENTS["(b) SIL"])
+    if args.profile or missed & {"batch_robot_steps", "batch_ir_robot_steps"}:
+        _progress("profiling (c)")
+        profiles["(c) batch with IR"] = profile(
+            lambda: bench_batch(rec, args.batch_n, args.batch_seconds, True, 1), COMPONENTS["(c) batch with IR"])
+    return profiles
