@@ -81,6 +81,11 @@ class SimRobot:
         self.t += dt
         self._resolve_contact()
 
+    def set_world(self, world: World) -> None:
+        """Put the robot, where it stands, in an edited world (walls drawn or moved around it)."""
+        self.world = world
+        self._clearance = -1.0  # the broad phase's clearance was measured against the old walls
+
     def _resolve_contact(self) -> None:
         cx, cy = dynamics.axle_centre(self.q, self.p)
         # Broad phase: no wall can be reached before the body has moved by

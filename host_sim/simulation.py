@@ -98,6 +98,13 @@ class Simulation:
 
         self._outside = outside
 
+    def record_to(self, recorder: RecordingWriter | None) -> None:
+        """Start writing every control cycle to `recorder` from now on; None stops (the caller closes it)."""
+        if self._rows is not None:
+            self._rows.finish()
+        self.recorder = recorder
+        self._rows = _RecordingRows(recorder, self.controller) if recorder is not None else None
+
     # One control instant: readings -> controller -> currents; log it.
     def control(self) -> None:
         robot = self.robot

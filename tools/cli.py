@@ -19,6 +19,7 @@ SUBCOMMANDS = (
     ("flash", "compile the firmware with mpy-cross, copy it to a board with mpremote, check HELLO"),
     ("diagnose", "where a recording and the twin disagree, in physical terms"),
     ("fuzzy", "the fuzzy controller: rule table, FCL, figure, evaluation"),
+    ("gui", "the paper's application in a window: draw a room, watch three robots, drive one"),
     ("plot", "figures: the IR sensor model (the paper's Figs. 7-12), the built-in worlds"),
     ("bench", "benchmarks that produce the README's figures"),
 )
@@ -31,6 +32,7 @@ _MODULES = {
     "flash": "tools.flash",
     "diagnose": "tools.diagnose",
     "fuzzy": "tools.fuzzy_rules",
+    "gui": "tools.gui",
     "plot": "tools.plot",
     "bench": "tools.bench",
 }

@@ -1,0 +1,107 @@
+"""`twinbot gui`: the paper's application (its §4, Fig. 14) in a window.
+
+Draw the room with the mouse (walls snap to a grid; select, move, delete,
+undo; save and load world files; zoom and pan), and watch three robots at
+once: the simulated robot running the firmware in the loop (SIL), the user
+robot driven by the arrow keys or a joystick / gamepad, and, with --port,
+the real robot on a serial port (a Pico, or a virtual board's pty from
+`twinbot board`), its pose from its odometry and its IR readings as they
+arrive.  The user's orders can drive the simulated and the real robot too.
+Press h in the window for every key.
+
+Headless: --frames N runs N frames of 1/60 s without a display
+(SDL_VIDEODRIVER=dummy) and --screenshot writes the last one.  --bench
+times the frames and prints the median frame time.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from tools.cli import CliError
+
+EXAMPLES = """\
+examples:
+  twinbot gui                                   # the paper's room, refined rules
+  twinbot gui --world maze --rules first --speed 4
+  twinbot gui --world my_room.json --port /dev/pts/3
+  twinbot gui --frames 300 --screenshot gui.png # headless: 5 s of the run, one picture
+  twinbot gui --bench                           # median frame time, three robots
+"""
+
+
+def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
+    p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1], epilog=EXAMPLES,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--world", default="paper_room", help="built-in world (paper_room, maze, arena) or a world file")
+    p.add_argument("--rules", choices=("first", "refined"), default="refined", help="fuzzy rule set (default refined)")
+    p.add_argument("--port", help="the real robot's serial port (or a virtual board's pty); absent without it")
+    p.add_argument("--speed", type=float, default=1.0, help="k x real time (default 1)")
+    p.add_argument("--realtime", action="store_true", help="the step from the clock (the paper's Dt); default fixed")
+    p.add_argument("--no-noise", action="store_true", help="noise-free sensors")
+    p.add_argument("--emitter", type=int, default=60, help="IR emitter power L, %% (default 60)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
+    p.add_argument("--params", metavar="FILE", help="robot parameters JSON (any subset; see host_sim/params.py)")
+    p.add_argument("--save", metavar="FILE",
+                   help="the world file that s saves and l loads (default: --world if a file, else NAME.json)")
+    p.add_argument("--out", metavar="DIR", default=".", help="folder for recordings and screenshots (default .)")
+    p.add_argument("--frames", type=int, help="headless: run this many frames of 1/60 s, then stop")
+    p.add_argument("--screenshot", metavar="FILE", help="with --frames: write the last frame as a PNG")
+    p.add_argument("--bench", action="store_true", help="time 600 frames headless and print the median frame time")
+    p.set_defaults(func=run)
+
+
+def settings_from(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+    from host_sim.params import DEFAULT, ParamsError, load_params
+    from host_sim.world import BUILTIN_NAMES, WorldError, world_by_name_or_path
+    from tools.gui_app.app import Settings
+
+    try:
+        params = load_params(args.params) if args.params else DEFAULT
+        world = world_by_name_or_path(args.world, params.body_radius)
+    except (ParamsError, WorldError) as exc:
+        raise CliError(str(exc)) from None
+    if not args.speed > 0:
+        raise CliError(f"--speed must be > 0, not {args.speed}")
+    if not 0 <= args.emitter <= 100:
+        raise CliError(f"--emitter must be 0..100 %, not {args.emitter}")
+    if args.frames is not None and args.frames < 1:
+        raise CliError(f"--frames must be >= 1, not {args.frames}")
+    if args.screenshot and args.frames is None:
+        raise CliError("--screenshot needs --frames N (headless run)")
+    out = Path(args.out)
+    if not out.is_dir():
+        raise CliError(f"--out {out}: no such folder")
+    save = Path(args.save) if args.save else (Path(args.world) if args.world not in BUILTIN_NAMES
+                                              else out / f"{world.name}.json")
+    return Settings(world=world, params=params, rules=args.rules, port=args.port, speed=args.speed,
+                    realtime=args.realtime, noise=not args.no_noise, emitter_pct=args.emitter, seed=args.seed,
+                    world_file=save, out_dir=out)
+
+
+def run(args: argparse.Namespace) -> int:
+    from host_sim.serial_link import LinkError
+    from tools.gui_app import loop
+
+    settings = settings_from(args)
+    try:
+        app = loop.open_window(settings, headless=args.frames is not None or args.bench)
+    except LinkError as exc:
+        raise CliError(f"--port: {exc}") from None
+    try:
+        if args.bench:
+            times = loop.time_frames(app, 600)
+            print(loop.summary(times))
+            return 0
+        frames = loop.run(app, args.frames)
+        if args.screenshot:
+            app.screenshot(args.screenshot)
+            print(f"screenshot: {args.screenshot} ({frames} frames, t = {app.sim.sim.robot.t:.2f} s simulated)")
+    finally:
+        app.close()
+        loop.close()
+    return 0
+
+
+__all__ = ["register", "run", "sys"]

@@ -1,0 +1,67 @@
+"""The window's loop: interactive (capped at 60 frames/s), headless for N frames, or timed.
+
+Headless runs (--frames N) step the simulation by a nominal 1/60 s of wall
+time per frame, not by the clock, so what they draw does not depend on how
+fast the machine is: N frames at speed k are N k / 60 simulated seconds.
+"""
+from __future__ import annotations
+
+import os
+import statistics
+import time
+
+import pygame
+
+from tools.gui_app.app import SIZE, App, Settings
+
+FRAME_S = 1.0 / 60.0
+
+
+def open_window(settings: Settings, headless: bool) -> App:
+    if headless:
+        os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+    pygame.display.init()
+    pygame.font.init()
+    pygame.joystick.init()
+    surface = pygame.display.set_mode(SIZE)
+    pygame.display.set_caption(f"twinbot gui - {settings.world.name}")
+    return App(settings, surface)
+
+
+def run(app: App, frames: int | None = None) -> int:
+    """Run until the window closes (frames=None, paced by the clock) or for `frames` frames of 1/60 s."""
+    clock = pygame.time.Clock()
+    n = 0
+    while not app.controls.quit and (frames is None or n < frames):
+        for event in pygame.event.get():
+            app.controls.handle(event)
+        dt = clock.tick(60) / 1000.0 if frames is None else FRAME_S
+        app.frame(dt)
+        pygame.display.flip()
+        n += 1
+    return n
+
+
+def time_frames(app: App, frames: int, warmup: int = 30) -> list[float]:
+    """Wall seconds of each frame (events, step, draw, flip), uncapped, after `warmup` frames."""
+    times: list[float] = []
+    for k in range(warmup + frames):
+        t0 = time.perf_counter()
+        for event in pygame.event.get():
+            app.controls.handle(event)
+        app.frame(FRAME_S)
+        pygame.display.flip()
+        if k >= warmup:
+            times.append(time.perf_counter() - t0)
+    return times
+
+
+def summary(times: list[float]) -> str:
+    q = statistics.quantiles(times, n=10)
+    med = statistics.median(times)
+    return (f"{len(times)} frames: median {1000 * med:.2f} ms ({1 / med:.0f} frames/s), "
+            f"p90 {1000 * q[-1]:.2f} ms, max {1000 * max(times):.2f} ms")
+
+
+def close() -> None:
+    pygame.quit()

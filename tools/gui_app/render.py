@@ -1,0 +1,156 @@
+"""What the window shows, laid out: the room on the left, a panel on the right, the status bar below.
+
+The room: the grid, the coverage overlay of the simulated robot, walls (the
+selected one lit), the wall being drawn, each robot's trail, body, heading
+and eight IR rays (shaded by the reflected counts), collision marks and
+the exit flag.  The panel: per robot, its state line and the eight IR
+counts as bars; for the two robots with firmware, the wheel-speed
+set-points it decided (the fuzzy controller's outputs in AUTONOMOUS mode);
+coverage over time with the time to 90 %; the buttons.
+"""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Sequence
+
+import pygame
+
+from protocol import messages as M
+from tools.gui_app import draw
+from tools.gui_app.controls import PANEL_X
+from tools.gui_app.robots import RealBot, SimBot, rays
+
+if TYPE_CHECKING:
+    from tools.gui_app.app import App
+
+ADC_FULL = 4095.0
+BAR_FULL = 1500.0  # counts at the top of a bar: reflections rarely reach the ADC's full scale
+
+
+class Renderer:
+    def __init__(self, app: App) -> None:
+        self.app = app
+        self.p = draw.Painter(app.surface)
+
+    def draw(self) -> None:
+        surf = self.app.surface
+        surf.fill(draw.BG)
+        self.room()
+        pygame.draw.rect(surf, draw.PANEL, (PANEL_X, 0, surf.get_width() - PANEL_X, surf.get_height()))
+        self.panel()
+        self.status()
+        if self.app.show_help:
+            self.help()
+
+    # -- the room -------------------------------------------------------------
+    def room(self) -> None:
+        app, p = self.app, self.p
+        view, world = app.view, app.editor.world
+        surf = app.surface
+        surf.set_clip(pygame.Rect(view.rect))
+        p.grid(view, app.editor.grid, world.size)
+        cov = app.sim.sim.coverage
+        if app.show_coverage:
+            p.coverage(view, cov.covered, cov._count, cov.resolution)  # noqa: SLF001
+        p.walls(view, world.walls, app.editor.selected)
+        preview = app.controls.preview()
+        if preview is not None:
+            p.preview(view, *preview)
+        bots: list[tuple[SimBot | RealBot, str]] = [(app.user, "user"), (app.sim, "simulated")]
+        if app.real is not None:
+            bots.insert(0, (app.real, "real"))
+        for bot, name in bots:
+            self.robot(bot, name)
+        if app.sim.sim.exit_time is not None:
+            i = next((k for k, t in enumerate(app.sim.sim._t) if t >= app.sim.sim.exit_time), -1)  # noqa: SLF001
+            x, y, _ = app.sim.trail[i]
+            p.flag(view, x, y)
+        surf.set_clip(None)
+
+    def robot(self, bot: SimBot | RealBot, name: str) -> None:
+        app, p = self.app, self.p
+        colour = draw.COLOURS[name]
+        pose = bot.pose
+        p.trail(app.view, bot.trail, colour)
+        p.rays(app.view, rays(app.editor.world, pose, app.s.params), bot.counts(), colour, BAR_FULL)
+        contact = isinstance(bot, SimBot) and bot.sim.robot.in_contact
+        p.robot(app.view, pose, app.s.params.body_radius, colour, contact)
+        if isinstance(bot, SimBot):
+            p.marks(app.view, bot.collision_marks, draw.RED)
+
+    # -- the panel ---------------------------------------------------------------
+    def panel(self) -> None:
+        app, p = self.app, self.p
+        x = PANEL_X + 10
+        y = 8
+        for bot, name in ((app.sim, "simulated"), (app.user, "user"), (app.real, "real")):
+            self.robot_block(bot, name, x, y)
+            y += 100
+        cov = app.sim.sim.coverage
+        t = app.sim.sim._t  # noqa: SLF001
+        t90 = next((tt for tt, f in zip(t, cov.fractions) if f >= 0.9), None)
+        p.text(f"coverage of the simulated robot: {100 * cov.fraction:.1f} %", (x, y + 4), draw.TEXT, 20)
+        p.plot(pygame.Rect(x, y + 24, 360, 120), t, cov.fractions, t90)
+        for rect, action in app.controls.buttons:
+            on = bool(action.on and action.on())
+            p.button(rect, action.label, on, rect.collidepoint(pygame.mouse.get_pos()))
+        rows = (len(app.controls.buttons) + 3) // 4
+        p.text("h: all keys and mouse controls", (x, rows * 30 + app.controls.buttons[0][0].y + 6), draw.DIM, 16)
+
+    def robot_block(self, bot: SimBot | RealBot | None, name: str, x: int, y: int) -> None:
+        p = self.p
+        colour = draw.COLOURS[name]
+        pygame.draw.circle(self.app.surface, colour, (x + 6, y + 8), 6)
+        if bot is None:
+            p.text(f"real robot: {self.app.real_error}", (x + 18, y), draw.DIM, 20)
+            return
+        p.text(self.robot_line(bot, name), (x + 18, y), draw.TEXT, 20)
+        p.bars(pygame.Rect(x, y + 22, 200, 54), bot.counts(), colour, BAR_FULL)
+        if isinstance(bot, SimBot):
+            left, right = bot.setpoints()
+            p.text("wheel set-points, mm/s", (x + 212, y + 20), draw.DIM, 16)
+            p.setpoints(pygame.Rect(x + 212, y + 34, 148, 42), left, right, self.app.user_control.max_speed, colour)
+        else:
+            p.text(bot.source, (x + 212, y + 24), draw.DIM, 16)
+            p.text(f"{bot.frames} TELEMETRY frames", (x + 212, y + 40), draw.DIM, 16)
+
+    def robot_line(self, bot: SimBot | RealBot, name: str) -> str:
+        x, y, phi = bot.pose
+        where = f"({x:.2f}, {y:.2f}) m"
+        if isinstance(bot, SimBot):
+            mode = M.MODE_NAMES[bot.firmware.mode]
+            return f"{name}  {mode}  {where}  {bot.sim.robot.collisions} coll."
+        mode = M.MODE_NAMES[int(bot.last["mode"])] if bot.last is not None else "?"  # type: ignore[call-overload]
+        return f"real  {mode}  {where}"
+
+    # -- status bar and help ---------------------------------------------------------
+    def status(self) -> None:
+        app, p = self.app, self.p
+        surf = app.surface
+        top = surf.get_height() - 40
+        pygame.draw.rect(surf, (225, 227, 232), (0, top, surf.get_width(), 40))
+        sim = app.sim.sim
+        factor = app.clock.factor()
+        rtf = f"{factor:.2f}x real time" if factor is not None else "-"
+        exit_text = f"exit found at {sim.exit_time:.1f} s" if sim.exit_time is not None else "no exit yet"
+        real = "real robot: " + ("on " + app.s.port if app.real is not None else app.real_error)
+        line1 = (f"t = {sim.robot.t:7.2f} s   {rtf}   speed {app.s.speed:g}x   "
+                 f"{'real time (clock Dt)' if app.s.realtime else 'fixed step'}   "
+                 f"{'RUNNING' if app.running else 'PAUSED'}   rules {app.s.rules}   L {app.s.emitter_pct} %   "
+                 f"noise {'on' if app.s.noise else 'off'}   {exit_text}   {'REC' if app.recording else ''}")
+        line2 = f"{real}   |   user: {app.user_control.device()}   |   {app.message}"
+        p.text(line1, (8, top + 4), draw.TEXT, 20)
+        p.text(line2, (8, top + 22), draw.DIM, 20)
+
+    def help(self) -> None:
+        lines: list[str] = ["twinbot gui: keys (buttons on the right do the same)", ""]
+        lines += [f"{a.key_label:>7}   {a.help}" for a in self.app.controls.actions]
+        lines += ["", *MOUSE_HELP]
+        self.p.overlay(lines, pygame.Rect(60, 30, 780, 19 * len(lines) + 24))
+
+
+MOUSE_HELP: Sequence[str] = (
+    "arrows / joystick: drive the user robot (u: the simulated one too, i: the real one)",
+    "mouse: drag on the floor draws a wall (snapped to the grid); drag a wall moves it;",
+    "       right click deletes a wall; wheel zooms; middle drag or shift+drag pans",
+    "esc, q: quit",
+)
