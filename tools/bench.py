@@ -23,6 +23,8 @@ BENCHMARKS = (
     ("sim", "tools.bench_sim",
      "host simulator: real-time factor of one robot replaying a recording and with the firmware in SIL, "
      "batch robot-steps/s at N = 1000, and IR-SIM on the same room"),
+    ("gui", "tools.bench_gui",
+     "twinbot gui: frame time with the simulated, user and real (virtual board) robots, rays and coverage on"),
 )
 
 

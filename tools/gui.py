@@ -10,8 +10,8 @@ arrive.  The user's orders can drive the simulated and the real robot too.
 Press h in the window for every key.
 
 Headless: --frames N runs N frames of 1/60 s without a display
-(SDL_VIDEODRIVER=dummy) and --screenshot writes the last one.  --bench
-times the frames and prints the median frame time.
+(SDL_VIDEODRIVER=dummy) and --screenshot writes the last one.  The frame
+time is measured by `twinbot bench gui`.
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ examples:
   twinbot gui --world maze --rules first --speed 4
   twinbot gui --world my_room.json --port /dev/pts/3
   twinbot gui --frames 300 --screenshot gui.png # headless: 5 s of the run, one picture
-  twinbot gui --bench                           # median frame time, three robots
+  twinbot bench gui                             # frame time with the three robots
 """
 
 
@@ -48,7 +48,6 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
     p.add_argument("--out", metavar="DIR", default=".", help="folder for recordings and screenshots (default .)")
     p.add_argument("--frames", type=int, help="headless: run this many frames of 1/60 s, then stop")
     p.add_argument("--screenshot", metavar="FILE", help="with --frames: write the last frame as a PNG")
-    p.add_argument("--bench", action="store_true", help="time 600 frames headless and print the median frame time")
     p.set_defaults(func=run)
 
 
@@ -86,14 +85,10 @@ def run(args: argparse.Namespace) -> int:
 
     settings = settings_from(args)
     try:
-        app = loop.open_window(settings, headless=args.frames is not None or args.bench)
+        app = loop.open_window(settings, headless=args.frames is not None)
     except LinkError as exc:
         raise CliError(f"--port: {exc}") from None
     try:
-        if args.bench:
-            times = loop.time_frames(app, 600)
-            print(loop.summary(times))
-            return 0
         frames = loop.run(app, args.frames)
         if args.screenshot:
             app.screenshot(args.screenshot)

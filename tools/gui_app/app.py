@@ -233,7 +233,7 @@ class App:
             path = self.s.out_dir / f"gui-{stamp}-{name}.csv"
             writer = RecordingWriter(path, source="robot" if name == "real" else "simulator", sample_period=0.04,
                                      robot=params.to_json(), world=world.to_dict(),
-                                     extra={"controller": "SIL" if name != "real" else "serial", "robot": name,
+                                     extra={"controller": "SIL" if name != "real" else "serial", "which": name,
                                             "rules": self.s.rules, "noise": self.s.noise,
                                             "emitter_pct": self.s.emitter_pct})
             bot.record(writer)

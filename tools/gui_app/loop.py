@@ -7,7 +7,6 @@ fast the machine is: N frames at speed k are N k / 60 simulated seconds.
 from __future__ import annotations
 
 import os
-import statistics
 import time
 
 import pygame
@@ -54,13 +53,6 @@ def time_frames(app: App, frames: int, warmup: int = 30) -> list[float]:
         if k >= warmup:
             times.append(time.perf_counter() - t0)
     return times
-
-
-def summary(times: list[float]) -> str:
-    q = statistics.quantiles(times, n=10)
-    med = statistics.median(times)
-    return (f"{len(times)} frames: median {1000 * med:.2f} ms ({1 / med:.0f} frames/s), "
-            f"p90 {1000 * q[-1]:.2f} ms, max {1000 * max(times):.2f} ms")
 
 
 def close() -> None:

@@ -1,0 +1,253 @@
+"""`twinbot gui`, offscreen (SDL_VIDEODRIVER=dummy): driven by posted mouse, keyboard and joystick events.
+
+No real joystick can exist in dummy mode, so the joystick is its events
+(JOYAXISMOTION, JOYDEVICEREMOVED), which is all the input layer reads.
+The real robot is a pseudo-terminal whose other end the test holds: the
+test writes TELEMETRY frames as a robot would and reads the orders sent.
+"""
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Any, Iterator
+
+import pytest
+
+os.environ["SDL_VIDEODRIVER"] = "dummy"
+os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
+pygame = pytest.importorskip("pygame")
+
+from host_sim.params import DEFAULT  # noqa: E402
+from host_sim.recording import load_recording  # noqa: E402
+from host_sim.world import builtin_world, load_world  # noqa: E402
+from protocol import messages as M  # noqa: E402
+from protocol.framing import FrameDecoder, FrameEncoder  # noqa: E402
+from tests.helpers import run_twinbot  # noqa: E402
+from tools.gui_app import draw, loop  # noqa: E402
+from tools.gui_app.app import App, Settings  # noqa: E402
+
+WORLD = builtin_world("paper_room")
+
+
+@pytest.fixture
+def make_app(tmp_path: Path) -> Iterator[Any]:
+    apps: list[App] = []
+
+    def make(**changes: Any) -> App:
+        s = Settings(world=WORLD, params=DEFAULT, world_file=tmp_path / "room.json", out_dir=tmp_path)
+        for k, v in changes.items():
+            setattr(s, k, v)
+        app = loop.open_window(s, headless=True)
+        apps.append(app)
+        return app
+
+    yield make
+    for app in apps:
+        app.close()
+    loop.close()
+
+
+def post(kind: int, **fields: Any) -> None:
+    pygame.event.post(pygame.event.Event(kind, **fields))
+
+
+def key(k: int) -> None:
+    post(pygame.KEYDOWN, key=k, mod=0, unicode="", scancode=0)
+    post(pygame.KEYUP, key=k, mod=0, unicode="", scancode=0)
+
+
+def drag(app: App, a: tuple[float, float], b: tuple[float, float], button: int = 1) -> None:
+    """A mouse drag between two world points (m)."""
+    sa, sb = app.view.to_screen(*a), app.view.to_screen(*b)
+    post(pygame.MOUSEBUTTONDOWN, pos=sa, button=button)
+    post(pygame.MOUSEMOTION, pos=sb, rel=(sb[0] - sa[0], sb[1] - sa[1]), buttons=(1, 0, 0))
+    post(pygame.MOUSEBUTTONUP, pos=sb, button=button)
+
+
+def test_draw_a_wall_with_the_mouse_then_move_delete_undo_save_and_load(make_app: Any, tmp_path: Path) -> None:
+    app = make_app()
+    n0 = len(app.editor.walls)
+    drag(app, (1.012, 1.188), (1.41, 1.205))  # ends snap to the 5 cm grid
+    loop.run(app, 2)
+    assert len(app.editor.walls) == n0 + 1
+    assert app.editor.walls[-1] == {"segment": [1.0, 1.2, 1.4, 1.2]}
+    assert app.sim.sim.world is app.editor.world  # the robots live in the edited room
+    shot = pygame.image.load(str(app.screenshot(tmp_path / "wall.png")))
+    assert tuple(shot.get_at(app.view.to_screen(1.2, 1.2)))[:3] == draw.SELECTED  # drawn, and selected
+    key(pygame.K_s)  # save
+    loop.run(app, 1)
+    assert load_world(tmp_path / "room.json").walls[-1] == {"segment": [1.0, 1.2, 1.4, 1.2]}
+
+    drag(app, (1.2, 1.2), (1.2, 1.31))  # grab the wall, move it up by two grid steps
+    loop.run(app, 2)
+    assert app.editor.walls[-1]["segment"] == pytest.approx([1.0, 1.3, 1.4, 1.3])
+    sx, sy = app.view.to_screen(1.2, 1.3)
+    post(pygame.MOUSEBUTTONDOWN, pos=(sx, sy), button=3)  # right click deletes
+    loop.run(app, 1)
+    assert len(app.editor.walls) == n0
+    shot = pygame.image.load(str(app.screenshot(tmp_path / "gone.png")))
+    assert tuple(shot.get_at((sx, sy)))[:3] not in (draw.WALL, draw.SELECTED)
+    key(pygame.K_z)  # undo the delete
+    loop.run(app, 1)
+    assert app.editor.walls[-1]["segment"] == pytest.approx([1.0, 1.3, 1.4, 1.3])
+    key(pygame.K_z)  # undo the move
+    key(pygame.K_z)  # undo the drawing
+    loop.run(app, 1)
+    assert len(app.editor.walls) == n0
+    key(pygame.K_l)  # load the saved room: the wall is back, the robots restart in it
+    loop.run(app, 1)
+    assert app.editor.walls[-1] == {"segment": [1.0, 1.2, 1.4, 1.2]}
+    assert app.sim.sim.world is app.editor.world
+
+
+def test_zoom_and_pan(make_app: Any) -> None:
+    app = make_app()
+    scale = app.view.scale
+    centre = app.view.to_screen(1.0, 0.75)
+    pygame.mouse.set_pos(centre)
+    post(pygame.MOUSEWHEEL, x=0, y=2, flipped=False, precise_x=0.0, precise_y=2.0, touch=False)
+    loop.run(app, 1)
+    assert app.view.scale == pytest.approx(scale * 1.15 ** 2)
+    ox = app.view.ox
+    a = app.view.to_screen(0.5, 0.5)
+    post(pygame.MOUSEBUTTONDOWN, pos=a, button=2)
+    post(pygame.MOUSEMOTION, pos=(a[0] + 100, a[1]), rel=(100, 0), buttons=(0, 1, 0))
+    post(pygame.MOUSEBUTTONUP, pos=(a[0] + 100, a[1]), button=2)
+    loop.run(app, 1)
+    assert app.view.ox == pytest.approx(ox - 100 / app.view.scale)
+
+
+def test_keyboard_drives_the_user_robot_and_u_hands_it_the_simulated_one(make_app: Any) -> None:
+    app = make_app()
+    x0, y0, phi0 = app.user.pose
+    post(pygame.KEYDOWN, key=pygame.K_UP, mod=0, unicode="", scancode=0)
+    loop.run(app, 60)  # 1 s
+    assert app.user.firmware.mode == M.MODE_HOST
+    assert app.user.setpoints() == (200, 200)
+    x1, y1, phi1 = app.user.pose
+    along = (x1 - x0) * math.cos(phi0) + (y1 - y0) * math.sin(phi0)
+    assert along > 0.1 and abs(phi1 - phi0) < 0.05  # straight ahead
+    key(pygame.K_u)  # the user's orders drive the simulated robot too
+    loop.run(app, 5)
+    assert app.sim.firmware.mode == M.MODE_HOST and app.sim.setpoints() == (200, 200)
+    post(pygame.KEYUP, key=pygame.K_UP, mod=0, unicode="", scancode=0)
+    key(pygame.K_u)  # and back to exploring on its own
+    loop.run(app, 5)
+    assert app.sim.firmware.mode == M.MODE_AUTONOMOUS
+    assert app.user.setpoints() == (0, 0)
+
+
+def test_joystick_events_turn_the_user_robot_and_unplugging_stops_it(make_app: Any) -> None:
+    app = make_app()
+    phi0 = app.user.pose[2]
+    post(pygame.JOYAXISMOTION, instance_id=0, joy=0, axis=0, value=-1.0)  # stick full left
+    loop.run(app, 30)
+    left, right = app.user.setpoints()
+    assert right > 0 > left  # turning on the spot, counter-clockwise
+    assert app.user.pose[2] > phi0 + 0.2
+    post(pygame.JOYDEVICEREMOVED, instance_id=0)
+    loop.run(app, 5)
+    assert app.user.setpoints() == (0, 0)
+
+
+def test_the_simulated_robot_explores_with_its_firmware(make_app: Any) -> None:
+    app = make_app(speed=4.0)
+    loop.run(app, 150)  # 10 s
+    sim = app.sim.sim
+    assert sim.robot.t == pytest.approx(10.0, abs=0.05)
+    assert app.sim.firmware.mode == M.MODE_AUTONOMOUS
+    x, y, _ = app.sim.pose
+    assert math.hypot(x - WORLD.start[0], y - WORLD.start[1]) > 0.1
+    assert sim.coverage.fraction > 0.02 and len(sim.coverage.fractions) == len(sim._t)
+    assert app.user.pose == pytest.approx(app.user.sim.robot.pose) and app.user.setpoints() == (0, 0)
+
+
+def test_controls_noise_rules_emitter_realtime_step_reset(make_app: Any) -> None:
+    app = make_app()
+    for k in (pygame.K_n, pygame.K_f, pygame.K_RIGHTBRACKET, pygame.K_t):
+        key(k)
+    loop.run(app, 6)
+    assert app.sim.sim.robot.rng is None and not app.s.noise
+    assert app.sim.firmware.params[M.param_by_name("rule_set")[0]] == 0  # first
+    assert app.sim.firmware.params[M.param_by_name("emitter_pct")[0]] == 70
+    assert app.sim.sim.robot.emitter_pct == 70
+    t = app.sim.sim.robot.t
+    loop.run(app, 30)  # real time: each frame is one pass of Dt = 1/60 s
+    assert app.sim.sim.robot.t == pytest.approx(t + 0.5, abs=1e-9)
+    key(pygame.K_SPACE)  # pause
+    loop.run(app, 10)
+    t = app.sim.sim.robot.t
+    key(pygame.K_PERIOD)  # one control period
+    loop.run(app, 10)
+    assert app.sim.sim.robot.t == pytest.approx(t + 0.040, abs=1e-9) and not app.running
+    key(pygame.K_r)
+    loop.run(app, 1)
+    assert app.sim.sim.robot.t == 0 and app.sim.pose == pytest.approx(WORLD.start)
+
+
+def test_record_every_robot(make_app: Any, tmp_path: Path) -> None:
+    app = make_app()
+    post(pygame.KEYDOWN, key=pygame.K_UP, mod=0, unicode="", scancode=0)
+    key(pygame.K_c)
+    loop.run(app, 60)
+    key(pygame.K_c)
+    loop.run(app, 1)
+    files = sorted(tmp_path.glob("gui-*.csv"))
+    assert [f.name.rsplit("-", 1)[1] for f in files] == ["simulated.csv", "user.csv"]  # no real robot here
+    sim_rec = load_recording(files[0])
+    user_rec = load_recording(files[1])
+    assert 20 <= len(sim_rec.t) <= 26  # 1 s of 40 ms cycles
+    assert sim_rec.pose is not None and sim_rec.meta["robot"] == DEFAULT.to_json() and sim_rec.meta["which"] == "simulated"
+    trail = set(app.sim.trail)
+    assert all(tuple(p) in trail for p in sim_rec.pose.tolist())  # the truth columns: its poses, cycle by cycle
+    assert (user_rec.cmd > 0).any()  # the user's orders turned into currents
+
+
+def test_the_real_robot_on_a_serial_port(make_app: Any, pty_pair: Any) -> None:
+    app = make_app(port=pty_pair.path)
+    enc = FrameEncoder()
+    for k in range(10):  # 100 ticks a frame on both wheels: straight ahead
+        f = {"tick_ms": 40 * k, "mode": M.MODE_AUTONOMOUS, "flags": 0, "enc_l": 100 * k, "enc_r": 100 * k,
+             "ir_on": [900, 300, 160, 160, 160, 160, 160, 300], "ir_amb": [150] * 8, "i_ref_l_ma": 10,
+             "i_ref_r_ma": 10, "vbat_mv": 7400}
+        pty_pair.write(enc.encode(M.TELEMETRY, M.pack_payload(M.TELEMETRY, f)))
+    for _ in range(20):
+        loop.run(app, 1)
+        if app.real is not None and app.real.frames == 10:
+            break
+    assert app.real is not None and app.real.frames == 10
+    assert app.real.counts() == [750, 150, 10, 10, 10, 10, 10, 150]
+    dist = 900 * math.pi * DEFAULT.wheel_radius * 2 / DEFAULT.ticks_per_rev
+    x0, y0, phi0 = WORLD.start
+    assert app.real.pose == pytest.approx((x0 + dist * math.cos(phi0), y0 + dist * math.sin(phi0), phi0), abs=1e-4)
+    post(pygame.KEYDOWN, key=pygame.K_LEFT, mod=0, unicode="", scancode=0)
+    key(pygame.K_i)  # the user drives the real robot: COMMAND frames in HOST mode go out
+    loop.run(app, 3)
+    sent = FrameDecoder().decode_all(pty_pair.read_available())
+    commands = [M.unpack_payload(t, p) for t, _s, p in sent if t == M.COMMAND]
+    assert commands and commands[0]["mode"] == M.MODE_HOST
+    assert commands[0]["right"] > 0 > commands[0]["left"]
+
+
+def test_the_real_robots_own_odometry_is_used_when_telemetry_carries_it(make_app: Any, pty_pair: Any) -> None:
+    app = make_app(port=pty_pair.path)
+    assert app.real is not None
+    f = {"tick_ms": 0, "mode": 1, "flags": 0, "enc_l": 0, "enc_r": 0, "ir_on": [0] * 8, "ir_amb": [0] * 8,
+         "i_ref_l_ma": 0, "i_ref_r_ma": 0, "vbat_mv": 7400, "odo_x": 100_000, "odo_y": 0, "odo_heading": 1 << 28}
+    app.real.telemetry(f)  # a quarter turn, 10 cm ahead in its own frame
+    x0, y0, phi0 = WORLD.start
+    assert app.real.source == "TELEMETRY odometry"
+    assert app.real.pose == pytest.approx((x0 + 0.1 * math.cos(phi0), y0 + 0.1 * math.sin(phi0), phi0 + math.pi / 2))
+
+
+def test_headless_command_writes_a_screenshot(tmp_path: Path) -> None:
+    out = tmp_path / "gui.png"
+    r = run_twinbot("gui", "--frames", "30", "--screenshot", str(out), "--out", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    img = pygame.image.load(str(out))
+    assert img.get_size() == (1280, 780)
+    bad = run_twinbot("gui", "--world", "no_such_room", "--frames", "1")
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "no_such_room" in bad.stderr
+    busy = run_twinbot("gui", "--port", str(tmp_path / "ttyNOPE"), "--frames", "1")
+    assert busy.returncode == 2 and "no such port" in busy.stderr
