@@ -12,6 +12,7 @@ import os
 from pathlib import Path
 from typing import Any, Iterator
 
+import numpy as np
 import pytest
 
 os.environ["SDL_VIDEODRIVER"] = "dummy"
@@ -99,6 +100,28 @@ def test_draw_a_wall_with_the_mouse_then_move_delete_undo_save_and_load(make_app
     loop.run(app, 1)
     assert app.editor.walls[-1] == {"segment": [1.0, 1.2, 1.4, 1.2]}
     assert app.sim.sim.world is app.editor.world
+
+
+def test_a_box_obstacle_and_a_new_wall_are_seen_by_the_simulated_robots_sensors(make_app: Any, tmp_path: Path) -> None:
+    app = make_app()
+    key(pygame.K_SPACE)  # pause
+    key(pygame.K_PERIOD)
+    loop.run(app, 1)
+    front = app.sim.counts()[0]
+    drag(app, (0.45, 0.2), (0.45, 0.6))  # a wall 5 cm ahead of the robot's rim
+    key(pygame.K_PERIOD)
+    loop.run(app, 1)
+    assert app.sim.counts()[0] > front + 200
+    key(pygame.K_o)  # the box tool
+    drag(app, (1.49, 0.21), (1.81, 0.39))
+    loop.run(app, 1)
+    assert app.editor.walls[-1] == {"polygon": [[1.5, 0.2], [1.8, 0.2], [1.8, 0.4], [1.5, 0.4]]}
+    assert app.editor.world.inside_obstacle(np.array([[1.65, 0.3]]))[0]
+    shot = pygame.image.load(str(app.screenshot(tmp_path / "box.png")))
+    assert tuple(shot.get_at(app.view.to_screen(1.65, 0.3)))[:3] == draw.SELECTED
+    key(pygame.K_s)
+    loop.run(app, 1)
+    assert len(load_world(tmp_path / "room.json").polygons) == len(WORLD.polygons) + 1  # valid, convex
 
 
 def test_zoom_and_pan(make_app: Any) -> None:

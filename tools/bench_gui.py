@@ -1,8 +1,10 @@
 """`twinbot bench gui`: frame time of `twinbot gui` with its robots, rays and coverage on.
 
 Each workload opens the application headless (SDL_VIDEODRIVER=dummy),
-runs 30 frames to warm up, then times FRAMES frames one by one, uncapped:
-the events, the simulated robots' physics and firmware for 1/60 s of wall
+first runs the two simulated robots PRERUN simulated seconds at full speed
+(so that their trails are as long as the window draws them, 4000 points),
+then 30 frames to warm up, then times FRAMES frames one by one, started
+every 1/60 s as in the window (the wait is not counted): the events, the simulated robots' physics and firmware for 1/60 s of wall
 time x the speed factor, the real robot's frames, and drawing everything
 (room, coverage overlay, trails, 8 rays and bars per robot, set-points,
 coverage plot, buttons, status bar) into the window.  The real robot is a
@@ -28,6 +30,7 @@ from typing import Any
 from tools.cli import CliError
 
 TARGET_FPS = 60.0
+PRERUN = 200.0  # simulated seconds before timing: 5000 control periods, trails at their longest
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -65,6 +68,7 @@ def workload(frames: int, speed: float, port: str | None) -> dict[str, Any]:
             app.real.link.send(M.COMMAND, {"mode": M.MODE_AUTONOMOUS, "left": 0, "right": 0})
             time.sleep(0.5)
         assert app.show_coverage
+        app.advance(PRERUN)
         times = loop.time_frames(app, frames)
         real_frames = app.real.frames if app.real is not None else 0
         t_sim = app.sim.sim.robot.t
@@ -74,7 +78,7 @@ def workload(frames: int, speed: float, port: str | None) -> dict[str, Any]:
     med = statistics.median(times)
     return {"speed": speed, "robots": 3 if port else 2, "frames": len(times), "median_ms": 1000 * med,
             "p90_ms": 1000 * statistics.quantiles(times, n=10)[-1], "max_ms": 1000 * max(times),
-            "fps": 1 / med, "telemetry": real_frames, "sim_s": t_sim}
+            "fps": 1 / med, "telemetry": real_frames, "sim_s": t_sim - PRERUN}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -104,9 +108,9 @@ def print_report(args: argparse.Namespace, rows: list[tuple[str, dict[str, Any]]
           f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     print(f"pygame-ce {pygame.version.ver} (SDL {'.'.join(map(str, pygame.get_sdl_version()))}), "
           f"video driver {os.environ.get('SDL_VIDEODRIVER')}, window 1280 x 780, paper_room, coverage overlay, "
-          f"rays and trails on")
+          f"rays and trails on; trails {PRERUN:.0f} s long before timing; frames started at 60 Hz")
     print()
-    head = f"{'workload':<46}| median ms | p90 ms | max ms | frames/s | sim s | TELEMETRY rx"
+    head = f"{'workload':<46}| median ms | p90 ms | max ms | 1/median | sim s | TELEMETRY rx"
     print(head)
     print("-" * 46 + "+" + "+".join("-" * (len(c)) for c in head.split("|")[1:]))
     for name, r in rows:
@@ -119,6 +123,8 @@ def print_report(args: argparse.Namespace, rows: list[tuple[str, dict[str, Any]]
         print(f"  [NOT RUN] >= {TARGET_FPS:.0f} frames/s with the three robots (--no-board)")
         return
     worst = min(r["fps"] for r in three)
+    p90 = max(r["p90_ms"] for r in three)
     mark = "[MET]   " if worst >= TARGET_FPS else "[MISSED]"
-    print(f"  {mark} >= {TARGET_FPS:.0f} frames/s (median) with the three robots, rays and coverage on: "
-          f"{worst:.0f} frames/s at worst")
+    print(f"  {mark} >= {TARGET_FPS:.0f} frames/s with the three robots, rays and coverage on: median frame "
+          f"{1000 / worst:.2f} ms = {worst:.0f} frames/s at worst (p90 {p90:.2f} ms, "
+          f"budget {1000 / TARGET_FPS:.2f} ms)")

@@ -82,6 +82,7 @@ class App:
         self.running = True
         self.show_help = False
         self.show_coverage = True
+        self.box_tool = False  # drags draw box obstacles instead of walls
         self.user_drives_sim = False
         self.user_drives_real = False
         self.recording: list[Path] = []
@@ -121,10 +122,7 @@ class App:
     # -- one frame -----------------------------------------------------------------
     def frame(self, dt: float) -> None:
         """One pass: orders, physics (if running), the real robot's frames, drawing."""
-        if self.editor.version != self._world_version:
-            for bot in self.sim_bots:
-                bot.set_world(self.editor.world)
-            self._world_version = self.editor.version
+        self.sync_world()
         orders = self.user_control.wheels()
         self.user.orders = orders
         self.sim.orders = orders if self.user_drives_sim else None
@@ -139,7 +137,15 @@ class App:
         self.renderer.draw()
         self.frames += 1
 
+    def sync_world(self) -> None:
+        """The simulated robots move into the room as edited (before any step, and before drawing)."""
+        if self.editor.version != self._world_version:
+            for bot in self.sim_bots:
+                bot.set_world(self.editor.world)
+            self._world_version = self.editor.version
+
     def advance(self, sim_seconds: float) -> None:
+        self.sync_world()
         for bot in self.sim_bots:
             if self.s.realtime:
                 bot.stepper.clock(sim_seconds)
@@ -149,6 +155,7 @@ class App:
     def single_step(self) -> None:
         """One 40 ms control period of both simulated robots (pauses the run)."""
         self.running = False
+        self.sync_world()
         for bot in self.sim_bots:
             bot.stepper.step_period()
         self.say(f"one step: t = {self.sim.sim.robot.t:.2f} s")

@@ -1,7 +1,7 @@
 """Keys, buttons and the mouse: every control is one `Action`, reachable by a key and most by a button.
 
 The mouse edits the room: drag on empty floor draws a wall (both ends snap
-to the grid); press on a wall selects it and dragging moves it (by whole
+to the grid), or with the box tool (o) a rectangular obstacle; press on a wall selects it and dragging moves it (by whole
 grid steps); right click deletes the wall under the cursor; the wheel
 zooms about the cursor; the middle button, or shift + drag, pans.
 """
@@ -55,6 +55,8 @@ def actions(app: App) -> list[Action]:
                lambda: app.user_drives_real),
         Action((k.K_v,), "v", "coverage", "coverage overlay on / off", app_toggle(app, "show_coverage"),
                lambda: app.show_coverage),
+        Action((k.K_o,), "o", "box tool", "drag draws a box obstacle instead of a wall", app_toggle(app, "box_tool"),
+               lambda: app.box_tool),
         Action((k.K_s,), "s", "save", "save the world file", app.save_world),
         Action((k.K_l,), "l", "load", "load the world file", app.load_world),
         Action((k.K_z,), "z", "undo", "undo the last change to the walls", lambda: app.editor.undo()),
@@ -140,7 +142,7 @@ class Controls:
         else:
             app.editor.selected = None
             start = app.editor.snap(*world_pt)
-            self.drag = ("draw", start, start)
+            self.drag = ("box" if app.box_tool else "draw", start, start)
 
     def motion(self, pos: tuple[int, int], rel: tuple[int, int]) -> None:
         app, drag = self.app, self.drag
@@ -149,8 +151,8 @@ class Controls:
         if drag[0] == "pan":
             app.view.pan(pos[0] - drag[1][0], pos[1] - drag[1][1])
             self.drag = ("pan", pos)
-        elif drag[0] == "draw":
-            self.drag = ("draw", drag[1], app.editor.snap(*app.view.to_world(*pos)))
+        elif drag[0] in ("draw", "box"):
+            self.drag = (drag[0], drag[1], app.editor.snap(*app.view.to_world(*pos)))
         elif drag[0] == "move":
             x, y = app.view.to_world(*pos)
             app.editor.move_to(drag[1], drag[2], x - drag[3][0], y - drag[3][1])
@@ -164,10 +166,15 @@ class Controls:
             end = app.editor.snap(*app.view.to_world(*pos))
             if app.editor.add_segment(drag[1], end):
                 app.say(f"wall {len(app.editor.walls) - 1}: {drag[1]} -> {end}")
+        elif drag[0] == "box" and button == 1:
+            end = app.editor.snap(*app.view.to_world(*pos))
+            if app.editor.add_box(drag[1], end):
+                app.say(f"obstacle {len(app.editor.walls) - 1}: box {drag[1]} - {end}")
         elif drag[0] == "move" and app.editor.version == drag[4]:
             app.editor.drop_undo()  # a click that selected without moving: nothing to undo
 
-    def preview(self) -> tuple[tuple[float, float], tuple[float, float]] | None:
-        if self.drag is not None and self.drag[0] == "draw" and self.drag[1] != self.drag[2]:
-            return self.drag[1], self.drag[2]
+    def preview(self) -> tuple[str, tuple[float, float], tuple[float, float]] | None:
+        """The wall or box being drawn: (kind, a, b)."""
+        if self.drag is not None and self.drag[0] in ("draw", "box") and self.drag[1] != self.drag[2]:
+            return self.drag[0], self.drag[1], self.drag[2]
         return None

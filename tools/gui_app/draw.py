@@ -39,6 +39,7 @@ class Painter:
         self._grid: pygame.Surface | None = None
         self._cov_key: tuple[Any, ...] | None = None
         self._cov: pygame.Surface | None = None
+        self._trails: dict[tuple[Any, ...], list[tuple[int, int]]] = {}
 
     def text(self, s: str, pos: tuple[int, int], colour: tuple[int, int, int] = TEXT, size: int = 20,
              anchor: str = "topleft") -> pygame.Rect:
@@ -92,8 +93,12 @@ class Painter:
                 pygame.draw.polygon(self.surface, (150, 150, 158) if i != selected else SELECTED, pts)
                 pygame.draw.polygon(self.surface, colour, pts, width)
 
-    def preview(self, view: Viewport, a: tuple[float, float], b: tuple[float, float]) -> None:
-        pygame.draw.line(self.surface, PREVIEW, view.to_screen(*a), view.to_screen(*b), 3)
+    def preview(self, view: Viewport, kind: str, a: tuple[float, float], b: tuple[float, float]) -> None:
+        if kind == "box":
+            corners = [(a[0], a[1]), (b[0], a[1]), (b[0], b[1]), (a[0], b[1])]
+            pygame.draw.polygon(self.surface, PREVIEW, [view.to_screen(*c) for c in corners], 3)
+        else:
+            pygame.draw.line(self.surface, PREVIEW, view.to_screen(*a), view.to_screen(*b), 3)
         for p in (a, b):
             pygame.draw.circle(self.surface, PREVIEW, view.to_screen(*p), 4)
 
@@ -120,11 +125,19 @@ class Painter:
     # -- robots -------------------------------------------------------------
     def trail(self, view: Viewport, trail: Sequence[tuple[float, float, float]], colour: tuple[int, int, int],
               keep: int = 4000) -> None:
-        if len(trail) < 2:
-            return
-        pts = np.asarray(trail[-keep:], dtype=float)[:, :2]
-        light = tuple(int(c + (255 - c) * 0.55) for c in colour)
-        pygame.draw.lines(self.surface, light, False, view.to_screen_array(pts).tolist(), 2)
+        """The last `keep` poses as a line; their pixels are converted once each (until the view changes)."""
+        key = (id(trail), view.version, view.rect)
+        done = self._trails.get(key)
+        if done is None or len(done) > len(trail):
+            self._trails = {k: v for k, v in self._trails.items() if k[0] != id(trail)}
+            done = self._trails[key] = []
+        if len(trail) > len(done):
+            new = np.asarray(trail[len(done):], dtype=float).reshape(-1, 3)[:, :2]
+            done.extend(map(tuple, view.to_screen_array(new).round().astype(int).tolist()))
+        if len(done) >= 2:
+            light = (int(colour[0] + (255 - colour[0]) * 0.55), int(colour[1] + (255 - colour[1]) * 0.55),
+                     int(colour[2] + (255 - colour[2]) * 0.55))
+            pygame.draw.lines(self.surface, light, False, done[-keep:], 2)
 
     def robot(self, view: Viewport, pose: tuple[float, float, float], radius: float, colour: tuple[int, int, int],
               contact: bool = False) -> None:
@@ -182,7 +195,7 @@ class Painter:
         pygame.draw.line(self.surface, DIM, (mid, rect.y), (mid, rect.bottom))
         pygame.draw.rect(self.surface, DIM, rect, 1)
 
-    def plot(self, rect: pygame.Rect, t: Sequence[float], frac: Sequence[float], t90: float | None) -> None:
+    def plot(self, rect: pygame.Rect, t: list[float], frac: list[float], t90: float | None) -> None:
         """Coverage against time, 0..100 %, with the 90 % line."""
         pygame.draw.rect(self.surface, (255, 255, 255), rect)
         y90 = rect.bottom - int(0.9 * rect.height)
@@ -203,7 +216,7 @@ class Painter:
     def button(self, rect: pygame.Rect, label: str, on: bool, hover: bool) -> None:
         fill = (200, 220, 250) if on else (252, 252, 252)
         if hover:
-            fill = tuple(max(0, c - 18) for c in fill)
+            fill = (fill[0] - 18, fill[1] - 18, fill[2] - 18)
         pygame.draw.rect(self.surface, fill, rect, border_radius=4)
         pygame.draw.rect(self.surface, DIM, rect, 1, border_radius=4)
         self.text(label, rect.center, TEXT, 16, "center")

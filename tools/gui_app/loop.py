@@ -42,16 +42,25 @@ def run(app: App, frames: int | None = None) -> int:
 
 
 def time_frames(app: App, frames: int, warmup: int = 30) -> list[float]:
-    """Wall seconds of each frame (events, step, draw, flip), uncapped, after `warmup` frames."""
+    """Wall seconds of each frame's work (events, step, draw, flip), after `warmup` frames.
+
+    Frames start every 1/60 s as in the window (the real robot's frames arrive
+    at their own pace meanwhile); the wait for the next start is not counted.
+    """
     times: list[float] = []
+    start = time.perf_counter()
     for k in range(warmup + frames):
         t0 = time.perf_counter()
         for event in pygame.event.get():
             app.controls.handle(event)
         app.frame(FRAME_S)
         pygame.display.flip()
+        t1 = time.perf_counter()
         if k >= warmup:
-            times.append(time.perf_counter() - t0)
+            times.append(t1 - t0)
+        wait = start + (k + 1) * FRAME_S - t1
+        if wait > 0:
+            time.sleep(wait)
     return times
 
 

@@ -30,6 +30,8 @@ class Renderer:
     def __init__(self, app: App) -> None:
         self.app = app
         self.p = draw.Painter(app.surface)
+        self._exit: tuple[object, tuple[float, float]] = (None, (0.0, 0.0))
+        self._t90: tuple[object, int, float | None] = (None, 0, None)
 
     def draw(self) -> None:
         surf = self.app.surface
@@ -61,10 +63,31 @@ class Renderer:
         for bot, name in bots:
             self.robot(bot, name)
         if app.sim.sim.exit_time is not None:
-            i = next((k for k, t in enumerate(app.sim.sim._t) if t >= app.sim.sim.exit_time), -1)  # noqa: SLF001
-            x, y, _ = app.sim.trail[i]
+            x, y = self.exit_point()
             p.flag(view, x, y)
         surf.set_clip(None)
+
+    def exit_point(self) -> tuple[float, float]:
+        """Where the simulated robot was when it left the room (found once per run)."""
+        sim = self.app.sim.sim
+        if self._exit[0] is not sim:
+            i = next((k for k, t in enumerate(sim._t) if t >= sim.exit_time), -1)  # type: ignore[operator]  # noqa: SLF001
+            self._exit = (sim, sim._pose[i][:2])  # noqa: SLF001
+        return self._exit[1]  # type: ignore[return-value]
+
+    def time_to_90(self) -> float | None:
+        """The first control instant with coverage >= 90 %, scanning only the instants not seen yet."""
+        cov = self.app.sim.sim.coverage
+        seen_cov, seen, t90 = self._t90
+        if seen_cov is not cov:
+            seen, t90 = 0, None
+        if t90 is None:
+            fr = cov.fractions
+            hit = next((k for k in range(seen, len(fr)) if fr[k] >= 0.9), None)
+            t90 = self.app.sim.sim._t[hit] if hit is not None else None  # noqa: SLF001
+            seen = len(fr)
+        self._t90 = (cov, seen, t90)
+        return t90
 
     def robot(self, bot: SimBot | RealBot, name: str) -> None:
         app, p = self.app, self.p
@@ -87,7 +110,7 @@ class Renderer:
             y += 100
         cov = app.sim.sim.coverage
         t = app.sim.sim._t  # noqa: SLF001
-        t90 = next((tt for tt, f in zip(t, cov.fractions) if f >= 0.9), None)
+        t90 = self.time_to_90()
         p.text(f"coverage of the simulated robot: {100 * cov.fraction:.1f} %", (x, y + 4), draw.TEXT, 20)
         p.plot(pygame.Rect(x, y + 24, 360, 120), t, cov.fractions, t90)
         for rect, action in app.controls.buttons:
@@ -132,7 +155,7 @@ class Renderer:
         factor = app.clock.factor()
         rtf = f"{factor:.2f}x real time" if factor is not None else "-"
         exit_text = f"exit found at {sim.exit_time:.1f} s" if sim.exit_time is not None else "no exit yet"
-        real = "real robot: " + ("on " + app.s.port if app.real is not None else app.real_error)
+        real = "real robot: " + (f"on {app.s.port}" if app.real is not None else app.real_error)
         line1 = (f"t = {sim.robot.t:7.2f} s   {rtf}   speed {app.s.speed:g}x   "
                  f"{'real time (clock Dt)' if app.s.realtime else 'fixed step'}   "
                  f"{'RUNNING' if app.running else 'PAUSED'}   rules {app.s.rules}   L {app.s.emitter_pct} %   "
@@ -150,7 +173,7 @@ class Renderer:
 
 MOUSE_HELP: Sequence[str] = (
     "arrows / joystick: drive the user robot (u: the simulated one too, i: the real one)",
-    "mouse: drag on the floor draws a wall (snapped to the grid); drag a wall moves it;",
+    "mouse: drag on the floor draws a wall (o: a box obstacle), snapped to the grid; drag a wall moves it;",
     "       right click deletes a wall; wheel zooms; middle drag or shift+drag pans",
     "esc, q: quit",
 )

@@ -63,9 +63,9 @@ class UserControl:
     def stick(self) -> tuple[float, float]:
         """(forward, turn left) in -1..1 from the arrows, else the d-pad, else the sticks."""
         if self.arrows:
-            fwd = (pygame.K_UP in self.arrows) - (pygame.K_DOWN in self.arrows)
-            turn = (pygame.K_LEFT in self.arrows) - (pygame.K_RIGHT in self.arrows)
-            return float(fwd), float(turn)
+            up_down = (pygame.K_UP in self.arrows) - (pygame.K_DOWN in self.arrows)
+            left_right = (pygame.K_LEFT in self.arrows) - (pygame.K_RIGHT in self.arrows)
+            return float(up_down), float(left_right)
         for hx, hy in self.hats.values():
             if hx or hy:
                 return float(hy), float(-hx)

@@ -87,6 +87,16 @@ class WallEditor:
         self.selected = len(self.walls) - 1
         return True
 
+    def add_box(self, a: tuple[float, float], b: tuple[float, float]) -> bool:
+        """A rectangular obstacle (a convex polygon) with corners a and b snapped; False if it has no area."""
+        (x0, y0), (x1, y1) = self.snap(*a), self.snap(*b)
+        if abs(x1 - x0) < 1e-9 or abs(y1 - y0) < 1e-9:
+            return False
+        xl, xh, yl, yh = min(x0, x1), max(x0, x1), min(y0, y1), max(y0, y1)
+        self._change([*self.walls, {"polygon": [[xl, yl], [xh, yl], [xh, yh], [xl, yh]]}])
+        self.selected = len(self.walls) - 1
+        return True
+
     def pick(self, x: float, y: float, tolerance: float) -> int | None:
         """The wall nearest to (x, y) within tolerance (m), or None."""
         best, best_d = None, tolerance
