@@ -198,6 +198,11 @@ def test_controls_noise_rules_emitter_realtime_step_reset(make_app: Any) -> None
     t = app.sim.sim.robot.t
     loop.run(app, 30)  # real time: each frame is one pass of Dt = 1/60 s
     assert app.sim.sim.robot.t == pytest.approx(t + 0.5, abs=1e-9)
+    n = len(app.sim.sim._t)
+    app.s.speed = 8.0  # a frame's Dt of 133 ms: passes of at most one period, no control period skipped
+    loop.run(app, 15)
+    assert len(app.sim.sim._t) - n == pytest.approx(8 * 15 / 60 / 0.040, abs=1)
+    assert app.sim.stepper.missed == 0
     key(pygame.K_SPACE)  # pause
     loop.run(app, 10)
     t = app.sim.sim.robot.t
@@ -227,18 +232,27 @@ def test_record_every_robot(make_app: Any, tmp_path: Path) -> None:
     assert (user_rec.cmd > 0).any()  # the user's orders turned into currents
 
 
-def test_the_real_robot_on_a_serial_port(make_app: Any, pty_pair: Any) -> None:
+def telemetry(enc: FrameEncoder, k: int) -> bytes:
+    """The k-th TELEMETRY frame of a robot driving straight ahead, 100 ticks a frame on both wheels."""
+    f = {"tick_ms": 40 * k, "mode": M.MODE_AUTONOMOUS, "flags": 0, "enc_l": 100 * k, "enc_r": 100 * k,
+         "ir_on": [900, 300, 160, 160, 160, 160, 160, 300], "ir_amb": [150] * 8, "i_ref_l_ma": 10,
+         "i_ref_r_ma": 10, "vbat_mv": 7400}
+    return enc.encode(M.TELEMETRY, M.pack_payload(M.TELEMETRY, f))
+
+
+def run_until(app: App, frames: int) -> None:
+    for _ in range(50):
+        loop.run(app, 1)
+        if app.real is not None and app.real.frames >= frames:
+            return
+
+
+def test_the_real_robot_on_a_serial_port(make_app: Any, pty_pair: Any, tmp_path: Path) -> None:
     app = make_app(port=pty_pair.path)
     enc = FrameEncoder()
-    for k in range(10):  # 100 ticks a frame on both wheels: straight ahead
-        f = {"tick_ms": 40 * k, "mode": M.MODE_AUTONOMOUS, "flags": 0, "enc_l": 100 * k, "enc_r": 100 * k,
-             "ir_on": [900, 300, 160, 160, 160, 160, 160, 300], "ir_amb": [150] * 8, "i_ref_l_ma": 10,
-             "i_ref_r_ma": 10, "vbat_mv": 7400}
-        pty_pair.write(enc.encode(M.TELEMETRY, M.pack_payload(M.TELEMETRY, f)))
-    for _ in range(20):
-        loop.run(app, 1)
-        if app.real is not None and app.real.frames == 10:
-            break
+    for k in range(10):
+        pty_pair.write(telemetry(enc, k))
+    run_until(app, 10)
     assert app.real is not None and app.real.frames == 10
     assert app.real.counts() == [750, 150, 10, 10, 10, 10, 10, 150]
     dist = 900 * math.pi * DEFAULT.wheel_radius * 2 / DEFAULT.ticks_per_rev
@@ -251,6 +265,15 @@ def test_the_real_robot_on_a_serial_port(make_app: Any, pty_pair: Any) -> None:
     commands = [M.unpack_payload(t, p) for t, _s, p in sent if t == M.COMMAND]
     assert commands and commands[0]["mode"] == M.MODE_HOST
     assert commands[0]["right"] > 0 > commands[0]["left"]
+    key(pygame.K_c)  # record: the real robot's TELEMETRY goes to its own file
+    loop.run(app, 1)
+    for k in range(10, 15):
+        pty_pair.write(telemetry(enc, k))
+    run_until(app, 15)
+    key(pygame.K_c)
+    loop.run(app, 1)
+    real = load_recording(next(tmp_path.glob("gui-*-real.csv")))
+    assert real.enc[:, 0].tolist() == [1000, 1100, 1200, 1300, 1400] and real.pose is None
 
 
 def test_the_real_robots_own_odometry_is_used_when_telemetry_carries_it(make_app: Any, pty_pair: Any) -> None:

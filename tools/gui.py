@@ -69,6 +69,8 @@ def settings_from(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         raise CliError(f"--frames must be >= 1, not {args.frames}")
     if args.screenshot and args.frames is None:
         raise CliError("--screenshot needs --frames N (headless run)")
+    if args.screenshot and not Path(args.screenshot).resolve().parent.is_dir():
+        raise CliError(f"--screenshot {args.screenshot}: no such folder")
     out = Path(args.out)
     if not out.is_dir():
         raise CliError(f"--out {out}: no such folder")
@@ -84,10 +86,14 @@ def run(args: argparse.Namespace) -> int:
     from tools.gui_app import loop
 
     settings = settings_from(args)
+    import pygame
+
     try:
         app = loop.open_window(settings, headless=args.frames is not None)
     except LinkError as exc:
         raise CliError(f"--port: {exc}") from None
+    except pygame.error as exc:
+        raise CliError(f"cannot open a window ({exc}); without a display run headless: --frames N") from None
     try:
         frames = loop.run(app, args.frames)
         if args.screenshot:

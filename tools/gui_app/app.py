@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import collections
 import datetime
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,6 +32,7 @@ from tools.gui_app.world_edit import WallEditor
 SIZE = (1280, 780)
 ROOM_RECT = (0, 0, 900, 740)
 SPEEDS = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0)
+MAX_CATCH_UP = 0.1  # s of wall time a fixed-step frame makes up at most: a slow frame must not snowball
 MAX_SPEED = M.param_by_name("max_speed")[4]  # mm/s, the firmware's default wheel-speed limit
 
 
@@ -127,7 +129,7 @@ class App:
         self.user.orders = orders
         self.sim.orders = orders if self.user_drives_sim else None
         if self.running:
-            self.advance(dt * self.s.speed)
+            self.advance((dt if self.s.realtime else min(dt, MAX_CATCH_UP)) * self.s.speed)
         if self.real is not None:
             self.real.orders = orders if self.user_drives_real else None
             self.real.poll()
@@ -145,10 +147,15 @@ class App:
             self._world_version = self.editor.version
 
     def advance(self, sim_seconds: float) -> None:
+        """Fixed step: whole periods worth sim_seconds.  Real time: the frame's Dt in passes of at most
+        one control period (the window's loop is slower than run_realtime's, whose passes are ~2 ms:
+        one pass per frame at a high speed factor would skip control periods that run_realtime runs)."""
         self.sync_world()
+        passes = max(1, math.ceil(sim_seconds / self.sim.sim.cycle_s - 1e-9))
         for bot in self.sim_bots:
             if self.s.realtime:
-                bot.stepper.clock(sim_seconds)
+                for _ in range(passes):
+                    bot.stepper.clock(sim_seconds / passes)
             else:
                 bot.stepper.fixed(sim_seconds)
 

@@ -7,6 +7,7 @@ fast the machine is: N frames at speed k are N k / 60 simulated seconds.
 from __future__ import annotations
 
 import os
+import sys
 import time
 
 import pygame
@@ -17,9 +18,16 @@ FRAME_S = 1.0 / 60.0
 
 
 def open_window(settings: Settings, headless: bool) -> App:
+    chosen = os.environ.get("SDL_VIDEODRIVER")
+    if (not headless and not chosen and sys.platform.startswith("linux")
+            and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))):
+        raise pygame.error("no display: neither DISPLAY nor WAYLAND_DISPLAY is set")
     if headless:
         os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
     pygame.display.init()
+    if not headless and not chosen and pygame.display.get_driver() in ("offscreen", "dummy"):
+        pygame.display.quit()  # SDL found no display and fell back to drawing nowhere: a window nobody sees
+        raise pygame.error("no display found")
     pygame.font.init()
     pygame.joystick.init()
     surface = pygame.display.set_mode(SIZE)

@@ -46,8 +46,13 @@ class UserControl:
             self.last_device = self._name(event.instance_id)
             return True
         if t == pygame.JOYDEVICEADDED:
-            joy = pygame.joystick.Joystick(event.device_index)
+            try:
+                joy = pygame.joystick.Joystick(event.device_index)
+            except pygame.error as exc:  # unplugged again already, or no driver
+                self.last_device = f"joystick {event.device_index} could not be opened: {exc}"
+                return True
             self.joysticks[joy.get_instance_id()] = joy
+            self.last_device = joy.get_name()
             return True
         if t == pygame.JOYDEVICEREMOVED:
             self.joysticks.pop(event.instance_id, None)
