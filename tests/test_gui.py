@@ -297,3 +297,11 @@ def test_headless_command_writes_a_screenshot(tmp_path: Path) -> None:
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "no_such_room" in bad.stderr
     busy = run_twinbot("gui", "--port", str(tmp_path / "ttyNOPE"), "--frames", "1")
     assert busy.returncode == 2 and "no such port" in busy.stderr
+
+
+def test_bench_gui_smoke() -> None:
+    """The benchmark runs and prints its table (no speed asserted: benchmarks are not timed tests)."""
+    r = run_twinbot("bench", "gui", "--frames", "20", "--prerun", "1", "--no-board")
+    assert r.returncode == 0, r.stderr
+    assert "simulated + user robot, speed 1" in r.stdout and "median ms" in r.stdout
+    assert "[NOT RUN]" in r.stdout  # the three-robot target needs the virtual board

@@ -38,6 +38,8 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
     p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1],
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--frames", type=int, default=600, help="timed frames per workload (default 600)")
+    p.add_argument("--prerun", type=float, default=PRERUN,
+                   help=f"simulated seconds run before timing, to grow the trails (default {PRERUN:g})")
     p.add_argument("--no-board", action="store_true", help="skip the workloads with a real robot (virtual board)")
     p.set_defaults(func=run)
 
@@ -54,7 +56,7 @@ def start_board() -> tuple[subprocess.Popen[str], str]:
     return proc, line.split(": ", 1)[1].strip()
 
 
-def workload(frames: int, speed: float, port: str | None) -> dict[str, Any]:
+def workload(frames: int, speed: float, port: str | None, prerun: float) -> dict[str, Any]:
     from host_sim.world import builtin_world
     from host_sim.params import DEFAULT
     from protocol import messages as M
@@ -68,7 +70,7 @@ def workload(frames: int, speed: float, port: str | None) -> dict[str, Any]:
             app.real.link.send(M.COMMAND, {"mode": M.MODE_AUTONOMOUS, "left": 0, "right": 0})
             time.sleep(0.5)
         assert app.show_coverage
-        app.advance(PRERUN)
+        app.advance(prerun)
         times = loop.time_frames(app, frames)
         real_frames = app.real.frames if app.real is not None else 0
         t_sim = app.sim.sim.robot.t
@@ -78,20 +80,22 @@ def workload(frames: int, speed: float, port: str | None) -> dict[str, Any]:
     med = statistics.median(times)
     return {"speed": speed, "robots": 3 if port else 2, "frames": len(times), "median_ms": 1000 * med,
             "p90_ms": 1000 * statistics.quantiles(times, n=10)[-1], "max_ms": 1000 * max(times),
-            "fps": 1 / med, "telemetry": real_frames, "sim_s": t_sim - PRERUN}
+            "fps": 1 / med, "telemetry": real_frames, "sim_s": t_sim - prerun}
 
 
 def run(args: argparse.Namespace) -> int:
     if args.frames < 10:
         raise CliError("--frames must be >= 10")
+    if args.prerun < 0:
+        raise CliError("--prerun must be >= 0")
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
     rows: list[tuple[str, dict[str, Any]]] = []
-    rows.append(("simulated + user robot, speed 1", workload(args.frames, 1.0, None)))
+    rows.append(("simulated + user robot, speed 1", workload(args.frames, 1.0, None, args.prerun)))
     if not args.no_board:
         proc, pty = start_board()
         try:
-            rows.append(("three robots (real = virtual board), speed 1", workload(args.frames, 1.0, pty)))
-            rows.append(("three robots (real = virtual board), speed 8", workload(args.frames, 8.0, pty)))
+            rows.append(("three robots (real = virtual board), speed 1", workload(args.frames, 1.0, pty, args.prerun)))
+            rows.append(("three robots (real = virtual board), speed 8", workload(args.frames, 8.0, pty, args.prerun)))
         finally:
             proc.terminate()
             proc.wait(10)
@@ -103,12 +107,13 @@ def print_report(args: argparse.Namespace, rows: list[tuple[str, dict[str, Any]]
     import pygame
 
     print("twinbot bench gui")
-    print(f"command:  twinbot bench gui --frames {args.frames}{' --no-board' if args.no_board else ''}")
+    print(f"command:  twinbot bench gui --frames {args.frames} --prerun {args.prerun:g}"
+          f"{' --no-board' if args.no_board else ''}")
     print(f"machine:  {platform.platform()}, {platform.machine()}, {os.cpu_count()} CPUs, "
           f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     print(f"pygame-ce {pygame.version.ver} (SDL {'.'.join(map(str, pygame.get_sdl_version()))}), "
           f"video driver {os.environ.get('SDL_VIDEODRIVER')}, window 1280 x 780, paper_room, coverage overlay, "
-          f"rays and trails on; trails {PRERUN:.0f} s long before timing; frames started at 60 Hz")
+          f"rays and trails on; trails {args.prerun:g} s long before timing; frames started at 60 Hz")
     print()
     head = f"{'workload':<46}| median ms | p90 ms | max ms | 1/median | sim s | TELEMETRY rx"
     print(head)

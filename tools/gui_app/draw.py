@@ -227,4 +227,10 @@ class Painter:
         self.surface.blit(box, rect)
         pygame.draw.rect(self.surface, DIM, rect, 1)
         for i, line in enumerate(lines):
-            self.text(line, (rect.x + 14, rect.y + 10 + 19 * i), TEXT, 20)
+            y = rect.y + 10 + 19 * i
+            if "\t" in line:  # key \t what it does: two columns
+                k, what = line.split("\t", 1)
+                self.text(k, (rect.x + 70, y), TEXT, 20, "topright")
+                self.text(what, (rect.x + 86, y), TEXT, 20)
+            else:
+                self.text(line, (rect.x + 14, y), TEXT, 20)

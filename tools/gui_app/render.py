@@ -166,7 +166,7 @@ class Renderer:
 
     def help(self) -> None:
         lines: list[str] = ["twinbot gui: keys (buttons on the right do the same)", ""]
-        lines += [f"{a.key_label:>7}   {a.help}" for a in self.app.controls.actions]
+        lines += [f"{a.key_label}\t{a.help}" for a in self.app.controls.actions]
         lines += ["", *MOUSE_HELP]
         self.p.overlay(lines, pygame.Rect(60, 30, 780, 19 * len(lines) + 24))
 
