@@ -186,6 +186,17 @@ def test_the_simulated_robot_explores_with_its_firmware(make_app: Any) -> None:
     assert app.user.pose == pytest.approx(app.user.sim.robot.pose) and app.user.setpoints() == (0, 0)
 
 
+def test_the_simulated_robot_on_a_virtual_board_pil_drives_as_in_process(make_app: Any) -> None:
+    sil = make_app()
+    loop.run(sil, 120)
+    pose = sil.sim.pose
+    pil = make_app(pil=True)  # the firmware under MicroPython, this process its hardware and host
+    loop.run(pil, 120)
+    assert pil.sim.pose == pose  # fixed step: SIL and PIL bit for bit
+    assert pil.sim.mode() == M.MODE_AUTONOMOUS  # from its TELEMETRY
+    assert pil.sim.currents() == sil.sim.currents() != (0, 0)
+
+
 def test_controls_noise_rules_emitter_realtime_step_reset(make_app: Any) -> None:
     app = make_app()
     for k in (pygame.K_n, pygame.K_f, pygame.K_RIGHTBRACKET, pygame.K_t):

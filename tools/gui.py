@@ -37,6 +37,8 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
     p.add_argument("--world", default="paper_room", help="built-in world (paper_room, maze, arena) or a world file")
     p.add_argument("--rules", choices=("first", "refined"), default="refined", help="fuzzy rule set (default refined)")
     p.add_argument("--port", help="the real robot's serial port (or a virtual board's pty); absent without it")
+    p.add_argument("--pil", action="store_true",
+                   help="the simulated robot's firmware on a virtual board under MicroPython (processor in the loop)")
     p.add_argument("--speed", type=float, default=1.0, help="k x real time (default 1)")
     p.add_argument("--realtime", action="store_true", help="the step from the clock (the paper's Dt); default fixed")
     p.add_argument("--no-noise", action="store_true", help="noise-free sensors")
@@ -76,7 +78,7 @@ def settings_from(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         raise CliError(f"--out {out}: no such folder")
     save = Path(args.save) if args.save else (Path(args.world) if args.world not in BUILTIN_NAMES
                                               else out / f"{world.name}.json")
-    return Settings(world=world, params=params, rules=args.rules, port=args.port, speed=args.speed,
+    return Settings(world=world, params=params, rules=args.rules, port=args.port, pil=args.pil, speed=args.speed,
                     realtime=args.realtime, noise=not args.no_noise, emitter_pct=args.emitter, seed=args.seed,
                     world_file=save, out_dir=out)
 
@@ -92,8 +94,10 @@ def run(args: argparse.Namespace) -> int:
         app = loop.open_window(settings, headless=args.frames is not None)
     except LinkError as exc:
         raise CliError(f"--port: {exc}") from None
-    except pygame.error as exc:
+    except pygame.error as exc:  # (a RuntimeError too: before the next clause)
         raise CliError(f"cannot open a window ({exc}); without a display run headless: --frames N") from None
+    except RuntimeError as exc:  # the virtual board of --pil did not start
+        raise CliError(f"--pil: {exc}") from None
     try:
         frames = loop.run(app, args.frames)
         if args.screenshot:

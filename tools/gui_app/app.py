@@ -42,6 +42,7 @@ class Settings:
     params: RobotParams
     rules: str = "refined"
     port: str | None = None
+    pil: bool = False  # the simulated robot's firmware on a virtual board (MicroPython) instead of in process
     speed: float = 1.0
     realtime: bool = False
     noise: bool = True
@@ -105,7 +106,10 @@ class App:
         s, world = self.s, self.editor.world
         rule_set = RULE_SETS[s.rules]
         common = dict(seed=s.seed, noise=s.noise, emitter_pct=s.emitter_pct)
-        self.sim = SimBot("simulated", world, s.params, rule_set, user=False, **common)  # type: ignore[arg-type]
+        for old in (getattr(self, "sim", None), getattr(self, "user", None)):
+            if old is not None:
+                old.close()
+        self.sim = SimBot("simulated", world, s.params, rule_set, user=False, pil=s.pil, **common)  # type: ignore[arg-type]
         self.user = SimBot("user", world, s.params, rule_set, user=True, **common)  # type: ignore[arg-type]
 
     def _open_real(self, port: str) -> None:
@@ -279,5 +283,7 @@ class App:
     def close(self) -> None:
         if self.recording:
             self.toggle_record()
+        for bot in self.sim_bots:
+            bot.close()
         if self.real is not None:
             self.real.close()

@@ -33,7 +33,7 @@ COLOURS = {"simulated": (40, 100, 230), "user": (20, 150, 60), "real": (235, 120
 class Painter:
     def __init__(self, surface: pygame.Surface) -> None:
         self.surface = surface
-        self.fonts = {size: pygame.font.Font(None, size) for size in (16, 20, 24)}
+        self.fonts = {size: pygame.font.Font(None, size) for size in (16, 18, 20, 24)}
         self._text: dict[tuple[str, tuple[int, int, int], int], pygame.Surface] = {}
         self._grid_key: tuple[Any, ...] | None = None
         self._grid: pygame.Surface | None = None

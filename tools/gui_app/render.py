@@ -126,12 +126,18 @@ class Renderer:
         if bot is None:
             p.text(f"real robot: {self.app.real_error}", (x + 18, y), draw.DIM, 20)
             return
-        p.text(self.robot_line(bot, name), (x + 18, y), draw.TEXT, 20)
+        p.text(self.robot_line(bot, name), (x + 18, y + 1), draw.TEXT, 18)
         p.bars(pygame.Rect(x, y + 22, 200, 54), bot.counts(), colour, BAR_FULL)
         if isinstance(bot, SimBot):
-            left, right = bot.setpoints()
-            p.text("wheel set-points, mm/s", (x + 212, y + 20), draw.DIM, 16)
-            p.setpoints(pygame.Rect(x + 212, y + 34, 148, 42), left, right, self.app.user_control.max_speed, colour)
+            sp = bot.setpoints()
+            rect = pygame.Rect(x + 212, y + 34, 148, 42)
+            if sp is not None:
+                p.text("wheel set-points, mm/s", (x + 212, y + 20), draw.DIM, 16)
+                p.setpoints(rect, sp[0], sp[1], self.app.user_control.max_speed, colour)
+            else:  # PIL, and TELEMETRY without set-points: the currents the firmware set
+                p.text("current references, mA", (x + 212, y + 20), draw.DIM, 16)
+                i_l, i_r = bot.currents()
+                p.setpoints(rect, i_l, i_r, int(1000 * self.app.s.params.current_limit), colour)
         else:
             p.text(bot.source, (x + 212, y + 24), draw.DIM, 16)
             p.text(f"{bot.frames} TELEMETRY frames", (x + 212, y + 40), draw.DIM, 16)
@@ -140,8 +146,9 @@ class Renderer:
         x, y, phi = bot.pose
         where = f"({x:.2f}, {y:.2f}) m"
         if isinstance(bot, SimBot):
-            mode = M.MODE_NAMES[bot.firmware.mode]
-            return f"{name}  {mode}  {where}  {bot.sim.robot.collisions} coll."
+            m = bot.mode()
+            mode = M.MODE_NAMES[m] if m is not None else "?"
+            return f"{name}{' (PIL)' if bot.pil else ''}  {mode}  {where}  {bot.sim.robot.collisions} coll."
         mode = M.MODE_NAMES[int(bot.last["mode"])] if bot.last is not None else "?"  # type: ignore[call-overload]
         return f"real  {mode}  {where}"
 

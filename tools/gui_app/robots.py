@@ -2,7 +2,9 @@
 
 - `SimBot`: a simulated robot (host_sim.sim_robot.SimRobot in a
   host_sim.simulation.Simulation) whose controller is the firmware itself,
-  in this process (host_sim.sil.SilController).  The *simulated robot* runs
+  in this process (host_sim.sil.SilController), or for the simulated robot
+  with --pil on a virtual board under MicroPython (host_sim.pil.PilController:
+  its mode and set-points are then known from its TELEMETRY only).  The *simulated robot* runs
   it in AUTONOMOUS mode (the fuzzy explorer); the *user robot* runs it in
   HOST mode, its wheel-speed orders from the user.  When the user's orders
   are routed to the simulated robot too, it is switched to HOST mode and
@@ -26,6 +28,7 @@ from firmware.odometry import EXACT, HEADING_TURN, Odometry
 from host_sim.ir_sensor import BEARINGS
 from host_sim.live import LiveStepper
 from host_sim.params import RobotParams
+from host_sim.pil import PilController
 from host_sim.recording import RecordingWriter
 from host_sim.serial_link import SerialLink
 from host_sim.sil import SilController
@@ -56,13 +59,16 @@ class SimBot:
     """A SimRobot with the firmware in SIL, stepped a frame at a time."""
 
     def __init__(self, name: str, world: World, params: RobotParams, rule_set: int, *, seed: int, noise: bool,
-                 emitter_pct: int, user: bool) -> None:
+                 emitter_pct: int, user: bool, pil: bool = False) -> None:
         self.name = name
         self.params = params
         self.seed = seed
         self.user = user  # the user robot: always HOST mode
-        self.controller = SilController(rule_set)
+        self.pil = pil
+        self.controller: Any = PilController(rule_set) if pil else SilController(rule_set)
         self.encoder = FrameEncoder()
+        self._host = False  # the last mode sent was HOST
+        self.last_telemetry: dict[str, object] | None = None
         self.sim = Simulation(world, params, self.controller, seed=seed, noise=noise)
         self.stepper = LiveStepper(self.sim, self._before_control)
         self.orders: tuple[int, int] | None = (0, 0) if user else None  # HOST wheel speeds, mm/s
@@ -78,8 +84,10 @@ class SimBot:
     def _before_control(self) -> None:
         if self.orders is not None:
             self._send(M.COMMAND, {"mode": M.MODE_HOST, "left": self.orders[0], "right": self.orders[1]})
-        elif self.firmware.mode != M.MODE_AUTONOMOUS:
+            self._host = True
+        elif self._host:  # the user let go: back to exploring
             self._send(M.COMMAND, {"mode": M.MODE_AUTONOMOUS, "left": 0, "right": 0})
+            self._host = False
 
     def set_param(self, name: str, value: int) -> None:
         self._send(M.PARAM_SET, {"param": M.param_by_name(name)[0], "value": int(value)})
@@ -102,7 +110,13 @@ class SimBot:
     # -- what is drawn ---------------------------------------------------
     @property
     def firmware(self) -> Any:
+        """The firmware's Robot object (SIL only: under PIL it runs in another process)."""
         return self.controller.robot
+
+    def mode(self) -> int | None:
+        if not self.pil:
+            return int(self.firmware.mode)
+        return None if self.last_telemetry is None else int(self.last_telemetry["mode"])  # type: ignore[call-overload]
 
     @property
     def pose(self) -> Pose:
@@ -119,9 +133,21 @@ class SimBot:
             return [0] * 8
         return [max(0, a - b) for a, b in zip(s.adc_on, s.adc_off)]
 
-    def setpoints(self) -> tuple[int, int]:
-        """The wheel-speed set-points the firmware decided last cycle (the fuzzy outputs in AUTONOMOUS), mm/s."""
-        return int(self.firmware.setpoint_l), int(self.firmware.setpoint_r)
+    def setpoints(self) -> tuple[int, int] | None:
+        """The wheel-speed set-points the firmware decided last cycle (the fuzzy outputs in AUTONOMOUS), mm/s.
+
+        Under PIL from TELEMETRY's sp_l, sp_r if the firmware sends them, else None."""
+        if not self.pil:
+            return int(self.firmware.setpoint_l), int(self.firmware.setpoint_r)
+        f = self.last_telemetry
+        if f is None or "sp_l" not in f:
+            return None
+        return int(f["sp_l"]), int(f["sp_r"])  # type: ignore[call-overload]
+
+    def currents(self) -> tuple[int, int]:
+        """The current references the firmware set last cycle, mA."""
+        i_l, i_r = self.sim.robot.i_ref
+        return int(round(1000 * i_l)), int(round(1000 * i_r))
 
     def after_frame(self) -> None:
         """Collision marks; TELEMETRY drained (to the recording when one is on)."""
@@ -130,7 +156,12 @@ class SimBot:
             self._collisions_seen = robot.collisions
             self.collision_marks.append(robot.pose[:2])
         if self.recorder is None:
-            self.controller.telemetry()  # nobody records: drop the frames, or they pile up
+            frames = self.controller.telemetry()  # nobody records: take them, or they pile up
+            if frames:
+                self.last_telemetry = frames[-1]
+
+    def close(self) -> None:
+        self.controller.close()
 
     def record(self, writer: RecordingWriter | None) -> None:
         if self.recorder is not None and writer is None:
