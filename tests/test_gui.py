@@ -124,6 +124,30 @@ def test_a_box_obstacle_and_a_new_wall_are_seen_by_the_simulated_robots_sensors(
     assert len(load_world(tmp_path / "room.json").polygons) == len(WORLD.polygons) + 1  # valid, convex
 
 
+def test_a_convex_polygon_by_its_corners_and_a_concave_one_refused(make_app: Any) -> None:
+    app = make_app()
+    n0 = len(app.editor.walls)
+    key(pygame.K_o)
+    key(pygame.K_o)  # wall -> box -> polygon
+    loop.run(app, 1)
+    assert app.tool == "polygon"
+
+    def click(x: float, y: float) -> None:
+        post(pygame.MOUSEBUTTONDOWN, pos=app.view.to_screen(x, y), button=1)
+        post(pygame.MOUSEBUTTONUP, pos=app.view.to_screen(x, y), button=1)
+
+    for corner in [(1.5, 1.2), (1.8, 1.2), (1.5, 1.4), (1.61, 1.31)]:  # a dart: not convex
+        click(*corner)
+    key(pygame.K_RETURN)
+    loop.run(app, 1)
+    assert len(app.editor.walls) == n0 and "not convex" in app.message
+    key(pygame.K_BACKSPACE)  # take back the dent: a triangle
+    key(pygame.K_RETURN)
+    loop.run(app, 1)
+    assert app.editor.walls[-1] == {"polygon": [[1.5, 1.2], [1.8, 1.2], [1.5, 1.4]]}
+    assert app.controls.corners == []
+
+
 def test_zoom_and_pan(make_app: Any) -> None:
     app = make_app()
     scale = app.view.scale

@@ -32,6 +32,7 @@ from tools.gui_app.world_edit import WallEditor
 SIZE = (1280, 780)
 ROOM_RECT = (0, 0, 900, 740)
 SPEEDS = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0)
+TOOLS = ("wall", "box", "polygon")
 MAX_CATCH_UP = 0.1  # s of wall time a fixed-step frame makes up at most: a slow frame must not snowball
 MAX_SPEED = M.param_by_name("max_speed")[4]  # mm/s, the firmware's default wheel-speed limit
 
@@ -85,7 +86,7 @@ class App:
         self.running = True
         self.show_help = False
         self.show_coverage = True
-        self.box_tool = False  # drags draw box obstacles instead of walls
+        self.tool = "wall"  # what the mouse draws: "wall", "box" or "polygon"
         self.user_drives_sim = False
         self.user_drives_real = False
         self.recording: list[Path] = []
@@ -209,6 +210,13 @@ class App:
             bot.set_param(name, value)
         if self.real is not None:
             self.real.set_param(name, value)
+
+    def next_tool(self) -> None:
+        self.tool = TOOLS[(TOOLS.index(self.tool) + 1) % len(TOOLS)]
+        self.controls.corners = []
+        self.say({"wall": "wall tool: drag on the floor draws a wall",
+                  "box": "box tool: drag draws a rectangular obstacle",
+                  "polygon": "polygon tool: click the corners, Enter closes (convex only)"}[self.tool])
 
     def toggle_user_drives_sim(self) -> None:
         self.user_drives_sim = not self.user_drives_sim

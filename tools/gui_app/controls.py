@@ -1,7 +1,10 @@
 """Keys, buttons and the mouse: every control is one `Action`, reachable by a key and most by a button.
 
-The mouse edits the room: drag on empty floor draws a wall (both ends snap
-to the grid), or with the box tool (o) a rectangular obstacle; press on a wall selects it and dragging moves it (by whole
+The mouse edits the room with the current tool (o cycles them): *wall*,
+drag on empty floor draws a wall (both ends snap to the grid); *box*, drag
+draws a rectangular obstacle; *polygon*, each click adds a corner and
+Enter closes the convex obstacle (Backspace takes back a corner, Esc drops
+it).  With any tool, press on a wall selects it and dragging moves it (by whole
 grid steps); right click deletes the wall under the cursor; the wheel
 zooms about the cursor; the middle button, or shift + drag, pans.
 """
@@ -29,6 +32,7 @@ class Action:
     help: str
     do: Callable[[], Any]
     on: Callable[[], bool] | None = None  # lit button when true
+    caption: Callable[[], str] | None = None  # the button's text when it changes with the state
 
 
 def actions(app: App) -> list[Action]:
@@ -55,8 +59,8 @@ def actions(app: App) -> list[Action]:
                lambda: app.user_drives_real),
         Action((k.K_v,), "v", "coverage", "coverage overlay on / off", app_toggle(app, "show_coverage"),
                lambda: app.show_coverage),
-        Action((k.K_o,), "o", "box tool", "drag draws a box obstacle instead of a wall", app_toggle(app, "box_tool"),
-               lambda: app.box_tool),
+        Action((k.K_o,), "o", "tool", "drawing tool: wall / box / convex polygon", app.next_tool,
+               lambda: app.tool != "wall", lambda: f"tool: {app.tool}"),
         Action((k.K_s,), "s", "save", "save the world file", app.save_world),
         Action((k.K_l,), "l", "load", "load the world file", app.load_world),
         Action((k.K_z,), "z", "undo", "undo the last change to the walls", lambda: app.editor.undo()),
@@ -85,6 +89,8 @@ class Controls:
                                *BUTTON_SIZE)
             self.buttons.append((rect, a))
         self.drag: tuple[Any, ...] | None = None  # ("draw", a, b) | ("move", i, wall, start) | ("pan", pos)
+        self.corners: list[tuple[float, float]] = []  # the polygon being drawn
+        self.pointer = (0.0, 0.0)  # world point under the mouse
         self.quit = False
 
     def handle(self, event: pygame.event.Event) -> None:
@@ -107,6 +113,9 @@ class Controls:
                 app.view.zoom(1.15 ** event.y, pos)
 
     def key(self, event: pygame.event.Event) -> None:
+        if self.corners and event.key in (pygame.K_RETURN, pygame.K_KP_ENTER, pygame.K_BACKSPACE, pygame.K_ESCAPE):
+            self.polygon_key(event.key)
+            return
         if event.key in (pygame.K_ESCAPE, pygame.K_q):
             self.quit = True
             return
@@ -135,6 +144,9 @@ class Controls:
             return
         if button != 1:
             return
+        if app.tool == "polygon":
+            self.corners.append(app.editor.snap(*world_pt))
+            return
         if picked is not None:
             app.editor.selected = picked
             app.editor.begin_move()
@@ -142,10 +154,23 @@ class Controls:
         else:
             app.editor.selected = None
             start = app.editor.snap(*world_pt)
-            self.drag = ("box" if app.box_tool else "draw", start, start)
+            self.drag = ("box" if app.tool == "box" else "draw", start, start)
+
+    def polygon_key(self, k: int) -> None:
+        app = self.app
+        if k == pygame.K_BACKSPACE:
+            self.corners.pop()
+        elif k == pygame.K_ESCAPE:
+            self.corners = []
+        else:
+            error = app.editor.add_polygon(self.corners)
+            app.say(error or f"obstacle {len(app.editor.walls) - 1}: polygon of {len(self.corners)} corners")
+            if error is None:
+                self.corners = []
 
     def motion(self, pos: tuple[int, int], rel: tuple[int, int]) -> None:
         app, drag = self.app, self.drag
+        self.pointer = app.view.to_world(*pos)
         if drag is None:
             return
         if drag[0] == "pan":

@@ -102,6 +102,15 @@ class Painter:
         for p in (a, b):
             pygame.draw.circle(self.surface, PREVIEW, view.to_screen(*p), 4)
 
+    def corners(self, view: Viewport, corners: Sequence[tuple[float, float]], pointer: tuple[float, float]) -> None:
+        """The polygon being drawn: its corners, and the edge to the pointer."""
+        pts = [view.to_screen(*c) for c in corners]
+        if len(pts) >= 2:
+            pygame.draw.lines(self.surface, PREVIEW, False, pts, 3)
+        pygame.draw.line(self.surface, PREVIEW, pts[-1], view.to_screen(*pointer), 1)
+        for p in pts:
+            pygame.draw.circle(self.surface, PREVIEW, p, 4)
+
     def coverage(self, view: Viewport, covered: np.ndarray, count: int, resolution: float) -> None:
         """The covered cells of the free grid (row 0 at y = 0), over the floor.
 

@@ -57,6 +57,8 @@ class Renderer:
         preview = app.controls.preview()
         if preview is not None:
             p.preview(view, *preview)
+        if app.controls.corners:
+            p.corners(view, app.controls.corners, app.editor.snap(*app.controls.pointer))
         bots: list[tuple[SimBot | RealBot, str]] = [(app.user, "user"), (app.sim, "simulated")]
         if app.real is not None:
             bots.insert(0, (app.real, "real"))
@@ -115,7 +117,8 @@ class Renderer:
         p.plot(pygame.Rect(x, y + 24, 360, 120), t, cov.fractions, t90)
         for rect, action in app.controls.buttons:
             on = bool(action.on and action.on())
-            p.button(rect, action.label, on, rect.collidepoint(pygame.mouse.get_pos()))
+            label = action.caption() if action.caption else action.label
+            p.button(rect, label, on, rect.collidepoint(pygame.mouse.get_pos()))
         rows = (len(app.controls.buttons) + 3) // 4
         p.text("h: all keys and mouse controls", (x, rows * 30 + app.controls.buttons[0][0].y + 6), draw.DIM, 16)
 
@@ -180,7 +183,8 @@ class Renderer:
 
 MOUSE_HELP: Sequence[str] = (
     "arrows / joystick: drive the user robot (u: the simulated one too, i: the real one)",
-    "mouse: drag on the floor draws a wall (o: a box obstacle), snapped to the grid; drag a wall moves it;",
+    "mouse: drag on the floor draws a wall, snapped to the grid (o: box, or polygon: click corners, Enter);",
+    "       drag a wall moves it;",
     "       right click deletes a wall; wheel zooms; middle drag or shift+drag pans",
     "esc, q: quit",
 )

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from host_sim.world import World, load_world, save_world
+from host_sim.world import World, WorldError, load_world, save_world, world_from_dict
 
 UNDO_DEPTH = 200
 
@@ -96,6 +96,18 @@ class WallEditor:
         self._change([*self.walls, {"polygon": [[xl, yl], [xh, yl], [xh, yh], [xl, yh]]}])
         self.selected = len(self.walls) - 1
         return True
+
+    def add_polygon(self, corners: list[tuple[float, float]]) -> str | None:
+        """A convex obstacle with these (snapped) corners; None if added, else why not (the world format's check)."""
+        walls = [*self.walls, {"polygon": [list(self.snap(*c)) for c in corners]}]
+        data = self.world.to_dict() | {"walls": walls}
+        try:
+            world_from_dict(data, "the new polygon")
+        except WorldError as exc:
+            return str(exc).replace(f"walls[{len(walls) - 1}].polygon: ", "")
+        self._change(walls)
+        self.selected = len(walls) - 1
+        return None
 
     def pick(self, x: float, y: float, tolerance: float) -> int | None:
         """The wall nearest to (x, y) within tolerance (m), or None."""
