@@ -16,7 +16,6 @@ time is measured by `twinbot bench gui`.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from tools.cli import CliError
@@ -109,4 +108,4 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-__all__ = ["register", "run", "sys"]
+__all__ = ["register", "run"]
