@@ -31,6 +31,7 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
     p.add_argument("--params", metavar="FILE", help="the twin's robot parameters (default: the recording's sidecar)")
     p.add_argument("--world", metavar="NAME|FILE", help="the walls (default: the recording's sidecar)")
     p.add_argument("--json", metavar="FILE", help="write the verdict and its evidence as JSON")
+    p.add_argument("--html", metavar="FILE", help="write a self-contained report with the pictures")
     p.add_argument("--write-params", metavar="FILE",
                    help="write the fitted twin as a robot parameter file (twinbot sim --params FILE loads it)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
@@ -64,7 +65,7 @@ def load(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 def run(args: argparse.Namespace) -> int:
     from host_sim.diagnosis import DiagnosisError, diagnose
 
-    for option, path in (("--json", args.json), ("--write-params", args.write_params)):
+    for option, path in (("--json", args.json), ("--html", args.html), ("--write-params", args.write_params)):
         if path and not Path(path).resolve().parent.is_dir():
             raise CliError(f"{option} {path}: folder {Path(path).parent} does not exist")
         if path and Path(path).is_dir():
@@ -83,6 +84,11 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         Path(args.json).write_text(json.dumps(result.to_json(), indent=1) + "\n")
         print(f"wrote {args.json}")
+    if args.html:
+        from host_sim.diagnosis.html import render
+
+        Path(args.html).write_text(render(rec, result), encoding="utf-8")
+        print(f"wrote {args.html}")
     if args.write_params:
         fitted = result.model.params if result.model is not None else params
         Path(args.write_params).write_text(json.dumps(fitted.to_json(), indent=1) + "\n")
