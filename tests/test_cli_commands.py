@@ -86,7 +86,8 @@ def test_a_board_that_cannot_start_says_why(tmp_path):
     assert _board_folders() <= before
 
 
-def test_a_board_run_leaves_no_temporary_folder():
+@pytest.mark.parametrize("stop,status", [(signal.SIGINT, 0), (signal.SIGTERM, 128 + signal.SIGTERM)])
+def test_a_board_run_leaves_no_temporary_folder(stop, status):
     before = _board_folders()
     proc = subprocess.Popen(twinbot_cmd("board", "--standin"), cwd=REPO, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
@@ -97,9 +98,9 @@ def test_a_board_run_leaves_no_temporary_folder():
         assert len(_board_folders() - before) == 1  # the board's flash and stderr, while it runs
         time.sleep(0.5)
     finally:
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(stop)
         proc.communicate(timeout=20)
-    assert proc.returncode == 0
+    assert proc.returncode == status
     assert _board_folders() <= before
 
 

@@ -19,6 +19,7 @@ import argparse
 import os
 import re
 import select
+import signal
 import socket
 import sys
 import tempfile
@@ -201,6 +202,8 @@ def board_trouble(board: VirtualBoard, stderr_path: Path, offset: int) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    # SIGTERM (kill, a test's terminate()) unwinds like Ctrl-C does, so the scratch folder goes too.
+    signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))
     with tempfile.TemporaryDirectory(prefix="twinbot-board-") as scratch:
         return run_in(args, Path(scratch))
 
