@@ -71,15 +71,19 @@ ROW_IRSIM = "(d) IR-SIM {version}, 1 robot + 8-beam lidar"
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
     p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1],
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--seconds", type=float, default=30.0,
+    from tools.arguments import float_range, int_range, output_file
+
+    p.add_argument("--seconds", type=float_range(0.2, 3600, unit="s"), default=30.0,
                    help="simulated seconds of the single-robot workloads (a), (b), (d) (default 30)")
-    p.add_argument("--batch-n", type=int, default=TARGET_BATCH_N, help="robots in the batch (default 1000)")
-    p.add_argument("--batch-seconds", type=float, default=2.0,
+    p.add_argument("--batch-n", type=int_range(1, 1_000_000), default=TARGET_BATCH_N,
+                   help="robots in the batch (default 1000)")
+    p.add_argument("--batch-seconds", type=float_range(0.04, 3600, unit="s"), default=2.0,
                    help="simulated seconds of each batch run (default 2, i.e. 50 control periods)")
-    p.add_argument("--repeats", type=int, default=5, help="timed runs per workload; the median is kept (default 5)")
+    p.add_argument("--repeats", type=int_range(1, 1000), default=5,
+                   help="timed runs per workload; the median is kept (default 5)")
     p.add_argument("--profile", action="store_true",
                    help="profile (cProfile) every workload of ours, not only those that miss their target")
-    p.add_argument("--json", metavar="FILE", help="write every figure here")
+    p.add_argument("--json", metavar="FILE", type=output_file, help="write every figure here")
     p.set_defaults(func=run)
 
 
@@ -553,12 +557,7 @@ def print_report(report: dict[str, Any]) -> None:
 def run(args: argparse.Namespace) -> int:
     blas = pin_blas_threads()
     from host_sim.world import builtin_world
-    from tools.cli import CliError
 
-    if args.seconds < 0.2 or args.batch_seconds <= 0:
-        raise CliError("--seconds must be >= 0.2 (5 control periods) and --batch-seconds > 0")
-    if args.batch_n < 1 or args.repeats < 1:
-        raise CliError("--batch-n and --repeats must be >= 1")
     t_start = time.monotonic()
     command = (f"twinbot bench sim --seconds {args.seconds:g} --batch-n {args.batch_n} "
                f"--batch-seconds {args.batch_seconds:g} --repeats {args.repeats}"
