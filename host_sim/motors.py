@@ -28,7 +28,8 @@ w = w_eps atanh(tau / T_c) (a few mm/s at the rim).
 Encoders: cumulative ticks = floor(theta / (2 pi) * ticks_per_rev), floor toward
 -inf, so tick k covers [k, k+1) * 2 pi / ticks_per_rev whatever the sign of theta
 (a counter that starts at 0 with the wheel at angle 0 counts -1 as soon as it
-turns backwards by any amount).
+turns backwards by any amount).  `encoder_angle(k)` is the centre of tick k,
+the best guess of the angle from a count and safe from rounding at the edges.
 
 Scalar functions are pure Python floats (one robot, hot path); the *_batch
 versions take numpy arrays of shape (N,) or (N, 2) (left, right) with parameters
@@ -145,5 +146,14 @@ def encoder_ticks_batch(theta: Any, p: Any) -> np.ndarray:
 
 
 def encoder_angle(ticks: int, p: RobotParams) -> float:
-    """The lower edge (rad) of tick `ticks`: the inverse of encoder_ticks up to one tick."""
-    return ticks * TWO_PI / p.ticks_per_rev
+    """The centre (rad) of tick `ticks`: encoder_ticks(encoder_angle(k)) == k for every k.
+
+    The centre, not the lower edge: k * 2 pi / tpr, divided back by 2 pi / tpr,
+    rounds to just below k for about one k in six, and floor then gives k - 1."""
+    return (ticks + 0.5) * TWO_PI / p.ticks_per_rev
+
+
+def encoder_angle_batch(ticks: Any, p: Any) -> np.ndarray:
+    """encoder_angle for an array of counts (N,) or (N, 2) -> float array of the same shape."""
+    ticks = np.asarray(ticks, dtype=float)
+    return (ticks + 0.5) * (TWO_PI / _axis0(p.ticks_per_rev, ticks.ndim))

@@ -6,7 +6,8 @@ feed it the recorded current references cycle after cycle, and compare
 what the model's encoders, sensors and pose do with what was recorded.
 
 The state at row k comes from the recording alone: the pose of C from the
-tracker columns (needed), the wheel angles from the encoder counts, and the
+tracker columns (needed), the wheel angles from the encoder counts (the
+middle of the recorded tick), and the
 wheel speeds from the encoder counts around row k (central differences, or
 the rows after it at the start).  At row 0 of a simulator recording the
 robot is at rest, so a replay from there repeats the run exactly.
@@ -71,15 +72,17 @@ def state_at(rec: Recording, k: int, p: RobotParams) -> tuple[tuple[float, ...],
     if not 0 <= k < n:
         raise ReplayError(f"row {k} is outside the recording (0..{n - 1})")
     x, y, phi = (float(v) for v in rec.pose[k])
-    theta = [motors.encoder_angle(int(rec.enc[k, i]), p) for i in range(2)]
     if k == 0 and rec.meta.get("source") == "simulator":
-        v = (0.0, 0.0)  # the simulator starts every run at rest
+        theta = [0.0, 0.0]  # the simulator starts every run at rest, the wheels at angle 0
+        v = (0.0, 0.0)
     else:
         lo, hi = (k - 1, k + 1) if 0 < k < n - 1 else ((k, k + 1) if k == 0 else (k - 1, k))
         dt = float(rec.t[hi] - rec.t[lo]) if n > 1 else 0.0
         per_tick = 2 * math.pi / p.ticks_per_rev
         v = tuple(float(rec.enc[hi, i] - rec.enc[lo, i]) * per_tick / dt if dt > 0 else 0.0
                   for i in range(2))  # type: ignore[assignment]
+        # the middle of the recorded tick: the best guess, and never the tick below
+        theta = [motors.encoder_angle(int(rec.enc[k, i]), p) for i in range(2)]
     q = dynamics.q_from_axle_pose(x, y, phi, p, theta[0], theta[1])
     return q, (float(v[0]), float(v[1]))
 
