@@ -51,6 +51,10 @@ class RobotParams:
     viscous_friction: float = _p(2.0e-4, "N m s/rad", "viscous friction at each wheel axle")
     coulomb_friction: float = _p(1.5e-3, "N m", "dry friction torque at each wheel axle")
     battery_voltage: float = _p(7.4, "V", "battery voltage feeding the drivers")
+    # --- contact (host_sim/contact.py, docs/dynamics.md "Contact") ------------------
+    wheel_friction: float = _p(0.8, "-", "Coulomb friction coefficient mu between a wheel and the floor; each "
+                                         "wheel carries half the weight, (m_c + 2 m_w) g / 2")
+    wall_friction: float = _p(0.3, "-", "Coulomb friction coefficient between the body's rim and a wall")
     # --- encoders ------------------------------------------------------------------
     ticks_per_rev: float = _p(1200, "ticks", "encoder ticks per wheel turn (12 CPR x2 decoding x 50:1)")
     # --- IR sensors (paper 3.3; host_sim/ir_sensor.py, docs/ir-sensor.md) ----------
