@@ -173,6 +173,9 @@ def params_from_dict(data: object, where: str = "parameters") -> RobotParams:
             raise ParamsError(f"{where}: '{name}' must be positive, got {getattr(params, name)}")
     if params.com_offset < 0:
         raise ParamsError(f"{where}: 'com_offset' must be >= 0 (G ahead of C), got {params.com_offset}")
+    for name in ("wheel_friction", "wall_friction"):
+        if getattr(params, name) < 0:
+            raise ParamsError(f"{where}: '{name}' must be >= 0, got {getattr(params, name)}")
     if not 0 < params.gear_efficiency <= 1:
         raise ParamsError(f"{where}: 'gear_efficiency' must be in (0, 1], got {params.gear_efficiency}")
     return params
