@@ -205,6 +205,10 @@ class BatchSim:
         self._gap = np.full(n, -1.0)
         self.slipping = np.zeros(n, dtype=bool)  # a wheel slips: the body velocity is extra state
         self.body = np.zeros((n, 3))  # (u, l, omega) of the robots that slip
+        # the last contact step's forces, where the next one starts (SimRobot._forces)
+        self._warm = np.zeros(n, dtype=bool)
+        self._wheel_force = np.zeros((2, 2, n))
+        self._wall_force = np.zeros((2, n, max(self.world.n_walls, 1)))
         self._walls = self.world.n_walls > 0
 
     # ------------------------------------------------------------------ set-up
@@ -295,7 +299,7 @@ class BatchSim:
         q0, v0 = self.q, self.v
         q1, v1, tau, _cur = drive.drive_step_batch(q0, v0, i_ref, dt, self._p, self._p_motors)
         ok = contact.traction_ok_batch(v0, v1, tau, dt, self._p) & ~self.slipping
-        idx, gaps, normals = self._walls_in_reach(q0, q1, ok, dt)
+        idx, gaps, normals, order = self._walls_in_reach(q0, q1, ok, dt)
         if idx.size:
             # the rolling step is kept unless it takes the rim into a wall (SimRobot.advance)
             d = _sub(self._d, idx)
@@ -305,12 +309,14 @@ class BatchSim:
                 hits = (gaps + normals[..., 0] * dx[:, None] + normals[..., 1] * dy[:, None] < 0.0).any(1)
             ok[idx[hits]] = False
         if not ok.all():
-            self._slip_step(q0, v0, q1, v1, ~ok, i_ref, dt, idx, gaps, normals)
+            self._slip_step(q0, v0, q1, v1, ~ok, i_ref, dt, idx, gaps, normals, order)
+        self._warm &= ~ok  # a rolling step ends the contact forces' history
         self.q, self.v = q1, v1
         self.t += dt
 
     def _slip_step(self, q0: np.ndarray, v0: np.ndarray, q1: np.ndarray, v1: np.ndarray, bad: np.ndarray,
-                   i_ref: Any, dt: float, idx: np.ndarray, gaps: np.ndarray, normals: np.ndarray) -> None:
+                   i_ref: Any, dt: float, idx: np.ndarray, gaps: np.ndarray, normals: np.ndarray,
+                   order: np.ndarray) -> None:
         """contact.slip_step_batch for the robots `bad`, written into q1, v1."""
         s = np.flatnonzero(bad)
         i_s = np.asarray(i_ref, dtype=float)
@@ -328,26 +334,39 @@ class BatchSim:
         g = np.full((len(s), width), np.inf)
         nrm = np.zeros((len(s), width, 2))
         nrm[..., 0] = 1.0  # no wall: any unit normal, its gap is inf
+        walls = np.zeros((len(s), width), dtype=np.int64)
         if width:
             pos = np.searchsorted(idx, s)
             found = (pos < len(idx)) & (idx[np.minimum(pos, len(idx) - 1)] == s)
             g[found] = gaps[pos[found]]
             nrm[found] = normals[pos[found]]
-        qn, vn, bn, rolled, pushed = contact.slip_step_batch(q0[s], v0[s], body, tau, slope, dt, self._p, g, nrm,
-                                                              None if self._shared else s)
+            walls[found] = order[pos[found]]
+        # warm start from the last step's contact forces, where there was one (SimRobot.advance)
+        warm = self._warm[s]
+        wheel_f = np.where(warm[None, None], self._wheel_force[:, :, s], 0.0)
+        wall_f = self._wall_force[:, s[:, None], walls].transpose(0, 2, 1)  # (2, W, K)
+        wall_f = np.where((warm[:, None] & np.isfinite(g))[None].transpose(0, 2, 1), wall_f, 0.0)
+        qn, vn, bn, rolled, pushed, wheel_f, wall_f = contact.slip_step_batch(
+            q0[s], v0[s], body, tau, slope, dt, self._p, g, nrm, None if self._shared else s, wheel_f, wall_f)
         q1[s], v1[s], self.body[s] = qn, vn, bn
+        self._wheel_force[:, :, s] = wheel_f
+        self._wall_force[:, s] = 0.0
+        if width:
+            self._wall_force[:, s[:, None], walls] = np.where(np.isfinite(g)[None], wall_f.transpose(0, 2, 1), 0.0)
+        self._warm[s] = True
         self.slipping[s] = ~rolled
         started = s[pushed & ~self.in_contact[s]]
         self.collisions[started] += 1
         self.in_contact[s[pushed]] = True
 
     def _walls_in_reach(self, q0: np.ndarray, q1: np.ndarray, ok: np.ndarray, dt: float
-                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(robots tested, their gaps (K, W), normals (K, W, 2)): SimRobot._walls_in_reach for every robot
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(robots tested, their gaps (K, W), normals (K, W, 2), wall indices (K, W)):
+        SimRobot._walls_in_reach for every robot
         that may reach a wall in this step (C moves at most |dG| + d |dphi|)."""
         none = np.empty(0, dtype=np.int64)
         if not self._walls:
-            return none, np.empty((0, 0)), np.empty((0, 0, 2))
+            return none, np.empty((0, 0)), np.empty((0, 0, 2)), np.empty((0, 0), dtype=np.int64)
         chk, d = self._chk, self._d
         moved = np.hypot(q0[:, 0] - chk[:, 0], q0[:, 1] - chk[:, 1]) + d * np.abs(q0[:, 2] - chk[:, 2])
         travel = np.hypot(q1[:, 0] - q0[:, 0], q1[:, 1] - q0[:, 1]) + d * np.abs(q1[:, 2] - q0[:, 2])
@@ -359,15 +378,16 @@ class BatchSim:
         self.in_contact &= ~(far & (self._gap - moved > CONTACT_HYSTERESIS))
         idx = np.flatnonzero(~far)
         if idx.size == 0:
-            return none, np.empty((0, 0)), np.empty((0, 0, 2))
+            return none, np.empty((0, 0)), np.empty((0, 0, 2)), np.empty((0, 0), dtype=np.int64)
         qi = q0[idx]
         di = _sub(d, idx)
         centre = np.stack([qi[:, 0] - di * np.cos(qi[:, 2]), qi[:, 1] - di * np.sin(qi[:, 2])], 1)
-        gaps, normals, gmin = contact.walls_in_reach_batch(self.world, centre, _sub(self._r, idx), within[idx])
+        gaps, normals, order, gmin = contact.walls_in_reach_batch(self.world, centre, _sub(self._r, idx),
+                                                                  within[idx])
         chk[idx] = qi[:, :3]
         self._gap[idx] = gmin
         self.in_contact[idx[gmin > CONTACT_HYSTERESIS]] = False
-        return idx, gaps, normals
+        return idx, gaps, normals, order
 
     # ------------------------------------------------------------------ runs
     def run_inputs(self, cmd: Any, substeps: int | None = None, sensors: bool = True,

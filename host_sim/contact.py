@@ -102,8 +102,9 @@ def traction_ok_batch(v0: np.ndarray, v1: np.ndarray, tau: np.ndarray, dt: Any, 
 # Which walls a step can reach
 # --------------------------------------------------------------------------- #
 def walls_in_reach(world: Any, cx: float, cy: float, radius: float, within: float
-                   ) -> tuple[list[tuple[float, float, float]], float]:
-    """([(gap, nx, ny), ...] in wall order for the walls with gap < within, smallest gap (inf: none)).
+                   ) -> tuple[list[tuple[float, float, float, int]], float]:
+    """([(gap, nx, ny, wall index), ...] in wall order for the walls with gap < within, smallest gap
+    (inf: none).
 
     gap = distance from C to the wall minus the body radius (negative: overlapping)."""
     if world.n_walls == 0:
@@ -111,14 +112,15 @@ def walls_in_reach(world: Any, cx: float, cy: float, radius: float, within: floa
     dist, normal = world.wall_distances(np.array([[cx, cy]]))
     gaps = dist[0] - radius
     near = np.flatnonzero(gaps < within)
-    return ([(float(gaps[i]), float(normal[0, i, 0]), float(normal[0, i, 1])) for i in near],
+    return ([(float(gaps[i]), float(normal[0, i, 0]), float(normal[0, i, 1]), int(i)) for i in near],
             float(gaps.min()))
 
 
 def walls_in_reach_batch(world: Any, centres: np.ndarray, radius: Any, within: Any
-                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """For K robots: gaps (K, W), normals (K, W, 2) of the walls in reach, padded with gap = inf, and
-    the smallest gap (K,).  W is the most walls any of them has in reach; walls keep their order."""
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """For K robots: gaps (K, W), normals (K, W, 2), wall indices (K, W) of the walls in reach, padded
+    with gap = inf, and the smallest gap (K,).  W is the most walls any of them has in reach; walls
+    keep their order."""
     dist, normal = world.wall_distances(centres)
     gaps = dist - np.reshape(radius, (-1, 1))
     near = gaps < np.reshape(within, (-1, 1))
@@ -126,7 +128,7 @@ def walls_in_reach_batch(world: Any, centres: np.ndarray, radius: Any, within: A
     order = np.argsort(~near, axis=1, kind="stable")[:, :width]  # the walls in reach first, in wall order
     rows = np.arange(len(centres))[:, None]
     g = np.where(near[rows, order], gaps[rows, order], np.inf)
-    return g, normal[rows, order], gaps.min(1) if gaps.shape[1] else np.full(len(centres), np.inf)
+    return g, normal[rows, order], order, gaps.min(1) if gaps.shape[1] else np.full(len(centres), np.inf)
 
 
 # --------------------------------------------------------------------------- #
@@ -139,13 +141,18 @@ def body_velocity(v: Any, p: Any) -> tuple[Any, Any, Any]:
 
 
 def slip_step(q: Any, v: Any, body: tuple[float, float, float] | None, tau: Any, slope: Any, dt: float,
-              p: RobotParams, walls: list[tuple[float, float, float]]
-              ) -> tuple[tuple[float, ...], tuple[float, float], tuple[float, float, float] | None, bool]:
+              p: RobotParams, walls: list[tuple[float, float, float, int]],
+              warm: tuple[list[list[float]], list[list[float]]] | None = None
+              ) -> tuple[tuple[float, ...], tuple[float, float], tuple[float, float, float] | None, bool,
+                         tuple[list[list[float]], list[list[float]]]]:
     """One step of the unconstrained robot with wheel friction and wall contacts.
 
     q, v: as dynamics; body: (u, l, omega) if slipping, None if rolling (then from v).
-    tau, slope: wheel torques (N m) and d tau / d w (N m s, <= 0) at v.  walls: (gap, nx, ny)
-    as walls_in_reach.  Returns (q, v, body or None if both wheels stick, a wall pushed).
+    tau, slope: wheel torques (N m) and d tau / d w (N m s, <= 0) at v.  walls: (gap, nx, ny, index)
+    as walls_in_reach.  warm: the contact forces of the previous step (wheels [[F_e, F_n]] x 2,
+    walls [[F_n, F_t]] in the order of `walls`), where the solve starts (warm start: in steady
+    contact a few sweeps instead of a hundred; the solution is the same).  Returns (q, v, body or
+    None if both wheels stick, a wall pushed, the contact forces for the next warm start).
     """
     m, k, j, dd, iw, r, b, d, rad, cap, mu_w, mg = consts(p)
     phi = q[2]
@@ -180,7 +187,7 @@ def slip_step(q: Any, v: Any, body: tuple[float, float, float] | None, tau: Any,
         idet = 1.0 / (wee * wnn - wen * wen)
         wheels.append((sb, el, ew, -r / iwi, wnn * idet, -wen * idet, wee * idet))
     contacts = []
-    for gap, nx, ny in walls:
+    for gap, nx, ny, _index in walls:
         ne, nn = nx * c + ny * s, -nx * s + ny * c
         nl, nw = j * nn * jd, -k * nn * jd
         tl_, tw = (j * ne + k * rad) * jd, (-k * ne - m * rad) * jd
@@ -189,8 +196,26 @@ def slip_step(q: Any, v: Any, body: tuple[float, float, float] | None, tau: Any,
         contacts.append((gap / dt, ne, nn, nl, nw, tl_, tw, 1.0 / wnn_, 1.0 / wtt))
     lim = cap * dt
     tol = PGS_TOL * mg * dt
-    pw = [[0.0, 0.0], [0.0, 0.0]]
-    pc = [[0.0, 0.0] for _ in contacts]
+    if warm is None:
+        pw = [[0.0, 0.0], [0.0, 0.0]]
+        pc = [[0.0, 0.0] for _ in contacts]
+    else:
+        pw = [[f[0] * dt, f[1] * dt] for f in warm[0]]
+        pc = [[f[0] * dt, f[1] * dt] for f in warm[1]]
+        for i, (sb, el, ew, er, _a11, _a12, _a22) in enumerate(wheels):
+            pe, pn = pw[i]
+            u += ju * pe
+            l += el * pe + lat_l * pn
+            om += ew * pe + lat_w * pn
+            if i == 0:
+                wl += er * pe
+            else:
+                wr += er * pe
+        for i, (_gdt, ne, nn, nl, nw, tl_, tw, _inn, _itt) in enumerate(contacts):
+            pn, pt = pc[i]
+            u += (ne * pn - nn * pt) * ju
+            l += nl * pn + tl_ * pt
+            om += nw * pn + tw * pt
     for _ in range(PGS_MAX_ITER):
         change = 0.0
         for i, (sb, el, ew, er, a11, a12, a22) in enumerate(wheels):
@@ -238,16 +263,19 @@ def slip_step(q: Any, v: Any, body: tuple[float, float, float] | None, tau: Any,
     stick = lim * (1.0 - STICK_MARGIN)
     rolling = math.hypot(*pw[0]) < stick and math.hypot(*pw[1]) < stick
     pushed = any(pn > 0.0 for pn, _pt in pc)
-    return q1, (wl, wr), None if rolling else (u, l, om), pushed
+    forces = ([[pe / dt, pn / dt] for pe, pn in pw], [[pn / dt, pt / dt] for pn, pt in pc])
+    return q1, (wl, wr), None if rolling else (u, l, om), pushed, forces
 
 
 def slip_step_batch(q: np.ndarray, v: np.ndarray, body: np.ndarray, tau: np.ndarray, slope: np.ndarray, dt: Any,
-                    p: Any, gaps: np.ndarray, normals: np.ndarray, idx: np.ndarray | None = None
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                    p: Any, gaps: np.ndarray, normals: np.ndarray, idx: np.ndarray | None = None,
+                    warm_wheels: np.ndarray | None = None, warm_walls: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """`slip_step` for K robots: q (K, 5), v (K, 2), body (K, 3) (u, l, omega; for rolling robots
     from v), tau, slope (K, 2), dt float or (K,), gaps (K, W) and normals (K, W, 2) as
-    walls_in_reach_batch; p a RobotParams or a ParamBatch, of which robots idx are these K.
-    Returns (q, v, body, rolling (K,), pushed (K,))."""
+    walls_in_reach_batch; p a RobotParams or a ParamBatch, of which robots idx are these K;
+    warm_wheels (2, 2, K) and warm_walls (2, W, K): the previous step's forces, as slip_step's warm.
+    Returns (q, v, body, rolling (K,), pushed (K,), wheel forces (2, 2, K), wall forces (2, W, K))."""
     cs = consts(p)
     if idx is not None:
         cs = tuple(x[idx] if isinstance(x, np.ndarray) else x for x in cs)
@@ -289,9 +317,29 @@ def slip_step_batch(q: np.ndarray, v: np.ndarray, body: np.ndarray, tau: np.ndar
     gdt = gaps / (np.reshape(dt, (-1, 1)) if np.ndim(dt) else dt)
     lim = cap * dt
     tol = PGS_TOL * mg * dt
-    pw = np.zeros((2, 2, n))
     n_walls = gaps.shape[1]
-    pc = np.zeros((2, n_walls, n))
+    if warm_wheels is None:
+        pw = np.zeros((2, 2, n))
+    else:
+        pw = warm_wheels * dt
+        for i, (sb, el, ew, er, _a11, _a12, _a22) in enumerate(wheels):
+            pe, pn = pw[i]
+            u += ju * pe
+            l += el * pe + lat_l * pn
+            om += ew * pe + lat_w * pn
+            if i == 0:
+                wl += er * pe
+            else:
+                wr += er * pe
+    if warm_walls is None:
+        pc = np.zeros((2, n_walls, n))
+    else:
+        pc = warm_walls * dt
+        for w in range(n_walls):
+            pn, pt = pc[0, w], pc[1, w]
+            u += (ne[:, w] * pn - nn[:, w] * pt) * ju
+            l += nl[:, w] * pn + tl_[:, w] * pt
+            om += nw[:, w] * pn + tw[:, w] * pt
     mu_wv = np.broadcast_to(mu_w, (n,))
     active = np.ones(n, dtype=bool)
     for _ in range(PGS_MAX_ITER):
@@ -345,4 +393,4 @@ def slip_step_batch(q: np.ndarray, v: np.ndarray, body: np.ndarray, tau: np.ndar
     stick = lim * (1.0 - STICK_MARGIN)
     rolling = (np.hypot(pw[0, 0], pw[0, 1]) < stick) & (np.hypot(pw[1, 0], pw[1, 1]) < stick)
     pushed = (pc[0] > 0.0).any(0) if n_walls else np.zeros(n, dtype=bool)
-    return q1, np.stack([wl, wr], 1), np.stack([u, l, om], 1), rolling, pushed
+    return q1, np.stack([wl, wr], 1), np.stack([u, l, om], 1), rolling, pushed, pw / dt, pc / dt

@@ -44,6 +44,7 @@ class SimRobot:
         self.collisions = 0
         self.in_contact = False
         self.slip: tuple[float, float, float] | None = None  # (u, l, omega) while a wheel slips
+        self._forces: tuple[list[list[float]], dict[int, list[float]]] | None = None  # last contact forces
         self._gap_at_check = -1.0  # the smallest wall gap at the last wall test (broad phase)
         self._checked_at = (0.0, 0.0, 0.0)  # G and phi at the last wall test
         self.last_sense: Sense | None = None
@@ -87,22 +88,28 @@ class SimRobot:
             d = p.com_offset
             dx = q1[0] - q0[0] - d * (math.cos(q1[2]) - math.cos(q0[2]))
             dy = q1[1] - q0[1] - d * (math.sin(q1[2]) - math.sin(q0[2]))
-            rolled = all(gap + nx * dx + ny * dy >= 0.0 for gap, nx, ny in walls)
+            rolled = all(gap + nx * dx + ny * dy >= 0.0 for gap, nx, ny, _i in walls)
         if rolled:
             self.q, self.v = q1, v1
+            self._forces = None
         else:
             tl, il, sl = motors.wheel_torque_slope(self.i_ref[0], v0[0], p)
             tr, ir, sr = motors.wheel_torque_slope(self.i_ref[1], v0[1], p)
             self.current = (il, ir)
-            self.q, self.v, self.slip, pushed = contact.slip_step(q0, v0, self.slip, (tl, tr), (sl, sr), dt, p,
-                                                                   walls)
+            warm = None
+            if self._forces is not None:  # start from the last step's contact forces
+                wheel_f, wall_f = self._forces
+                warm = (wheel_f, [wall_f.get(w[3], [0.0, 0.0]) for w in walls])
+            self.q, self.v, self.slip, pushed, (wheel_f, wall_list) = contact.slip_step(
+                q0, v0, self.slip, (tl, tr), (sl, sr), dt, p, walls, warm)
+            self._forces = (wheel_f, {w[3]: f for w, f in zip(walls, wall_list)})
             if pushed and not self.in_contact:
                 self.collisions += 1
             self.in_contact = self.in_contact or pushed
         self.t += dt
 
     def _walls_in_reach(self, q0: tuple[float, ...], q1: tuple[float, ...] | None,
-                        dt: float) -> list[tuple[float, float, float]]:
+                        dt: float) -> list[tuple[float, float, float, int]]:
         """The walls the step from q0 (to q1 when rolling) may touch, (gap, nx, ny) each.
 
         Broad phase: no test while the smallest gap at the last test exceeds how far C may have
