@@ -14,7 +14,7 @@ compare what each one's encoders, sensors and pose do with the recording.
 dynamics.ParamBatch (one value per robot for every scalar parameter; the
 tuple-valued IR coefficients come from `base`).
 
-Each control period (default 40 ms) is what host_sim/hardware.SimRobot and
+Each control period (default 40 ms) is what host_sim/sim_robot.SimRobot and
 host_sim/simulation.Simulation do for one robot, for all N at once:
 
 1. the readings at the control instant: encoder ticks (motors.encoder_ticks_batch,
@@ -26,27 +26,30 @@ host_sim/simulation.Simulation do for one robot, for all N at once:
 2. the current references of that row are applied (row j of the results is
    the state *before* row j's command acts: the recording format's convention,
    so results and recordings line up row for row);
-3. n substeps of dt = period / n: motors (motors.wheel_torque_batch: current
-   regulator, back-EMF, current limit, friction), dynamics
-   (dynamics.step_batch, the same integrator as dynamics.step), contacts.
+3. n substeps of dt = period / n: motors at the mid-step speed and dynamics
+   (drive.drive_step_batch: current regulator, back-EMF, current limit,
+   friction; dynamics.step_batch, the same integrator as dynamics.step),
+   then contact where needed.
 
-Contacts: the same push-out rule as SimRobot, vectorised: a robot whose body
-disc (radius body_radius around C) overlaps a wall is pushed back out along
-the wall's normal and, if it was driving into the wall, its translation stops
-(the wheels keep only their spin); the start of each contact counts one
-collision.  The wall test runs only for robots that may have reached a wall
-since their last test (a conservative bound on how far C moved, so the
-result is the same as testing every robot every substep).  world=None means
-no walls: no contacts, and the IR sensors see only the ambient light.
+Contacts: the same model as SimRobot, vectorised (host_sim/contact.py,
+docs/dynamics.md "Contact"): every robot takes the rolling step
+(drive.drive_step_batch); those whose wheels lose their grip
+(contact.traction_ok_batch) or whose rim would enter a wall take the
+contact step instead (contact.slip_step_batch, on that subset only), with
+all the walls within their reach (contact.walls_in_reach_batch); the start
+of each contact counts one collision.  The wall test runs only for robots
+that may reach a wall in the step (a conservative bound on how far C moved
+since their last test).  world=None means no walls: no wall contacts, and
+the IR sensors see only the ambient light.
 
-Agreement with SimRobot: the same physics in the same order, but
-dynamics.step_batch evaluates the closed form with a different grouping of
-the floating-point operations than dynamics.step, so a batch robot and a
-SimRobot with the same inputs agree to rounding error (below 1e-13 m after
-16 s with wall contacts, in tests/test_batch.py) rather than bit for bit; the
-quantised outputs (encoder ticks, ADC counts) are then equal except where the
-exact value sits within that rounding error of a quantisation boundary.  With
-seed=s and N = 1 the sensor noise is the same stream as SimRobot(seed=s).
+Agreement with SimRobot: the same physics in the same order, but the numpy
+paths group the floating-point operations differently from the pure-Python
+ones, so a batch robot and a SimRobot with the same inputs agree to
+rounding error (below 1e-9 m in tests/test_batch.py and tests/test_contact.py,
+wall contacts, slip and corners included) rather than bit for bit; the
+quantised outputs (encoder ticks, ADC counts) are then equal except where
+the exact value sits within that rounding error of a quantisation boundary.
+With seed=s and N = 1 the sensor noise is the same stream as SimRobot(seed=s).
 
 Speed: the motors and the dynamics cost ~60 numpy operations on arrays of N
 per substep, the wall test a few more (and a nearest-wall query for the

@@ -26,8 +26,9 @@ of `World.segments`, shape (M, 4)):
 * `World.cast_robots(poses, bearings)` the same for rays leaving robot
   centres at fixed bearings (the IR ring), with the front end folded into
   one matrix product: the fast path of the sensor model;
-* `World.nearest_wall(points)` -> (signed distance, unit normal) for
-  collisions;
+* `World.nearest_wall(points)` -> (signed distance, unit normal) to the
+  nearest wall; `World.wall_distances(points)` the same to every wall at
+  once (contact with several walls, host_sim/contact.py);
 * `World.inside_obstacle(points)`; `World.visible(points, targets)` (line of
   sight, for lamps);
 * `World.free_cells(resolution, margin)` -> boolean occupancy grid of the

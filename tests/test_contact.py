@@ -153,3 +153,75 @@ def test_traction_scalar_and_batch_agree_and_a_full_current_start_slips():
         fast = drive(FLOOR, (0.5, 1.0, 0.0), (i_ma, i_ma), 0.3, 0.005, each=count)
     assert slips[150] == 0 and slips[500] > 5  # 7.7 N of thrust from rest against mu m g = 4 N
     assert fast.pose[1] == pytest.approx(1.0, abs=1e-12)  # straight: it spins its wheels, no sideways drift
+
+
+def test_slip_step_scalar_and_batch_agree_function_by_function():
+    """contact.slip_step == contact.slip_step_batch on random states: slipping or rolling, zero to two
+    walls in reach (corners), with and without a warm start, per-robot parameters."""
+    from host_sim.dynamics import ParamBatch
+    from host_sim import motors
+
+    rng = np.random.default_rng(11)
+    n = 40
+    params = [DEFAULT.replace(wheel_friction=float(rng.uniform(0.2, 1.0)), wall_friction=float(rng.uniform(0, 0.6)),
+                              com_offset=float(rng.uniform(0, 0.03)), body_mass=float(rng.uniform(0.3, 0.8)))
+              for _ in range(n)]
+    pb = ParamBatch.from_params(params)
+    q = np.column_stack([rng.uniform(-1, 1, (n, 2)), rng.uniform(-4, 4, n), rng.uniform(-9, 9, (n, 2))])
+    v = rng.uniform(-30, 30, (n, 2))
+    body = np.column_stack([rng.uniform(-0.5, 0.5, n), rng.uniform(-0.2, 0.2, n), rng.uniform(-5, 5, n)])
+    slipping = rng.random(n) < 0.5
+    i_ref = rng.uniform(-0.5, 0.5, (n, 2))
+    n_walls = rng.integers(0, 3, n)
+    gaps = np.full((n, 2), np.inf)
+    normals = np.zeros((n, 2, 2))
+    normals[..., 0] = 1.0
+    for i in range(n):
+        for w in range(n_walls[i]):
+            a = rng.uniform(-np.pi, np.pi)
+            gaps[i, w] = rng.uniform(-1e-4, 3e-3)
+            normals[i, w] = (math.cos(a), math.sin(a))
+    warm_wheels = rng.uniform(-1, 1, (2, 2, n)) * np.array([p.wheel_friction for p in params]) * 0.7
+    warm_walls = np.stack([rng.uniform(0, 3, (2, n)), rng.uniform(-0.1, 0.1, (2, n))])
+    warm_walls[:, ~np.isfinite(gaps.T)] = 0.0
+    tau, _c, slope = motors.wheel_torque_slope_batch(i_ref, v, pb)
+    for warm in (False, True):
+        body_b = np.where(slipping[:, None], body, np.column_stack(contact.body_velocity(v.T, pb)))
+        out = contact.slip_step_batch(q, v, body_b, tau, slope, 0.005, pb, gaps, normals, None,
+                                      warm_wheels if warm else None, warm_walls if warm else None)
+        for i in range(n):
+            walls = [(gaps[i, w], normals[i, w, 0], normals[i, w, 1], w) for w in range(n_walls[i])]
+            w_s = (warm_wheels[:, :, i].tolist(), warm_walls[:, :n_walls[i], i].T.tolist()) if warm else None
+            tl, _il, sl = motors.wheel_torque_slope(i_ref[i, 0], v[i, 0], params[i])
+            tr, _ir, sr = motors.wheel_torque_slope(i_ref[i, 1], v[i, 1], params[i])
+            assert np.allclose((tl, tr, sl, sr), (*tau[i], *slope[i]), rtol=1e-12, atol=1e-15)
+            qs, vs, bs, pushed, forces = contact.slip_step(q[i], v[i], tuple(body[i]) if slipping[i] else None,
+                                                          (tl, tr), (sl, sr), 0.005, params[i], walls, w_s)
+            assert np.allclose(out[0][i], qs, rtol=1e-10, atol=1e-10)
+            assert np.allclose(out[1][i], vs, rtol=1e-9, atol=1e-8)
+            assert (bs is None) == bool(out[3][i]) and pushed == bool(out[4][i])
+            if bs is not None:
+                assert np.allclose(out[2][i], bs, rtol=1e-9, atol=1e-9)
+            assert np.allclose(out[5][:, :, i], forces[0], rtol=1e-8, atol=1e-8)
+    assert out[3].sum() > 0 and (~out[3]).sum() > 0 and out[4].sum() > 0  # gripping, slipping and pushed
+
+
+def test_torque_slope_is_the_derivative_and_walls_in_reach_agree():
+    from host_sim import motors
+
+    for i_ref in (0.0, 0.2, 0.5, -0.5):
+        for w in (-35.0, -2.0, -0.05, 0.0, 0.03, 5.0, 30.0):
+            tau, _i, slope = motors.wheel_torque_slope(i_ref, w, DEFAULT)
+            assert tau == motors.wheel_torque(i_ref, w, DEFAULT)[0]
+            h = 1e-6
+            fd = (motors.wheel_torque(i_ref, w + h, DEFAULT)[0] - motors.wheel_torque(i_ref, w - h, DEFAULT)[0]) / (2 * h)
+            assert slope == pytest.approx(fd, rel=1e-5, abs=1e-9) and slope < 0
+    centres = np.array([[0.05, 0.05], [0.5, 0.062], [0.5, 0.5], [0.94, 0.5], [0.52, 0.52]])
+    g, nrm, order, gmin = contact.walls_in_reach_batch(BOX, centres, R, np.full(5, 0.01))
+    for k, (cx, cy) in enumerate(centres):
+        walls, gm = contact.walls_in_reach(BOX, cx, cy, R, 0.01)
+        assert gm == pytest.approx(gmin[k], abs=1e-15)
+        assert [w[3] for w in walls] == list(order[k, : len(walls)]) and np.isinf(g[k, len(walls):]).all()
+        assert np.allclose([w[0] for w in walls], g[k, : len(walls)], atol=1e-15)
+    assert len(contact.walls_in_reach(BOX, 0.05, 0.05, R, 0.01)[0]) == 2  # the corner: both walls
+    assert contact.walls_in_reach(BOX, 0.52, 0.52, R, 0.01)[1] < 0  # inside the obstacle: negative gap
