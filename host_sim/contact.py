@@ -58,7 +58,7 @@ def consts(p: Any) -> tuple[Any, ...]:
     k = p.body_mass * p.com_offset
     j = (p.body_inertia + p.body_mass * p.com_offset ** 2 + 2 * p.wheel_mass * p.half_axle ** 2
          + 2 * p.wheel_inertia_diam)
-    c = (m, k, j, m * j - k * k, p.wheel_inertia, p.wheel_radius, p.half_axle, p.com_offset, p.body_radius,
+    c: tuple[Any, ...] = (m, k, j, m * j - k * k, p.wheel_inertia, p.wheel_radius, p.half_axle, p.com_offset, p.body_radius,
          p.wheel_friction * m * GRAVITY / 2, p.wall_friction, m * GRAVITY)
     if isinstance(p, RobotParams):
         c = tuple(float(x) for x in c)
@@ -140,6 +140,45 @@ def body_velocity(v: Any, p: Any) -> tuple[Any, Any, Any]:
     return 0.5 * r * (v[0] + v[1]), 0.0 * v[0], 0.5 * r * (v[1] - v[0]) / b
 
 
+def _free_body(u: Any, l: Any, om: Any, dt: Any, m: Any, k: Any, j: Any) -> tuple[Any, Any, Any]:
+    """The body's free motion over dt: (M - a G) nu1 = (M + a G) nu0, a = dt/2 omega (implicit midpoint
+    on the gyroscopic terms, which do no work), solved by Cramer's rule.  Floats or arrays."""
+    a = 0.5 * dt * om
+    am, ak = a * m, a * k
+    r1 = m * u + am * l + ak * om
+    r2 = m * l + k * om - am * u
+    r3 = k * l + j * om - ak * u
+    det = m * (m * j - k * k) + am * (am * j - k * ak) - ak * (am * k - m * ak)
+    return ((r1 * (m * j - k * k) + am * (r2 * j - k * r3) - ak * (r2 * k - m * r3)) / det,
+            (m * (r2 * j - k * r3) - r1 * (am * j - k * ak) - ak * (am * r3 - ak * r2)) / det,
+            (m * (m * r3 - k * r2) + am * (am * r3 - ak * r2) + r1 * (am * k - m * ak)) / det)
+
+
+def _wheel_blocks(iwl: Any, iwr: Any, m: Any, k: Any, j: Any, r: Any, b: Any) -> list[tuple[Any, ...]]:
+    """Per wheel (left, right): (s b, the heading row's M^-1 J^T on l and omega, on the wheel, and the
+    inverse of the 2x2 block [heading, sideways] of J M^-1 J^T as a11, a12, a22).  iw*: the wheels'
+    inertias in this step.  Floats or arrays."""
+    ju, jd = 1.0 / m, 1.0 / (m * j - k * k)
+    blocks = []
+    for side, iwi in ((1.0, iwl), (-1.0, iwr)):
+        sb = side * b
+        wee = ju + m * b * b * jd + r * r / iwi
+        wen = sb * k * jd
+        wnn = j * jd
+        idet = 1.0 / (wee * wnn - wen * wen)
+        blocks.append((sb, k * sb * jd, -m * sb * jd, -r / iwi, wnn * idet, -wen * idet, wee * idet))
+    return blocks
+
+
+def _wall_block(ne: Any, nn: Any, m: Any, k: Any, j: Any, rad: Any) -> tuple[Any, ...]:
+    """A wall with normal (ne, nn) in the body frame: M^-1 J^T of its normal row on l, omega (nl, nw),
+    of its tangent row (tl, tw), and the rows' inverse masses.  Floats or arrays."""
+    ju, jd = 1.0 / m, 1.0 / (m * j - k * k)
+    return (j * nn * jd, -k * nn * jd, (j * ne + k * rad) * jd, (-k * ne - m * rad) * jd,
+            1.0 / (ne * ne * ju + j * nn * nn * jd),
+            1.0 / (nn * nn * ju + (j * ne * ne + 2 * k * rad * ne + m * rad * rad) * jd))
+
+
 def slip_step(q: Any, v: Any, body: tuple[float, float, float] | None, tau: Any, slope: Any, dt: float,
               p: RobotParams, walls: list[tuple[float, float, float, int]],
               warm: tuple[list[list[float]], list[list[float]]] | None = None
@@ -154,117 +193,89 @@ def slip_step(q: Any, v: Any, body: tuple[float, float, float] | None, tau: Any,
     contact a few sweeps instead of a hundred; the solution is the same).  Returns (q, v, body or
     None if both wheels stick, a wall pushed, the contact forces for the next warm start).
     """
-    m, k, j, dd, iw, r, b, d, rad, cap, mu_w, mg = consts(p)
-    phi = q[2]
-    c, s = math.cos(phi), math.sin(phi)
-    if body is None:
-        u, l, om = 0.5 * r * (v[0] + v[1]), 0.0, 0.5 * r * (v[1] - v[0]) / b
-    else:
-        u, l, om = body
-    # Free motion: (M - a G) nu1 = (M + a G) nu0, a = dt/2 omega (gyroscopic, no work), by Cramer.
-    a = 0.5 * dt * om
-    am, ak = a * m, a * k
-    r1 = m * u + am * l + ak * om
-    r2 = m * l + k * om - am * u
-    r3 = k * l + j * om - ak * u
-    det = m * (m * j - k * k) + am * (am * j - k * ak) - ak * (am * k - m * ak)
-    u = (r1 * (m * j - k * k) + am * (r2 * j - k * r3) - ak * (r2 * k - m * r3)) / det
-    l = (m * (r2 * j - k * r3) - r1 * (am * j - k * ak) - ak * (am * r3 - ak * r2)) / det
-    om = (m * (m * r3 - k * r2) + am * (am * r3 - ak * r2) + r1 * (am * k - m * ak)) / det
+    m, k, j, _dd, iw, r, b, d, rad, cap, _mu_w, mg = consts(p)
+    c, s = math.cos(q[2]), math.sin(q[2])
+    u, l, om = body if body is not None else body_velocity(v, p)
+    u, l, om = _free_body(u, l, om, dt, m, k, j)
     # Wheels: I_w (w1 - w0) = dt (tau + slope (w1 - w0)) + impulse, linearly implicit.
     iwl, iwr = iw - dt * slope[0], iw - dt * slope[1]
-    wl, wr = v[0] + dt * tau[0] / iwl, v[1] + dt * tau[1] / iwr
-    # Velocity changes per unit impulse, M^-1 J^T, and the local inverse masses.
-    ju, jd = 1.0 / m, 1.0 / dd
-    lat_l, lat_w = j * jd, -k * jd  # the sideways row (0, 1, 0)
-    wheels = []
-    for side, iwi in ((1.0, iwl), (-1.0, iwr)):
-        sb = side * b
-        el, ew = k * sb * jd, -m * sb * jd  # the heading row (1, 0, -s b, -r)
-        wee = ju + m * b * b * jd + r * r / iwi
-        wen = sb * k * jd
-        wnn = j * jd
-        idet = 1.0 / (wee * wnn - wen * wen)
-        wheels.append((sb, el, ew, -r / iwi, wnn * idet, -wen * idet, wee * idet))
+    nu = [u, l, om, v[0] + dt * tau[0] / iwl, v[1] + dt * tau[1] / iwr]
+    wheels = _wheel_blocks(iwl, iwr, m, k, j, r, b)
     contacts = []
     for gap, nx, ny, _index in walls:
         ne, nn = nx * c + ny * s, -nx * s + ny * c
-        nl, nw = j * nn * jd, -k * nn * jd
-        tl_, tw = (j * ne + k * rad) * jd, (-k * ne - m * rad) * jd
-        wnn_ = ne * ne * ju + j * nn * nn * jd
-        wtt = nn * nn * ju + (j * ne * ne + 2 * k * rad * ne + m * rad * rad) * jd
-        contacts.append((gap / dt, ne, nn, nl, nw, tl_, tw, 1.0 / wnn_, 1.0 / wtt))
-    lim = cap * dt
-    tol = PGS_TOL * mg * dt
-    if warm is None:
-        pw = [[0.0, 0.0], [0.0, 0.0]]
-        pc = [[0.0, 0.0] for _ in contacts]
-    else:
-        pw = [[f[0] * dt, f[1] * dt] for f in warm[0]]
-        pc = [[f[0] * dt, f[1] * dt] for f in warm[1]]
-        for i, (sb, el, ew, er, _a11, _a12, _a22) in enumerate(wheels):
-            pe, pn = pw[i]
-            u += ju * pe
-            l += el * pe + lat_l * pn
-            om += ew * pe + lat_w * pn
-            if i == 0:
-                wl += er * pe
-            else:
-                wr += er * pe
-        for i, (_gdt, ne, nn, nl, nw, tl_, tw, _inn, _itt) in enumerate(contacts):
-            pn, pt = pc[i]
-            u += (ne * pn - nn * pt) * ju
-            l += nl * pn + tl_ * pt
-            om += nw * pn + tw * pt
-    for _ in range(PGS_MAX_ITER):
-        change = 0.0
-        for i, (sb, el, ew, er, a11, a12, a22) in enumerate(wheels):
-            ve = u - sb * om - r * (wl if i == 0 else wr)
-            pe0, pn0 = pw[i]
-            pe, pn = pe0 - (a11 * ve + a12 * l), pn0 - (a12 * ve + a22 * l)
-            size = math.hypot(pe, pn)
-            if size > lim:
-                pe, pn = pe * lim / size, pn * lim / size
-            de, dn = pe - pe0, pn - pn0
-            pw[i] = [pe, pn]
-            u += ju * de
-            l += el * de + lat_l * dn
-            om += ew * de + lat_w * dn
-            if i == 0:
-                wl += er * de
-            else:
-                wr += er * de
-            change = max(change, abs(de), abs(dn))
-        for i, (gdt, ne, nn, nl, nw, tl_, tw, inn, itt) in enumerate(contacts):
-            pn0, pt0 = pc[i]
-            pn = pn0 - (ne * u + nn * l + gdt) * inn
-            pn = pn if pn > 0.0 else 0.0
-            dn = pn - pn0
-            u += ne * ju * dn
-            l += nl * dn
-            om += nw * dn
-            pt = pt0 - (-nn * u + ne * l - rad * om) * itt
-            bound = mu_w * pn
-            pt = bound if pt > bound else (-bound if pt < -bound else pt)
-            dt_ = pt - pt0
-            u += -nn * ju * dt_
-            l += tl_ * dt_
-            om += tw * dt_
-            pc[i] = [pn, pt]
-            change = max(change, abs(dn), abs(dt_))
-        if change < tol:
-            break
+        contacts.append((gap / dt, ne, nn) + _wall_block(ne, nn, m, k, j, rad))
+    pw = [[f[0] * dt, f[1] * dt] for f in warm[0]] if warm else [[0.0, 0.0], [0.0, 0.0]]
+    pc = [[f[0] * dt, f[1] * dt] for f in warm[1]] if warm else [[0.0, 0.0] for _ in contacts]
+    _solve(nu, wheels, contacts, pw, pc, p, dt, start=warm is not None)
+    u, l, om, wl, wr = nu
     # Pose with the new velocities (C moves as its constraints saw it: heading phi_n).
-    cx, cy = q[0] - d * c, q[1] - d * s
-    cx += dt * (u * c - l * s)
-    cy += dt * (u * s + l * c)
-    phi1 = phi + dt * om
+    cx = q[0] - d * c + dt * (u * c - l * s)
+    cy = q[1] - d * s + dt * (u * s + l * c)
+    phi1 = q[2] + dt * om
     q1 = (cx + d * math.cos(phi1), cy + d * math.sin(phi1), phi1, q[3] + dt * wl, q[4] + dt * wr)
-    stick = lim * (1.0 - STICK_MARGIN)
+    stick = cap * dt * (1.0 - STICK_MARGIN)
     rolling = math.hypot(*pw[0]) < stick and math.hypot(*pw[1]) < stick
     pushed = any(pn > 0.0 for pn, _pt in pc)
     forces = ([[pe / dt, pn / dt] for pe, pn in pw], [[pn / dt, pt / dt] for pn, pt in pc])
     return q1, (wl, wr), None if rolling else (u, l, om), pushed, forces
+
+
+def _apply(nu: list[float], w: tuple[Any, ...], pe: float, pn: float, wheel: int, ju: float,
+           lat_l: float, lat_w: float) -> None:
+    """nu += M^-1 J^T (pe, pn) for wheel block w."""
+    _sb, el, ew, er = w[:4]
+    nu[0] += ju * pe
+    nu[1] += el * pe + lat_l * pn
+    nu[2] += ew * pe + lat_w * pn
+    nu[3 + wheel] += er * pe
+
+
+def _solve(nu: list[float], wheels: list[tuple[Any, ...]], contacts: list[tuple[Any, ...]],
+           pw: list[list[float]], pc: list[list[float]], p: RobotParams, dt: float, start: bool) -> None:
+    """Projected Gauss-Seidel on the contact impulses pw (wheels), pc (walls), updating nu in place.
+
+    start: pw, pc hold a warm start, whose velocity change is applied first."""
+    m, k, j, dd, _iw, r, _b, _d, rad, cap, mu_w, mg = consts(p)
+    ju, lat_l, lat_w = 1.0 / m, j / dd, -k / dd  # M^-1 J^T of the sideways row (0, 1, 0)
+    if start:
+        for i, w in enumerate(wheels):
+            _apply(nu, w, pw[i][0], pw[i][1], i, ju, lat_l, lat_w)
+        for (_g, ne, nn, nl, nw, tl, tw, _inn, _itt), (pn, pt) in zip(contacts, pc):
+            nu[0] += (ne * pn - nn * pt) * ju
+            nu[1] += nl * pn + tl * pt
+            nu[2] += nw * pn + tw * pt
+    lim, tol = cap * dt, PGS_TOL * mg * dt
+    for _ in range(PGS_MAX_ITER):
+        change = 0.0
+        for i, w in enumerate(wheels):
+            sb, _el, _ew, _er, a11, a12, a22 = w
+            ve = nu[0] - sb * nu[2] - r * nu[3 + i]
+            pe0, pn0 = pw[i]
+            pe, pn = pe0 - (a11 * ve + a12 * nu[1]), pn0 - (a12 * ve + a22 * nu[1])
+            size = math.hypot(pe, pn)
+            if size > lim:
+                pe, pn = pe * lim / size, pn * lim / size
+            pw[i] = [pe, pn]
+            _apply(nu, w, pe - pe0, pn - pn0, i, ju, lat_l, lat_w)
+            change = max(change, abs(pe - pe0), abs(pn - pn0))
+        for i, (gdt, ne, nn, nl, nw, tl, tw, inn, itt) in enumerate(contacts):
+            pn0, pt0 = pc[i]
+            pn = max(pn0 - (ne * nu[0] + nn * nu[1] + gdt) * inn, 0.0)
+            dn = pn - pn0
+            nu[0] += ne * ju * dn
+            nu[1] += nl * dn
+            nu[2] += nw * dn
+            bound = mu_w * pn
+            pt = min(max(pt0 - (-nn * nu[0] + ne * nu[1] - rad * nu[2]) * itt, -bound), bound)
+            dt_ = pt - pt0
+            nu[0] -= nn * ju * dt_
+            nu[1] += tl * dt_
+            nu[2] += tw * dt_
+            pc[i] = [pn, pt]
+            change = max(change, abs(dn), abs(dt_))
+        if change < tol:
+            break
 
 
 def slip_step_batch(q: np.ndarray, v: np.ndarray, body: np.ndarray, tau: np.ndarray, slope: np.ndarray, dt: Any,
@@ -279,118 +290,83 @@ def slip_step_batch(q: np.ndarray, v: np.ndarray, body: np.ndarray, tau: np.ndar
     cs = consts(p)
     if idx is not None:
         cs = tuple(x[idx] if isinstance(x, np.ndarray) else x for x in cs)
-    m, k, j, dd, iw, r, b, d, rad, cap, mu_w, mg = cs
-    n = len(q)
-    phi = q[:, 2]
-    c, s = np.cos(phi), np.sin(phi)
-    u, l, om = body[:, 0].copy(), body[:, 1].copy(), body[:, 2].copy()
-    a = 0.5 * dt * om
-    am, ak = a * m, a * k
-    r1 = m * u + am * l + ak * om
-    r2 = m * l + k * om - am * u
-    r3 = k * l + j * om - ak * u
-    det = m * (m * j - k * k) + am * (am * j - k * ak) - ak * (am * k - m * ak)
-    u = (r1 * (m * j - k * k) + am * (r2 * j - k * r3) - ak * (r2 * k - m * r3)) / det
-    l = (m * (r2 * j - k * r3) - r1 * (am * j - k * ak) - ak * (am * r3 - ak * r2)) / det
-    om = (m * (m * r3 - k * r2) + am * (am * r3 - ak * r2) + r1 * (am * k - m * ak)) / det
+    m, k, j, _dd, iw, r, b, d, rad, cap, _mu_w, _mg = cs
+    n, n_walls = len(q), gaps.shape[1]
+    c, s = np.cos(q[:, 2]), np.sin(q[:, 2])
+    u, l, om = _free_body(body[:, 0], body[:, 1], body[:, 2], dt, m, k, j)
     iwl, iwr = iw - dt * slope[:, 0], iw - dt * slope[:, 1]
-    wl, wr = v[:, 0] + dt * tau[:, 0] / iwl, v[:, 1] + dt * tau[:, 1] / iwr
-    ju, jd = 1.0 / m, 1.0 / dd
-    lat_l, lat_w = j * jd, -k * jd
-    wheels = []
-    for side, iwi in ((1.0, iwl), (-1.0, iwr)):
-        sb = side * b
-        wee = ju + m * b * b * jd + r * r / iwi
-        wen = sb * k * jd
-        wnn = j * jd
-        idet = 1.0 / (wee * wnn - wen * wen)
-        wheels.append((sb, k * sb * jd, -m * sb * jd, -r / iwi, wnn * idet, -wen * idet, wee * idet))
-    nx, ny = normals[..., 0], normals[..., 1]
-    cc, ss = c[:, None], s[:, None]
-    ne, nn = nx * cc + ny * ss, -nx * ss + ny * cc  # (K, W)
-    jw, kw_, mw_, rw = (np.reshape(x, (-1, 1)) if np.ndim(x) else x for x in (j, k, m, rad))
-    jdw, juw = (np.reshape(x, (-1, 1)) if np.ndim(x) else x for x in (jd, ju))
-    nl, nw = jw * nn * jdw, -kw_ * nn * jdw
-    tl_, tw = (jw * ne + kw_ * rw) * jdw, (-kw_ * ne - mw_ * rw) * jdw
-    inn = 1.0 / (ne * ne * juw + jw * nn * nn * jdw)
-    itt = 1.0 / (nn * nn * juw + (jw * ne * ne + 2 * kw_ * rw * ne + mw_ * rw * rw) * jdw)
-    gdt = gaps / (np.reshape(dt, (-1, 1)) if np.ndim(dt) else dt)
-    lim = cap * dt
-    tol = PGS_TOL * mg * dt
-    n_walls = gaps.shape[1]
-    if warm_wheels is None:
-        pw = np.zeros((2, 2, n))
-    else:
-        pw = warm_wheels * dt
-        for i, (sb, el, ew, er, _a11, _a12, _a22) in enumerate(wheels):
+    nu = [u, l, om, v[:, 0] + dt * tau[:, 0] / iwl, v[:, 1] + dt * tau[:, 1] / iwr]
+    wheels = _wheel_blocks(iwl, iwr, m, k, j, r, b)
+    ne = (normals[..., 0] * c[:, None] + normals[..., 1] * s[:, None]).T  # (W, K)
+    nn = (-normals[..., 0] * s[:, None] + normals[..., 1] * c[:, None]).T
+    contacts = [(gaps[:, w] / dt, ne[w], nn[w]) + _wall_block(ne[w], nn[w], m, k, j, rad) for w in range(n_walls)]
+    pw = np.zeros((2, 2, n)) if warm_wheels is None else warm_wheels * dt
+    pc = np.zeros((2, n_walls, n)) if warm_walls is None else warm_walls * dt
+    with np.errstate(invalid="ignore"):  # walls padded with gap = inf
+        _solve_batch(nu, wheels, contacts, pw, pc, cs, dt, start=warm_wheels is not None)
+    u, l, om, wl, wr = nu
+    cx = q[:, 0] - d * c + dt * (u * c - l * s)
+    cy = q[:, 1] - d * s + dt * (u * s + l * c)
+    phi1 = q[:, 2] + dt * om
+    q1 = np.stack([cx + d * np.cos(phi1), cy + d * np.sin(phi1), phi1, q[:, 3] + dt * wl, q[:, 4] + dt * wr], 1)
+    stick = cap * dt * (1.0 - STICK_MARGIN)
+    rolling = (np.hypot(pw[0, 0], pw[0, 1]) < stick) & (np.hypot(pw[1, 0], pw[1, 1]) < stick)
+    pushed = (pc[0] > 0.0).any(0) if n_walls else np.zeros(n, dtype=bool)
+    return q1, np.stack([wl, wr], 1), np.stack([u, l, om], 1), rolling, pushed, pw / dt, pc / dt
+
+
+def _solve_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: list[tuple[Any, ...]],
+                 pw: np.ndarray, pc: np.ndarray, cs: tuple[Any, ...], dt: Any, start: bool) -> None:
+    """`_solve` for K robots (pw (2, 2, K), pc (2, W, K), nu five (K,) arrays, all updated in place):
+    each robot stops at the sweep where its own impulses settle, as the scalar solve does."""
+    m, k, j, dd, _iw, r, _b, _d, rad, cap, mu_w, mg = cs
+    ju, lat_l, lat_w = 1.0 / m, j / dd, -k / dd
+    if start:
+        for i, (_sb, el, ew, er, _a11, _a12, _a22) in enumerate(wheels):
             pe, pn = pw[i]
-            u += ju * pe
-            l += el * pe + lat_l * pn
-            om += ew * pe + lat_w * pn
-            if i == 0:
-                wl += er * pe
-            else:
-                wr += er * pe
-    if warm_walls is None:
-        pc = np.zeros((2, n_walls, n))
-    else:
-        pc = warm_walls * dt
-        for w in range(n_walls):
+            nu[0] += ju * pe
+            nu[1] += el * pe + lat_l * pn
+            nu[2] += ew * pe + lat_w * pn
+            nu[3 + i] += er * pe
+        for w, (_g, ne, nn, nl, nw, tl, tw, _inn, _itt) in enumerate(contacts):
             pn, pt = pc[0, w], pc[1, w]
-            u += (ne[:, w] * pn - nn[:, w] * pt) * ju
-            l += nl[:, w] * pn + tl_[:, w] * pt
-            om += nw[:, w] * pn + tw[:, w] * pt
-    mu_wv = np.broadcast_to(mu_w, (n,))
-    active = np.ones(n, dtype=bool)
+            nu[0] += (ne * pn - nn * pt) * ju
+            nu[1] += nl * pn + tl * pt
+            nu[2] += nw * pn + tw * pt
+    lim, tol = cap * dt, PGS_TOL * mg * dt
+    active = np.ones(len(nu[0]), dtype=bool)
     for _ in range(PGS_MAX_ITER):
-        change = np.zeros(n)
+        change = np.zeros(len(active))
         for i, (sb, el, ew, er, a11, a12, a22) in enumerate(wheels):
-            ve = u - sb * om - r * (wl if i == 0 else wr)
-            pe0, pn0 = pw[i]
-            pe, pn = pe0 - (a11 * ve + a12 * l), pn0 - (a12 * ve + a22 * l)
+            ve = nu[0] - sb * nu[2] - r * nu[3 + i]
+            pe0, pn0 = pw[i, 0].copy(), pw[i, 1].copy()
+            pe, pn = pe0 - (a11 * ve + a12 * nu[1]), pn0 - (a12 * ve + a22 * nu[1])
             size = np.hypot(pe, pn)
-            scale = np.where(size > lim, lim / np.where(size > 0, size, 1.0), 1.0)
-            de = np.where(active, pe * scale - pe0, 0.0)
-            dn = np.where(active, pn * scale - pn0, 0.0)
-            pw[i, 0] += de
-            pw[i, 1] += dn
-            u += ju * de
-            l += el * de + lat_l * dn
-            om += ew * de + lat_w * dn
-            if i == 0:
-                wl += er * de
-            else:
-                wr += er * de
+            over = size > lim
+            pe = np.where(over, pe * lim / np.where(over, size, 1.0), pe)
+            pn = np.where(over, pn * lim / np.where(over, size, 1.0), pn)
+            de, dn = np.where(active, pe - pe0, 0.0), np.where(active, pn - pn0, 0.0)
+            pw[i, 0], pw[i, 1] = pe0 + de, pn0 + dn
+            nu[0] += ju * de
+            nu[1] += el * de + lat_l * dn
+            nu[2] += ew * de + lat_w * dn
+            nu[3 + i] += er * de
             change = np.maximum(change, np.maximum(np.abs(de), np.abs(dn)))
-        for w in range(n_walls):
-            pn0, pt0 = pc[0, w], pc[1, w]
-            e_, n_ = ne[:, w], nn[:, w]
-            with np.errstate(invalid="ignore"):
-                pn = np.maximum(pn0 - (e_ * u + n_ * l + gdt[:, w]) * inn[:, w], 0.0)
+        for w, (gdt, ne, nn, nl, nw, tl, tw, inn, itt) in enumerate(contacts):
+            pn0, pt0 = pc[0, w].copy(), pc[1, w].copy()
+            pn = np.maximum(pn0 - (ne * nu[0] + nn * nu[1] + gdt) * inn, 0.0)
             dn = np.where(active, pn - pn0, 0.0)
-            u += e_ * ju * dn
-            l += nl[:, w] * dn
-            om += nw[:, w] * dn
-            pn = pn0 + dn
-            pt = pt0 - (-n_ * u + e_ * l - rad * om) * itt[:, w]
-            bound = mu_wv * pn
-            pt = np.minimum(np.maximum(pt, -bound), bound)
+            nu[0] += ne * ju * dn
+            nu[1] += nl * dn
+            nu[2] += nw * dn
+            bound = mu_w * (pn0 + dn)
+            pt = np.minimum(np.maximum(pt0 - (-nn * nu[0] + ne * nu[1] - rad * nu[2]) * itt, -bound), bound)
             dt_ = np.where(active, pt - pt0, 0.0)
-            u += -n_ * ju * dt_
-            l += tl_[:, w] * dt_
-            om += tw[:, w] * dt_
-            pc[0, w] = pn
-            pc[1, w] = pt0 + dt_
+            nu[0] -= nn * ju * dt_
+            nu[1] += tl * dt_
+            nu[2] += tw * dt_
+            pc[0, w], pc[1, w] = pn0 + dn, pt0 + dt_
             change = np.maximum(change, np.maximum(np.abs(dn), np.abs(dt_)))
         active &= change >= tol
         if not active.any():
             break
-    cx, cy = q[:, 0] - d * c, q[:, 1] - d * s
-    cx = cx + dt * (u * c - l * s)
-    cy = cy + dt * (u * s + l * c)
-    phi1 = phi + dt * om
-    q1 = np.stack([cx + d * np.cos(phi1), cy + d * np.sin(phi1), phi1, q[:, 3] + dt * wl, q[:, 4] + dt * wr], 1)
-    stick = lim * (1.0 - STICK_MARGIN)
-    rolling = (np.hypot(pw[0, 0], pw[0, 1]) < stick) & (np.hypot(pw[1, 0], pw[1, 1]) < stick)
-    pushed = (pc[0] > 0.0).any(0) if n_walls else np.zeros(n, dtype=bool)
-    return q1, np.stack([wl, wr], 1), np.stack([u, l, om], 1), rolling, pushed, pw / dt, pc / dt
