@@ -41,8 +41,9 @@ from host_sim.params import RobotParams
 
 GRAVITY = 9.81  # m/s^2
 PGS_TOL = 1e-10  # impulse change (in units of m g dt) below which the solve has converged
-PGS_MAX_ITER = 500
+PGS_MAX_ITER = 100  # sweeps; past it (redundant contacts at a standstill) the next step goes on from here
 STICK_MARGIN = 1e-9  # a wheel impulse this far inside its cone (relative) is sticking
+NEWTON_STEPS = 6  # on a wheel's friction disc (quadratic convergence from lam = 0)
 REACH_MARGIN = 2e-3  # m: a wall closer than the step's travel + this is a contact candidate
 
 _last: tuple[Any, tuple[float, ...]] | None = None
@@ -166,8 +167,33 @@ def _wheel_blocks(iwl: Any, iwr: Any, m: Any, k: Any, j: Any, r: Any, b: Any) ->
         wen = sb * k * jd
         wnn = j * jd
         idet = 1.0 / (wee * wnn - wen * wen)
-        blocks.append((sb, k * sb * jd, -m * sb * jd, -r / iwi, wnn * idet, -wen * idet, wee * idet))
+        blocks.append((sb, k * sb * jd, -m * sb * jd, -r / iwi, wnn * idet, -wen * idet, wee * idet, wee, wen, wnn))
     return blocks
+
+
+def _on_disc(pe: Any, pn: Any, be: Any, bn: Any, wee: Any, wen: Any, wnn: Any, lim: Any) -> tuple[Any, Any]:
+    """The impulse on the disc |P| = lim minimising 1/2 P^T W P + P^T b, for an unconstrained minimum
+    (pe, pn) outside it: P(lam) = -(W + lam I)^-1 b with |P(lam)| = lim (the slip velocity W P + b
+    is then -lam P: opposite to the friction, Coulomb's maximal dissipation).  Newton on
+    1/|P(lam)| - 1/lim from lam = 0, which converges monotonically (More and Sorensen); a fixed
+    number of steps, then scaled onto the disc.  Floats or arrays."""
+    lam = 0.0 * pe
+    for _ in range(NEWTON_STEPS):
+        size2 = pe * pe + pn * pn
+        a11, a22 = wee + lam, wnn + lam
+        idet = 1.0 / (a11 * a22 - wen * wen)
+        # dP/dlam = -(W + lam I)^-1 P
+        de = -(a22 * pe - wen * pn) * idet
+        dn = -(a11 * pn - wen * pe) * idet
+        size = size2 ** 0.5
+        phi = 1.0 / size - 1.0 / lim
+        dphi = -(pe * de + pn * dn) / (size2 * size)
+        lam = lam - phi / dphi
+        a11, a22 = wee + lam, wnn + lam
+        idet = 1.0 / (a11 * a22 - wen * wen)
+        pe, pn = -(a22 * be - wen * bn) * idet, -(a11 * bn - wen * be) * idet
+    scale = lim / (pe * pe + pn * pn) ** 0.5
+    return pe * scale, pn * scale
 
 
 def _wall_block(ne: Any, nn: Any, m: Any, k: Any, j: Any, rad: Any) -> tuple[Any, ...]:
@@ -249,13 +275,13 @@ def _solve(nu: list[float], wheels: list[tuple[Any, ...]], contacts: list[tuple[
     for _ in range(PGS_MAX_ITER):
         change = 0.0
         for i, w in enumerate(wheels):
-            sb, _el, _ew, _er, a11, a12, a22 = w
+            sb, _el, _ew, _er, a11, a12, a22, wee, wen, wnn = w
             ve = nu[0] - sb * nu[2] - r * nu[3 + i]
             pe0, pn0 = pw[i]
             pe, pn = pe0 - (a11 * ve + a12 * nu[1]), pn0 - (a12 * ve + a22 * nu[1])
-            size = math.hypot(pe, pn)
-            if size > lim:
-                pe, pn = pe * lim / size, pn * lim / size
+            if pe * pe + pn * pn > lim * lim:
+                pe, pn = _on_disc(pe, pn, ve - (wee * pe0 + wen * pn0), nu[1] - (wen * pe0 + wnn * pn0),
+                                  wee, wen, wnn, lim)
             pw[i] = [pe, pn]
             _apply(nu, w, pe - pe0, pn - pn0, i, ju, lat_l, lat_w)
             change = max(change, abs(pe - pe0), abs(pn - pn0))
@@ -322,7 +348,7 @@ def _solve_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: 
     m, k, j, dd, _iw, r, _b, _d, rad, cap, mu_w, mg = cs
     ju, lat_l, lat_w = 1.0 / m, j / dd, -k / dd
     if start:
-        for i, (_sb, el, ew, er, _a11, _a12, _a22) in enumerate(wheels):
+        for i, (_sb, el, ew, er) in enumerate(w[:4] for w in wheels):
             pe, pn = pw[i]
             nu[0] += ju * pe
             nu[1] += el * pe + lat_l * pn
@@ -337,14 +363,16 @@ def _solve_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: 
     active = np.ones(len(nu[0]), dtype=bool)
     for _ in range(PGS_MAX_ITER):
         change = np.zeros(len(active))
-        for i, (sb, el, ew, er, a11, a12, a22) in enumerate(wheels):
+        for i, (sb, el, ew, er, a11, a12, a22, wee, wen, wnn) in enumerate(wheels):
             ve = nu[0] - sb * nu[2] - r * nu[3 + i]
             pe0, pn0 = pw[i, 0].copy(), pw[i, 1].copy()
             pe, pn = pe0 - (a11 * ve + a12 * nu[1]), pn0 - (a12 * ve + a22 * nu[1])
-            size = np.hypot(pe, pn)
-            over = size > lim
-            pe = np.where(over, pe * lim / np.where(over, size, 1.0), pe)
-            pn = np.where(over, pn * lim / np.where(over, size, 1.0), pn)
+            over = pe * pe + pn * pn > lim * lim
+            if over.any():
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    de, dn = _on_disc(pe, pn, ve - (wee * pe0 + wen * pn0), nu[1] - (wen * pe0 + wnn * pn0),
+                                      wee, wen, wnn, lim)
+                pe, pn = np.where(over, de, pe), np.where(over, dn, pn)
             de, dn = np.where(active, pe - pe0, 0.0), np.where(active, pn - pn0, 0.0)
             pw[i, 0], pw[i, 1] = pe0 + de, pn0 + dn
             nu[0] += ju * de
