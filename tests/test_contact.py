@@ -233,3 +233,21 @@ def test_torque_slope_is_the_derivative_and_walls_in_reach_agree():
         assert np.allclose([w[0] for w in walls], g[k, : len(walls)], atol=1e-15)
     assert len(contact.walls_in_reach(BOX, 0.05, 0.05, R, 0.01)[0]) == 2  # the corner: both walls
     assert contact.walls_in_reach(BOX, 0.52, 0.52, R, 0.01)[1] < 0  # inside the obstacle: negative gap
+
+
+def test_a_slipping_wheels_friction_is_opposite_its_slip():
+    """contact._on_disc: the minimum of 1/2 P^T W P + P^T b on the disc |P| = lim has the slip velocity
+    W P + b exactly opposite to P (Coulomb, maximal dissipation), for blocks like a wheel's (heading
+    stiff through the wheel's inertia, sideways soft) and lims from 1 % to 99 % of the free minimum."""
+    rng = np.random.default_rng(0)
+    for _ in range(2000):
+        wee, wnn = rng.uniform(20, 60), rng.uniform(1, 4)
+        wen = rng.uniform(-0.5, 0.5) * math.sqrt(wee * wnn)
+        w = np.array([[wee, wen], [wen, wnn]])
+        b = rng.normal(size=2) * 10 ** rng.uniform(-4, 0)
+        free = -np.linalg.solve(w, b)
+        lim = np.linalg.norm(free) * rng.uniform(0.01, 0.99)
+        force = np.array(contact._on_disc(free[0], free[1], b[0], b[1], wee, wen, wnn, lim))
+        slip = w @ force + b
+        assert np.linalg.norm(force) == pytest.approx(lim, rel=1e-12)
+        assert slip @ force < 0 and abs(slip[0] * force[1] - slip[1] * force[0]) < 1e-9 * np.linalg.norm(slip) * lim
