@@ -51,6 +51,10 @@ class RobotParams:
     viscous_friction: float = _p(2.0e-4, "N m s/rad", "viscous friction at each wheel axle")
     coulomb_friction: float = _p(1.5e-3, "N m", "dry friction torque at each wheel axle")
     battery_voltage: float = _p(7.4, "V", "battery voltage feeding the drivers")
+    # --- contact (host_sim/contact.py, docs/dynamics.md "Contact") ------------------
+    wheel_friction: float = _p(0.8, "-", "Coulomb friction coefficient mu between a wheel and the floor; each "
+                                         "wheel carries half the weight, (m_c + 2 m_w) g / 2")
+    wall_friction: float = _p(0.3, "-", "Coulomb friction coefficient between the body's rim and a wall")
     # --- encoders ------------------------------------------------------------------
     ticks_per_rev: float = _p(1200, "ticks", "encoder ticks per wheel turn (12 CPR x2 decoding x 50:1)")
     # --- IR sensors (paper 3.3; host_sim/ir_sensor.py, docs/ir-sensor.md) ----------
@@ -207,6 +211,9 @@ def params_from_dict(data: object, where: str = "parameters") -> RobotParams:
             raise ParamsError(f"{where}: '{name}' must be positive, got {getattr(params, name)}")
     if params.com_offset < 0:
         raise ParamsError(f"{where}: 'com_offset' must be >= 0 (G ahead of C), got {params.com_offset}")
+    for name in ("wheel_friction", "wall_friction"):
+        if getattr(params, name) < 0:
+            raise ParamsError(f"{where}: '{name}' must be >= 0, got {getattr(params, name)}")
     if not 0 < params.gear_efficiency <= 1:
         raise ParamsError(f"{where}: 'gear_efficiency' must be in (0, 1], got {params.gear_efficiency}")
     return params

@@ -26,8 +26,9 @@ of `World.segments`, shape (M, 4)):
 * `World.cast_robots(poses, bearings)` the same for rays leaving robot
   centres at fixed bearings (the IR ring), with the front end folded into
   one matrix product: the fast path of the sensor model;
-* `World.nearest_wall(points)` -> (signed distance, unit normal) for
-  collisions;
+* `World.nearest_wall(points)` -> (signed distance, unit normal) to the
+  nearest wall; `World.wall_distances(points)` the same to every wall at
+  once (contact with several walls, host_sim/contact.py);
 * `World.inside_obstacle(points)`; `World.visible(points, targets)` (line of
   sight, for lamps);
 * `World.free_cells(resolution, margin)` -> boolean occupancy grid of the
@@ -176,6 +177,9 @@ class World:
         self._hp_n = np.asarray(rows, dtype=float).reshape(-1, 2)
         self._hp_c = np.asarray(cs, dtype=float)
         self._hp_starts = np.asarray(starts, dtype=int)
+        # For every segment, the convex obstacle it bounds (-1: a free-standing wall).
+        poly_of_entry = {entry: k for k, entry in enumerate(self._poly_entry)}
+        self._seg_polygon = np.array([poly_of_entry.get(int(e), -1) for e in self.segment_entry], dtype=int)
 
     # ------------------------------------------------------------------ basics
     def lamp_levels(self, t: Any = 0.0) -> np.ndarray:
@@ -468,6 +472,33 @@ class World:
             normal[inside] = -normal[inside]
         out = (dist.reshape(batch), normal.reshape(batch + (2,)))
         return out + (idx.reshape(batch),) if return_index else out
+
+    def wall_distances(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Signed distance from every point to every wall, and the unit normal from the wall to the point.
+
+        points (P, 2) -> distance (P, M), normal (P, M, 2), M = len(segments), in segment
+        order.  As nearest_wall, but for all walls at once (contact with several walls,
+        corners): the distance to an edge of a convex obstacle the point is inside is
+        negative and its normal points out of the obstacle.
+        """
+        q = np.asarray(points, dtype=float).reshape(-1, 2)
+        rel = q[:, None, :] - self._a[None]  # (P, M, 2)
+        u = np.clip((rel * self._e[None]).sum(-1) / self._len2, 0.0, 1.0)
+        diff = rel - u[..., None] * self._e[None]
+        dist = np.sqrt((diff * diff).sum(-1))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            normal = diff / dist[..., None]
+        on_wall = dist < 1e-12
+        if on_wall.any():
+            normal[on_wall] = np.broadcast_to(self._normal[None], normal.shape)[on_wall]
+        if self.polygons:
+            excess = q @ self._hp_n.T - self._hp_c  # (P, E)
+            inside = np.maximum.reduceat(excess, self._hp_starts, axis=1) < -_EPS  # (P, n_polygons)
+            seg_inside = np.zeros(dist.shape, dtype=bool)
+            seg_inside[:, self._seg_polygon >= 0] = inside[:, self._seg_polygon[self._seg_polygon >= 0]]
+            dist = np.where(seg_inside, -dist, dist)
+            normal[seg_inside] = -normal[seg_inside]
+        return dist, normal
 
     def inside_obstacle(self, points: np.ndarray) -> np.ndarray:
         """True where a point is strictly inside one of the convex polygons."""

@@ -26,7 +26,8 @@ possible, nothing drawn:
       among ours is (a): one robot and a ring of 8 range readings per 40 ms.
 
 A robot-step is one robot advanced by one physics step (dt = 40 ms / 8 =
-5 ms: motor model, dynamics, contact test).  A robot-period is one robot
+5 ms: motor model at mid-step, dynamics, grip and wall tests, and the contact
+step where a wheel slips or a wall is hit).  A robot-period is one robot
 advanced by one 40 ms control period: 8 robot-steps plus the readings at the
 control instant (encoders, and the IR ring when sensors are on).  IR-SIM has
 no substeps: one env.step() is one robot-period and one robot-step.
@@ -125,9 +126,10 @@ COMPONENTS = {
     "(a) replay": [
         ("IR sensors + encoders (SimRobot.sense)", "host_sim/sim_robot.py", "sense"),
         ("8 physics steps (SimRobot.advance)", "host_sim/sim_robot.py", "advance"),
-        ("  of which the wall test (_resolve_contact)", "host_sim/sim_robot.py", "_resolve_contact"),
-        ("  of which dynamics.step", "host_sim/dynamics.py", "step"),
-        ("  of which motors.wheel_torque", "host_sim/motors.py", "wheel_torque"),
+        ("  of which the wall test (_walls_in_reach)", "host_sim/sim_robot.py", "_walls_in_reach"),
+        ("  of which motors + dynamics (drive.drive_step)", "host_sim/drive.py", "drive_step"),
+        ("  of which the grip test (contact.traction_ok)", "host_sim/contact.py", "traction_ok"),
+        ("  of which contact steps (contact.slip_step)", "host_sim/contact.py", "slip_step"),
     ],
     "(b) SIL": [
         ("IR sensors + encoders (SimRobot.sense)", "host_sim/sim_robot.py", "sense"),
@@ -140,7 +142,9 @@ COMPONENTS = {
         ("  of which the ray cast (World.cast_robots)", "host_sim/world.py", "cast_robots"),
         ("motors (wheel_torque_batch)", "host_sim/motors.py", "wheel_torque_batch"),
         ("dynamics (step_batch)", "host_sim/dynamics.py", "step_batch"),
-        ("wall tests (BatchSim._resolve_contacts)", "host_sim/batch.py", "_resolve_contacts"),
+        ("grip tests (contact.traction_ok_batch)", "host_sim/contact.py", "traction_ok_batch"),
+        ("wall tests (BatchSim._walls_in_reach)", "host_sim/batch.py", "_walls_in_reach"),
+        ("contact steps (contact.slip_step_batch)", "host_sim/contact.py", "slip_step_batch"),
         ("encoders (encoder_ticks_batch)", "host_sim/motors.py", "encoder_ticks_batch"),
     ],
 }
@@ -521,7 +525,7 @@ def print_report(report: dict[str, Any]) -> None:
         print(textwrap.fill(text, 108, initial_indent=f"{label:<14}", subsequent_indent=" " * 14))
 
     note("robot-step:", "one robot advanced by one physics step of 5 ms (40 ms / 8): motor model, dynamics, "
-                        "contact test.  robot-period: one robot advanced by one 40 ms control period = 8 "
+                        "grip and wall tests, contact step where needed.  robot-period: one robot advanced by one 40 ms control period = 8 "
                         "robot-steps + the readings at the control instant (encoders; IR ring if on).  IR-SIM "
                         "has no substeps: one env.step() of 40 ms counts as one of each.")
     d = r["irsim"]
