@@ -177,24 +177,8 @@ class BatchSim:
                     raise ValueError(f"{'poses' if width == 3 else 'q'} must have shape (N, {width}), got {a.shape}")
                 n_hint = a.shape[0]
         self._set_params(params, n_hint)
+        self._set_state(poses, q, v)
         n = self.n
-        if q is not None:
-            self.q = np.array(q, dtype=float)
-            if self.q.shape != (n, 5):
-                raise ValueError(f"q must have shape ({n}, 5), got {self.q.shape}")
-            self.v = np.zeros((n, 2)) if v is None else np.array(v, dtype=float)
-            if self.v.shape != (n, 2):
-                raise ValueError(f"v must have shape ({n}, 2), got {self.v.shape}")
-        else:
-            if poses is None:
-                poses = np.tile(np.asarray(self.world.start, dtype=float), (n, 1))
-            pz = np.asarray(poses, dtype=float)
-            d = self._d
-            self.q = np.zeros((n, 5))
-            self.q[:, 0] = pz[:, 0] + d * np.cos(pz[:, 2])
-            self.q[:, 1] = pz[:, 1] + d * np.sin(pz[:, 2])
-            self.q[:, 2] = pz[:, 2]
-            self.v = np.zeros((n, 2))
         self.t = float(t)
         self.emitter_now = float(emitter_pct if initial_emitter_pct is None else initial_emitter_pct)
         self.collisions = np.zeros(n, dtype=np.int64)
@@ -212,6 +196,27 @@ class BatchSim:
         self._walls = self.world.n_walls > 0
 
     # ------------------------------------------------------------------ set-up
+    def _set_state(self, poses: Any, q: Any, v: Any) -> None:
+        """q and v given, or robots at rest at poses of C (default the world's start)."""
+        n = self.n
+        if q is not None:
+            self.q = np.array(q, dtype=float)
+            if self.q.shape != (n, 5):
+                raise ValueError(f"q must have shape ({n}, 5), got {self.q.shape}")
+            self.v = np.zeros((n, 2)) if v is None else np.array(v, dtype=float)
+            if self.v.shape != (n, 2):
+                raise ValueError(f"v must have shape ({n}, 2), got {self.v.shape}")
+            return
+        if poses is None:
+            poses = np.tile(np.asarray(self.world.start, dtype=float), (n, 1))
+        pz = np.asarray(poses, dtype=float)
+        d = self._d
+        self.q = np.zeros((n, 5))
+        self.q[:, 0] = pz[:, 0] + d * np.cos(pz[:, 2])
+        self.q[:, 1] = pz[:, 1] + d * np.sin(pz[:, 2])
+        self.q[:, 2] = pz[:, 2]
+        self.v = np.zeros((n, 2))
+
     def _set_params(self, params: Any, n_hint: int | None) -> None:
         if isinstance(params, RobotParams):
             n = n_hint if n_hint is not None else 1

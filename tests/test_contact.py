@@ -17,6 +17,7 @@ from host_sim.interface import Actuate
 from host_sim.params import DEFAULT
 from host_sim.sim_robot import SimRobot
 from host_sim.world import World
+from tests import test_dynamics as reference  # the reference formulas (written out there)
 
 FLOOR = World(name="floor", size=(2.0, 2.0), walls=[{"segment": [-1.0, 0.0, 3.0, 0.0]}])
 CORNER = World(name="corner", size=(2.0, 2.0),
@@ -93,12 +94,12 @@ def test_energy_never_grows_in_contact(friction):
     p = DEFAULT if friction else DEFAULT.replace(viscous_friction=0.0, coulomb_friction=0.0,
                                                  battery_voltage=100.0)
     robot = SimRobot(CORNER, p, (0.15, 0.2, math.radians(-120)), noise=False)
-    robot.v = dynamics.wheel_speeds(0.6, 3.0, p)
+    robot.v = reference.wheel_speeds(0.6, 3.0, p)
     energy, pushed = [], []
 
     def kinetic(r):
         if r.slip is None:
-            return dynamics.kinetic_energy_reduced(r.v, p)
+            return reference.kinetic_energy_reduced(r.v, p)
         u, l, om = r.slip
         m, k, j = contact.consts(p)[:3]
         return 0.5 * (m * (u * u + l * l) + 2 * k * l * om + j * om * om

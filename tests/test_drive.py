@@ -17,6 +17,7 @@ from host_sim import drive
 from host_sim import dynamics as dy
 from host_sim import motors as mo
 from host_sim.params import DEFAULT as P
+from tests import test_dynamics as reference  # the reference formulas (written out there)
 
 DTS = (0.005, 0.0025, 0.00125, 0.000625)
 # (name in the docs table, initial wheel speeds rad/s, current references A)
@@ -31,7 +32,7 @@ T_END, SAMPLE = 2.0, 0.04
 def coupled(x, i_ref):
     v = x[5:]
     tau = [mo.wheel_torque(i_ref[j], v[j], P)[0] for j in range(2)]
-    return np.array([*dy.qdot(x[:5], v, P), *dy.reduced_accel_fast(x[:5], v, tau, P)])
+    return np.array([*reference.qdot(x[:5], v, P), *dy.reduced_accel_fast(x[:5], v, tau, P)])
 
 
 def rk4_path(v0, i_ref, dt=1e-4):
