@@ -47,6 +47,11 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
                    help="send COMMAND: mode (stop, autonomous, host, teleop) and wheel setpoints in mm/s")
     p.add_argument("--rate", type=float_range(0, 1000, unit="Hz"), default=10.0,
                    help="repeat --command at this rate in Hz, to keep the watchdog fed (0: send once; default 10)")
+    p.add_argument("--excite", action="store_true",
+                   help="drive the robot through the identification manoeuvre (HOST mode at 25 Hz: creep, steps, "
+                        "chirp, spins, arcs, reversals, bursts; it turns away from walls its IR sees and heads back "
+                        "beyond 0.5 m of its start); with --record F.csv, a recording for twinbot diagnose "
+                        "(default --duration 92 s: the manoeuvre twice)")
     p.add_argument("--param-set", action="append", default=[], metavar="NAME=VALUE", help="send PARAM_SET (repeatable)")
     p.add_argument("--param-get", action="append", default=[], metavar="NAME", help="send PARAM_GET (repeatable)")
     p.add_argument("--record", metavar="FILE", type=record_target,
@@ -178,8 +183,41 @@ class Display:
         self.stream.flush()
 
 
+class ManoeuvreDriver:
+    """--excite: each COMMAND from the manoeuvre, given the robot's latest TELEMETRY (its IR and odometry)."""
+
+    def __init__(self) -> None:
+        from host_sim.excitation import Manoeuvre
+
+        self.manoeuvre = Manoeuvre()
+        self.last: dict[str, object] | None = None
+        self.start: float | None = None
+
+    def frame(self, frame: Frame) -> None:
+        if frame.direction == "rx" and frame.msg_type == M.TELEMETRY:
+            self.last = frame.fields
+
+    def __call__(self) -> dict[str, object]:
+        from host_sim.excitation import odometry_of, reflected_of
+
+        now = time.monotonic()
+        if self.start is None:
+            self.start = now
+        left, right = self.manoeuvre.command(now - self.start, reflected_of(self.last), odometry_of(self.last))
+        return {"mode": M.MODE_HOST, "left": left, "right": right}
+
+
 def run(args: argparse.Namespace) -> int:
-    command = parse_command(args.command) if args.command else None
+    if args.excite and args.command:
+        raise CliError("--excite and --command both command the wheels: give one")
+    command: dict[str, object] | ManoeuvreDriver | None = parse_command(args.command) if args.command else None
+    if args.excite:
+        command = ManoeuvreDriver()
+        args.rate = 25.0
+        if args.duration is None:
+            from host_sim.excitation import CYCLE_S as MANOEUVRE_S
+
+            args.duration = 2 * MANOEUVRE_S
     param_sets = [parse_param_set(s) for s in args.param_set]
     param_gets = [_param(n)[0] for n in args.param_get]
     display = Display(args.quiet)
@@ -195,6 +233,8 @@ def run(args: argparse.Namespace) -> int:
     def on_frame(frame: Frame) -> None:
         if log:
             log.frame(frame)
+        if isinstance(command, ManoeuvreDriver):
+            command.frame(frame)
         display.frame(frame)
 
     try:
@@ -238,7 +278,7 @@ class TelemetryRecorder:
         self.writer.close()
 
 
-def session(link: SerialLink, args: argparse.Namespace, command: dict[str, object] | None,
+def session(link: SerialLink, args: argparse.Namespace, command: dict[str, object] | ManoeuvreDriver | None,
             param_sets: list[tuple[int, int]], param_gets: list[int]) -> int:
     if args.hello:
         link.send(M.HELLO, host_hello())
@@ -253,7 +293,7 @@ def session(link: SerialLink, args: argparse.Namespace, command: dict[str, objec
         now = time.monotonic()
         silence.check(link.decoder.frames, now)
         if command is not None and now >= next_command:
-            link.send(M.COMMAND, command)
+            link.send(M.COMMAND, command() if callable(command) else command)
             if args.rate > 0:
                 next_command = now + 1.0 / args.rate
             else:

@@ -61,6 +61,10 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
                         "instead of simulating it off the map until --duration")
     p.add_argument("--pil", action="store_true",
                    help="run the firmware on a virtual board under MicroPython (processor in the loop)")
+    p.add_argument("--excite", action="store_true",
+                   help="drive the firmware through the identification manoeuvre (HOST mode: creep, steps, chirp, "
+                        "spins, arcs, reversals, bursts; IR-guarded) instead of exploring: a recording for "
+                        "twinbot diagnose")
 
 
 def parse_speed(speed: str | float, mode: str) -> float:
@@ -90,10 +94,16 @@ def make_controller(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     rule_set = RULE_SETS[args.rules]
     if args.pil:
         try:
-            return PilController(rule_set)
+            controller: object = PilController(rule_set)
         except RuntimeError as exc:
             raise CliError(f"PIL: {exc}") from None
-    return SilController(rule_set)
+    else:
+        controller = SilController(rule_set)
+    if getattr(args, "excite", False):
+        from host_sim.excitation import ExcitedController
+
+        return ExcitedController(controller)
+    return controller
 
 
 class Progress:
@@ -173,6 +183,7 @@ def run(args: argparse.Namespace) -> int:
             recorder = RecordingWriter(args.record, source="simulator", sample_period=0.04,
                                        robot=params.to_json(), world=world.to_dict(),
                                        extra={"controller": "PIL" if args.pil else "SIL", "rules": args.rules,
+                                              "excitation": "manoeuvre" if args.excite else "exploration",
                                               "seed": args.seed, "mode": args.mode, "substeps": args.substeps,
                                               "noise": not args.no_noise, "emitter_pct": 60})
         except RecordingError as exc:
