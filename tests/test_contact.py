@@ -248,7 +248,7 @@ def test_a_slipping_wheels_friction_is_opposite_its_slip():
         b = rng.normal(size=2) * 10 ** rng.uniform(-4, 0)
         free = -np.linalg.solve(w, b)
         lim = np.linalg.norm(free) * rng.uniform(0.01, 0.99)
-        force = np.array(contact._on_disc(free[0], free[1], b[0], b[1], wee, wen, wnn, lim))
+        force = np.array(contact._on_disc(b[0], b[1], lim, contact._eigen(wee, wen, wnn)))
         slip = w @ force + b
         assert np.linalg.norm(force) == pytest.approx(lim, rel=1e-12)
         assert slip @ force < 0 and abs(slip[0] * force[1] - slip[1] * force[0]) < 1e-9 * np.linalg.norm(slip) * lim
