@@ -124,9 +124,11 @@ def test_the_collision_counter_counts_contact_starts():
     assert robot.collisions == 2 and robot.in_contact
 
 
-def test_batch_and_scalar_contact_agree_on_random_scenarios_with_corners():
+@pytest.mark.parametrize("vector_from", [1, 64])
+def test_batch_and_scalar_contact_agree_on_random_scenarios_with_corners(vector_from):
     """N robots thrown at random into a box with an obstacle (corners included), random currents and
-    per-robot friction: BatchSim == SimRobot for each, to rounding."""
+    per-robot friction: BatchSim == SimRobot for each, to rounding; BatchSim's contact steps
+    vectorised (contact.slip_step_batch) or, for few robots, one by one (contact.slip_step)."""
     rng = np.random.default_rng(8)
     n = 12
     poses = np.column_stack([rng.uniform(0.1, 0.35, n), rng.uniform(0.1, 0.35, n), rng.uniform(-np.pi, np.pi, n)])
@@ -134,7 +136,9 @@ def test_batch_and_scalar_contact_agree_on_random_scenarios_with_corners():
     params = [DEFAULT.replace(wheel_friction=float(rng.uniform(0.3, 1.0)), wall_friction=float(rng.uniform(0, 0.6)))
               for _ in range(n)]
     cmd = np.repeat(np.round(rng.uniform(-0.2, 0.5, (6, n, 2)), 3), 15, axis=0)
-    res = BatchSim(BOX, params, poses).run_inputs(cmd, sensors=False)
+    sim = BatchSim(BOX, params, poses)
+    sim.vector_contacts_from = vector_from
+    res = sim.run_inputs(cmd, sensors=False)
     slipped = 0
     for i in range(n):
         robot = SimRobot(BOX, params[i], tuple(poses[i]), noise=False)
