@@ -37,7 +37,11 @@ docs/dynamics.md "Contact"): every robot takes the rolling step
 (contact.traction_ok_batch) or whose rim would enter a wall take the
 contact step instead (contact.slip_step_batch, on that subset only), with
 all the walls within their reach (contact.walls_in_reach_batch); the start
-of each contact counts one collision.  The wall test runs only for robots
+of each contact counts one collision.  When fewer than
+`vector_contacts_from` (64) robots need the contact step, they take it one
+by one through contact.slip_step, its scalar twin: the vectorised solve
+iterates until its slowest robot settles, and for a few robots its sweeps
+are all Python overhead.  The wall test runs only for robots
 that may reach a wall in the step (a conservative bound on how far C moved
 since their last test).  world=None means no walls: no wall contacts, and
 the IR sensors see only the ambient light.
