@@ -293,7 +293,8 @@ def _solve(nu: list[float], wheels: list[tuple[Any, ...]], contacts: list[tuple[
             pe0, pn0 = pw[i]
             pe, pn = pe0 - (a11 * ve + a12 * nu[1]), pn0 - (a12 * ve + a22 * nu[1])
             if pe * pe + pn * pn > lim * lim:
-                pe, pn = _on_disc(ve - (wee * pe0 + wen * pn0), nu[1] - (wen * pe0 + wnn * pn0), lim, eig)
+                pe, pn = _on_disc(ve - (wee * pe0 + wen * pn0), nu[1] - (wen * pe0 + wnn * pn0), lim, eig) \
+                    if lim > 0.0 else (0.0, 0.0)  # mu = 0: no grip at all
             pw[i] = [pe, pn]
             _apply(nu, w, pe - pe0, pn - pn0, i, ju, lat_l, lat_w)
         for i, (gdt, ne, nn, nl, nw, tl, tw, inn, itt) in enumerate(contacts):
@@ -384,7 +385,9 @@ def _solve_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: 
             if over.any():
                 with np.errstate(divide="ignore", invalid="ignore"):
                     de, dn = _on_disc(ve - (wee * pe0 + wen * pn0), nu[1] - (wen * pe0 + wnn * pn0), lim, eig)
-                pe, pn = np.where(over, de, pe), np.where(over, dn, pn)
+                grip = lim > 0.0  # mu = 0: no grip at all
+                pe = np.where(over, np.where(grip, de, 0.0), pe)
+                pn = np.where(over, np.where(grip, dn, 0.0), pn)
             de, dn = np.where(active, pe - pe0, 0.0), np.where(active, pn - pn0, 0.0)
             pw[i, 0], pw[i, 1] = pe0 + de, pn0 + dn
             nu[0] += ju * de
