@@ -37,7 +37,11 @@ docs/dynamics.md "Contact"): every robot takes the rolling step
 (contact.traction_ok_batch) or whose rim would enter a wall take the
 contact step instead (contact.slip_step_batch, on that subset only), with
 all the walls within their reach (contact.walls_in_reach_batch); the start
-of each contact counts one collision.  The wall test runs only for robots
+of each contact counts one collision.  When fewer than
+`vector_contacts_from` (64) robots need the contact step, they take it one
+by one through contact.slip_step, its scalar twin: the vectorised solve
+iterates until its slowest robot settles, and for a few robots its sweeps
+are all Python overhead.  The wall test runs only for robots
 that may reach a wall in the step (a conservative bound on how far C moved
 since their last test).  world=None means no walls: no wall contacts, and
 the IR sensors see only the ambient light.
@@ -79,6 +83,7 @@ from host_sim.world import World
 
 
 SUBSTEPS = 8
+VECTOR_CONTACTS_FROM = 64  # robots in one contact step from which the vectorised solve is the faster
 N_SENSORS = ir_sensor.N_SENSORS
 # RobotParams fields the IR model reads: robots that agree on all of them
 # share one read_sensors_batch call.
@@ -191,6 +196,9 @@ class BatchSim:
         self.body = np.zeros((n, 3))  # (u, l, omega) of the robots that slip
         # the last contact step's forces, where the next one starts (SimRobot._forces)
         self._warm = np.zeros(n, dtype=bool)
+        # Fewer robots than this in a contact step: contact.slip_step one by one, else slip_step_batch.
+        self.vector_contacts_from = VECTOR_CONTACTS_FROM
+        self._robots_cache: dict[int, RobotParams] = {}
         self._wheel_force = np.zeros((2, 2, n))
         self._wall_force = np.zeros((2, n, max(self.world.n_walls, 1)))
         self._walls = self.world.n_walls > 0
@@ -351,8 +359,12 @@ class BatchSim:
         wheel_f = np.where(warm[None, None], self._wheel_force[:, :, s], 0.0)
         wall_f = self._wall_force[:, s[:, None], walls].transpose(0, 2, 1)  # (2, W, K)
         wall_f = np.where((warm[:, None] & np.isfinite(g))[None].transpose(0, 2, 1), wall_f, 0.0)
-        qn, vn, bn, rolled, pushed, wheel_f, wall_f = contact.slip_step_batch(
-            q0[s], v0[s], body, tau, slope, dt, self._p, g, nrm, None if self._shared else s, wheel_f, wall_f)
+        if len(s) >= self.vector_contacts_from:
+            qn, vn, bn, rolled, pushed, wheel_f, wall_f = contact.slip_step_batch(
+                q0[s], v0[s], body, tau, slope, dt, self._p, g, nrm, None if self._shared else s, wheel_f, wall_f)
+        else:
+            qn, vn, bn, rolled, pushed, wheel_f, wall_f = self._slip_steps_one_by_one(
+                s, q0, v0, body, tau, slope, dt, g, nrm, walls, wheel_f, wall_f)
         q1[s], v1[s], self.body[s] = qn, vn, bn
         self._wheel_force[:, :, s] = wheel_f
         self._wall_force[:, s] = 0.0
@@ -363,6 +375,39 @@ class BatchSim:
         started = s[pushed & ~self.in_contact[s]]
         self.collisions[started] += 1
         self.in_contact[s[pushed]] = True
+
+    def _slip_steps_one_by_one(self, s: np.ndarray, q0: np.ndarray, v0: np.ndarray, body: np.ndarray,
+                               tau: np.ndarray, slope: np.ndarray, dt: float, g: np.ndarray, nrm: np.ndarray,
+                               walls: np.ndarray, wheel_f: np.ndarray, wall_f: np.ndarray) -> tuple[np.ndarray, ...]:
+        """contact.slip_step (the scalar twin of slip_step_batch) for each robot of s, in the batch's layout:
+        a few robots in contact cost less this way than a vectorised solve whose sweeps are all
+        overhead."""
+        k, width = len(s), g.shape[1]
+        qn, vn, bn = np.empty((k, 5)), np.empty((k, 2)), np.empty((k, 3))
+        rolled, pushed = np.zeros(k, dtype=bool), np.zeros(k, dtype=bool)
+        wheel_out, wall_out = np.zeros((2, 2, k)), np.zeros((2, width, k))
+        for n, j in enumerate(s):
+            near = [w for w in range(width) if np.isfinite(g[n, w])]
+            in_reach = [(float(g[n, w]), float(nrm[n, w, 0]), float(nrm[n, w, 1]), int(walls[n, w])) for w in near]
+            warm = (wheel_f[:, :, n].tolist(), [wall_f[:, w, n].tolist() for w in near]) if self._warm[j] else None
+            q_j, v_j, b_j, pushed[n], (f_wheels, f_walls) = contact.slip_step(
+                q0[j].tolist(), v0[j].tolist(), tuple(body[n].tolist()) if self.slipping[j] else None,
+                tau[n].tolist(), slope[n].tolist(), dt, self._robot_params(int(j)), in_reach, warm)
+            qn[n], vn[n] = q_j, v_j
+            rolled[n] = b_j is None
+            bn[n] = body[n] if b_j is None else b_j
+            wheel_out[:, :, n] = f_wheels
+            for w, f in zip(near, f_walls):
+                wall_out[:, w, n] = f
+        return qn, vn, bn, rolled, pushed, wheel_out, wall_out
+
+    def _robot_params(self, j: int) -> RobotParams:
+        if self._shared:
+            return self._p  # type: ignore[no-any-return]
+        cached = self._robots_cache.get(j)
+        if cached is None:
+            cached = self._robots_cache[j] = self._p.robot(j, self.base)
+        return cached
 
     def _walls_in_reach(self, q0: np.ndarray, q1: np.ndarray, ok: np.ndarray, dt: float
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -40,10 +40,10 @@ import numpy as np
 from host_sim.params import RobotParams
 
 GRAVITY = 9.81  # m/s^2
-PGS_TOL = 1e-10  # impulse change (in units of m g dt) below which the solve has converged
+PGS_TOL = 1e-10  # m/s: a sweep that moves no velocity by more than this ends the solve
 PGS_MAX_ITER = 100  # sweeps; past it (redundant contacts at a standstill) the next step goes on from here
 STICK_MARGIN = 1e-9  # a wheel impulse this far inside its cone (relative) is sticking
-NEWTON_STEPS = 6  # on a wheel's friction disc (quadratic convergence from lam = 0)
+NEWTON_STEPS = 6  # on a wheel's friction disc: the force within 1e-13 rad of opposite the slip
 REACH_MARGIN = 2e-3  # m: a wall closer than the step's travel + this is a contact candidate
 
 _last: tuple[Any, tuple[float, ...]] | None = None
@@ -167,33 +167,45 @@ def _wheel_blocks(iwl: Any, iwr: Any, m: Any, k: Any, j: Any, r: Any, b: Any) ->
         wen = sb * k * jd
         wnn = j * jd
         idet = 1.0 / (wee * wnn - wen * wen)
-        blocks.append((sb, k * sb * jd, -m * sb * jd, -r / iwi, wnn * idet, -wen * idet, wee * idet, wee, wen, wnn))
+        blocks.append((sb, k * sb * jd, -m * sb * jd, -r / iwi, wnn * idet, -wen * idet, wee * idet, wee, wen, wnn,
+                       _eigen(wee, wen, wnn)))
     return blocks
 
 
-def _on_disc(pe: Any, pn: Any, be: Any, bn: Any, wee: Any, wen: Any, wnn: Any, lim: Any) -> tuple[Any, Any]:
-    """The impulse on the disc |P| = lim minimising 1/2 P^T W P + P^T b, for an unconstrained minimum
-    (pe, pn) outside it: P(lam) = -(W + lam I)^-1 b with |P(lam)| = lim (the slip velocity W P + b
-    is then -lam P: opposite to the friction, Coulomb's maximal dissipation).  Newton on
-    1/|P(lam)| - 1/lim from lam = 0, which converges monotonically (More and Sorensen); a fixed
-    number of steps, then scaled onto the disc.  Floats or arrays."""
-    lam = 0.0 * pe
+def _on_disc(be: Any, bn: Any, lim: Any, eig: tuple[Any, Any, Any, Any]) -> tuple[Any, Any]:
+    """The impulse on the disc |P| = lim minimising 1/2 P^T W P + P^T b (b = (be, bn)), when the
+    unconstrained minimum lies outside it: P(lam) = -(W + lam I)^-1 b with |P(lam)| = lim, so that
+    the slip velocity W P + b = -lam P is opposite to the friction (Coulomb's maximal dissipation).
+    In W's eigenbasis (eig = cos, sin of its first eigenvector, eigenvalues mu1 >= mu2), Newton on
+    1/|P(lam)| - 1/lim, which converges monotonically from below (More and Sorensen), from the
+    lower bound |b| / lim - mu1; a fixed number of steps, then scaled onto the disc.  Floats or arrays."""
+    c, s, mu1, mu2 = eig
+    b1, b2 = c * be + s * bn, c * bn - s * be
+    lam = (b1 * b1 + b2 * b2) ** 0.5 / lim - mu1
+    lam = lam * (lam > 0)
     for _ in range(NEWTON_STEPS):
-        size2 = pe * pe + pn * pn
-        a11, a22 = wee + lam, wnn + lam
-        idet = 1.0 / (a11 * a22 - wen * wen)
-        # dP/dlam = -(W + lam I)^-1 P
-        de = -(a22 * pe - wen * pn) * idet
-        dn = -(a11 * pn - wen * pe) * idet
-        size = size2 ** 0.5
-        phi = 1.0 / size - 1.0 / lim
-        dphi = -(pe * de + pn * dn) / (size2 * size)
-        lam = lam - phi / dphi
-        a11, a22 = wee + lam, wnn + lam
-        idet = 1.0 / (a11 * a22 - wen * wen)
-        pe, pn = -(a22 * be - wen * bn) * idet, -(a11 * bn - wen * be) * idet
-    scale = lim / (pe * pe + pn * pn) ** 0.5
-    return pe * scale, pn * scale
+        i1, i2 = 1.0 / (mu1 + lam), 1.0 / (mu2 + lam)
+        q1, q2 = b1 * i1, b2 * i2
+        size2 = q1 * q1 + q2 * q2
+        # phi = size2^-1/2 - 1/lim, phi' = size2^-3/2 (q1^2 i1 + q2^2 i2)
+        inv = size2 ** -0.5
+        lam = lam - (inv - 1.0 / lim) / (inv * inv * inv * (q1 * q1 * i1 + q2 * q2 * i2))
+    q1, q2 = -b1 / (mu1 + lam), -b2 / (mu2 + lam)
+    scale = lim / (q1 * q1 + q2 * q2) ** 0.5
+    return (c * q1 - s * q2) * scale, (s * q1 + c * q2) * scale
+
+
+def _eigen(wee: Any, wen: Any, wnn: Any) -> tuple[Any, Any, Any, Any]:
+    """(cos, sin of the first eigenvector, eigenvalues mu1 >= mu2) of the symmetric [[wee, wen], [wen, wnn]]."""
+    half = 0.5 * (wee - wnn)
+    rad = (half * half + wen * wen) ** 0.5
+    if isinstance(half, np.ndarray):
+        theta = 0.5 * np.arctan2(wen, half)
+        c, s = np.cos(theta), np.sin(theta)
+    else:  # Python floats stay Python floats (numpy scalars are ten times slower)
+        theta = 0.5 * math.atan2(wen, half)
+        c, s = math.cos(theta), math.sin(theta)
+    return c, s, 0.5 * (wee + wnn) + rad, 0.5 * (wee + wnn) - rad
 
 
 def _wall_block(ne: Any, nn: Any, m: Any, k: Any, j: Any, rad: Any) -> tuple[Any, ...]:
@@ -271,20 +283,20 @@ def _solve(nu: list[float], wheels: list[tuple[Any, ...]], contacts: list[tuple[
             nu[0] += (ne * pn - nn * pt) * ju
             nu[1] += nl * pn + tl * pt
             nu[2] += nw * pn + tw * pt
-    lim, tol = cap * dt, PGS_TOL * mg * dt
+    lim = cap * dt
+    b = wheels[0][0]
     for _ in range(PGS_MAX_ITER):
-        change = 0.0
+        before = (nu[0], nu[1], nu[2], nu[3], nu[4])
         for i, w in enumerate(wheels):
-            sb, _el, _ew, _er, a11, a12, a22, wee, wen, wnn = w
+            sb, _el, _ew, _er, a11, a12, a22, wee, wen, wnn, eig = w
             ve = nu[0] - sb * nu[2] - r * nu[3 + i]
             pe0, pn0 = pw[i]
             pe, pn = pe0 - (a11 * ve + a12 * nu[1]), pn0 - (a12 * ve + a22 * nu[1])
             if pe * pe + pn * pn > lim * lim:
-                pe, pn = _on_disc(pe, pn, ve - (wee * pe0 + wen * pn0), nu[1] - (wen * pe0 + wnn * pn0),
-                                  wee, wen, wnn, lim)
+                pe, pn = _on_disc(ve - (wee * pe0 + wen * pn0), nu[1] - (wen * pe0 + wnn * pn0), lim, eig) \
+                    if lim > 0.0 else (0.0, 0.0)  # mu = 0: no grip at all
             pw[i] = [pe, pn]
             _apply(nu, w, pe - pe0, pn - pn0, i, ju, lat_l, lat_w)
-            change = max(change, abs(pe - pe0), abs(pn - pn0))
         for i, (gdt, ne, nn, nl, nw, tl, tw, inn, itt) in enumerate(contacts):
             pn0, pt0 = pc[i]
             pn = max(pn0 - (ne * nu[0] + nn * nu[1] + gdt) * inn, 0.0)
@@ -299,8 +311,9 @@ def _solve(nu: list[float], wheels: list[tuple[Any, ...]], contacts: list[tuple[
             nu[1] += tl * dt_
             nu[2] += tw * dt_
             pc[i] = [pn, pt]
-            change = max(change, abs(dn), abs(dt_))
-        if change < tol:
+        # settled when no velocity (of C, of the rim and the wheels' contact points) moved by PGS_TOL
+        if max(abs(nu[0] - before[0]), abs(nu[1] - before[1]), abs(b * (nu[2] - before[2])),
+               abs(r * (nu[3] - before[3])), abs(r * (nu[4] - before[4]))) < PGS_TOL:
             break
 
 
@@ -359,27 +372,28 @@ def _solve_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: 
             nu[0] += (ne * pn - nn * pt) * ju
             nu[1] += nl * pn + tl * pt
             nu[2] += nw * pn + tw * pt
-    lim, tol = cap * dt, PGS_TOL * mg * dt
+    lim = cap * dt
+    b = np.abs(wheels[0][0])
     active = np.ones(len(nu[0]), dtype=bool)
     for _ in range(PGS_MAX_ITER):
-        change = np.zeros(len(active))
-        for i, (sb, el, ew, er, a11, a12, a22, wee, wen, wnn) in enumerate(wheels):
+        before = [x.copy() for x in nu]
+        for i, (sb, el, ew, er, a11, a12, a22, wee, wen, wnn, eig) in enumerate(wheels):
             ve = nu[0] - sb * nu[2] - r * nu[3 + i]
             pe0, pn0 = pw[i, 0].copy(), pw[i, 1].copy()
             pe, pn = pe0 - (a11 * ve + a12 * nu[1]), pn0 - (a12 * ve + a22 * nu[1])
             over = pe * pe + pn * pn > lim * lim
             if over.any():
                 with np.errstate(divide="ignore", invalid="ignore"):
-                    de, dn = _on_disc(pe, pn, ve - (wee * pe0 + wen * pn0), nu[1] - (wen * pe0 + wnn * pn0),
-                                      wee, wen, wnn, lim)
-                pe, pn = np.where(over, de, pe), np.where(over, dn, pn)
+                    de, dn = _on_disc(ve - (wee * pe0 + wen * pn0), nu[1] - (wen * pe0 + wnn * pn0), lim, eig)
+                grip = lim > 0.0  # mu = 0: no grip at all
+                pe = np.where(over, np.where(grip, de, 0.0), pe)
+                pn = np.where(over, np.where(grip, dn, 0.0), pn)
             de, dn = np.where(active, pe - pe0, 0.0), np.where(active, pn - pn0, 0.0)
             pw[i, 0], pw[i, 1] = pe0 + de, pn0 + dn
             nu[0] += ju * de
             nu[1] += el * de + lat_l * dn
             nu[2] += ew * de + lat_w * dn
             nu[3 + i] += er * de
-            change = np.maximum(change, np.maximum(np.abs(de), np.abs(dn)))
         for w, (gdt, ne, nn, nl, nw, tl, tw, inn, itt) in enumerate(contacts):
             pn0, pt0 = pc[0, w].copy(), pc[1, w].copy()
             pn = np.maximum(pn0 - (ne * nu[0] + nn * nu[1] + gdt) * inn, 0.0)
@@ -394,7 +408,9 @@ def _solve_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: 
             nu[1] += tl * dt_
             nu[2] += tw * dt_
             pc[0, w], pc[1, w] = pn0 + dn, pt0 + dt_
-            change = np.maximum(change, np.maximum(np.abs(dn), np.abs(dt_)))
-        active &= change >= tol
+        change = np.maximum(np.maximum(np.abs(nu[0] - before[0]), np.abs(nu[1] - before[1])),
+                            np.maximum(np.abs(b * (nu[2] - before[2])),
+                                       np.maximum(np.abs(r * (nu[3] - before[3])), np.abs(r * (nu[4] - before[4])))))
+        active &= change >= PGS_TOL
         if not active.any():
             break

@@ -124,9 +124,11 @@ def test_the_collision_counter_counts_contact_starts():
     assert robot.collisions == 2 and robot.in_contact
 
 
-def test_batch_and_scalar_contact_agree_on_random_scenarios_with_corners():
+@pytest.mark.parametrize("vector_from", [1, 64])
+def test_batch_and_scalar_contact_agree_on_random_scenarios_with_corners(vector_from):
     """N robots thrown at random into a box with an obstacle (corners included), random currents and
-    per-robot friction: BatchSim == SimRobot for each, to rounding."""
+    per-robot friction: BatchSim == SimRobot for each, to rounding; BatchSim's contact steps
+    vectorised (contact.slip_step_batch) or, for few robots, one by one (contact.slip_step)."""
     rng = np.random.default_rng(8)
     n = 12
     poses = np.column_stack([rng.uniform(0.1, 0.35, n), rng.uniform(0.1, 0.35, n), rng.uniform(-np.pi, np.pi, n)])
@@ -134,7 +136,9 @@ def test_batch_and_scalar_contact_agree_on_random_scenarios_with_corners():
     params = [DEFAULT.replace(wheel_friction=float(rng.uniform(0.3, 1.0)), wall_friction=float(rng.uniform(0, 0.6)))
               for _ in range(n)]
     cmd = np.repeat(np.round(rng.uniform(-0.2, 0.5, (6, n, 2)), 3), 15, axis=0)
-    res = BatchSim(BOX, params, poses).run_inputs(cmd, sensors=False)
+    sim = BatchSim(BOX, params, poses)
+    sim.vector_contacts_from = vector_from
+    res = sim.run_inputs(cmd, sensors=False)
     slipped = 0
     for i in range(n):
         robot = SimRobot(BOX, params[i], tuple(poses[i]), noise=False)
@@ -248,7 +252,20 @@ def test_a_slipping_wheels_friction_is_opposite_its_slip():
         b = rng.normal(size=2) * 10 ** rng.uniform(-4, 0)
         free = -np.linalg.solve(w, b)
         lim = np.linalg.norm(free) * rng.uniform(0.01, 0.99)
-        force = np.array(contact._on_disc(free[0], free[1], b[0], b[1], wee, wen, wnn, lim))
+        force = np.array(contact._on_disc(b[0], b[1], lim, contact._eigen(wee, wen, wnn)))
         slip = w @ force + b
         assert np.linalg.norm(force) == pytest.approx(lim, rel=1e-12)
         assert slip @ force < 0 and abs(slip[0] * force[1] - slip[1] * force[0]) < 1e-9 * np.linalg.norm(slip) * lim
+
+
+def test_on_ice_the_wheels_spin_and_the_robot_stays():
+    """wheel_friction = 0: no ground force at all; scalar and batch (both paths) agree."""
+    ice = DEFAULT.replace(wheel_friction=0.0)
+    robot = drive(World(name="e", size=(1.0, 1.0), walls=[]), (0.0, 0.0, 0.0), (500, 300), 0.96, 0.005, p=ice)
+    assert robot.pose == (0.0, 0.0, 0.0) and robot.slip is not None and min(robot.encoder_ticks()) > 1000
+    for vector_from in (1, 64):
+        sim = BatchSim(None, [ice, DEFAULT], np.zeros((2, 3)))
+        sim.vector_contacts_from = vector_from
+        res = sim.run_inputs(np.tile([[0.5, 0.3]], (25, 1)), sensors=False)
+        assert np.array_equal(res.pose[-1, 0], [0.0, 0.0, 0.0]) and res.pose[-1, 1, 0] > 0.3
+        assert np.abs(res.enc[-1, 0] - robot.encoder_ticks()).max() <= 1  # row 24: after 0.96 s
