@@ -48,7 +48,8 @@ fixed step, second order, velocities first then pose:
     q+ = q + dt S(phi + dt omega_bar / 2) (v + v+) / 2
 
 where H = S^T M S (constant) and C(omega*) is the gyroscopic (skew) matrix with
-phi' frozen at omega*.  It costs one 2x2 solve, is exact for d = 0 under a
+phi' frozen at omega*.  Second order for a torque held over the step; with the
+motors in the loop the torque must be taken at mid-step (host_sim/drive.py).  It costs one 2x2 solve, is exact for d = 0 under a
 constant torque, and satisfies the work-energy balance  T+ - T = tau . (theta+ - theta)
 to rounding error, so with no input the kinetic energy is conserved exactly.
 """

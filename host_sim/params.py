@@ -51,6 +51,10 @@ class RobotParams:
     viscous_friction: float = _p(2.0e-4, "N m s/rad", "viscous friction at each wheel axle")
     coulomb_friction: float = _p(1.5e-3, "N m", "dry friction torque at each wheel axle")
     battery_voltage: float = _p(7.4, "V", "battery voltage feeding the drivers")
+    # --- contact (host_sim/contact.py, docs/dynamics.md "Contact") ------------------
+    wheel_friction: float = _p(0.8, "-", "Coulomb friction coefficient mu between a wheel and the floor; each "
+                                         "wheel carries half the weight, (m_c + 2 m_w) g / 2")
+    wall_friction: float = _p(0.3, "-", "Coulomb friction coefficient between the body's rim and a wall")
     # --- encoders ------------------------------------------------------------------
     ticks_per_rev: float = _p(1200, "ticks", "encoder ticks per wheel turn (12 CPR x2 decoding x 50:1)")
     # --- IR sensors (paper 3.3; host_sim/ir_sensor.py, docs/ir-sensor.md) ----------
@@ -163,6 +167,18 @@ class ParamsError(ValueError):
     """A parameter file is wrong; the message names the file, the entry and the problem."""
 
 
+# What a parameter file may say beyond "finite and positive": whole numbers
+# where the hardware counts, and ranges outside which the models overflow or
+# stop meaning anything (readings travel as 16-bit fields on the wire).
+INTEGER_PARAMS = {"adc_bits": (8, 16), "ticks_per_rev": (1, 1_000_000)}
+PARAM_RANGES = {
+    "ir_saturation": (0.0, 1.0), "ir_on_delay": (0.0, 0.04), "ir_noise": (0.0, 1e4),
+    "viscous_friction": (0.0, 1e3), "coulomb_friction": (0.0, 1e3), "current_limit": (0.0, 1e3),
+    "ir_blend": (1.0, 1e3), "ir_gain": (0.0, 1e6), "ir_ambient": (0.0, 1e6), "ir_near_peak": (0.0, 1.0),
+}
+MAX_MAGNITUDE = 1e9  # any other scalar, in its unit
+
+
 def params_from_dict(data: object, where: str = "parameters") -> RobotParams:
     if not isinstance(data, dict):
         raise ParamsError(f"{where}: expected a JSON object of name: value")
@@ -186,6 +202,7 @@ def params_from_dict(data: object, where: str = "parameters") -> RobotParams:
                 raise ParamsError(f"{where}: '{name}' must be a finite number ({known[name].metadata['unit']}), "
                                   f"got {value!r}")
             changes[name] = float(value)
+    _check_ranges(changes, where)
     params = dataclasses.replace(RobotParams(), **changes)  # type: ignore[arg-type]
     for name in ("wheel_radius", "half_axle", "body_radius", "body_mass", "wheel_mass", "body_inertia",
                  "wheel_inertia", "torque_constant", "armature_resistance", "gear_ratio", "ticks_per_rev",
@@ -194,17 +211,42 @@ def params_from_dict(data: object, where: str = "parameters") -> RobotParams:
             raise ParamsError(f"{where}: '{name}' must be positive, got {getattr(params, name)}")
     if params.com_offset < 0:
         raise ParamsError(f"{where}: 'com_offset' must be >= 0 (G ahead of C), got {params.com_offset}")
+    for name in ("wheel_friction", "wall_friction"):
+        if getattr(params, name) < 0:
+            raise ParamsError(f"{where}: '{name}' must be >= 0, got {getattr(params, name)}")
     if not 0 < params.gear_efficiency <= 1:
         raise ParamsError(f"{where}: 'gear_efficiency' must be in (0, 1], got {params.gear_efficiency}")
     return params
 
 
+def _check_ranges(changes: dict[str, object], where: str) -> None:
+    for name, value in changes.items():
+        if isinstance(value, tuple):
+            if not all(math.isfinite(v) and abs(v) <= MAX_MAGNITUDE for v in value):
+                raise ParamsError(f"{where}: '{name}' has an item that is not a finite number within "
+                                  f"+-{MAX_MAGNITUDE:g}")
+            continue
+        v = float(value)  # type: ignore[arg-type]
+        if name in INTEGER_PARAMS:
+            lo, hi = INTEGER_PARAMS[name]
+            if v != int(v) or not lo <= v <= hi:
+                raise ParamsError(f"{where}: '{name}' must be a whole number in {lo}..{hi}, got {value}")
+        elif name in PARAM_RANGES:
+            lo_f, hi_f = PARAM_RANGES[name]
+            if not lo_f <= v <= hi_f:
+                raise ParamsError(f"{where}: '{name}' must be in {lo_f:g}..{hi_f:g}, got {value}")
+        elif abs(v) > MAX_MAGNITUDE:
+            raise ParamsError(f"{where}: '{name}' is beyond +-{MAX_MAGNITUDE:g}, got {value}")
+
+
 def load_params(path: str | Path) -> RobotParams:
     path = Path(path)
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(path.read_text(encoding="utf-8"))
     except OSError as exc:
         raise ParamsError(f"{path}: cannot read: {exc.strerror}") from exc
+    except UnicodeDecodeError as exc:
+        raise ParamsError(f"{path}: not a parameter file: byte {exc.start} is not UTF-8 text") from exc
     except json.JSONDecodeError as exc:
         raise ParamsError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from exc
     return params_from_dict(data, str(path))

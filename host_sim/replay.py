@@ -10,7 +10,8 @@ vectorised); both read the recording through `replay_inputs`, the one place
 that says what a recording's timing, emitter power and start mean.
 
 The state at row k comes from the recording alone: the pose of C from the
-tracker columns (needed), the wheel angles from the encoder counts, and the
+tracker columns (needed), the wheel angles from the encoder counts (the
+middle of the recorded tick), and the
 wheel speeds from the encoder counts around row k (central differences, or
 the rows after it at the start).  At row 0 of a simulator recording the
 robot is at rest, so a replay from there repeats the run exactly.
@@ -102,7 +103,10 @@ def state_at(rec: Recording, k: int, p: RobotParams) -> tuple[tuple[float, ...],
     if not 0 <= k < n:
         raise ReplayError(f"row {k} is outside the recording (0..{n - 1})")
     x, y, phi = (float(v) for v in rec.pose[k])
-    theta = [motors.encoder_angle(int(rec.enc[k, i]), p) for i in range(2)]
+    if starts_at_rest(rec, k):
+        theta = [0.0, 0.0]  # the simulator starts every run at rest, the wheels at angle 0
+    else:  # the middle of the recorded tick: the best guess, and never the tick below
+        theta = [motors.encoder_angle(int(rec.enc[k, i]), p) for i in range(2)]
     v = (0.0, 0.0) if starts_at_rest(rec, k) else wheel_speeds_at(rec, k, p)
     q = dynamics.q_from_axle_pose(x, y, phi, p, theta[0], theta[1])
     return q, (float(v[0]), float(v[1]))

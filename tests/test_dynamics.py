@@ -580,4 +580,22 @@ def test_encoder_ticks_floor_toward_minus_infinity(k, frac, tpr):
     theta = (k + frac) * 2 * math.pi / tpr
     assert mo.encoder_ticks(theta, p) == k
     assert mo.encoder_ticks_batch(np.array([theta]), p)[0] == k
-    assert mo.encoder_angle(k, p) <= theta < mo.encoder_angle(k + 1, p)
+    # encoder_angle(k) is the centre of tick k: half a tick above its lower edge
+    assert mo.encoder_angle(k, p) == pytest.approx((k + 0.5) * 2 * math.pi / tpr, rel=1e-15, abs=1e-15)
+
+
+@pytest.mark.parametrize("tpr", [1200.0, 48.0, 4096.0, 1000.0])
+def test_encoder_angle_round_trips_for_every_count(tpr):
+    """encoder_ticks(encoder_angle(k)) == k for every k in -10^6..10^6, scalar and batch (the lower
+    edge of the tick, k 2 pi / tpr, came back as k - 1 for ~17 % of k at 1200 ticks/rev)."""
+    p = P.replace(ticks_per_rev=tpr)
+    k = np.arange(-10**6, 10**6 + 1)
+    assert np.array_equal(mo.encoder_ticks_batch(mo.encoder_angle_batch(k, p), p), k)
+    pb = dy.ParamBatch.broadcast(p, 2)
+    k2 = np.stack([k, k[::-1]])  # (2, n): one row per robot of the ParamBatch
+    assert np.array_equal(mo.encoder_ticks_batch(mo.encoder_angle_batch(k2, pb), pb), k2)
+    if tpr == 1200.0:  # the scalar path for every k (2e6 calls, ~1 s)
+        ticks, angle = mo.encoder_ticks, mo.encoder_angle
+        assert all(ticks(angle(j, p), p) == j for j in range(-10**6, 10**6 + 1))
+        # and the old lower edge did fail, so this test can see the fault
+        assert sum(ticks(j * 2 * math.pi / tpr, p) != j for j in range(-10**4, 10**4)) > 1000

@@ -75,25 +75,23 @@ MAVLINK_MSG_ID = 42042  # > 255: a MAVLink-2-only message id
 _MAV_TYPES = {"B": "uint8_t", "b": "int8_t", "H": "uint16_t", "h": "int16_t", "I": "uint32_t", "i": "int32_t"}
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
-    return value
+def _json_path(text: str) -> Path:
+    from tools.arguments import output_file
+
+    return Path(output_file(text))
 
 
 def register(subparsers: Any, name: str, summary: str) -> None:
     p = subparsers.add_parser(
         name, help=summary, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    p.add_argument("--frames", type=_positive_int, default=20000, metavar="N",
+    from tools.arguments import int_range
+
+    p.add_argument("--frames", type=int_range(1, 10_000_000), default=20000, metavar="N",
                    help="TELEMETRY frames per run (default 20000)")
-    p.add_argument("--repeats", type=_positive_int, default=5, metavar="R",
+    p.add_argument("--repeats", type=int_range(1, 1000), default=5, metavar="R",
                    help="runs per measurement; the median is reported (default 5)")
-    p.add_argument("--json", type=Path, metavar="FILE", help="also write every figure to FILE as JSON")
+    p.add_argument("--json", type=_json_path, metavar="FILE", help="also write every figure to FILE as JSON")
     p.set_defaults(func=run)
 
 

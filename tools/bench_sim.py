@@ -26,7 +26,8 @@ possible, nothing drawn:
       among ours is (a): one robot and a ring of 8 range readings per 40 ms.
 
 A robot-step is one robot advanced by one physics step (dt = 40 ms / 8 =
-5 ms: motor model, dynamics, contact test).  A robot-period is one robot
+5 ms: motor model at mid-step, dynamics, grip and wall tests, and the contact
+step where a wheel slips or a wall is hit).  A robot-period is one robot
 advanced by one 40 ms control period: 8 robot-steps plus the readings at the
 control instant (encoders, and the IR ring when sensors are on).  IR-SIM has
 no substeps: one env.step() is one robot-period and one robot-step.
@@ -71,15 +72,19 @@ ROW_IRSIM = "(d) IR-SIM {version}, 1 robot + 8-beam lidar"
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
     p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1],
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--seconds", type=float, default=30.0,
+    from tools.arguments import float_range, int_range, output_file
+
+    p.add_argument("--seconds", type=float_range(0.2, 3600, unit="s"), default=30.0,
                    help="simulated seconds of the single-robot workloads (a), (b), (d) (default 30)")
-    p.add_argument("--batch-n", type=int, default=TARGET_BATCH_N, help="robots in the batch (default 1000)")
-    p.add_argument("--batch-seconds", type=float, default=2.0,
+    p.add_argument("--batch-n", type=int_range(1, 1_000_000), default=TARGET_BATCH_N,
+                   help="robots in the batch (default 1000)")
+    p.add_argument("--batch-seconds", type=float_range(0.04, 3600, unit="s"), default=2.0,
                    help="simulated seconds of each batch run (default 2, i.e. 50 control periods)")
-    p.add_argument("--repeats", type=int, default=5, help="timed runs per workload; the median is kept (default 5)")
+    p.add_argument("--repeats", type=int_range(1, 1000), default=5,
+                   help="timed runs per workload; the median is kept (default 5)")
     p.add_argument("--profile", action="store_true",
                    help="profile (cProfile) every workload of ours, not only those that miss their target")
-    p.add_argument("--json", metavar="FILE", help="write every figure here")
+    p.add_argument("--json", metavar="FILE", type=output_file, help="write every figure here")
     p.set_defaults(func=run)
 
 
@@ -121,9 +126,10 @@ COMPONENTS = {
     "(a) replay": [
         ("IR sensors + encoders (SimRobot.sense)", "host_sim/sim_robot.py", "sense"),
         ("8 physics steps (SimRobot.advance)", "host_sim/sim_robot.py", "advance"),
-        ("  of which the wall test (_resolve_contact)", "host_sim/sim_robot.py", "_resolve_contact"),
-        ("  of which dynamics.step", "host_sim/dynamics.py", "step"),
-        ("  of which motors.wheel_torque", "host_sim/motors.py", "wheel_torque"),
+        ("  of which the wall test (_walls_in_reach)", "host_sim/sim_robot.py", "_walls_in_reach"),
+        ("  of which motors + dynamics (drive.drive_step)", "host_sim/drive.py", "drive_step"),
+        ("  of which the grip test (contact.traction_ok)", "host_sim/contact.py", "traction_ok"),
+        ("  of which contact steps (contact.slip_step)", "host_sim/contact.py", "slip_step"),
     ],
     "(b) SIL": [
         ("IR sensors + encoders (SimRobot.sense)", "host_sim/sim_robot.py", "sense"),
@@ -136,7 +142,9 @@ COMPONENTS = {
         ("  of which the ray cast (World.cast_robots)", "host_sim/world.py", "cast_robots"),
         ("motors (wheel_torque_batch)", "host_sim/motors.py", "wheel_torque_batch"),
         ("dynamics (step_batch)", "host_sim/dynamics.py", "step_batch"),
-        ("wall tests (BatchSim._resolve_contacts)", "host_sim/batch.py", "_resolve_contacts"),
+        ("grip tests (contact.traction_ok_batch)", "host_sim/contact.py", "traction_ok_batch"),
+        ("wall tests (BatchSim._walls_in_reach)", "host_sim/batch.py", "_walls_in_reach"),
+        ("contact steps (contact.slip_step_batch)", "host_sim/contact.py", "slip_step_batch"),
         ("encoders (encoder_ticks_batch)", "host_sim/motors.py", "encoder_ticks_batch"),
     ],
 }
@@ -517,7 +525,7 @@ def print_report(report: dict[str, Any]) -> None:
         print(textwrap.fill(text, 108, initial_indent=f"{label:<14}", subsequent_indent=" " * 14))
 
     note("robot-step:", "one robot advanced by one physics step of 5 ms (40 ms / 8): motor model, dynamics, "
-                        "contact test.  robot-period: one robot advanced by one 40 ms control period = 8 "
+                        "grip and wall tests, contact step where needed.  robot-period: one robot advanced by one 40 ms control period = 8 "
                         "robot-steps + the readings at the control instant (encoders; IR ring if on).  IR-SIM "
                         "has no substeps: one env.step() of 40 ms counts as one of each.")
     d = r["irsim"]
@@ -553,12 +561,7 @@ def print_report(report: dict[str, Any]) -> None:
 def run(args: argparse.Namespace) -> int:
     blas = pin_blas_threads()
     from host_sim.world import builtin_world
-    from tools.cli import CliError
 
-    if args.seconds < 0.2 or args.batch_seconds <= 0:
-        raise CliError("--seconds must be >= 0.2 (5 control periods) and --batch-seconds > 0")
-    if args.batch_n < 1 or args.repeats < 1:
-        raise CliError("--batch-n and --repeats must be >= 1")
     t_start = time.monotonic()
     command = (f"twinbot bench sim --seconds {args.seconds:g} --batch-n {args.batch_n} "
                f"--batch-seconds {args.batch_seconds:g} --repeats {args.repeats}"

@@ -19,25 +19,36 @@ import argparse
 import sys
 from pathlib import Path
 
-
+from tools.arguments import int_range, output_folder, positive_float, sim_seconds
 from tools.cli import CliError
+from tools.sim import plural
 
 
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
     p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1],
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--out", default="demo", help="folder for the pictures (default demo/)")
-    p.add_argument("--duration", type=float, default=180.0, help="simulated seconds per exploration (default 180)")
+    p.add_argument("--out", default="demo", type=output_folder, help="folder for the pictures (default demo/)")
+    p.add_argument("--duration", type=sim_seconds(), default=180.0,
+                   help="simulated seconds per exploration (default 180)")
     p.add_argument("--world", default="paper_room", help="world to explore (default paper_room)")
-    p.add_argument("--repeat-duration", type=float, default=30.0,
+    p.add_argument("--repeat-duration", type=sim_seconds(), default=30.0,
                    help="simulated seconds of each repeatability run (default 30)")
-    p.add_argument("--repeat-speed", type=float, default=25.0,
+    p.add_argument("--repeat-speed", type=positive_float, default=25.0,
                    help="real-time runs go at this many times real time (default 25)")
-    p.add_argument("--pairs", type=int, default=20, help="pairs of runs of each kind (default 20)")
+    p.add_argument("--pairs", type=int_range(1, 1000), default=20, help="pairs of runs of each kind (default 20)")
     p.add_argument("--loopback", action="store_true", help="show the serial protocol on loop:// instead")
-    p.add_argument("--record", default="recordings/demo-frames.jsonl", help=argparse.SUPPRESS)
+    p.add_argument("--record", default="recordings/demo-frames.jsonl", type=output_folder_file,
+                   help=argparse.SUPPRESS)
     p.add_argument("--port", default="loop://", help=argparse.SUPPRESS)
     p.set_defaults(func=run)
+
+
+def output_folder_file(text: str) -> str:
+    """The loopback demo's frame log: a file whose folder may still have to be made."""
+    output_folder(str(Path(text).parent))
+    if Path(text).is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r} is a folder; give a file name")
+    return text
 
 
 def run(args: argparse.Namespace) -> int:
@@ -145,4 +156,5 @@ class _PairProgress:
 
 def _title(rules: str, run) -> str:  # type: ignore[no-untyped-def]
     found = f"exit found at {run.exit_time:.0f} s" if run.exit_time is not None else "no exit"
-    return f"{rules} rule set: {found}, {100 * run.coverage[-1]:.0f} % covered, {run.collisions} collisions"
+    return (f"{rules} rule set: {found}, {100 * run.coverage[-1]:.0f} % covered, "
+            f"{plural(run.collisions, 'collision')}")

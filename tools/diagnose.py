@@ -19,6 +19,7 @@ import json
 import sys
 from pathlib import Path
 
+from tools.arguments import input_file, output_file
 from tools.cli import CliError
 
 
@@ -27,11 +28,12 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
                        formatter_class=argparse.RawDescriptionHelpFormatter,
                        epilog="examples:\n  twinbot diagnose run.csv\n"
                               "  twinbot diagnose run.csv --params my_robot.json --json verdict.json")
-    p.add_argument("recording", help="a recording (FILE.csv with its FILE.csv.json sidecar)")
-    p.add_argument("--params", metavar="FILE", help="the twin's robot parameters (default: the recording's sidecar)")
+    p.add_argument("recording", type=input_file, help="a recording (FILE.csv with its FILE.csv.json sidecar)")
+    p.add_argument("--params", metavar="FILE", type=input_file, help="the twin's robot parameters (default: the recording's sidecar)")
     p.add_argument("--world", metavar="NAME|FILE", help="the walls (default: the recording's sidecar)")
-    p.add_argument("--json", metavar="FILE", help="write the verdict and its evidence as JSON")
-    p.add_argument("--write-params", metavar="FILE",
+    p.add_argument("--json", metavar="FILE", type=output_file, help="write the verdict and its evidence as JSON")
+    p.add_argument("--html", metavar="FILE", type=output_file, help="write a self-contained report with the pictures")
+    p.add_argument("--write-params", metavar="FILE", type=output_file,
                    help="write the fitted twin as a robot parameter file (twinbot sim --params FILE loads it)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=run)
@@ -64,11 +66,6 @@ def load(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 def run(args: argparse.Namespace) -> int:
     from host_sim.diagnosis import DiagnosisError, diagnose
 
-    for option, path in (("--json", args.json), ("--write-params", args.write_params)):
-        if path and not Path(path).resolve().parent.is_dir():
-            raise CliError(f"{option} {path}: folder {Path(path).parent} does not exist")
-        if path and Path(path).is_dir():
-            raise CliError(f"{option} {path}: is a folder, not a file")
     rec, params, world = load(args)
 
     def progress(stage: str) -> None:
@@ -83,6 +80,11 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         Path(args.json).write_text(json.dumps(result.to_json(), indent=1) + "\n")
         print(f"wrote {args.json}")
+    if args.html:
+        from host_sim.diagnosis.html import render
+
+        Path(args.html).write_text(render(rec, result), encoding="utf-8")
+        print(f"wrote {args.html}")
     if args.write_params:
         fitted = result.model.params if result.model is not None else params
         Path(args.write_params).write_text(json.dumps(fitted.to_json(), indent=1) + "\n")

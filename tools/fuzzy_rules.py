@@ -171,6 +171,12 @@ examples:
 
 
 def register(subparsers: Any, name: str, summary: str) -> None:
+    from firmware import config
+    from protocol import messages as M
+    from tools.arguments import image_file, int_range
+
+    _pid, _name, speed_lo, speed_hi, _default, _unit = M.param_by_name("max_speed")
+    adc_max = (1 << config.ADC_BITS) - 1
     p = subparsers.add_parser(
         name, help=summary,
         description="The fuzzy exploration controller of firmware/fuzzy.py (paper section 5): "
@@ -180,12 +186,14 @@ def register(subparsers: Any, name: str, summary: str) -> None:
     )
     p.add_argument("--rules", choices=RULE_SET_NAMES, default="refined",
                    help="rule set (default: refined)")
-    p.add_argument("--max-speed", type=int, default=200, metavar="N",
-                   help="wheel speed scale in mm/s: the terms are %% of it (default 200)")
+    p.add_argument("--max-speed", type=int_range(max(1, speed_lo), speed_hi, unit="mm/s"), default=200, metavar="N",
+                   help=f"wheel speed scale in mm/s, {max(1, speed_lo)}..{speed_hi} as the firmware's "
+                        "max_speed: the terms are %% of it (default 200)")
     p.add_argument("--fcl", action="store_true", help="print the rule base as FCL text")
-    p.add_argument("--plot", metavar="FILE", help="write the figure of the sets (PNG, SVG, PDF)")
-    p.add_argument("--eval", nargs=fz.N_SENSORS, type=int, metavar="S",
-                   help="evaluate for eight reflected readings S1 ... S8 (ADC counts)")
+    p.add_argument("--plot", metavar="FILE", type=image_file,
+                   help="write the figure of the sets (.png, .svg, .pdf ...)")
+    p.add_argument("--eval", nargs=fz.N_SENSORS, type=int_range(0, adc_max, unit="ADC counts"), metavar="S",
+                   help=f"evaluate for eight reflected readings S1 ... S8 (ADC counts, 0..{adc_max})")
     p.set_defaults(func=run)
 
 
@@ -193,8 +201,6 @@ def run(args: argparse.Namespace) -> int:
     from tools.cli import CliError
 
     rs = rule_set_index(args.rules)
-    if args.max_speed <= 0:
-        raise CliError(f"--max-speed {args.max_speed}: must be positive")
     if args.plot:
         try:
             plot_sets(args.plot, args.max_speed)

@@ -11,7 +11,6 @@ channel, so a collision cannot swamp a slow effect elsewhere.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
@@ -33,6 +32,7 @@ class Comparison:
     whiteness: dict[str, float] = field(default_factory=dict)  # Ljung-Box p-value per located channel
     lag: dict[str, tuple[int, float]] = field(default_factory=dict)  # wheel channels: (lag, correlation)
     findings: list[Finding] = field(default_factory=list)
+    pose: np.ndarray | None = None  # (W, T, 3) the twin's pose in every window (for pictures)
 
     def channel(self, name: str) -> Channel:
         return next(c for c in self.channels if c.name == name)
@@ -44,7 +44,7 @@ def compare(rec: Recording, params: RobotParams, world: World | None, seconds: f
     run = run_windows(rec, windows, params, world)
     chans = build_channels(rec, windows, run, [params], world)
     contact = contact_windows(rec, windows, params, world)
-    cmp = Comparison(seconds, windows, chans, contact, held_out_fit(chans, windows, contact))
+    cmp = Comparison(seconds, windows, chans, contact, held_out_fit(chans, windows, contact), pose=run.pose[:, 0])
     if locate:
         _locate(cmp, rec, params, world)
     return cmp
@@ -91,4 +91,3 @@ def compare_all(rec: Recording, params: RobotParams, world: World | None,
 
 
 __all__ = ["Comparison", "compare", "compare_all", "held_out_fit"]
-_ = Any

@@ -43,6 +43,8 @@ class Diagnosis:
     unexplained: list[dict[str, Any]] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     model: Model | None = None  # the fitted twin, when effects were tried
+    after: Comparison | None = None  # the fitted twin judged on the same windows
+    after_long: Comparison | None = None  # ... and on the longest ones (pictures)
 
     def to_json(self) -> dict[str, Any]:
         return {"recording": self.recording, "verdict": self.verdict, "located": self.located,
@@ -114,7 +116,9 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     final = chain[-1]
     result.model = final
     say("judging the fitted twin")
-    after = compare_all(rec, final.params, world, seconds)[0]
+    afters = compare_all(rec, final.params, world, seconds)
+    after = result.after = afters[0]
+    result.after_long = afters[-1]
     result.fit_after = dict(after.fit)
     result.effects = [_effect_entry(final, i, chain) for i in range(len(final.effects))]
     remaining = [_located(after, f) for f in after.findings]

@@ -23,7 +23,7 @@ from host_sim import dynamics, ir_sensor, motors
 from host_sim.batch import BatchSim, robot_params
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
-from host_sim.replay import ReplayError, replay_inputs, starts_at_rest, wheel_speeds_at
+from host_sim.replay import ReplayError, replay_inputs, starts_at_rest, state_at, wheel_speeds_at
 from host_sim.world import World
 
 DEFAULT_SECONDS = (1.0, 5.0)
@@ -73,15 +73,17 @@ class WindowRun:
 
 
 def initial_states(rec: Recording, rows: np.ndarray, p: RobotParams) -> tuple[np.ndarray, np.ndarray]:
-    """(q (W, 5), v (W, 2)) at the given rows: tracker pose (origin without one), encoder angles and speeds."""
+    """(q (W, 5), v (W, 2)) at the given rows: as replay.state_at, the origin standing in for a missing tracker."""
     q = np.empty((len(rows), 5))
     v = np.empty((len(rows), 2))
     for i, k in enumerate(rows):
-        k = int(k)
-        v[i] = (0.0, 0.0) if starts_at_rest(rec, k) else wheel_speeds_at(rec, k, p)
-        x, y, phi = (float(c) for c in rec.pose[k]) if rec.pose is not None else (0.0, 0.0, 0.0)
-        theta = [motors.encoder_angle(int(rec.enc[k, w]), p) for w in range(2)]
-        q[i] = dynamics.q_from_axle_pose(x, y, phi, p, theta[0], theta[1])
+        if rec.pose is not None:
+            qk, vk = state_at(rec, int(k), p)
+        else:
+            theta = [motors.encoder_angle(int(rec.enc[k, w]), p) for w in range(2)]
+            qk = dynamics.q_from_axle_pose(0.0, 0.0, 0.0, p, theta[0], theta[1])
+            vk = (0.0, 0.0) if starts_at_rest(rec, int(k)) else wheel_speeds_at(rec, int(k), p)
+        q[i], v[i] = qk, vk
     return q, v
 
 
