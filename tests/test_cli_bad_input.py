@@ -30,6 +30,20 @@ CASES: list[tuple[str, list[str], str]] = [
     ("no-command", [], "COMMAND missing"),
     ("unknown-command", ["bogus"], "bogus"),
     ("unknown-option", ["sim", "--bogus"], "--bogus"),
+    # gui (every row fails before a window opens)
+    ("gui-speed-zero", ["gui", "--speed", "0"], "'0'"),
+    ("gui-speed-nan", ["gui", "--speed", "nan"], "'nan'"),
+    ("gui-speed-huge", ["gui", "--speed", "1e9"], "'1e9'"),
+    ("gui-emitter-over", ["gui", "--emitter", "101"], "'101'"),
+    ("gui-seed-negative", ["gui", "--seed", "-1"], "'-1'"),
+    ("gui-frames-zero", ["gui", "--frames", "0"], "'0'"),
+    ("gui-screenshot-format", ["gui", "--frames", "1", "--screenshot", "{case}/x.xyz"], ".xyz"),
+    ("gui-screenshot-in-a-file", ["gui", "--frames", "1", "--screenshot", "{case}/afile/x.png"], "afile"),
+    ("gui-screenshot-without-frames", ["gui", "--screenshot", "{case}/x.png"], "--frames"),
+    ("gui-out-missing", ["gui", "--frames", "1", "--out", "{case}/missing"], "missing"),
+    ("gui-world-missing", ["gui", "--frames", "1", "--world", "{case}/nope.json"], "nope.json"),
+    ("gui-port-missing", ["gui", "--frames", "1", "--port", "{case}/ttyNOPE"], "ttyNOPE"),
+    ("gui-pil-port-missing", ["gui", "--frames", "1", "--pil", "--port", "{case}/ttyNOPE"], "ttyNOPE"),
     # sim
     ("sim-duration-nan", ["sim", "--duration", "nan"], "'nan'"),
     ("sim-duration-inf", ["sim", "--duration", "inf"], "'inf'"),
@@ -155,6 +169,8 @@ CASES: list[tuple[str, list[str], str]] = [
     ("bench-sim-seconds-nan", ["bench", "sim", "--seconds", "nan"], "'nan'"),
     ("bench-sim-batch-zero", ["bench", "sim", "--batch-n", "0"], "'0'"),
     ("bench-sim-json-folder", ["bench", "sim", "--json", "{case}/adir"], "adir"),
+    ("bench-gui-frames-few", ["bench", "gui", "--frames", "5"], "'5'"),
+    ("bench-gui-prerun-nan", ["bench", "gui", "--prerun", "nan"], "'nan'"),
 ]
 
 

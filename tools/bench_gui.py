@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from tools.arguments import float_range, int_range
 from tools.cli import CliError
 
 TARGET_FPS = 60.0
@@ -37,8 +38,8 @@ REPO = Path(__file__).resolve().parents[1]
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
     p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1],
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--frames", type=int, default=600, help="timed frames per workload (default 600)")
-    p.add_argument("--prerun", type=float, default=PRERUN,
+    p.add_argument("--frames", type=int_range(10, 1_000_000), default=600, help="timed frames per workload (default 600)")
+    p.add_argument("--prerun", type=float_range(0, 86_400, unit="s"), default=PRERUN,
                    help=f"simulated seconds run before timing, to grow the trails (default {PRERUN:g})")
     p.add_argument("--no-board", action="store_true", help="skip the workloads with a real robot (virtual board)")
     p.set_defaults(func=run)
@@ -84,10 +85,6 @@ def workload(frames: int, speed: float, port: str | None, prerun: float) -> dict
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.frames < 10:
-        raise CliError("--frames must be >= 10")
-    if args.prerun < 0:
-        raise CliError("--prerun must be >= 0")
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
     rows: list[tuple[str, dict[str, Any]]] = []
     rows.append(("simulated + user robot, speed 1", workload(args.frames, 1.0, None, args.prerun)))

@@ -18,7 +18,25 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from tools.arguments import float_range, int_range, non_negative_int, output_file
 from tools.cli import CliError
+
+MAX_SPEED = 64.0  # x real time: beyond, a frame's catch-up is whole seconds of two firmwares
+MAX_FRAMES = 10_000_000
+IMAGE_SUFFIXES = (".png", ".bmp", ".tga", ".jpg", ".jpeg")  # what pygame.image.save writes
+
+
+def screenshot_file(text: str) -> str:
+    output_file(text)
+    if Path(text).suffix.lower() not in IMAGE_SUFFIXES:
+        raise argparse.ArgumentTypeError(f"{text}: pygame writes {', '.join(IMAGE_SUFFIXES)}")
+    return text
+
+
+def existing_folder(text: str) -> str:
+    if not Path(text).is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: no such folder")
+    return text
 
 EXAMPLES = """\
 examples:
@@ -38,17 +56,21 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
     p.add_argument("--port", help="the real robot's serial port (or a virtual board's pty); absent without it")
     p.add_argument("--pil", action="store_true",
                    help="the simulated robot's firmware on a virtual board under MicroPython (processor in the loop)")
-    p.add_argument("--speed", type=float, default=1.0, help="k x real time (default 1)")
+    p.add_argument("--speed", type=float_range(0, MAX_SPEED, lo_open=True), default=1.0,
+                   help=f"k x real time, > 0 and <= {MAX_SPEED:g} (default 1)")
     p.add_argument("--realtime", action="store_true", help="the step from the clock (the paper's Dt); default fixed")
     p.add_argument("--no-noise", action="store_true", help="noise-free sensors")
-    p.add_argument("--emitter", type=int, default=60, help="IR emitter power L, %% (default 60)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
+    p.add_argument("--emitter", type=int_range(0, 100, unit="%"), default=60,
+                   help="IR emitter power L, 0..100 %% (default 60)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the sensor noise, >= 0 (default 0)")
     p.add_argument("--params", metavar="FILE", help="robot parameters JSON (any subset; see host_sim/params.py)")
-    p.add_argument("--save", metavar="FILE",
+    p.add_argument("--save", metavar="FILE", type=output_file,
                    help="the world file that s saves and l loads (default: --world if a file, else NAME.json)")
-    p.add_argument("--out", metavar="DIR", default=".", help="folder for recordings and screenshots (default .)")
-    p.add_argument("--frames", type=int, help="headless: run this many frames of 1/60 s, then stop")
-    p.add_argument("--screenshot", metavar="FILE", help="with --frames: write the last frame as a PNG")
+    p.add_argument("--out", metavar="DIR", type=existing_folder, default=".",
+                   help="folder for recordings and screenshots (default .)")
+    p.add_argument("--frames", type=int_range(1, MAX_FRAMES), help="headless: run this many frames of 1/60 s, then stop")
+    p.add_argument("--screenshot", metavar="FILE", type=screenshot_file,
+                   help="with --frames: write the last frame (.png, .bmp, .tga, .jpg)")
     p.set_defaults(func=run)
 
 
@@ -62,19 +84,9 @@ def settings_from(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         world = world_by_name_or_path(args.world, params.body_radius)
     except (ParamsError, WorldError) as exc:
         raise CliError(str(exc)) from None
-    if not args.speed > 0:
-        raise CliError(f"--speed must be > 0, not {args.speed}")
-    if not 0 <= args.emitter <= 100:
-        raise CliError(f"--emitter must be 0..100 %, not {args.emitter}")
-    if args.frames is not None and args.frames < 1:
-        raise CliError(f"--frames must be >= 1, not {args.frames}")
     if args.screenshot and args.frames is None:
         raise CliError("--screenshot needs --frames N (headless run)")
-    if args.screenshot and not Path(args.screenshot).resolve().parent.is_dir():
-        raise CliError(f"--screenshot {args.screenshot}: no such folder")
     out = Path(args.out)
-    if not out.is_dir():
-        raise CliError(f"--out {out}: no such folder")
     save = Path(args.save) if args.save else (Path(args.world) if args.world not in BUILTIN_NAMES
                                               else out / f"{world.name}.json")
     return Settings(world=world, params=params, rules=args.rules, port=args.port, pil=args.pil, speed=args.speed,

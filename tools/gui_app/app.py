@@ -95,10 +95,10 @@ class App:
         self.clock = Clock()
         self.real: RealBot | None = None
         self.real_error = "absent (start with --port PORT)"
+        if settings.port:  # first: a bad port fails before a virtual board (--pil) is started
+            self._open_real(settings.port)
         self._make_bots()
         self._world_version = self.editor.version
-        if settings.port:
-            self._open_real(settings.port)
         self.controls = Controls(self)
         self.renderer = Renderer(self)
 
