@@ -52,7 +52,7 @@ class Renderer:
         p.grid(view, app.editor.grid, world.size)
         cov = app.sim.sim.coverage
         if app.show_coverage:
-            p.coverage(view, cov.covered, cov._count, cov.resolution)  # noqa: SLF001
+            p.coverage(view, cov.covered, round(cov.fraction * cov.n_free), cov.resolution)
         p.walls(view, world.walls, app.editor.selected)
         preview = app.controls.preview()
         if preview is not None:
