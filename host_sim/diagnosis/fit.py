@@ -96,11 +96,13 @@ class Objective:
 
     def __init__(self, rec: Recording, windows: Windows, world: World | None, names: list[str],
                  sigma: dict[str, float], keep: np.ndarray) -> None:
-        self.rec, self.windows, self.world = rec, windows, world
+        self.rec, self.world = rec, world
+        # Only the windows judged are simulated: those touching a wall are not fitted on.
+        self.windows = Windows(windows.start[keep], windows.rows, windows.held_out[keep])
         self.names = names
         self.sigma = sigma
-        self.train = keep & ~windows.held_out
-        self.test = keep & windows.held_out
+        self.train = ~self.windows.held_out
+        self.test = self.windows.held_out
         self.sensors = any(n.startswith(("ir_", "amb_")) for n in names)
         self.evaluations = 0
 
