@@ -48,6 +48,12 @@ class Actuate:
     emitter_pct: int  # IR emitter pulse width, the light power L
 
 
+def geometry_from_params(wheel_radius_m: float, half_axle_m: float, ticks_per_rev: int) -> tuple[int, int, int]:
+    """The firmware's geometry parameters (wheel_diameter_um, wheel_base_um, ticks_per_rev) of a
+    robot given as RobotParams does; protocol.messages.geometry_frames turns them into PARAM_SETs."""
+    return round(2 * wheel_radius_m * 1e6), round(2 * half_axle_m * 1e6), int(ticks_per_rev)
+
+
 def setup_frames(rule_set: int, mode: int = M.MODE_AUTONOMOUS) -> list[bytes]:
     """What the host says to the firmware before its first cycle: the rule set, then the mode."""
     enc = FrameEncoder()

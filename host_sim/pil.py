@@ -21,7 +21,14 @@ from protocol.framing import HEADER_SIZE, FrameDecoder, FrameEncoder
 class PilLink:
     """The simulator's end of a virtual board's hardware link (TCP on 127.0.0.1)."""
 
-    def __init__(self) -> None:
+    def __init__(self, watchdog_s: float | None = None) -> None:
+        # watchdog_s: the board's hardware watchdog, modelled here.  If no
+        # HW_ACTUATE comes that long after a HW_SENSE (the firmware's loop
+        # stalled), the motors get zero current, as an RP2040's watchdog
+        # reset would leave them; None: wait (lockstep runs, up to 10 s).
+        self.watchdog_s = watchdog_s
+        self.watchdog_trips = 0
+        self.last_emitter = 0
         self.server = socket.create_server(("127.0.0.1", 0))
         self.port = self.server.getsockname()[1]
         self.conn: socket.socket | None = None
@@ -45,10 +52,14 @@ class PilLink:
                                               "vbat_mv": s.vbat_mv})
         self.conn.sendall(self.enc.encode(M.HW_SENSE, payload))
         dec = self.dec
+        self.conn.settimeout(10 if self.watchdog_s is None else self.watchdog_s)
         while True:
             try:
                 data = self.conn.recv(4096)
             except socket.timeout:
+                if self.watchdog_s is not None:
+                    self.watchdog_trips += 1
+                    return Actuate(0, 0, self.last_emitter)
                 raise RuntimeError("the virtual board did not answer HW_SENSE within 10 s") from None
             if not data:
                 raise RuntimeError("the virtual board closed its hardware link (it stopped or was reset)")
@@ -57,6 +68,7 @@ class PilLink:
                 i = dec.feed(data, i, end)
                 if dec.ready and dec.msg_type == M.HW_ACTUATE:
                     f = M.unpack_payload(M.HW_ACTUATE, dec.body[HEADER_SIZE:HEADER_SIZE + dec.payload_len])
+                    self.last_emitter = f["emitter_pct"]  # type: ignore[assignment]
                     return Actuate(f["i_ref_l_ma"], f["i_ref_r_ma"], f["emitter_pct"])  # type: ignore[arg-type]
 
     def close(self) -> None:

@@ -31,8 +31,8 @@ class _InProcessHal(BufferedHal):
         del self.inbox[:n]
         return n
 
-    def host_write(self, data: memoryview) -> None:
-        self.outbox += data
+    def host_write(self, buf: bytearray, n: int) -> None:
+        self.outbox += buf[:n]
 
     def end_cycle(self) -> None:
         pass

@@ -55,7 +55,8 @@ def collect(link, seconds, msg_type=M.TELEMETRY):
 def test_telemetry_flows_with_ambient_removed_by_the_firmware(board):
     link = SerialLink.open(board.path)
     try:
-        link.send(M.HELLO, {"protocol": 1, "fw_major": 0, "fw_minor": 0, "fw_patch": 0, "board": 1, "sensors": 0})
+        link.send(M.HELLO, {"protocol": 1, "fw_major": 0, "fw_minor": 0, "fw_patch": 0, "board": 1, "sensors": 0,
+                            "wheel_diameter_um": 0, "wheel_base_um": 0, "ticks_per_rev": 0})
         hello = link.wait_for(M.HELLO, 5)
         assert hello is not None and hello.fields["board"] == M.BOARD_VIRTUAL and hello.fields["sensors"] == 8
         frames = collect(link, 1.0)

@@ -143,7 +143,8 @@ def wait_for_hello(port: str, timeout: float) -> dict[str, object]:
         try:
             while time.monotonic() < deadline:
                 link.send(M.HELLO, {"protocol": M.PROTOCOL_VERSION, "fw_major": 0, "fw_minor": 0,
-                                    "fw_patch": 0, "board": M.BOARD_HOST, "sensors": 0})
+                                    "fw_patch": 0, "board": M.BOARD_HOST, "sensors": 0,
+                                    "wheel_diameter_um": 0, "wheel_base_um": 0, "ticks_per_rev": 0})
                 frame = link.wait_for(M.HELLO, 0.5)
                 if frame is not None:
                     return frame.fields

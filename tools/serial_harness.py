@@ -250,7 +250,8 @@ def session(link: SerialLink, args: argparse.Namespace, command: dict[str, objec
             param_sets: list[tuple[int, int]], param_gets: list[int]) -> int:
     if args.hello:
         link.send(M.HELLO, {"protocol": M.PROTOCOL_VERSION, "fw_major": 0, "fw_minor": 1, "fw_patch": 0,
-                            "board": M.BOARD_HOST, "sensors": 0})
+                            "board": M.BOARD_HOST, "sensors": 0, "wheel_diameter_um": 0,
+                            "wheel_base_um": 0, "ticks_per_rev": 0})
     for pid, value in param_sets:
         link.send(M.PARAM_SET, {"param": pid, "value": value})
     for pid in param_gets:
