@@ -394,3 +394,19 @@ def test_encoder_sequence_wraps() -> None:
             seqs.append(s)
     assert seqs == [k & 0xFF for k in range(300)]
     assert dec.seq_gaps == 0 and dec.frames_lost == 0
+
+
+# ------------------------------------------------------------------ fields
+
+
+@pytest.mark.parametrize("value", [0, 1, -1, 255, 256, -256, 0x7FFFFFFF, -0x80000000, 123456789, -987654321])
+def test_field_readers_match_struct(value: int) -> None:
+    """protocol.fields reads what struct packs, at any offset, signs included."""
+    from protocol import fields
+
+    buf = bytearray(3) + struct.pack("<i", value) + bytearray(2)
+    assert fields.read_i32(buf, 3) == value
+    v16 = value & 0xFFFF
+    buf16 = bytearray(1) + struct.pack("<H", v16)
+    assert fields.read_u16(buf16, 1) == v16
+    assert fields.read_i16(buf16, 1) == struct.unpack("<h", struct.pack("<H", v16))[0]
