@@ -8,13 +8,13 @@ compare what each one's encoders, sensors and pose do with the recording.
     res = sim.run_inputs(cmd)                       # cmd: (T, 2) or (T, N, 2), A
     res.enc (T, N, 2), res.pose (T, N, 3), res.ir_on / res.ir_amb (T, N, 8)
 
-    res = from_recording(rec, params_list, start=k)  # replay row k.. for N sets
+    res = host_sim.replay.replay_batch(rec, params_list, start=k)  # replay row k.. for N sets
 
 `params` is one RobotParams (N copies), a sequence of N RobotParams, or a
 dynamics.ParamBatch (one value per robot for every scalar parameter; the
 tuple-valued IR coefficients come from `base`).
 
-Each control period (default 40 ms) is what host_sim/hardware.SimRobot and
+Each control period (default 40 ms) is what host_sim/sim_robot.SimRobot and
 host_sim/simulation.Simulation do for one robot, for all N at once:
 
 1. the readings at the control instant: encoder ticks (motors.encoder_ticks_batch,
@@ -26,27 +26,34 @@ host_sim/simulation.Simulation do for one robot, for all N at once:
 2. the current references of that row are applied (row j of the results is
    the state *before* row j's command acts: the recording format's convention,
    so results and recordings line up row for row);
-3. n substeps of dt = period / n: motors (motors.wheel_torque_batch: current
-   regulator, back-EMF, current limit, friction), dynamics
-   (dynamics.step_batch, the same integrator as dynamics.step), contacts.
+3. n substeps of dt = period / n: motors at the mid-step speed and dynamics
+   (drive.drive_step_batch: current regulator, back-EMF, current limit,
+   friction; dynamics.step_batch, the same integrator as dynamics.step),
+   then contact where needed.
 
-Contacts: the same push-out rule as SimRobot, vectorised: a robot whose body
-disc (radius body_radius around C) overlaps a wall is pushed back out along
-the wall's normal and, if it was driving into the wall, its translation stops
-(the wheels keep only their spin); the start of each contact counts one
-collision.  The wall test runs only for robots that may have reached a wall
-since their last test (a conservative bound on how far C moved, so the
-result is the same as testing every robot every substep).  world=None means
-no walls: no contacts, and the IR sensors see only the ambient light.
+Contacts: the same model as SimRobot, vectorised (host_sim/contact.py,
+docs/dynamics.md "Contact"): every robot takes the rolling step
+(drive.drive_step_batch); those whose wheels lose their grip
+(contact.traction_ok_batch) or whose rim would enter a wall take the
+contact step instead (contact.slip_step_batch, on that subset only), with
+all the walls within their reach (contact.walls_in_reach_batch); the start
+of each contact counts one collision.  When fewer than
+`vector_contacts_from` (64) robots need the contact step, they take it one
+by one through contact.slip_step, its scalar twin: the vectorised solve
+iterates until its slowest robot settles, and for a few robots its sweeps
+are all Python overhead.  The wall test runs only for robots
+that may reach a wall in the step (a conservative bound on how far C moved
+since their last test).  world=None means no walls: no wall contacts, and
+the IR sensors see only the ambient light.
 
-Agreement with SimRobot: the same physics in the same order, but
-dynamics.step_batch evaluates the closed form with a different grouping of
-the floating-point operations than dynamics.step, so a batch robot and a
-SimRobot with the same inputs agree to rounding error (below 1e-13 m after
-16 s with wall contacts, in tests/test_batch.py) rather than bit for bit; the
-quantised outputs (encoder ticks, ADC counts) are then equal except where the
-exact value sits within that rounding error of a quantisation boundary.  With
-seed=s and N = 1 the sensor noise is the same stream as SimRobot(seed=s).
+Agreement with SimRobot: the same physics in the same order, but the numpy
+paths group the floating-point operations differently from the pure-Python
+ones, so a batch robot and a SimRobot with the same inputs agree to
+rounding error (below 1e-9 m in tests/test_batch.py and tests/test_contact.py,
+wall contacts, slip and corners included) rather than bit for bit; the
+quantised outputs (encoder ticks, ADC counts) are then equal except where
+the exact value sits within that rounding error of a quantisation boundary.
+With seed=s and N = 1 the sensor noise is the same stream as SimRobot(seed=s).
 
 Speed: the motors and the dynamics cost ~60 numpy operations on arrays of N
 per substep, the wall test a few more (and a nearest-wall query for the
@@ -67,22 +74,21 @@ from typing import Any
 
 import numpy as np
 
-from host_sim import dynamics, ir_sensor, motors
+from host_sim import contact, drive, dynamics, ir_sensor, motors
 from host_sim.dynamics import ParamBatch
 from host_sim.interface import CYCLE_S
 from host_sim.params import RobotParams
+from host_sim.sim_robot import CONTACT_HYSTERESIS
 from host_sim.world import World
 
 
 SUBSTEPS = 8
+VECTOR_CONTACTS_FROM = 64  # robots in one contact step from which the vectorised solve is the faster
 N_SENSORS = ir_sensor.N_SENSORS
 # RobotParams fields the IR model reads: robots that agree on all of them
 # share one read_sensors_batch call.
 IR_FIELDS = tuple(f.name for f in dataclasses.fields(RobotParams)
                   if f.name.startswith("ir_") or f.name in ("body_radius", "sensor_range", "adc_bits"))
-_CONTACT_HYSTERESIS = 0.002  # m, as SimRobot: leaving contact needs this much clearance
-_CLEARANCE_MARGIN = 0.004  # m, as SimRobot: closer than this to a wall, test it every substep
-_CHECK_SLACK = 0.002  # m, as SimRobot: the clearance kept from a wall between two tests
 
 
 @dataclass
@@ -96,11 +102,8 @@ class BatchResult:
     ir_amb: np.ndarray | None  # (T, N, 8) ADC counts, emitters off
     collisions: np.ndarray  # (N,) contacts started during the run
     substeps: int
-    start: int = 0  # the recording row it started from (from_recording)
-
-    @property
-    def n_robots(self) -> int:
-        return int(self.enc.shape[1])
+    start: int = 0  # the recording row it started from (replay_batch)
+    theta: np.ndarray | None = None  # (T, N, 2) wheel angles (rad), unquantised: what the encoders count
 
     @property
     def periods(self) -> int:
@@ -133,6 +136,17 @@ class _PerWheel:
             value = np.repeat(value[:, None], 2, axis=1)
             setattr(self, name, value)  # computed once
         return value
+
+
+class _SubParams:
+    """Robots s of a parameter set (RobotParams shared, or per-robot arrays), for the motor model."""
+
+    def __init__(self, p: Any, s: np.ndarray) -> None:
+        self._p, self._s = p, s
+
+    def __getattr__(self, name: str) -> Any:
+        value = getattr(self._p, name)
+        return value[self._s] if isinstance(value, np.ndarray) and value.ndim >= 1 else value
 
 
 class BatchSim:
@@ -168,6 +182,30 @@ class BatchSim:
                     raise ValueError(f"{'poses' if width == 3 else 'q'} must have shape (N, {width}), got {a.shape}")
                 n_hint = a.shape[0]
         self._set_params(params, n_hint)
+        self._set_state(poses, q, v)
+        n = self.n
+        self.t = float(t)
+        self.emitter_now = float(emitter_pct if initial_emitter_pct is None else initial_emitter_pct)
+        self.collisions = np.zeros(n, dtype=np.int64)
+        self.in_contact = np.zeros(n, dtype=bool)
+        # Broad phase of the wall test: where G and phi were at each robot's last
+        # test, and the smallest wall gap then.
+        self._chk = np.zeros((n, 3))
+        self._gap = np.full(n, -1.0)
+        self.slipping = np.zeros(n, dtype=bool)  # a wheel slips: the body velocity is extra state
+        self.body = np.zeros((n, 3))  # (u, l, omega) of the robots that slip
+        # the last contact step's forces, where the next one starts (SimRobot._forces)
+        self._warm = np.zeros(n, dtype=bool)
+        # Fewer robots than this in a contact step: contact.slip_step one by one, else slip_step_batch.
+        self.vector_contacts_from = VECTOR_CONTACTS_FROM
+        self._robots_cache: dict[int, RobotParams] = {}
+        self._wheel_force = np.zeros((2, 2, n))
+        self._wall_force = np.zeros((2, n, max(self.world.n_walls, 1)))
+        self._walls = self.world.n_walls > 0
+
+    # ------------------------------------------------------------------ set-up
+    def _set_state(self, poses: Any, q: Any, v: Any) -> None:
+        """q and v given, or robots at rest at poses of C (default the world's start)."""
         n = self.n
         if q is not None:
             self.q = np.array(q, dtype=float)
@@ -176,27 +214,17 @@ class BatchSim:
             self.v = np.zeros((n, 2)) if v is None else np.array(v, dtype=float)
             if self.v.shape != (n, 2):
                 raise ValueError(f"v must have shape ({n}, 2), got {self.v.shape}")
-        else:
-            if poses is None:
-                poses = np.tile(np.asarray(self.world.start, dtype=float), (n, 1))
-            pz = np.asarray(poses, dtype=float)
-            d = self._d
-            self.q = np.zeros((n, 5))
-            self.q[:, 0] = pz[:, 0] + d * np.cos(pz[:, 2])
-            self.q[:, 1] = pz[:, 1] + d * np.sin(pz[:, 2])
-            self.q[:, 2] = pz[:, 2]
-            self.v = np.zeros((n, 2))
-        self.t = float(t)
-        self.emitter_now = float(emitter_pct if initial_emitter_pct is None else initial_emitter_pct)
-        self.collisions = np.zeros(n, dtype=np.int64)
-        self.in_contact = np.zeros(n, dtype=bool)
-        # Broad phase of the wall test: where G and phi were at each robot's last
-        # test, and how far C could then still move before it may touch a wall.
-        self._chk = np.zeros((n, 3))
-        self._clearance = np.full(n, -1.0)
-        self._walls = self.world.n_walls > 0
+            return
+        if poses is None:
+            poses = np.tile(np.asarray(self.world.start, dtype=float), (n, 1))
+        pz = np.asarray(poses, dtype=float)
+        d = self._d
+        self.q = np.zeros((n, 5))
+        self.q[:, 0] = pz[:, 0] + d * np.cos(pz[:, 2])
+        self.q[:, 1] = pz[:, 1] + d * np.sin(pz[:, 2])
+        self.q[:, 2] = pz[:, 2]
+        self.v = np.zeros((n, 2))
 
-    # ------------------------------------------------------------------ set-up
     def _set_params(self, params: Any, n_hint: int | None) -> None:
         if isinstance(params, RobotParams):
             n = n_hint if n_hint is not None else 1
@@ -227,6 +255,9 @@ class BatchSim:
         self._p_motors: Any = shared if shared is not None else _PerWheel(batch)
         self._d = shared.com_offset if shared is not None else batch.com_offset
         self._r = shared.body_radius if shared is not None else batch.body_radius
+        self._wheel_radius = shared.wheel_radius if shared is not None else batch.wheel_radius
+        self._half_axle = shared.half_axle if shared is not None else batch.half_axle
+        self._shared = shared is not None
         # IR groups: (indices or None for all, RobotParams).
         if shared is not None:
             self._ir_groups: list[tuple[np.ndarray | None, RobotParams]] = [(None, shared)]
@@ -276,55 +307,142 @@ class BatchSim:
 
     # ------------------------------------------------------------------ physics
     def substep(self, i_ref: Any, dt: float) -> None:
-        """All N robots by dt seconds with current references i_ref, (2,) or (N, 2) A."""
-        tau, _current = motors.wheel_torque_batch(i_ref, self.v, self._p_motors)
-        dynamics.step_batch(self.q, self.v, tau, dt, self._p, out=(self.q, self.v))
+        """All N robots by dt seconds with current references i_ref, (2,) or (N, 2) A: SimRobot.advance
+        for each (rolling where the wheels hold and no wall is hit, else the contact step)."""
+        q0, v0 = self.q, self.v
+        q1, v1, tau, _cur = drive.drive_step_batch(q0, v0, i_ref, dt, self._p, self._p_motors)
+        ok = contact.traction_ok_batch(v0, v1, tau, dt, self._p) & ~self.slipping
+        idx, gaps, normals, order = self._walls_in_reach(q0, q1, ok, dt)
+        if idx.size:
+            # the rolling step is kept unless it takes the rim into a wall (SimRobot.advance)
+            d = _sub(self._d, idx)
+            dx = q1[idx, 0] - q0[idx, 0] - d * (np.cos(q1[idx, 2]) - np.cos(q0[idx, 2]))
+            dy = q1[idx, 1] - q0[idx, 1] - d * (np.sin(q1[idx, 2]) - np.sin(q0[idx, 2]))
+            with np.errstate(invalid="ignore"):
+                hits = (gaps + normals[..., 0] * dx[:, None] + normals[..., 1] * dy[:, None] < 0.0).any(1)
+            ok[idx[hits]] = False
+        if not ok.all():
+            self._slip_step(q0, v0, q1, v1, ~ok, i_ref, dt, idx, gaps, normals, order)
+        self._warm &= ~ok  # a rolling step ends the contact forces' history
+        self.q, self.v = q1, v1
         self.t += dt
-        if self._walls:
-            self._resolve_contacts()
 
-    def _resolve_contacts(self) -> None:
-        """SimRobot._resolve_contact for every robot that may have reached a wall."""
-        q, chk = self.q, self._chk
-        # C = G - d (cos phi, sin phi) moves at most |dG| + d |dphi| since the last test.
-        moved = np.hypot(q[:, 0] - chk[:, 0], q[:, 1] - chk[:, 1])
-        moved += self._d * np.abs(q[:, 2] - chk[:, 2])
-        idx = np.flatnonzero(moved >= self._clearance)
+    def _slip_step(self, q0: np.ndarray, v0: np.ndarray, q1: np.ndarray, v1: np.ndarray, bad: np.ndarray,
+                   i_ref: Any, dt: float, idx: np.ndarray, gaps: np.ndarray, normals: np.ndarray,
+                   order: np.ndarray) -> None:
+        """contact.slip_step_batch for the robots `bad`, written into q1, v1."""
+        s = np.flatnonzero(bad)
+        i_s = np.asarray(i_ref, dtype=float)
+        i_s = i_s[s] if i_s.ndim == 2 else np.broadcast_to(i_s, (len(s), 2))
+        tau, _cur, slope = motors.wheel_torque_slope_batch(i_s, v0[s], _SubParams(self._p_motors, s))
+        body = self.body[s]
+        rolling = ~self.slipping[s]
+        if rolling.any():
+            r, b = _sub(self._wheel_radius, s), _sub(self._half_axle, s)
+            vs = v0[s]
+            body[:, 0] = np.where(rolling, 0.5 * r * (vs[:, 0] + vs[:, 1]), body[:, 0])
+            body[:, 1] = np.where(rolling, 0.0, body[:, 1])
+            body[:, 2] = np.where(rolling, 0.5 * r * (vs[:, 1] - vs[:, 0]) / b, body[:, 2])
+        width = gaps.shape[1] if idx.size else 0
+        g = np.full((len(s), width), np.inf)
+        nrm = np.zeros((len(s), width, 2))
+        nrm[..., 0] = 1.0  # no wall: any unit normal, its gap is inf
+        walls = np.zeros((len(s), width), dtype=np.int64)
+        if width:
+            pos = np.searchsorted(idx, s)
+            found = (pos < len(idx)) & (idx[np.minimum(pos, len(idx) - 1)] == s)
+            g[found] = gaps[pos[found]]
+            nrm[found] = normals[pos[found]]
+            walls[found] = order[pos[found]]
+        # warm start from the last step's contact forces, where there was one (SimRobot.advance)
+        warm = self._warm[s]
+        wheel_f = np.where(warm[None, None], self._wheel_force[:, :, s], 0.0)
+        wall_f = self._wall_force[:, s[:, None], walls].transpose(0, 2, 1)  # (2, W, K)
+        wall_f = np.where((warm[:, None] & np.isfinite(g))[None].transpose(0, 2, 1), wall_f, 0.0)
+        if len(s) >= self.vector_contacts_from:
+            qn, vn, bn, rolled, pushed, wheel_f, wall_f = contact.slip_step_batch(
+                q0[s], v0[s], body, tau, slope, dt, self._p, g, nrm, None if self._shared else s, wheel_f, wall_f)
+        else:
+            qn, vn, bn, rolled, pushed, wheel_f, wall_f = self._slip_steps_one_by_one(
+                s, q0, v0, body, tau, slope, dt, g, nrm, walls, wheel_f, wall_f)
+        q1[s], v1[s], self.body[s] = qn, vn, bn
+        self._wheel_force[:, :, s] = wheel_f
+        self._wall_force[:, s] = 0.0
+        if width:
+            self._wall_force[:, s[:, None], walls] = np.where(np.isfinite(g)[None], wall_f.transpose(0, 2, 1), 0.0)
+        self._warm[s] = True
+        self.slipping[s] = ~rolled
+        started = s[pushed & ~self.in_contact[s]]
+        self.collisions[started] += 1
+        self.in_contact[s[pushed]] = True
+
+    def _slip_steps_one_by_one(self, s: np.ndarray, q0: np.ndarray, v0: np.ndarray, body: np.ndarray,
+                               tau: np.ndarray, slope: np.ndarray, dt: float, g: np.ndarray, nrm: np.ndarray,
+                               walls: np.ndarray, wheel_f: np.ndarray, wall_f: np.ndarray) -> tuple[np.ndarray, ...]:
+        """contact.slip_step (the scalar twin of slip_step_batch) for each robot of s, in the batch's layout:
+        a few robots in contact cost less this way than a vectorised solve whose sweeps are all
+        overhead."""
+        k, width = len(s), g.shape[1]
+        qn, vn, bn = np.empty((k, 5)), np.empty((k, 2)), np.empty((k, 3))
+        rolled, pushed = np.zeros(k, dtype=bool), np.zeros(k, dtype=bool)
+        wheel_out, wall_out = np.zeros((2, 2, k)), np.zeros((2, width, k))
+        for n, j in enumerate(s):
+            near = [w for w in range(width) if np.isfinite(g[n, w])]
+            in_reach = [(float(g[n, w]), float(nrm[n, w, 0]), float(nrm[n, w, 1]), int(walls[n, w])) for w in near]
+            warm = (wheel_f[:, :, n].tolist(), [wall_f[:, w, n].tolist() for w in near]) if self._warm[j] else None
+            q_j, v_j, b_j, pushed[n], (f_wheels, f_walls) = contact.slip_step(
+                q0[j].tolist(), v0[j].tolist(), tuple(body[n].tolist()) if self.slipping[j] else None,
+                tau[n].tolist(), slope[n].tolist(), dt, self._robot_params(int(j)), in_reach, warm)
+            qn[n], vn[n] = q_j, v_j
+            rolled[n] = b_j is None
+            bn[n] = body[n] if b_j is None else b_j
+            wheel_out[:, :, n] = f_wheels
+            for w, f in zip(near, f_walls):
+                wall_out[:, w, n] = f
+        return qn, vn, bn, rolled, pushed, wheel_out, wall_out
+
+    def _robot_params(self, j: int) -> RobotParams:
+        if self._shared:
+            return self._p  # type: ignore[no-any-return]
+        cached = self._robots_cache.get(j)
+        if cached is None:
+            cached = self._robots_cache[j] = self._p.robot(j, self.base)
+        return cached
+
+    def _walls_in_reach(self, q0: np.ndarray, q1: np.ndarray, ok: np.ndarray, dt: float
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(robots tested, their gaps (K, W), normals (K, W, 2), wall indices (K, W)):
+        SimRobot._walls_in_reach for every robot
+        that may reach a wall in this step (C moves at most |dG| + d |dphi|)."""
+        none = np.empty(0, dtype=np.int64)
+        if not self._walls:
+            return none, np.empty((0, 0)), np.empty((0, 0, 2)), np.empty((0, 0), dtype=np.int64)
+        chk, d = self._chk, self._d
+        moved = np.hypot(q0[:, 0] - chk[:, 0], q0[:, 1] - chk[:, 1]) + d * np.abs(q0[:, 2] - chk[:, 2])
+        travel = np.hypot(q1[:, 0] - q0[:, 0], q1[:, 1] - q0[:, 1]) + d * np.abs(q1[:, 2] - q0[:, 2])
+        if self.slipping.any():
+            sl = self.body
+            travel = np.where(self.slipping, dt * (np.abs(sl[:, 0]) + np.abs(sl[:, 1])), travel)
+        within = travel + contact.REACH_MARGIN
+        far = moved + within < self._gap
+        self.in_contact &= ~(far & (self._gap - moved > CONTACT_HYSTERESIS))
+        idx = np.flatnonzero(~far)
         if idx.size == 0:
-            return
-        qi = q[idx]
-        d = _sub(self._d, idx)
-        r = _sub(self._r, idx)
-        cos, sin = np.cos(qi[:, 2]), np.sin(qi[:, 2])
-        centre = np.stack([qi[:, 0] - d * cos, qi[:, 1] - d * sin], 1)
-        dist, normal = self.world.nearest_wall(centre)  # type: ignore[misc]
+            return none, np.empty((0, 0)), np.empty((0, 0, 2)), np.empty((0, 0), dtype=np.int64)
+        qi = q0[idx]
+        di = _sub(d, idx)
+        centre = np.stack([qi[:, 0] - di * np.cos(qi[:, 2]), qi[:, 1] - di * np.sin(qi[:, 2])], 1)
+        gaps, normals, order, gmin = contact.walls_in_reach_batch(self.world, centre, _sub(self._r, idx),
+                                                                  within[idx])
         chk[idx] = qi[:, :3]
-        self._clearance[idx] = np.where(dist > r + _CLEARANCE_MARGIN, dist - r - _CHECK_SLACK, -1.0)
-        hit = dist < r
-        if hit.any():
-            h = idx[hit]
-            depth = (r - dist)[hit] if _is_array(r) else r - dist[hit]
-            nx, ny = normal[hit, 0], normal[hit, 1]
-            q[h, 0] += depth * nx
-            q[h, 1] += depth * ny
-            self._clearance[h] = -1.0
-            heading_into = cos[hit] * nx + sin[hit] * ny
-            v = self.v
-            forward = v[h, 0] + v[h, 1]
-            stop = h[forward * heading_into < 0]  # driving into the wall: the translation stops
-            if stop.size:
-                spin = (v[stop, 1] - v[stop, 0]) / 2
-                v[stop, 0] = -spin
-                v[stop, 1] = spin
-            self.collisions[h] += ~self.in_contact[h]
-            self.in_contact[h] = True
-        free = dist > r + _CONTACT_HYSTERESIS
-        if free.any():
-            self.in_contact[idx[free]] = False
+        self._gap[idx] = gmin
+        self.in_contact[idx[gmin > CONTACT_HYSTERESIS]] = False
+        return idx, gaps, normals, order
 
     # ------------------------------------------------------------------ runs
     def run_inputs(self, cmd: Any, substeps: int | None = None, sensors: bool = True,
-                   seed: int | np.random.Generator | None = None, period: Any = None) -> BatchResult:
+                   seed: int | np.random.Generator | None = None, period: Any = None,
+                   emitter: Any = None) -> BatchResult:
         """Apply T rows of current references, one per control period; returns the readings.
 
         cmd: (T, 2) A, the same references for every robot, or (T, N, 2).
@@ -332,7 +450,9 @@ class BatchSim:
         sensors: read the IR ring at every control instant (False: enc and
         pose only, faster).  seed: sensor noise (None: noise-free; an int or
         a numpy Generator).  period: seconds per row, a float or (T,) array
-        (default cycle_s).  The state carries on: call again to continue.
+        (default cycle_s).  emitter: (T,) % emitter power of each row's
+        on-reading (default: as the constructor's emitter_pct and
+        initial_emitter_pct say).  The state carries on: call again to continue.
         """
         cmd = np.asarray(cmd, dtype=float)
         n = self.n
@@ -349,6 +469,7 @@ class BatchSim:
             np.random.default_rng(seed) if seed is not None else None)
         t_out = np.empty(n_rows)
         enc = np.empty((n_rows, n, 2), dtype=np.int64)
+        theta = np.empty((n_rows, n, 2))
         pose = np.empty((n_rows, n, 3))
         ir_on = np.empty((n_rows, n, N_SENSORS), dtype=np.int64) if sensors else None
         ir_amb = np.empty((n_rows, n, N_SENSORS), dtype=np.int64) if sensors else None
@@ -356,7 +477,10 @@ class BatchSim:
         for j in range(n_rows):
             t_out[j] = self.t
             enc[j] = self.encoder_ticks()
+            theta[j] = self.q[:, 3:5]
             pose[j] = here = self.pose
+            if emitter is not None:
+                self.emitter_now = float(emitter[j])
             if sensors:
                 ir_on[j], ir_amb[j] = self.read_sensors(rng, here)  # type: ignore[index]
             i_ref = cmd[j]
@@ -364,13 +488,14 @@ class BatchSim:
             dt = float(periods[j]) / substeps
             for _ in range(substeps):
                 self.substep(i_ref, dt)
-        return BatchResult(t_out, enc, pose, ir_on, ir_amb, self.collisions - collisions0, substeps)
+        return BatchResult(t_out, enc, pose, ir_on, ir_amb, self.collisions - collisions0, substeps, theta=theta)
 
 
 # --------------------------------------------------------------------------- #
 # Identification: N parameter sets replaying one recording
 # --------------------------------------------------------------------------- #
-def _robot_params(params: Any, base: RobotParams | None) -> tuple[Any, list[RobotParams]]:
+def robot_params(params: Any, base: RobotParams | None) -> tuple[Any, list[RobotParams]]:
+    """(what BatchSim takes, the N RobotParams) from a RobotParams, a sequence of them or a ParamBatch."""
     if isinstance(params, RobotParams):
         return params, [params]
     if isinstance(params, ParamBatch):
@@ -379,53 +504,4 @@ def _robot_params(params: Any, base: RobotParams | None) -> tuple[Any, list[Robo
     return robots, robots
 
 
-def from_recording(rec: Any, params_list: Any, start: int = 0, *, stop: int | None = None,
-                   world: World | None = None, substeps: int = SUBSTEPS, sensors: bool = True,
-                   seed: int | np.random.Generator | None = None, base: RobotParams | None = None,
-                   nominal_timing: bool | None = None) -> BatchResult:
-    """Replay rows start..stop-1 of a recording for N parameter sets at once (host_sim/replay.replay, batched).
-
-    Every robot starts in the state the recording has at row `start`
-    (host_sim/replay.state_at with that robot's parameters: the tracker
-    pose, the wheel angles from the encoders, the wheel speeds from the
-    encoders around the row) and is fed the recorded current references.
-    params_list: a RobotParams, a sequence of N, or a ParamBatch (with
-    `base`).  world: default the recording's own (its sidecar), no walls
-    when it has none.  Timing as replay: one nominal sample period per row
-    for fixed-step simulator recordings, else the recorded times.
-    """
-    from host_sim.replay import ReplayError, state_at
-    from host_sim.world import world_from_dict
-
-    stop = len(rec) if stop is None else stop
-    if not 0 <= start < stop <= len(rec):
-        raise ReplayError(f"rows {start}..{stop} do not fit the recording (0..{len(rec)})")
-    if world is None and isinstance(rec.meta.get("world"), dict):
-        world = world_from_dict(rec.meta["world"], f"{rec.path or 'recording'} (sidecar world)")
-    params, robots = _robot_params(params_list, base)
-    states = [state_at(rec, start, p) for p in robots]
-    q = np.array([s[0] for s in states], dtype=float)
-    v = np.array([s[1] for s in states], dtype=float)
-    if isinstance(params_list, RobotParams):
-        q = q.reshape(1, 5)
-        v = v.reshape(1, 2)
-    simulator = rec.meta.get("source") == "simulator"
-    if nominal_timing is None:
-        nominal_timing = simulator and rec.meta.get("mode") == "fixed"
-    emitter = float(rec.meta.get("emitter_pct", 60))
-    sim = BatchSim(world, params, q=q, v=v, t=float(rec.t[start]), base=base, cycle_s=rec.sample_period,
-                   substeps=substeps, emitter_pct=emitter,
-                   initial_emitter_pct=0.0 if (start == 0 and simulator) else emitter)
-    n_rows = stop - start
-    if nominal_timing:
-        period: Any = rec.sample_period
-    else:
-        period = np.full(n_rows, rec.sample_period)
-        inner = np.arange(start, stop) + 1 < len(rec)
-        period[inner] = np.diff(rec.t[start:min(stop + 1, len(rec))])[: int(inner.sum())]
-    result = sim.run_inputs(rec.cmd[start:stop], substeps=substeps, sensors=sensors, seed=seed, period=period)
-    result.start = start
-    return result
-
-
-__all__ = ["BatchSim", "BatchResult", "from_recording", "IR_FIELDS", "CYCLE_S", "SUBSTEPS"]
+__all__ = ["BatchSim", "BatchResult", "robot_params", "IR_FIELDS", "CYCLE_S", "SUBSTEPS"]

@@ -21,6 +21,7 @@ from firmware.manifest import BOARD_FILES, MAIN_PY
 from host_sim.micropython_tools import REPO_ROOT, micropython_exe
 
 SUPERVISOR = REPO_ROOT / "firmware" / "unix_board.py"
+TAIL_BYTES = 2048
 
 
 def factory_image(folder: Path) -> None:
@@ -49,6 +50,7 @@ class VirtualBoard:
             stderr=self._stderr, env=env, bufsize=0,
         )
         self.dropped = 0  # bytes the board sent while nobody read the port
+        self._tail = b""  # the board's last output: a traceback when it dies (the unix port prints it on stdout)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._relay, name="pty relay", daemon=True)
         self._thread.start()
@@ -57,12 +59,14 @@ class VirtualBoard:
         assert self.proc.stdin is not None and self.proc.stdout is not None
         board_out = self.proc.stdout.fileno()
         board_in = self.proc.stdin.fileno()
-        while not self._stop.is_set() and self.proc.poll() is None:
+        # Until the board's stdout ends (not until it exits): its last words are read too.
+        while not self._stop.is_set():
             ready, _, _ = select.select([board_out, self.master], [], [], 0.1)
             if board_out in ready:
                 data = os.read(board_out, 4096)
                 if not data:
                     return
+                self._tail = (self._tail + data)[-TAIL_BYTES:]
                 try:
                     os.write(self.master, data)
                 except OSError as exc:  # nobody reads the port and its buffer is full
@@ -82,6 +86,15 @@ class VirtualBoard:
 
     def alive(self) -> bool:
         return self.proc.poll() is None
+
+    def last_words(self) -> str:
+        """The last line of text the board printed (after it stopped: the error that stopped it)."""
+        if not self.alive():
+            self._thread.join(1.0)
+        text = self._tail.replace(b"\r", b"\n").decode("utf-8", "replace")
+        lines = [line.strip() for line in text.split("\n")
+                 if line.strip() and all(c.isprintable() for c in line.strip())]
+        return lines[-1] if lines else ""
 
     def close(self) -> None:
         self._stop.set()

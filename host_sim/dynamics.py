@@ -35,9 +35,10 @@ Paths, all the same equations:
   recomputed at every call (numpy, for reading and checking);
 * `reduced_accel_fast` / `step`: the closed form in pure-Python floats (one robot);
 * `reduced_accel_batch` / `step_batch`: the closed form on numpy arrays of N robots,
-  each with its own parameters (`ParamBatch`);
-* `full_constrained_accel`: an independent check, the full constrained system
-  M q'' + V = E tau - A^T lambda with A q'' + A' q' = 0 solved as a KKT system (no S).
+  each with its own parameters (`ParamBatch`).
+
+The independent check, the full constrained system M q'' + V = E tau - A^T lambda
+with A q'' + A' q' = 0 solved as a KKT system (no S), lives in tests/test_dynamics.py.
 
 The integrator (`step`, `step_matrix`, `step_batch`; docs/dynamics.md, "Integrator"):
 fixed step, second order, velocities first then pose:
@@ -47,7 +48,8 @@ fixed step, second order, velocities first then pose:
     q+ = q + dt S(phi + dt omega_bar / 2) (v + v+) / 2
 
 where H = S^T M S (constant) and C(omega*) is the gyroscopic (skew) matrix with
-phi' frozen at omega*.  It costs one 2x2 solve, is exact for d = 0 under a
+phi' frozen at omega*.  Second order for a torque held over the step; with the
+motors in the loop the torque must be taken at mid-step (host_sim/drive.py).  It costs one 2x2 solve, is exact for d = 0 under a
 constant torque, and satisfies the work-energy balance  T+ - T = tau . (theta+ - theta)
 to rounding error, so with no input the kinetic energy is conserved exactly.
 """
@@ -264,33 +266,6 @@ def reduced_accel(q: Vec, v: Vec, tau: Vec, p: RobotParams) -> np.ndarray:
     return np.linalg.solve(h, rhs)
 
 
-def kinetic_energy(q: Vec, q_dot: Vec, p: RobotParams) -> float:
-    """T = 1/2 q'^T M(q) q' (J)."""
-    qd = np.asarray(q_dot, dtype=float)
-    return float(0.5 * qd @ mass_matrix(q, p) @ qd)
-
-
-def full_constrained_accel(q: Vec, q_dot: Vec, tau: Vec, p: RobotParams) -> tuple[np.ndarray, np.ndarray]:
-    """(q'', lambda) of  M q'' + V = E tau - A^T lambda,  A q'' + A' q' = 0  (KKT system; S not used).
-
-    lambda = (-F_lat, F_l, F_r): F_lat is the sideways ground force on the robot at the axle
-    (N, positive to the left), F_l, F_r the forward traction forces at the wheels (N).
-    q_dot must satisfy A q' = 0 (only then is this the robot's motion).
-    """
-    qd = np.asarray(q_dot, dtype=float)
-    m = mass_matrix(q, p)
-    a = constraint_matrix(q, p)
-    kkt = np.zeros((8, 8))
-    kkt[:5, :5] = m
-    kkt[:5, 5:] = a.T
-    kkt[5:, :5] = a
-    rhs = np.empty(8)
-    rhs[:5] = input_matrix(q, p) @ np.asarray(tau, dtype=float) - coriolis(q, qd, p)
-    rhs[5:] = -constraint_matrix_dot(q, qd, p) @ qd
-    sol = np.linalg.solve(kkt, rhs)
-    return sol[:5], sol[5:]
-
-
 def _gyroscopic_matrix(q: Vec, q_dot_star: np.ndarray, p: RobotParams, s_mat: np.ndarray,
                        m: np.ndarray) -> np.ndarray:
     """C*, 2x2: S^T (M S'(q'*) w + V(q'*, S w)) as a linear map of w, with phi' frozen at q'*.
@@ -328,28 +303,6 @@ def step_matrix(q: Vec, v: Vec, tau: Vec, dt: float, p: RobotParams) -> tuple[np
 # ----------------------------------------------------------------------------- #
 # Closed form, one robot, pure-Python floats
 # ----------------------------------------------------------------------------- #
-def body_velocity(v: Vec, p: RobotParams) -> tuple[float, float]:
-    """(u, omega): forward speed of C and G (m/s) and yaw rate (rad/s) from the wheel speeds."""
-    r, b = p.wheel_radius, p.half_axle
-    return 0.5 * r * (v[0] + v[1]), 0.5 * r * (v[1] - v[0]) / b
-
-
-def wheel_speeds(u: float, omega: float, p: RobotParams) -> tuple[float, float]:
-    """(w_l, w_r) (rad/s) for a forward speed u (m/s) and a yaw rate omega (rad/s)."""
-    r, b = p.wheel_radius, p.half_axle
-    return (u - b * omega) / r, (u + b * omega) / r
-
-
-def qdot(q: Vec, v: Vec, p: RobotParams) -> tuple[float, float, float, float, float]:
-    """q' = S(q) v (kinematics), pure Python."""
-    r, b, d = p.wheel_radius, p.half_axle, p.com_offset
-    wl, wr = v[0], v[1]
-    u = 0.5 * r * (wl + wr)
-    w = 0.5 * r * (wr - wl) / b
-    c, s = math.cos(q[2]), math.sin(q[2])
-    return (u * c - d * w * s, u * s + d * w * c, w, wl, wr)
-
-
 def reduced_accel_fast(q: Vec, v: Vec, tau: Vec, p: RobotParams) -> tuple[float, float]:
     """v' in closed form (pure Python floats; q is not needed: the reduced model does not depend on it)."""
     r, b, _d, g, _mt, _jt, imt, ijt = _coeffs(p)[:8]
@@ -360,14 +313,6 @@ def reduced_accel_fast(q: Vec, v: Vec, tau: Vec, p: RobotParams) -> tuple[float,
     ud = ((tl + tr) / r + g * w * w) * imt
     wd = (b * (tr - tl) / r - g * u * w) * ijt
     return (ud - b * wd) / r, (ud + b * wd) / r
-
-
-def kinetic_energy_reduced(v: Vec, p: RobotParams) -> float:
-    """T = 1/2 m_t u^2 + 1/2 J_t omega^2 = 1/2 v^T H v (J), pure Python."""
-    r, b, _d, _g, mt, jt = _coeffs(p)[:6]
-    u = 0.5 * r * (v[0] + v[1])
-    w = 0.5 * r * (v[1] - v[0]) / b
-    return 0.5 * (mt * u * u + jt * w * w)
 
 
 def step(q: Vec, v: Vec, tau: Vec, dt: float, p: RobotParams) -> tuple[tuple[float, ...], tuple[float, float]]:
@@ -403,16 +348,6 @@ def step(q: Vec, v: Vec, tau: Vec, dt: float, p: RobotParams) -> tuple[tuple[flo
 # ----------------------------------------------------------------------------- #
 # Closed form, N robots (numpy), per-robot parameters
 # ----------------------------------------------------------------------------- #
-def qdot_batch(q: np.ndarray, v: np.ndarray, p: Any) -> np.ndarray:
-    """q' = S(q) v for N robots: q (N, 5), v (N, 2) -> (N, 5)."""
-    r, b, d = _coeffs(p)[:3]
-    wl, wr = v[:, 0], v[:, 1]
-    u = 0.5 * r * (wl + wr)
-    w = 0.5 * r * (wr - wl) / b
-    c, s = np.cos(q[:, 2]), np.sin(q[:, 2])
-    return np.stack([u * c - d * w * s, u * s + d * w * c, w, wl, wr], axis=1)
-
-
 def reduced_accel_batch(q: np.ndarray, v: np.ndarray, tau: np.ndarray, p: Any) -> np.ndarray:
     """v' for N robots: v, tau (N, 2) -> (N, 2); p a RobotParams (shared) or a ParamBatch of N."""
     r, b, _d, g, _mt, _jt, imt, ijt = _coeffs(p)[:8]

@@ -26,6 +26,10 @@ Reflected light (docs/ir-sensor.md has the figures and the derivation):
   ir_saturation): flat above the emitter's saturation (Fig. 10);
 * C = ir_gain, counts m^2 at 100 % pulse width (extrapolated linearly).
 
+Option, a beam (ir_beam_rays = n > 1): each sensor casts n rays over
++-ir_beam_half_angle around its axis and reads the sum of their responses
+weighted by cos^2 of the angle off the axis (`beam`), on both paths.
+
 Readings (`read_sensors`): emitters off -> ambient + noise; emitters on ->
 ambient + reflected + noise; each clipped to 0..adc_max (the ADC ceiling
 saturates the total) and rounded to integer counts.  The ambient is the
@@ -124,6 +128,9 @@ class _Consts:
         self.inv_taper = 1.0 / (RANGE_TAPER * p.sensor_range)
         self.adc_max = p.adc_max
         self.powers = np.arange(6.0)
+        self.beam_n, off, self.beam_w = beam(p)
+        self.beam_w_list = self.beam_w.tolist()
+        self.beam_bearings = tuple(b + o for b in BEARINGS for o in off.tolist())  # sensor-major
 
 
 _CACHE: dict[int, _Consts] = {}
@@ -136,6 +143,20 @@ def _consts(p: RobotParams) -> _Consts:
             _CACHE.clear()
         c = _CACHE[id(p)] = _Consts(p)
     return c
+
+
+def beam(p: RobotParams) -> tuple[int, np.ndarray, np.ndarray]:
+    """(n, offsets from the sensor axis (rad), weights summing to 1) of each sensor's rays.
+
+    One ray: along the axis, weight 1 (the default).  n rays: evenly over
+    +-ir_beam_half_angle, weights proportional to cos^2(offset).
+    """
+    n = int(p.ir_beam_rays)
+    if n == 1:
+        return 1, np.zeros(1), np.ones(1)
+    off = np.linspace(-p.ir_beam_half_angle, p.ir_beam_half_angle, n)
+    w = np.cos(off) ** 2
+    return n, off, w / w.sum()
 
 
 def check_params(p: RobotParams) -> None:
@@ -156,6 +177,10 @@ def check_params(p: RobotParams) -> None:
         problems.append("ir_gain, ir_noise, ir_ambient and ir_on_delay must be >= 0")
     if len(p.ir_big_dome) != 6 or len(p.ir_small_dome) != 6:
         problems.append("ir_big_dome and ir_small_dome need 6 coefficients (x^0..x^5)")
+    if not (p.ir_beam_rays >= 1 and p.ir_beam_rays == int(p.ir_beam_rays)):
+        problems.append(f"ir_beam_rays must be a whole number >= 1, got {p.ir_beam_rays}")
+    elif p.ir_beam_rays > 1 and not 0 < p.ir_beam_half_angle < math.pi / 2:
+        problems.append(f"ir_beam_half_angle must be in (0, pi/2) rad, got {p.ir_beam_half_angle}")
     if problems:
         raise ValueError("IR sensor parameters: " + "; ".join(problems))
 
@@ -340,8 +365,16 @@ def _axes(poses: np.ndarray) -> np.ndarray:
 def _read(world: World, poses: np.ndarray, power_pct: Any, t: Any, p: RobotParams,
           rng: np.random.Generator | None) -> tuple[np.ndarray, np.ndarray]:
     c = _consts(p)
-    dist, ang, _hit = reflection(world, poses, p)
-    refl = response(dist, ang, power_pct, p)
+    if c.beam_n == 1:
+        dist, ang, _hit = reflection(world, poses, p)
+        refl = response(dist, ang, power_pct, p)
+    else:  # the beam: n rays per sensor, the weighted sum of their reflections
+        d, ang, _hit = world.cast_robots(poses, c.beam_bearings, p.sensor_range + p.body_radius)
+        shape = poses.shape[:-1] + (N_SENSORS, c.beam_n)
+        power = np.asarray(power_pct, dtype=float)
+        rays = response(np.maximum(d - p.body_radius, 0.0).reshape(shape), ang.reshape(shape),
+                        power[..., None] if power.ndim else power, p)
+        refl = rays @ c.beam_w
     base = p.ir_ambient if world.ambient is None else world.ambient
     if world.lamps:
         gains = _robot_lamp_gains(world, poses, _axes(poses), p)
@@ -372,7 +405,7 @@ def _read_one(world: World, x: float, y: float, phi: float, power_pct: float, t:
     """
     c = _consts(p)
     r = p.body_radius
-    dist, ang, _hit = world.cast_robot(x, y, phi, BEARINGS, p.sensor_range + r)
+    dist, ang, _hit = world.cast_robot(x, y, phi, c.beam_bearings, p.sensor_range + r)
     gain = p.ir_gain * power_term(power_pct, p)
     s0, s1, s2, s3, s4, s5 = c.coef_blend[:, 0].tolist()  # small dome
     d0, d1, d2_, d3, d4, d5 = c.coef_blend[:, 1].tolist()  # big - small
@@ -407,6 +440,9 @@ def _read_one(world: World, x: float, y: float, phi: float, power_pct: float, t:
                 u = 1.0
             va = vs + (u * u * (3.0 - 2.0 * u)) * vd
         refl.append(gain * (va if va > 0.0 else 0.0) * f)
+    if c.beam_n > 1:  # the beam: the weighted sum of each sensor's rays
+        n, w = c.beam_n, c.beam_w_list
+        refl = [sum(w[j] * refl[k * n + j] for j in range(n)) for k in range(N_SENSORS)]
     base = p.ir_ambient if world.ambient is None else world.ambient
     amb_off = [base] * N_SENSORS
     amb_on = amb_off

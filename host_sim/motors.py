@@ -28,7 +28,8 @@ w = w_eps atanh(tau / T_c) (a few mm/s at the rim).
 Encoders: cumulative ticks = floor(theta / (2 pi) * ticks_per_rev), floor toward
 -inf, so tick k covers [k, k+1) * 2 pi / ticks_per_rev whatever the sign of theta
 (a counter that starts at 0 with the wheel at angle 0 counts -1 as soon as it
-turns backwards by any amount).
+turns backwards by any amount).  `encoder_angle(k)` is the centre of tick k,
+the best guess of the angle from a count and safe from rounding at the edges.
 
 Scalar functions are pure Python floats (one robot, hot path); the *_batch
 versions take numpy arrays of shape (N,) or (N, 2) (left, right) with parameters
@@ -96,6 +97,25 @@ def wheel_torque(i_ref: float, w: float, p: RobotParams,
     return eta_n_kt * i - c_v * w - t_c * math.tanh(w / coulomb_eps), i
 
 
+def wheel_torque_slope(i_ref: float, w: float, p: RobotParams,
+                       coulomb_eps: float = COULOMB_EPS) -> tuple[float, float, float]:
+    """(torque (N m), current (A), d torque / d w (N m s, <= 0)) at wheel speed w: the torque and its
+    slope, for a linearly implicit step of a wheel that spins freely (host_sim/contact.py)."""
+    lim, n_kt, eta_n_kt, v_r, inv_r, c_v, t_c = _consts(p)
+    i = lim if i_ref > lim else (-lim if i_ref < -lim else i_ref)
+    emf_r = n_kt * w * inv_r
+    slope = -c_v
+    if i > v_r - emf_r:  # the battery, not the driver, sets the current: back-EMF damping
+        i = v_r - emf_r
+        slope -= eta_n_kt * n_kt * inv_r
+    elif i < -v_r - emf_r:
+        i = -v_r - emf_r
+        slope -= eta_n_kt * n_kt * inv_r
+    th = math.tanh(w / coulomb_eps)
+    slope -= t_c * (1.0 - th * th) / coulomb_eps
+    return eta_n_kt * i - c_v * w - t_c * th, i, slope
+
+
 def _axis0(a: Any, ndim: int) -> Any:
     """Per-robot parameter arrays (N,) broadcast against data of shape (N, ...)."""
     if isinstance(a, np.ndarray) and a.ndim == 1 and ndim > 1:
@@ -119,6 +139,29 @@ def wheel_torque_batch(i_ref: Any, w: Any, p: Any,
     torque = (_axis0(p.gear_efficiency, nd) * n_kt * i - _axis0(p.viscous_friction, nd) * w
               - _axis0(p.coulomb_friction, nd) * np.tanh(w / _axis0(coulomb_eps, nd)))
     return torque, i
+
+
+def wheel_torque_slope_batch(i_ref: Any, w: Any, p: Any, coulomb_eps: Any = COULOMB_EPS
+                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """wheel_torque_slope for arrays i_ref, w of shape (N,) or (N, 2): (torque, current, slope)."""
+    i_ref = np.asarray(i_ref, dtype=float)
+    w = np.asarray(w, dtype=float)
+    nd = w.ndim
+    lim = _axis0(p.current_limit, nd)
+    n_kt = _axis0(p.gear_ratio * p.torque_constant, nd)
+    inv_r = _axis0(1.0 / p.armature_resistance, nd)
+    vb = _axis0(p.battery_voltage, nd)
+    eta_n_kt = _axis0(p.gear_efficiency, nd) * n_kt
+    c_v, t_c, eps = _axis0(p.viscous_friction, nd), _axis0(p.coulomb_friction, nd), _axis0(coulomb_eps, nd)
+    emf = n_kt * w
+    i = np.minimum(np.maximum(i_ref, -lim), lim)
+    hi, lo = (vb - emf) * inv_r, (-vb - emf) * inv_r
+    limited = (i > hi) | (i < lo)
+    i = np.minimum(np.maximum(i, lo), hi)
+    th = np.tanh(w / eps)
+    torque = eta_n_kt * i - c_v * w - t_c * th
+    slope = -c_v - np.where(limited, eta_n_kt * n_kt * inv_r, 0.0) - t_c * (1.0 - th * th) / eps
+    return torque, i, slope
 
 
 def max_quiet_dt(p: RobotParams, coulomb_eps: float = COULOMB_EPS) -> float:
@@ -145,5 +188,14 @@ def encoder_ticks_batch(theta: Any, p: Any) -> np.ndarray:
 
 
 def encoder_angle(ticks: int, p: RobotParams) -> float:
-    """The lower edge (rad) of tick `ticks`: the inverse of encoder_ticks up to one tick."""
-    return ticks * TWO_PI / p.ticks_per_rev
+    """The centre (rad) of tick `ticks`: encoder_ticks(encoder_angle(k)) == k for every k.
+
+    The centre, not the lower edge: k * 2 pi / tpr, divided back by 2 pi / tpr,
+    rounds to just below k for about one k in six, and floor then gives k - 1."""
+    return (ticks + 0.5) * TWO_PI / p.ticks_per_rev
+
+
+def encoder_angle_batch(ticks: Any, p: Any) -> np.ndarray:
+    """encoder_angle for an array of counts (N,) or (N, 2) -> float array of the same shape."""
+    ticks = np.asarray(ticks, dtype=float)
+    return (ticks + 0.5) * (TWO_PI / _axis0(p.ticks_per_rev, ticks.ndim))

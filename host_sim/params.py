@@ -51,6 +51,10 @@ class RobotParams:
     viscous_friction: float = _p(2.0e-4, "N m s/rad", "viscous friction at each wheel axle")
     coulomb_friction: float = _p(1.5e-3, "N m", "dry friction torque at each wheel axle")
     battery_voltage: float = _p(7.4, "V", "battery voltage feeding the drivers")
+    # --- contact (host_sim/contact.py, docs/dynamics.md "Contact") ------------------
+    wheel_friction: float = _p(0.8, "-", "Coulomb friction coefficient mu between a wheel and the floor; each "
+                                         "wheel carries half the weight, (m_c + 2 m_w) g / 2")
+    wall_friction: float = _p(0.3, "-", "Coulomb friction coefficient between the body's rim and a wall")
     # --- encoders ------------------------------------------------------------------
     ticks_per_rev: float = _p(1200, "ticks", "encoder ticks per wheel turn (12 CPR x2 decoding x 50:1)")
     # --- IR sensors (paper 3.3; host_sim/ir_sensor.py, docs/ir-sensor.md) ----------
@@ -74,6 +78,10 @@ class RobotParams:
     ir_on_delay: float = _p(4.0e-4, "s", "time from a sensor's emitter-off reading to its emitter-on "
                                          "reading (emitter settling + the 8-way multiplexer)")
     adc_bits: float = _p(12, "bits", "ADC resolution; readings clip at 2^bits - 1")
+    ir_beam_rays: float = _p(1, "rays", "rays per sensor: 1 = along its axis only; n > 1 = a beam of n rays "
+                                        "spread evenly over +-ir_beam_half_angle, weighted by cos^2 of the "
+                                        "angle off the axis (emitter and receiver Lambertian)")
+    ir_beam_half_angle: float = _p(0.35, "rad", "half-angle of the beam (used when ir_beam_rays > 1)")
     # Angle response A (Fig. 7): two 5th-degree polynomials in |angle| (rad),
     # coefficients x^0..x^5, blended by a smoothstep of |angle| over
     # ir_angle_blend.  Least-squares fits (x^1 held at 0) of the target in
@@ -92,18 +100,39 @@ class RobotParams:
         metadata={"unit": "rad", "doc": "below the first |angle| the small dome alone, above the second the "
                                         "big dome alone, smoothstep in between"})
 
-    # ------------------------------------------------------------------------------
-    @property
-    def wheel_base(self) -> float:
-        return 2 * self.half_axle
+    # --- effects (host_sim/effects.py, docs/effects.md): physics the nominal twin leaves out.
+    # Each holds the value meaning "absent" by default; diagnosis fits them, a parameter file sets them.
+    coulomb_friction_delta_l: float = _p(0.0, "N m", "left axle's dry friction beyond coulomb_friction")
+    coulomb_friction_delta_r: float = _p(0.0, "N m", "right axle's dry friction beyond coulomb_friction")
+    viscous_friction_delta_l: float = _p(0.0, "N m s/rad", "left axle's viscous friction beyond viscous_friction")
+    viscous_friction_delta_r: float = _p(0.0, "N m s/rad", "right axle's viscous friction beyond viscous_friction")
+    wheel_radius_delta_l: float = _p(0.0, "m", "left wheel's radius minus wheel_radius")
+    wheel_radius_delta_r: float = _p(0.0, "m", "right wheel's radius minus wheel_radius")
+    torque_constant_delta_l: float = _p(0.0, "N m/A", "left motor's torque constant minus torque_constant")
+    torque_constant_delta_r: float = _p(0.0, "N m/A", "right motor's torque constant minus torque_constant")
+    ticks_per_rev_delta_l: float = _p(0.0, "ticks", "left encoder's counts per wheel turn minus ticks_per_rev")
+    ticks_per_rev_delta_r: float = _p(0.0, "ticks", "right encoder's counts per wheel turn minus ticks_per_rev")
+    backlash_l: float = _p(0.0, "rad", "play in the left gear, at the wheel")
+    backlash_r: float = _p(0.0, "rad", "play in the right gear, at the wheel")
+    actuator_delay: float = _p(0.0, "s", "a new current reference reaches the drivers this late")
+    battery_resistance: float = _p(0.0, "ohm", "battery internal resistance: the voltage sags with the current")
+    caster_drag: float = _p(0.0, "N", "the caster's drag force, against the direction of motion")
+    turning_resistance: float = _p(0.0, "N m", "the tyres' scrub torque, against turning")
+    ir_gain_scale: tuple[float, ...] = field(
+        default=(1.0,) * 8, metadata={"unit": "-", "doc": "each IR pair's optical efficiency relative to ir_gain"})
+    ir_misalignment: tuple[float, ...] = field(
+        default=(0.0,) * 8, metadata={"unit": "rad", "doc": "each IR pair's axis turned counter-clockwise"})
+    ir_offset: tuple[float, ...] = field(
+        default=(0.0,) * 8, metadata={"unit": "counts", "doc": "added to each emitter-on reading"})
+    ambient_leakage: tuple[float, ...] = field(
+        default=(0.0,) * 8, metadata={"unit": "-", "doc": "fraction of the ambient light each emitter-on reading "
+                                                          "sees on top of the emitter-off one"})
+    ir_latency: float = _p(0.0, "s", "the IR readings describe the pose this long ago")
 
+    # ------------------------------------------------------------------------------
     @property
     def adc_max(self) -> int:
         return (1 << int(self.adc_bits)) - 1
-
-    @property
-    def total_mass(self) -> float:
-        return self.body_mass + 2 * self.wheel_mass
 
     def replace(self, **changes: float) -> RobotParams:
         return dataclasses.replace(self, **changes)  # type: ignore[arg-type]
@@ -138,6 +167,18 @@ class ParamsError(ValueError):
     """A parameter file is wrong; the message names the file, the entry and the problem."""
 
 
+# What a parameter file may say beyond "finite and positive": whole numbers
+# where the hardware counts, and ranges outside which the models overflow or
+# stop meaning anything (readings travel as 16-bit fields on the wire).
+INTEGER_PARAMS = {"adc_bits": (8, 16), "ticks_per_rev": (1, 1_000_000)}
+PARAM_RANGES = {
+    "ir_saturation": (0.0, 1.0), "ir_on_delay": (0.0, 0.04), "ir_noise": (0.0, 1e4),
+    "viscous_friction": (0.0, 1e3), "coulomb_friction": (0.0, 1e3), "current_limit": (0.0, 1e3),
+    "ir_blend": (1.0, 1e3), "ir_gain": (0.0, 1e6), "ir_ambient": (0.0, 1e6), "ir_near_peak": (0.0, 1.0),
+}
+MAX_MAGNITUDE = 1e9  # any other scalar, in its unit
+
+
 def params_from_dict(data: object, where: str = "parameters") -> RobotParams:
     if not isinstance(data, dict):
         raise ParamsError(f"{where}: expected a JSON object of name: value")
@@ -161,6 +202,7 @@ def params_from_dict(data: object, where: str = "parameters") -> RobotParams:
                 raise ParamsError(f"{where}: '{name}' must be a finite number ({known[name].metadata['unit']}), "
                                   f"got {value!r}")
             changes[name] = float(value)
+    _check_ranges(changes, where)
     params = dataclasses.replace(RobotParams(), **changes)  # type: ignore[arg-type]
     for name in ("wheel_radius", "half_axle", "body_radius", "body_mass", "wheel_mass", "body_inertia",
                  "wheel_inertia", "torque_constant", "armature_resistance", "gear_ratio", "ticks_per_rev",
@@ -169,17 +211,42 @@ def params_from_dict(data: object, where: str = "parameters") -> RobotParams:
             raise ParamsError(f"{where}: '{name}' must be positive, got {getattr(params, name)}")
     if params.com_offset < 0:
         raise ParamsError(f"{where}: 'com_offset' must be >= 0 (G ahead of C), got {params.com_offset}")
+    for name in ("wheel_friction", "wall_friction"):
+        if getattr(params, name) < 0:
+            raise ParamsError(f"{where}: '{name}' must be >= 0, got {getattr(params, name)}")
     if not 0 < params.gear_efficiency <= 1:
         raise ParamsError(f"{where}: 'gear_efficiency' must be in (0, 1], got {params.gear_efficiency}")
     return params
 
 
+def _check_ranges(changes: dict[str, object], where: str) -> None:
+    for name, value in changes.items():
+        if isinstance(value, tuple):
+            if not all(math.isfinite(v) and abs(v) <= MAX_MAGNITUDE for v in value):
+                raise ParamsError(f"{where}: '{name}' has an item that is not a finite number within "
+                                  f"+-{MAX_MAGNITUDE:g}")
+            continue
+        v = float(value)  # type: ignore[arg-type]
+        if name in INTEGER_PARAMS:
+            lo, hi = INTEGER_PARAMS[name]
+            if v != int(v) or not lo <= v <= hi:
+                raise ParamsError(f"{where}: '{name}' must be a whole number in {lo}..{hi}, got {value}")
+        elif name in PARAM_RANGES:
+            lo_f, hi_f = PARAM_RANGES[name]
+            if not lo_f <= v <= hi_f:
+                raise ParamsError(f"{where}: '{name}' must be in {lo_f:g}..{hi_f:g}, got {value}")
+        elif abs(v) > MAX_MAGNITUDE:
+            raise ParamsError(f"{where}: '{name}' is beyond +-{MAX_MAGNITUDE:g}, got {value}")
+
+
 def load_params(path: str | Path) -> RobotParams:
     path = Path(path)
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(path.read_text(encoding="utf-8"))
     except OSError as exc:
         raise ParamsError(f"{path}: cannot read: {exc.strerror}") from exc
+    except UnicodeDecodeError as exc:
+        raise ParamsError(f"{path}: not a parameter file: byte {exc.start} is not UTF-8 text") from exc
     except json.JSONDecodeError as exc:
         raise ParamsError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from exc
     return params_from_dict(data, str(path))

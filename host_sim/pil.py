@@ -110,10 +110,11 @@ class PilController:
     def cycle(self, s: Sense) -> Actuate:
         return self.link.exchange(s)
 
-    def telemetry(self) -> list[dict[str, object]]:
+    def telemetry(self, wait: float = 0.0) -> list[dict[str, object]]:
+        """TELEMETRY received on the board's serial port since the last call, waiting up to `wait` s for more."""
         frames: list[dict[str, object]] = []
         while True:
-            got = self.host.poll(0.05)
+            got = self.host.poll(wait)
             if not got:
                 return frames
             frames += [f.fields for f in got if f.msg_type == M.TELEMETRY]

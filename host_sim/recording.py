@@ -2,20 +2,28 @@
 
 A recording is a CSV file plus a JSON sidecar (docs/recordings.md):
 
-    t,cmd_l,cmd_r,enc_l,enc_r,ir_on_0,...,ir_on_7,ir_amb_0,...,ir_amb_7,vbat,x,y,phi
+    t,cmd_l,cmd_r,enc_l,enc_r,ir_on_0..7,ir_amb_0..7,vbat,emitter_pct,
+    mode,sp_l,sp_r,odo_x,odo_y,odo_phi,x,y,phi
 
 one row per control cycle: t in seconds; cmd_l, cmd_r the current references
 in A; enc_l, enc_r cumulative encoder ticks; ir_on_i, ir_amb_i raw ADC counts
 with the emitters on and off (sensor 0 = S1 front, counter-clockwise); vbat in
-volts; x, y (m) and phi (rad) from an external tracker (the simulator's truth),
-empty when there is none.  The sidecar `FILE.json` holds the robot
-parameters, the world, the sample period, the units, the source and the
-software version.
+volts; emitter_pct the emitter pulse width of this row's on-reading; then the
+firmware's own view (mode, wheel-speed set-points in m/s, its odometry in m
+and rad), empty when the robot ran no firmware (an open-loop replay) or an
+older firmware that does not report it; x, y (m) and phi (rad) from an
+external tracker (the simulator's truth), empty when there is none.  The
+sidecar `FILE.json` holds the robot parameters, the world, the sample
+period, the units, the source and the software version.
 
+One writer, `RecordingWriter`, for every source: a robot's TELEMETRY goes in
+through `telemetry()` (the harness, and the simulator with the firmware in
+the loop), readings and outputs of a robot with no firmware through `row()`.
 Rows are written and flushed one at a time: a killed recorder loses nothing
 it had written.  `load_recording` checks every cell and says file, line and
 column of anything wrong; a last line cut short is reported as such, never
-silently dropped.
+silently dropped.  Version 1 files (without emitter_pct and the firmware's
+view) still load.
 """
 from __future__ import annotations
 
@@ -30,14 +38,35 @@ from pathlib import Path
 
 import numpy as np
 
+from firmware.hal import TICK_MASK
+from firmware.odometry import HEADING_TURN
+
 FORMAT = "twinbot-recording"
-VERSION = 1
-COLUMNS = (["t", "cmd_l", "cmd_r", "enc_l", "enc_r"] + [f"ir_on_{i}" for i in range(8)]
-           + [f"ir_amb_{i}" for i in range(8)] + ["vbat", "x", "y", "phi"])
+VERSION = 2
+READABLE_VERSIONS = (1, 2)
+IR_ON = tuple(f"ir_on_{i}" for i in range(8))
+IR_AMB = tuple(f"ir_amb_{i}" for i in range(8))
+FIRMWARE_VIEW = ("mode", "sp_l", "sp_r", "odo_x", "odo_y", "odo_phi")
+POSE = ("x", "y", "phi")
+COLUMNS_V1 = ["t", "cmd_l", "cmd_r", "enc_l", "enc_r", *IR_ON, *IR_AMB, "vbat", *POSE]
+COLUMNS = ["t", "cmd_l", "cmd_r", "enc_l", "enc_r", *IR_ON, *IR_AMB, "vbat", "emitter_pct", *FIRMWARE_VIEW, *POSE]
 UNITS = {"t": "s", "cmd_l": "A", "cmd_r": "A", "enc_l": "ticks", "enc_r": "ticks", "ir_on_i": "ADC counts",
-         "ir_amb_i": "ADC counts", "vbat": "V", "x": "m", "y": "m", "phi": "rad"}
-_INT_COLUMNS = {"enc_l", "enc_r", *(f"ir_on_{i}" for i in range(8)), *(f"ir_amb_{i}" for i in range(8))}
-_POSE = ("x", "y", "phi")
+         "ir_amb_i": "ADC counts", "vbat": "V", "emitter_pct": "%", "mode": "protocol MODE_*",
+         "sp_l": "m/s", "sp_r": "m/s", "odo_x": "m", "odo_y": "m", "odo_phi": "rad",
+         "x": "m", "y": "m", "phi": "rad"}
+_INT_COLUMNS = {"enc_l", "enc_r", "mode", *IR_ON, *IR_AMB}
+# Column groups that may be empty: all cells of a group present or all empty, in every row alike.
+_OPTIONAL_GROUPS = (("emitter_pct",), FIRMWARE_VIEW, POSE)
+_GROUP_LABELS = {("emitter_pct",): "the emitter power (emitter_pct)",
+                 FIRMWARE_VIEW: "the firmware's view (" + ", ".join(FIRMWARE_VIEW) + ")",
+                 POSE: "the tracker pose (x, y, phi)"}
+_UNWRAP_LIMIT = 1 << 29  # ms: a larger forward jump of the robot's clock is a reset, not time passing
+
+
+def _heading_rad(heading: int) -> float:
+    """The firmware's heading (1/2^30 turn, wrapped to [0, 2^30)) in rad, in (-pi, pi]."""
+    turns = heading / HEADING_TURN
+    return 2 * math.pi * (turns - 1.0 if turns > 0.5 else turns)
 
 
 class RecordingError(ValueError):
@@ -77,19 +106,56 @@ class RecordingWriter:
         self._file.write(",".join(COLUMNS) + "\n")
         self._file.flush()
         self.rows = 0
+        self._last_tick: int | None = None  # TELEMETRY clock, for telemetry()
+        self._t_ms = 0
 
     def _write_sidecar(self) -> None:
         sidecar_path(self.path).write_text(json.dumps(self.meta, indent=1, default=str) + "\n")
 
     def row(self, t: float, cmd: tuple[float, float], enc: tuple[int, int], ir_on: list[int] | tuple[int, ...],
             ir_amb: list[int] | tuple[int, ...], vbat: float,
-            pose: tuple[float, float, float] | None = None) -> None:
+            pose: tuple[float, float, float] | None = None, *, emitter_pct: float | None = None,
+            firmware: tuple[int, float, float, float, float, float] | None = None) -> None:
+        """One control cycle.  firmware: (mode, sp_l, sp_r, odo_x, odo_y, odo_phi) in SI units, if known."""
         cells = [repr(float(t)), repr(float(cmd[0])), repr(float(cmd[1])), str(int(enc[0])), str(int(enc[1]))]
         cells += [str(int(v)) for v in ir_on] + [str(int(v)) for v in ir_amb] + [repr(float(vbat))]
+        cells.append("" if emitter_pct is None else repr(float(emitter_pct)))
+        if firmware is None:
+            cells += [""] * len(FIRMWARE_VIEW)
+        else:
+            cells += [str(int(firmware[0]))] + [repr(float(v)) for v in firmware[1:]]
         cells += [repr(float(v)) for v in pose] if pose is not None else ["", "", ""]
         self._file.write(",".join(cells) + "\n")
         self._file.flush()
         self.rows += 1
+
+    def telemetry(self, f: dict[str, object], *, t: float | None = None,
+                  pose: tuple[float, float, float] | None = None) -> bool:
+        """One TELEMETRY frame's fields as a row; False if it repeats a tick or the clock went back (a reset).
+
+        t: the time of the row (default: the robot's clock, unwrapped, from its first frame).
+        Fields an older firmware does not send (emitter_pct, set-points, odometry) are left empty.
+        """
+        tick = int(f["tick_ms"])  # type: ignore[call-overload]
+        if self._last_tick is not None:
+            step = (tick - self._last_tick) & TICK_MASK
+            if step == 0 or step > _UNWRAP_LIMIT:
+                return False
+            self._t_ms += step
+        self._last_tick = tick
+        firmware = None
+        if "odo_heading" in f:
+            firmware = (int(f["mode"]), int(f["sp_l"]) / 1000.0, int(f["sp_r"]) / 1000.0,  # type: ignore[call-overload]
+                        int(f["odo_x"]) / 1e6, int(f["odo_y"]) / 1e6,  # type: ignore[call-overload]
+                        _heading_rad(int(f["odo_heading"])))  # type: ignore[call-overload]
+        emitter = f.get("emitter_pct")
+        self.row(self._t_ms / 1000.0 if t is None else t,
+                 (int(f["i_ref_l_ma"]) / 1000.0, int(f["i_ref_r_ma"]) / 1000.0),  # type: ignore[call-overload]
+                 (int(f["enc_l"]), int(f["enc_r"])), list(f["ir_on"]), list(f["ir_amb"]),  # type: ignore[call-overload]
+                 int(f["vbat_mv"]) / 1000.0, pose,  # type: ignore[call-overload]
+                 emitter_pct=None if emitter is None else float(emitter),  # type: ignore[arg-type]
+                 firmware=firmware)
+        return True
 
     def close(self) -> None:
         if self._file.closed:
@@ -119,6 +185,8 @@ class Recording:
     pose: np.ndarray | None  # (n, 3) x, y, phi, or None without a tracker
     meta: dict[str, object] = field(default_factory=dict)
     path: Path | None = None
+    emitter: np.ndarray | None = None  # (n,) % pulse width of each row's on-reading, None if not recorded
+    firmware: np.ndarray | None = None  # (n, 6) mode, sp_l, sp_r, odo_x, odo_y, odo_phi; None if not recorded
 
     def __len__(self) -> int:
         return len(self.t)
@@ -127,16 +195,43 @@ class Recording:
     def sample_period(self) -> float:
         return float(self.meta.get("sample_period") or (np.median(np.diff(self.t)) if len(self.t) > 1 else 0.0))
 
+    @property
+    def source(self) -> str:
+        return str(self.meta.get("source", "robot"))
+
 
 def load_recording(path: str | os.PathLike[str], *, require_sidecar: bool = True) -> Recording:
     path = Path(path)
     meta = _load_sidecar(path, require_sidecar)
+    lines = _read_lines(path)
+    columns = _check_header(path, lines[0].split(","))
+    robot = meta.get("robot") if isinstance(meta.get("robot"), dict) else {}
+    adc_max = (1 << int(robot["adc_bits"])) - 1 if "adc_bits" in robot else None  # type: ignore[index,operator,call-overload]
+    data, present = _parse_rows(path, lines[1:], columns, adc_max)
+    n = len(data)
+    if meta.get("rows") is not None and meta.get("rows") != n:
+        raise RecordingError(f"{path}: the sidecar says {meta['rows']} rows, the file holds {n}")
+    col = {name: k for k, name in enumerate(columns)}
+
+    def group(names: tuple[str, ...] | list[str], dtype: type = float) -> np.ndarray:
+        return data[:, [col[c] for c in names]].astype(dtype)
+
+    return Recording(
+        t=data[:, 0].copy(), cmd=group(["cmd_l", "cmd_r"]), enc=group(["enc_l", "enc_r"], np.int64),
+        ir_on=group(IR_ON, np.int64), ir_amb=group(IR_AMB, np.int64), vbat=data[:, col["vbat"]].copy(),
+        pose=group(POSE) if present[POSE] else None, meta=meta, path=path,
+        emitter=data[:, col["emitter_pct"]].copy() if present.get(("emitter_pct",)) else None,
+        firmware=group(FIRMWARE_VIEW) if present.get(FIRMWARE_VIEW) else None,
+    )
+
+
+def _read_lines(path: Path) -> list[str]:
     try:
         text = path.read_text(encoding="ascii")
     except OSError as exc:
         raise RecordingError(f"{path}: cannot read: {exc.strerror}") from exc
-    except UnicodeDecodeError as exc:
-        raise RecordingError(f"{path}: not a recording (not ASCII text)") from exc
+    except UnicodeDecodeError:
+        raise RecordingError(f"{path}: not a recording (not ASCII text)") from None
     if not text:
         raise RecordingError(f"{path}: empty file (no header)")
     lines = text.split("\n")
@@ -144,71 +239,68 @@ def load_recording(path: str | os.PathLike[str], *, require_sidecar: bool = True
         raise RecordingError(f"{path}:{len(lines)}: last line is cut short (the recorder stopped mid-write); "
                              f"the {len(lines) - 2} rows before it are complete")
     lines.pop()
-    header = lines[0].split(",")
-    if header != COLUMNS:
-        missing = [c for c in COLUMNS if c not in header]
-        extra = [c for c in header if c not in COLUMNS]
-        detail = []
-        if missing:
-            detail.append("missing " + ", ".join(missing))
-        if extra:
-            detail.append("unexpected " + ", ".join(extra))
-        if not detail:
-            detail.append("columns out of order")
-        raise RecordingError(f"{path}:1: header is not the recording header ({'; '.join(detail)}); "
-                             f"expected: {','.join(COLUMNS)}")
-    n = len(lines) - 1
-    data = np.zeros((n, len(COLUMNS)))
-    has_pose = None
-    adc_max = None
-    robot = meta.get("robot") if isinstance(meta.get("robot"), dict) else None
-    if robot and "adc_bits" in robot:
-        adc_max = (1 << int(robot["adc_bits"])) - 1  # type: ignore[call-overload]
-    for row_index, cells in enumerate(csv.reader(io.StringIO("\n".join(lines[1:])))):
+    return lines
+
+
+def _check_header(path: Path, header: list[str]) -> list[str]:
+    if header in (COLUMNS, COLUMNS_V1):
+        return header
+    missing = [c for c in COLUMNS if c not in header]
+    extra = [c for c in header if c not in COLUMNS]
+    detail = []
+    if missing:
+        detail.append("missing " + ", ".join(missing))
+    if extra:
+        detail.append("unexpected " + ", ".join(extra))
+    if not detail:
+        detail.append("columns out of order")
+    raise RecordingError(f"{path}:1: header is not the recording header ({'; '.join(detail)}); "
+                         f"expected: {','.join(COLUMNS)}")
+
+
+def _parse_rows(path: Path, lines: list[str], columns: list[str],
+                adc_max: int | None) -> tuple[np.ndarray, dict[tuple[str, ...], bool]]:
+    """Every cell checked; optional groups (emitter, firmware view, pose) all-or-nothing and alike in every row."""
+    data = np.zeros((len(lines), len(columns)))
+    groups = [(g, [columns.index(c) for c in g]) for g in _OPTIONAL_GROUPS if g[0] in columns]
+    present: dict[tuple[str, ...], bool] = {}
+    for row_index, cells in enumerate(csv.reader(io.StringIO("\n".join(lines)))):
         lineno = row_index + 2
-        if len(cells) != len(COLUMNS):
-            raise RecordingError(f"{path}:{lineno}: {len(cells)} cells, expected {len(COLUMNS)}")
-        pose_cells = cells[-3:]
-        empty = [c == "" for c in pose_cells]
-        if any(empty) and not all(empty):
-            raise RecordingError(f"{path}:{lineno}: x, y, phi must be all present or all empty")
-        row_pose = not all(empty)
-        if has_pose is None:
-            has_pose = row_pose
-        elif has_pose != row_pose:
-            raise RecordingError(f"{path}:{lineno}: the tracker pose (x, y, phi) is "
-                                 f"{'present' if row_pose else 'missing'} here but not in the rows before")
-        for k, (name, cell) in enumerate(zip(COLUMNS, cells)):
-            if name in _POSE and not row_pose:
-                data[row_index, k] = math.nan
-                continue
-            try:
-                value = int(cell) if name in _INT_COLUMNS else float(cell)
-            except ValueError:
-                kind = "an integer" if name in _INT_COLUMNS else "a number"
-                raise RecordingError(f"{path}:{lineno}: column '{name}': {cell!r} is not {kind}") from None
-            if not math.isfinite(value):
-                raise RecordingError(f"{path}:{lineno}: column '{name}': {cell!r} is not finite")
-            if name.startswith("ir_") and (value < 0 or (adc_max is not None and value > adc_max)):
-                raise RecordingError(f"{path}:{lineno}: column '{name}': {value} is outside the ADC range "
-                                     f"0..{adc_max if adc_max is not None else '?'}")
-            data[row_index, k] = value
+        if len(cells) != len(columns):
+            raise RecordingError(f"{path}:{lineno}: {len(cells)} cells, expected {len(columns)}")
+        empty_cols: set[int] = set()
+        for names, idx in groups:
+            empty = [cells[k] == "" for k in idx]
+            if any(empty) and not all(empty):
+                raise RecordingError(f"{path}:{lineno}: {', '.join(names)} must be all present or all empty")
+            here = not all(empty)
+            if present.setdefault(names, here) != here:
+                raise RecordingError(f"{path}:{lineno}: {_GROUP_LABELS[names]} is {'present' if here else 'missing'} "
+                                     f"here but not in the rows before")
+            if not here:
+                empty_cols.update(idx)
+        for k, (name, cell) in enumerate(zip(columns, cells)):
+            data[row_index, k] = math.nan if k in empty_cols else _cell(path, lineno, name, cell, adc_max)
         if row_index and data[row_index, 0] <= data[row_index - 1, 0]:
             raise RecordingError(f"{path}:{lineno}: column 't': {cells[0]} does not increase "
                                  f"(previous row: {data[row_index - 1, 0]!r})")
-    if meta.get("rows") is not None and meta.get("rows") != n:
-        raise RecordingError(f"{path}: the sidecar says {meta['rows']} rows, the file holds {n}")
-    col = {name: k for k, name in enumerate(COLUMNS)}
-    return Recording(
-        t=data[:, 0].copy(),
-        cmd=data[:, [col["cmd_l"], col["cmd_r"]]].copy(),
-        enc=data[:, [col["enc_l"], col["enc_r"]]].astype(np.int64),
-        ir_on=data[:, col["ir_on_0"]:col["ir_on_7"] + 1].astype(np.int64),
-        ir_amb=data[:, col["ir_amb_0"]:col["ir_amb_7"] + 1].astype(np.int64),
-        vbat=data[:, col["vbat"]].copy(),
-        pose=data[:, [col["x"], col["y"], col["phi"]]].copy() if has_pose else None,
-        meta=meta, path=path,
-    )
+    for names, _idx in groups:
+        present.setdefault(names, False)
+    return data, present
+
+
+def _cell(path: Path, lineno: int, name: str, cell: str, adc_max: int | None) -> float:
+    try:
+        value = int(cell) if name in _INT_COLUMNS else float(cell)
+    except ValueError:
+        kind = "an integer" if name in _INT_COLUMNS else "a number"
+        raise RecordingError(f"{path}:{lineno}: column '{name}': {cell!r} is not {kind}") from None
+    if not math.isfinite(value):
+        raise RecordingError(f"{path}:{lineno}: column '{name}': {cell!r} is not finite")
+    if name.startswith("ir_") and (value < 0 or (adc_max is not None and value > adc_max)):
+        raise RecordingError(f"{path}:{lineno}: column '{name}': {value} is outside the ADC range "
+                             f"0..{adc_max if adc_max is not None else '?'}")
+    return value
 
 
 def _load_sidecar(path: Path, required: bool) -> dict[str, object]:
@@ -224,8 +316,9 @@ def _load_sidecar(path: Path, required: bool) -> dict[str, object]:
         raise RecordingError(f"{side}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from exc
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise RecordingError(f"{side}: not a twinbot recording sidecar (format must be '{FORMAT}')")
-    if meta.get("version") != VERSION:
-        raise RecordingError(f"{side}: recording version {meta.get('version')!r}, this twinbot reads {VERSION}")
+    if meta.get("version") not in READABLE_VERSIONS:
+        raise RecordingError(f"{side}: recording version {meta.get('version')!r}, this twinbot reads "
+                             f"{' and '.join(map(str, READABLE_VERSIONS))}")
     period = meta.get("sample_period")
     if not isinstance(period, (int, float)) or period <= 0:
         raise RecordingError(f"{side}: 'sample_period' must be a positive number of seconds, got {period!r}")

@@ -1,12 +1,17 @@
-"""Replay a recording's inputs open loop, from any recorded state.
+"""Replay a recording's inputs open loop, from any recorded state: one robot, or N parameter sets at once.
 
-This is what identification needs: take row k of a recording (a real
-robot's or the simulator's), put the model in the state recorded there,
-feed it the recorded current references cycle after cycle, and compare
-what the model's encoders, sensors and pose do with what was recorded.
+This is what identification and diagnosis need: take row k of a recording
+(a real robot's or the simulator's), put the model in the state recorded
+there, feed it the recorded current references cycle after cycle, and
+compare what the model's encoders, sensors and pose do with what was
+recorded.  `replay` does it for one robot (host_sim.sim_robot.SimRobot),
+`replay_batch` for N parameter sets at once (host_sim.batch.BatchSim,
+vectorised); both read the recording through `replay_inputs`, the one place
+that says what a recording's timing, emitter power and start mean.
 
 The state at row k comes from the recording alone: the pose of C from the
-tracker columns (needed), the wheel angles from the encoder counts, and the
+tracker columns (needed), the wheel angles from the encoder counts (the
+middle of the recorded tick), and the
 wheel speeds from the encoder counts around row k (central differences, or
 the rows after it at the start).  At row 0 of a simulator recording the
 robot is at rest, so a replay from there repeats the run exactly.
@@ -15,11 +20,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from host_sim import dynamics, ir_sensor, motors
-from host_sim.interface import Actuate, Sense
+from host_sim.batch import BatchResult, BatchSim, robot_params
+from host_sim.interface import Actuate
 from host_sim.sim_robot import SimRobot
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
@@ -28,28 +35,6 @@ from host_sim.world import World
 
 class ReplayError(ValueError):
     pass
-
-
-class ReplayController:
-    """A recording's current references, one row per cycle (open loop)."""
-
-    name = "replay"
-
-    def __init__(self, cmd_amps: list[tuple[float, float]], emitter_pct: int = 60) -> None:
-        self.cmd = cmd_amps
-        self.k = 0
-        self.emitter_pct = emitter_pct
-
-    def cycle(self, s: Sense) -> Actuate:
-        if self.k < len(self.cmd):
-            left, right = self.cmd[self.k]
-        else:
-            left = right = 0.0
-        self.k += 1
-        return Actuate(round(left * 1000), round(right * 1000), self.emitter_pct)
-
-    def close(self) -> None:
-        pass
 
 
 @dataclass
@@ -62,6 +47,53 @@ class ReplayResult:
     start: int  # the recording row it started from
 
 
+@dataclass
+class ReplayInputs:
+    """What rows start..stop-1 of a recording gave the robot, and how time passed between them."""
+
+    cmd: np.ndarray  # (T, 2) current references, A, held from row j to row j + 1
+    period: np.ndarray  # (T,) s from row j to row j + 1
+    emitter: np.ndarray  # (T,) % emitter pulse width in force for row j's on-reading
+    t0: float  # time of row start
+    at_rest: bool  # the robot was at rest at row start (a simulator run's first row)
+
+
+def starts_at_rest(rec: Recording, k: int) -> bool:
+    """The simulator starts every run at rest; a robot's recording says nothing of it."""
+    return k == 0 and rec.source == "simulator"
+
+
+def replay_inputs(rec: Recording, start: int = 0, stop: int | None = None,
+                  nominal_timing: bool | None = None) -> ReplayInputs:
+    """The one reading of a recording's timing, emitter power and start, for every replay.
+
+    Timing: one nominal sample period per row for fixed-step simulator
+    recordings (nominal_timing None), else the recorded times (the last
+    row lasts one sample period).  Emitter power: the recording's own
+    emitter_pct column; for version-1 recordings without it, the sidecar's
+    emitter_pct (default 60 %), 0 for a simulator run's first row (its
+    emitters are not on until the first actuation).
+    """
+    stop = len(rec) if stop is None else stop
+    if not 0 <= start < stop <= len(rec):
+        raise ReplayError(f"rows {start}..{stop} do not fit the recording (0..{len(rec)})")
+    if nominal_timing is None:
+        nominal_timing = rec.source == "simulator" and rec.meta.get("mode") == "fixed"
+    n = stop - start
+    period = np.full(n, rec.sample_period)
+    if not nominal_timing:
+        inner = np.arange(start, stop) + 1 < len(rec)
+        period[inner] = np.diff(rec.t[start:min(stop + 1, len(rec))])[: int(inner.sum())]
+    if rec.emitter is not None:
+        emitter = rec.emitter[start:stop].astype(float)
+    else:
+        emitter = np.full(n, float(rec.meta.get("emitter_pct", 60)))  # type: ignore[arg-type]
+        if starts_at_rest(rec, start):
+            emitter[0] = 0.0
+    return ReplayInputs(rec.cmd[start:stop].astype(float), period, emitter, float(rec.t[start]),
+                        starts_at_rest(rec, start))
+
+
 def state_at(rec: Recording, k: int, p: RobotParams) -> tuple[tuple[float, ...], tuple[float, float]]:
     """(q, v) of the model at row k, from the recording alone."""
     if rec.pose is None:
@@ -71,26 +103,33 @@ def state_at(rec: Recording, k: int, p: RobotParams) -> tuple[tuple[float, ...],
     if not 0 <= k < n:
         raise ReplayError(f"row {k} is outside the recording (0..{n - 1})")
     x, y, phi = (float(v) for v in rec.pose[k])
-    theta = [motors.encoder_angle(int(rec.enc[k, i]), p) for i in range(2)]
-    if k == 0 and rec.meta.get("source") == "simulator":
-        v = (0.0, 0.0)  # the simulator starts every run at rest
-    else:
-        lo, hi = (k - 1, k + 1) if 0 < k < n - 1 else ((k, k + 1) if k == 0 else (k - 1, k))
-        dt = float(rec.t[hi] - rec.t[lo]) if n > 1 else 0.0
-        per_tick = 2 * math.pi / p.ticks_per_rev
-        v = tuple(float(rec.enc[hi, i] - rec.enc[lo, i]) * per_tick / dt if dt > 0 else 0.0
-                  for i in range(2))  # type: ignore[assignment]
+    if starts_at_rest(rec, k):
+        theta = [0.0, 0.0]  # the simulator starts every run at rest, the wheels at angle 0
+    else:  # the middle of the recorded tick: the best guess, and never the tick below
+        theta = [motors.encoder_angle(int(rec.enc[k, i]), p) for i in range(2)]
+    v = (0.0, 0.0) if starts_at_rest(rec, k) else wheel_speeds_at(rec, k, p)
     q = dynamics.q_from_axle_pose(x, y, phi, p, theta[0], theta[1])
     return q, (float(v[0]), float(v[1]))
+
+
+def wheel_speeds_at(rec: Recording, k: int, p: RobotParams) -> tuple[float, float]:
+    """Wheel speeds (rad/s) at row k from the encoder counts around it (central differences inside)."""
+    n = len(rec)
+    lo, hi = (k - 1, k + 1) if 0 < k < n - 1 else ((k, k + 1) if k == 0 else (k - 1, k))
+    dt = float(rec.t[hi] - rec.t[lo]) if n > 1 else 0.0
+    if dt <= 0:
+        return (0.0, 0.0)
+    per_tick = 2 * math.pi / p.ticks_per_rev
+    return (float(rec.enc[hi, 0] - rec.enc[lo, 0]) * per_tick / dt,
+            float(rec.enc[hi, 1] - rec.enc[lo, 1]) * per_tick / dt)
 
 
 def replay(rec: Recording, p: RobotParams, world: World, start: int = 0, stop: int | None = None,
            substeps: int = 8, seed: int | None = None, nominal_timing: bool | None = None,
            exact_sensors: bool = False) -> ReplayResult:
-    """Feed rows start..stop-1's current references to the model from the state at `start`.
+    """Feed rows start..stop-1's current references to one model robot from the state at `start`.
 
-    Steps last one sample period (nominal_timing, the default for fixed-step
-    simulator recordings) or the time between recorded rows (robots).
+    Timing and emitter power as `replay_inputs` reads them.
     seed: the sensor noise seed (None: noise-free sensors).
 
     The inputs are open loop, so the IR ring is read for all rows at once
@@ -98,45 +137,57 @@ def replay(rec: Recording, p: RobotParams, world: World, start: int = 0, stop: i
     reads it row by row as the simulation did instead, drawing the noise in
     the same order: a simulator recording then replays bit for bit.
     """
-    if nominal_timing is None:
-        nominal_timing = rec.meta.get("source") == "simulator" and rec.meta.get("mode") == "fixed"
-    stop = len(rec) if stop is None else stop
-    if not start < stop <= len(rec):
-        raise ReplayError(f"rows {start}..{stop} do not fit the recording (0..{len(rec)})")
-    period = rec.sample_period
-    emitter = int(rec.meta.get("emitter_pct", 60))  # type: ignore[call-overload]
+    inputs = replay_inputs(rec, start, stop, nominal_timing)
     robot = SimRobot(world, p, seed=seed, noise=seed is not None)
     robot.q, robot.v = state_at(rec, start, p)
-    robot.t = float(rec.t[start])
-    # A simulated run starts with the emitters off (no actuation yet).
-    robot.emitter_pct = 0 if (start == 0 and rec.meta.get("source") == "simulator") else emitter
-    controller = ReplayController([tuple(c) for c in rec.cmd[start:stop]], emitter)  # type: ignore[misc]
-    n = stop - start
+    robot.t = inputs.t0
+    n = len(inputs.cmd)
     enc = np.zeros((n, 2), dtype=np.int64)
     pose = np.zeros((n, 3))
     ir_on = np.zeros((n, 8), dtype=np.int64)
     ir_amb = np.zeros((n, 8), dtype=np.int64)
     t = np.zeros(n)
-    power = np.zeros(n)
     for j in range(n):
         t[j] = robot.t
         pose[j] = robot.pose
+        robot.emitter_pct = int(inputs.emitter[j])
         if exact_sensors:
             s = robot.sense()
             ir_on[j] = s.adc_on
             ir_amb[j] = s.adc_off
-        else:
-            enc_l, enc_r = robot.encoder_ticks()
-            s = Sense(0, [], [], enc_l, enc_r, 0)
-            power[j] = robot.emitter_pct
-        enc[j] = (s.enc_l, s.enc_r)
-        robot.actuate(controller.cycle(s))
-        if nominal_timing or start + j + 1 >= len(rec):
-            h = period / substeps
-        else:
-            h = (float(rec.t[start + j + 1]) - robot.t) / substeps
+        enc[j] = robot.encoder_ticks()
+        left, right = inputs.cmd[j]
+        robot.actuate(Actuate(round(left * 1000), round(right * 1000), robot.emitter_pct))
+        h = float(inputs.period[j]) / substeps
         for _ in range(substeps):
             robot.advance(h)
     if not exact_sensors:
-        ir_amb, ir_on = ir_sensor.read_sensors_batch(world, pose, power, t, p, robot.rng)
+        ir_amb, ir_on = ir_sensor.read_sensors_batch(world, pose, inputs.emitter, t, p, robot.rng)
     return ReplayResult(t, enc, pose, ir_on, ir_amb, start)
+
+
+def replay_batch(rec: Recording, params_list: Any, start: int = 0, *, stop: int | None = None,
+                 world: World | None = None, substeps: int = 8, sensors: bool = True,
+                 seed: int | np.random.Generator | None = None, base: RobotParams | None = None,
+                 nominal_timing: bool | None = None) -> BatchResult:
+    """`replay` for N parameter sets at once (host_sim.batch.BatchSim, vectorised).
+
+    Every robot starts in the state the recording has at row `start` (state_at
+    with that robot's parameters) and is fed the recorded current references.
+    params_list: a RobotParams, a sequence of N, or a ParamBatch (with `base`).
+    world: default the recording's own (its sidecar), no walls when it has none.
+    """
+    from host_sim.world import world_from_dict
+
+    inputs = replay_inputs(rec, start, stop, nominal_timing)
+    if world is None and isinstance(rec.meta.get("world"), dict):
+        world = world_from_dict(rec.meta["world"], f"{rec.path or 'recording'} (sidecar world)")
+    params, robots = robot_params(params_list, base)
+    states = [state_at(rec, start, p) for p in robots]
+    q = np.array([s[0] for s in states], dtype=float).reshape(-1, 5)
+    v = np.array([s[1] for s in states], dtype=float).reshape(-1, 2)
+    sim = BatchSim(world, params, q=q, v=v, t=inputs.t0, base=base, cycle_s=rec.sample_period, substeps=substeps)
+    result = sim.run_inputs(inputs.cmd, substeps=substeps, sensors=sensors, seed=seed, period=inputs.period,
+                            emitter=inputs.emitter)
+    result.start = start
+    return result

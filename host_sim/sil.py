@@ -65,8 +65,8 @@ class SilController:
         self.robot.run(1)  # with the firmware's own fault handling
         return Actuate(hal.i_left, hal.i_right, hal.power_used)
 
-    def telemetry(self) -> list[dict[str, object]]:
-        """TELEMETRY the firmware sent since the last call."""
+    def telemetry(self, wait: float = 0.0) -> list[dict[str, object]]:
+        """TELEMETRY the firmware sent since the last call (in process: nothing to wait for)."""
         frames = FrameDecoder().decode_all(bytes(self.hal.outbox))
         self.hal.outbox.clear()
         return [M.unpack_payload(t, p) for t, _s, p in frames if t == M.TELEMETRY]

@@ -20,11 +20,12 @@ import math
 
 import numpy as np
 
-from host_sim import dynamics, ir_sensor, motors
+from host_sim import contact, drive, dynamics, ir_sensor, motors
 from host_sim.interface import TICK_MASK, Actuate, Sense
 from host_sim.params import RobotParams
 from host_sim.world import World
 
+CONTACT_HYSTERESIS = 0.002  # m: a contact ends when the rim is this far from every wall
 
 
 class SimRobot:
@@ -38,12 +39,15 @@ class SimRobot:
         self.t = 0.0  # simulated seconds
         self.i_ref = (0.0, 0.0)  # A
         self.current = (0.0, 0.0)  # A actually flowing
-        self.emitter_pct = 0
+        self.emitter_pct = 0  # set by the last actuation
+        self.emitter_used = 0  # in force for the last sense(): its on-readings' light power
         self.rng = np.random.default_rng(seed) if noise else None
         self.collisions = 0
         self.in_contact = False
-        self._clearance = -1.0  # distance the body can still travel before it may touch a wall
-        self._checked_at = (0.0, 0.0)
+        self.slip: tuple[float, float, float] | None = None  # (u, l, omega) while a wheel slips
+        self._forces: tuple[list[list[float]], dict[int, list[float]]] | None = None  # last contact forces
+        self._gap_at_check = -1.0  # the smallest wall gap at the last wall test (broad phase)
+        self._checked_at = (0.0, 0.0, 0.0)  # G and phi at the last wall test
         self.last_sense: Sense | None = None
 
     @property
@@ -56,6 +60,7 @@ class SimRobot:
         return motors.encoder_ticks(self.q[3], self.p), motors.encoder_ticks(self.q[4], self.p)
 
     def sense(self) -> Sense:
+        self.emitter_used = self.emitter_pct
         x, y, phi = self.pose
         off, on = ir_sensor.read_sensors_lists(self.world, x, y, phi, float(self.emitter_pct), self.t, self.p,
                                                self.rng)
@@ -70,43 +75,64 @@ class SimRobot:
         self.emitter_pct = a.emitter_pct
 
     def advance(self, dt: float) -> None:
-        """One substep of dt seconds."""
+        """One substep of dt seconds: rolling (drive.drive_step) while the wheels hold and no wall is hit,
+        else the contact step (contact.slip_step, docs/dynamics.md "Contact")."""
         p = self.p
-        tau_l, i_l = motors.wheel_torque(self.i_ref[0], self.v[0], p)
-        tau_r, i_r = motors.wheel_torque(self.i_ref[1], self.v[1], p)
-        self.current = (i_l, i_r)
-        self.q, self.v = dynamics.step(self.q, self.v, (tau_l, tau_r), dt, p)
-        self.t += dt
-        self._resolve_contact()
-
-    def _resolve_contact(self) -> None:
-        cx, cy = dynamics.axle_centre(self.q, self.p)
-        # Broad phase: no wall can be reached before the body has moved by
-        # the clearance found at the last check.
-        moved = math.hypot(cx - self._checked_at[0], cy - self._checked_at[1])
-        if moved < self._clearance:
-            return
-        dist, normal = self.world.nearest_wall(np.array([[cx, cy]]))
-        d = float(dist[0])
-        r = self.p.body_radius
-        self._checked_at = (cx, cy)
-        self._clearance = d - r - 0.002 if d > r + 0.004 else -1.0
-        if d < r:
-            # Push the body back out along the wall normal; the wheels stall
-            # against the wall (no bouncing, no sliding).
-            nx, ny = float(normal[0, 0]), float(normal[0, 1])
-            q = list(self.q)
-            q[0] += (r - d) * nx
-            q[1] += (r - d) * ny
-            self.q = tuple(q)
-            self._clearance = -1.0
-            heading_into = math.cos(q[2]) * nx + math.sin(q[2]) * ny
-            forward = self.v[0] + self.v[1]
-            if forward * heading_into < 0:  # driving into the wall: the translation stops
-                spin = (self.v[1] - self.v[0]) / 2
-                self.v = (-spin, spin)
-            if not self.in_contact:
+        q0, v0 = self.q, self.v
+        rolled = False
+        if self.slip is None:
+            q1, v1, tau, self.current = drive.drive_step(q0, v0, self.i_ref, dt, p)
+            rolled = contact.traction_ok(v0, v1, tau, dt, p)
+        walls = self._walls_in_reach(q0, q1 if rolled else None, dt)
+        if rolled and walls:
+            # the rolling step is kept unless it takes the rim into a wall (linearised gap: the
+            # distance to a segment is convex in C, so this never misses a contact)
+            d = p.com_offset
+            dx = q1[0] - q0[0] - d * (math.cos(q1[2]) - math.cos(q0[2]))
+            dy = q1[1] - q0[1] - d * (math.sin(q1[2]) - math.sin(q0[2]))
+            rolled = all(gap + nx * dx + ny * dy >= 0.0 for gap, nx, ny, _i in walls)
+        if rolled:
+            self.q, self.v = q1, v1
+            self._forces = None
+        else:
+            tl, il, sl = motors.wheel_torque_slope(self.i_ref[0], v0[0], p)
+            tr, ir, sr = motors.wheel_torque_slope(self.i_ref[1], v0[1], p)
+            self.current = (il, ir)
+            warm = None
+            if self._forces is not None:  # start from the last step's contact forces
+                wheel_f, wall_f = self._forces
+                warm = (wheel_f, [wall_f.get(w[3], [0.0, 0.0]) for w in walls])
+            self.q, self.v, self.slip, pushed, (wheel_f, wall_list) = contact.slip_step(
+                q0, v0, self.slip, (tl, tr), (sl, sr), dt, p, walls, warm)
+            self._forces = (wheel_f, {w[3]: f for w, f in zip(walls, wall_list)})
+            if pushed and not self.in_contact:
                 self.collisions += 1
-            self.in_contact = True
-        elif d > r + 0.002:  # a little hysteresis: grazing is one contact, not many
+            self.in_contact = self.in_contact or pushed
+        self.t += dt
+
+    def _walls_in_reach(self, q0: tuple[float, ...], q1: tuple[float, ...] | None,
+                        dt: float) -> list[tuple[float, float, float, int]]:
+        """The walls the step from q0 (to q1 when rolling) may touch, (gap, nx, ny) each.
+
+        Broad phase: no test while the smallest gap at the last test exceeds how far C may have
+        moved since (C = G - d e moves at most |dG| + d |dphi|) plus how far this step takes it."""
+        d = self.p.com_offset
+        chk = self._checked_at
+        moved = math.hypot(q0[0] - chk[0], q0[1] - chk[1]) + d * abs(q0[2] - chk[2])
+        if q1 is not None:
+            travel = math.hypot(q1[0] - q0[0], q1[1] - q0[1]) + d * abs(q1[2] - q0[2])
+        else:
+            u, l, _om = self.slip if self.slip is not None else contact.body_velocity(self.v, self.p)
+            travel = dt * (abs(u) + abs(l))
+        within = travel + contact.REACH_MARGIN
+        if moved + within < self._gap_at_check:
+            if self._gap_at_check - moved > CONTACT_HYSTERESIS:
+                self.in_contact = False
+            return []
+        cx, cy = q0[0] - d * math.cos(q0[2]), q0[1] - d * math.sin(q0[2])
+        walls, gmin = contact.walls_in_reach(self.world, cx, cy, self.p.body_radius, within)
+        self._checked_at = (q0[0], q0[1], q0[2])
+        self._gap_at_check = gmin
+        if gmin > CONTACT_HYSTERESIS:  # a little hysteresis: grazing is one contact, not many
             self.in_contact = False
+        return walls

@@ -1,18 +1,31 @@
 """The simulation loop of the paper's section 4: fixed-step and real-time.
 
-Every control period (40 ms) the controller gets the robot's readings and
-sets its currents; between control instants the physics advances.
+The firmware's control period is 40 ms: the controller gets the robot's
+readings and sets its currents, and between control instants the physics
+advances.
 
-- Fixed step: every control period is split into n substeps of equal dt.
-  Nothing depends on the clock, so two runs with the same world, seed and
-  controller are identical bit for bit.  `speed` paces it (k x real time) or,
-  at infinity, runs as fast as the machine can.
-- Real time (the paper's variable step): each pass of the loop measures Dt
-  from the wall clock (times `speed`) and integrates X = X + X' dt over n
-  substeps dt = Dt / n, stopping at each control instant.  Dt depends on
-  what else the machine does, so rounding differs from run to run and, as
-  the paper observed (Fig. 15), two runs from identical conditions drift
-  apart until the robot takes different decisions.
+- Fixed step: every control period is split into n substeps of equal dt and
+  the controller runs exactly every 40 ms of simulated time.  Nothing
+  depends on the clock, so two runs with the same world, seed and
+  controller are identical bit for bit.  `speed` paces it (k x real time)
+  or, at infinity, runs as fast as the machine can.
+- Real time (the paper's variable step, `run_realtime`): the loop takes
+  Dt = (wall time since its last pass) x speed from the clock, never less
+  than `min_step`, and integrates Dt in n = ceil(Dt / (cycle / substeps))
+  substeps of Dt / n (the paper's "Dt = n dt").  When a pass ends at or
+  after the next 40 ms instant the sensors are read and the controller runs
+  there, at the pass: the control instants follow the clock, late by up to
+  one pass, and average 40 ms apart (a pass longer than a period skips the
+  instants it jumped over, counted in RunResult.extra).  Dt depends on what
+  else the machine does, so the sensors see the robot at slightly different
+  places from run to run even with the same noise seed, and, as the paper
+  observed (Fig. 15), two runs from identical conditions can take
+  different routes at a decision point (host_sim/repeatability.py measures
+  how often).
+
+Each substep uses the twin's own integrator (host_sim/dynamics.py, second
+order), not the paper's explicit X = X + X' dt: only the step sizes come
+from the clock.
 """
 from __future__ import annotations
 
@@ -71,6 +84,7 @@ class Simulation:
         self.substeps = substeps
         self.cycle_s = cycle_s
         self.recorder = recorder
+        self._rows = _RecordingRows(recorder, controller) if recorder is not None else None
         self.coverage = Coverage(world, params.body_radius, coverage_resolution)
         self._t: list[float] = []
         self._pose: list[tuple[float, float, float]] = []
@@ -98,8 +112,8 @@ class Simulation:
         self.coverage.add(pose[0], pose[1])
         if self.exit_time is None and self._outside(pose[0], pose[1]):
             self.exit_time = robot.t
-        if self.recorder is not None:
-            self.recorder.row(robot.t, cmd, (s.enc_l, s.enc_r), s.adc_on, s.adc_off, s.vbat_mv / 1000.0, pose)
+        if self._rows is not None:
+            self._rows.cycle(robot.t, pose, s, a, robot.emitter_used)
 
     def run_fixed(self, duration: float, speed: float = math.inf,
                   progress: Callable[[float], None] | None = None, stop_at_exit: bool = False) -> RunResult:
@@ -126,47 +140,97 @@ class Simulation:
                 progress(robot.t)
         return self._result("fixed", time.perf_counter() - start)
 
-    def run_realtime(self, duration: float, speed: float = 1.0, min_wall_step: float = 0.002,
+    def run_realtime(self, duration: float, speed: float = 1.0, min_step: float = 0.002,
                      progress: Callable[[float], None] | None = None,
                      stop: Callable[[], bool] | None = None, stop_at_exit: bool = False) -> RunResult:
-        """Variable step from the wall clock: Dt = elapsed * speed, split into n substeps.
+        """The paper's loop: the step comes from the clock, control runs at the pass where a period ended.
 
-        Runs until `duration` simulated seconds, or until stop() says so.
+        Each pass: Dt = (wall seconds since the last pass) * speed, waiting
+        first until it is at least `min_step` simulated seconds; Dt is
+        integrated in n substeps of Dt / n, each at most cycle / substeps;
+        then, if the simulated time has reached the next control instant,
+        the sensors are read and the controller runs now.  Runs until
+        `duration` simulated seconds, or until stop() says so.
+        RunResult.extra: "passes", "max_pass" (largest Dt, s),
+        "missed_periods" (control instants a long pass jumped over).
         """
         if not speed > 0 or math.isinf(speed):
             raise ValueError("real-time mode needs a finite speed factor > 0")
-        robot = self.robot
-        start = last = time.perf_counter()
+        if not min_step > 0:
+            raise ValueError("min_step must be > 0 simulated seconds")
+        robot, cycle = self.robot, self.cycle_s
+        h_max = cycle / self.substeps
+        min_wall = min_step / speed
         next_control = robot.t
-        n = self.substeps
-        while robot.t < duration - 1e-12 and not (stop and stop()):
-            if stop_at_exit and self.exit_time is not None:
-                break
+        passes, missed, max_pass = 0, 0, 0.0
+        start = last = time.perf_counter()
+        while robot.t < duration and not (stop and stop()):
+            if robot.t >= next_control:  # the clock says a period has elapsed: sense and control here
+                self.control()
+                behind = int((robot.t - next_control) // cycle)  # whole periods this pass jumped over
+                missed += behind
+                next_control += (behind + 1) * cycle  # the 40 ms grid keeps its phase
+                if stop_at_exit and self.exit_time is not None:
+                    break
             now = time.perf_counter()
-            if now - last < min_wall_step:
-                time.sleep(min_wall_step - (now - last))
+            if now - last < min_wall:
+                time.sleep(min_wall - (now - last))
                 now = time.perf_counter()
-            big_dt = (now - last) * speed
+            big_dt = min((now - last) * speed, duration - robot.t)
             last = now
-            target = min(robot.t + big_dt, duration)
-            while robot.t < target - 1e-12:
-                if robot.t >= next_control - 1e-9:
-                    self.control()
-                    next_control += self.cycle_s
-                h = min(target, next_control) - robot.t
-                if h <= 0:
-                    continue
-                for _ in range(n):
-                    robot.advance(h / n)
-                self.steps += n
+            n = max(1, math.ceil(big_dt / h_max))
+            for _ in range(n):
+                robot.advance(big_dt / n)
+            self.steps += n
+            passes += 1
+            max_pass = max(max_pass, big_dt)
             if progress:
                 progress(robot.t)
-        return self._result("realtime", time.perf_counter() - start)
+        result = self._result("realtime", time.perf_counter() - start)
+        result.extra.update(passes=passes, max_pass=max_pass, missed_periods=missed)
+        return result
 
     def _result(self, mode: str, wall: float) -> RunResult:
+        if self._rows is not None:
+            self._rows.finish()
         return RunResult(
             t=np.array(self._t), pose=np.array(self._pose).reshape(-1, 3), cmd=np.array(self._cmd).reshape(-1, 2),
             coverage=np.array(self.coverage.fractions), collisions=self.robot.collisions, wall_seconds=wall,
             sim_seconds=self.robot.t, mode=mode, controller=getattr(self.controller, "name", "?"), steps=self.steps,
             exit_time=self.exit_time,
         )
+
+
+class _RecordingRows:
+    """Rows of a recording, one per control cycle, written as the robot would write them.
+
+    With the firmware in the loop (SIL, PIL) a row is the firmware's TELEMETRY
+    for that cycle, exactly what `twinbot serial --record` writes from a real
+    robot, plus the simulator's truth (time and pose) as the tracker columns;
+    TELEMETRY is matched to its cycle by the tick, since over PIL's serial
+    port it may arrive a cycle late.  A controller without firmware (a
+    replay) gives its readings and outputs directly.
+    """
+
+    def __init__(self, writer: RecordingWriter, controller: object) -> None:
+        self.writer = writer
+        self.telemetry: Callable[..., list[dict[str, object]]] | None = getattr(controller, "telemetry", None)
+        self.truth: dict[int, tuple[float, tuple[float, float, float]]] = {}
+
+    def cycle(self, t: float, pose: tuple[float, float, float], s: Sense, a: Actuate, emitter_pct: int) -> None:
+        if self.telemetry is None:
+            self.writer.row(t, (a.i_left_ma / 1000.0, a.i_right_ma / 1000.0), (s.enc_l, s.enc_r), s.adc_on,
+                            s.adc_off, s.vbat_mv / 1000.0, pose, emitter_pct=emitter_pct)
+            return
+        self.truth[s.tick_ms] = (t, pose)
+        self._write(self.telemetry())
+
+    def finish(self) -> None:
+        if self.telemetry is not None and self.truth:
+            self._write(self.telemetry(wait=0.5))  # PIL: the last frames may still be on the wire
+
+    def _write(self, frames: list[dict[str, object]]) -> None:
+        for f in frames:
+            truth = self.truth.pop(int(f["tick_ms"]), None)  # type: ignore[call-overload]
+            if truth is not None:  # else a frame from before this run
+                self.writer.telemetry(f, t=truth[0], pose=truth[1])

@@ -26,8 +26,9 @@ of `World.segments`, shape (M, 4)):
 * `World.cast_robots(poses, bearings)` the same for rays leaving robot
   centres at fixed bearings (the IR ring), with the front end folded into
   one matrix product: the fast path of the sensor model;
-* `World.nearest_wall(points)` -> (signed distance, unit normal) for
-  collisions;
+* `World.nearest_wall(points)` -> (signed distance, unit normal) to the
+  nearest wall; `World.wall_distances(points)` the same to every wall at
+  once (contact with several walls, host_sim/contact.py);
 * `World.inside_obstacle(points)`; `World.visible(points, targets)` (line of
   sight, for lamps);
 * `World.free_cells(resolution, margin)` -> boolean occupancy grid of the
@@ -50,6 +51,17 @@ LAMP_KEYS = {"x", "y", "level", "flicker_hz", "flicker_depth"}
 DEFAULT_FLICKER_DEPTH = 0.3  # fraction of the lamp's level, when flicker_hz is given
 DEFAULT_BODY_RADIUS = 0.060  # m; params.RobotParams.body_radius, for the start check
 _EPS = 1e-9  # m, geometric tolerance
+# Bounds that keep a world's set-up and runs to seconds and megabytes.  The
+# coverage grid (host_sim/coverage.py, cells of GRID_RESOLUTION) and the
+# free-cell map measure every cell's distance to every wall segment.
+GRID_RESOLUTION = 0.05  # m, the coverage grid's default cell
+MAX_SIZE_M = 50.0  # m per side: 1000 x 1000 coverage cells
+MAX_GRID_CELLS = 1_000_000
+MAX_SEGMENTS = 5_000  # wall segments, polygon edges included
+MAX_GRID_WORK = 20_000_000  # coverage cells x wall segments: about 2 s of set-up
+MAX_COORD_M = 1_000.0  # |x|, |y| of any wall, lamp or start point
+MAX_LAMP_LEVEL = 1e6  # counts at 1 m; an ADC saturates at 4095 (12 bits)
+MAX_FLICKER_HZ = 1e4
 
 
 class WorldError(ValueError):
@@ -165,6 +177,9 @@ class World:
         self._hp_n = np.asarray(rows, dtype=float).reshape(-1, 2)
         self._hp_c = np.asarray(cs, dtype=float)
         self._hp_starts = np.asarray(starts, dtype=int)
+        # For every segment, the convex obstacle it bounds (-1: a free-standing wall).
+        poly_of_entry = {entry: k for k, entry in enumerate(self._poly_entry)}
+        self._seg_polygon = np.array([poly_of_entry.get(int(e), -1) for e in self.segment_entry], dtype=int)
 
     # ------------------------------------------------------------------ basics
     def lamp_levels(self, t: Any = 0.0) -> np.ndarray:
@@ -458,6 +473,33 @@ class World:
         out = (dist.reshape(batch), normal.reshape(batch + (2,)))
         return out + (idx.reshape(batch),) if return_index else out
 
+    def wall_distances(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Signed distance from every point to every wall, and the unit normal from the wall to the point.
+
+        points (P, 2) -> distance (P, M), normal (P, M, 2), M = len(segments), in segment
+        order.  As nearest_wall, but for all walls at once (contact with several walls,
+        corners): the distance to an edge of a convex obstacle the point is inside is
+        negative and its normal points out of the obstacle.
+        """
+        q = np.asarray(points, dtype=float).reshape(-1, 2)
+        rel = q[:, None, :] - self._a[None]  # (P, M, 2)
+        u = np.clip((rel * self._e[None]).sum(-1) / self._len2, 0.0, 1.0)
+        diff = rel - u[..., None] * self._e[None]
+        dist = np.sqrt((diff * diff).sum(-1))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            normal = diff / dist[..., None]
+        on_wall = dist < 1e-12
+        if on_wall.any():
+            normal[on_wall] = np.broadcast_to(self._normal[None], normal.shape)[on_wall]
+        if self.polygons:
+            excess = q @ self._hp_n.T - self._hp_c  # (P, E)
+            inside = np.maximum.reduceat(excess, self._hp_starts, axis=1) < -_EPS  # (P, n_polygons)
+            seg_inside = np.zeros(dist.shape, dtype=bool)
+            seg_inside[:, self._seg_polygon >= 0] = inside[:, self._seg_polygon[self._seg_polygon >= 0]]
+            dist = np.where(seg_inside, -dist, dist)
+            normal[seg_inside] = -normal[seg_inside]
+        return dist, normal
+
     def inside_obstacle(self, points: np.ndarray) -> np.ndarray:
         """True where a point is strictly inside one of the convex polygons."""
         p = np.asarray(points, dtype=float)
@@ -471,9 +513,20 @@ class World:
 
     # ------------------------------------------------------------------ grids
     def grid_shape(self, resolution: float) -> tuple[int, int]:
-        """(ny, nx) of the coverage grid of square cells of side `resolution` over the size."""
-        return (max(1, int(math.ceil(self.size[1] / resolution - 1e-9))),
-                max(1, int(math.ceil(self.size[0] / resolution - 1e-9))))
+        """(ny, nx) of the coverage grid of square cells of side `resolution` over the size.
+
+        WorldError when it has more than MAX_GRID_CELLS cells.
+        """
+        if not resolution > 0:
+            raise WorldError(f"{self.source}: grid resolution must be > 0 m, got {resolution}")
+        shape = (max(1, int(math.ceil(self.size[1] / resolution - 1e-9))),
+                 max(1, int(math.ceil(self.size[0] / resolution - 1e-9))))
+        cells = shape[0] * shape[1]
+        if cells > MAX_GRID_CELLS:
+            raise WorldError(f"{self.source}: size {self.size[0]:g} m x {self.size[1]:g} m in cells of "
+                             f"{resolution:g} m is {shape[1]:,} x {shape[0]:,} = {cells:,} cells; "
+                             f"the limit is {MAX_GRID_CELLS:,}")
+        return shape
 
     def cell_centres(self, resolution: float) -> tuple[np.ndarray, np.ndarray]:
         """x (nx,) and y (ny,) of the cell centres; cell [iy, ix] is at (x[ix], y[iy])."""
@@ -498,10 +551,13 @@ class World:
         (4-neighbours) to the start's cell: the area a robot can explore.
         """
         xs, ys = self.cell_centres(resolution)
-        gx, gy = np.meshgrid(xs, ys)
-        pts = np.stack([gx, gy], -1)
-        dist, _ = self.nearest_wall(pts)  # type: ignore[misc]
-        free = dist >= margin
+        # Rows in chunks: nearest_wall holds (points x walls) arrays.
+        rows_per_chunk = max(1, 2_000_000 // (len(xs) * max(1, self.n_walls)))
+        free = np.empty((len(ys), len(xs)), dtype=bool)
+        for r0 in range(0, len(ys), rows_per_chunk):
+            gx, gy = np.meshgrid(xs, ys[r0:r0 + rows_per_chunk])
+            dist, _ = self.nearest_wall(np.stack([gx, gy], -1))  # type: ignore[misc]
+            free[r0:r0 + rows_per_chunk] = dist >= margin
         if reachable:
             free = _flood(free, self.cell_of(np.array(self.start[:2]), resolution))
         return free
@@ -636,8 +692,27 @@ def world_from_dict(data: object, where: str = "world", body_radius: float = DEF
     size = _numbers(data["size"], 2, f"{where}: size", "size")
     if min(size) <= 0:
         raise WorldError(f"{where}: size: width and height must be positive (m), got {size}")
+    if max(size) > MAX_SIZE_M:
+        raise WorldError(f"{where}: size: {size[0]:g} m x {size[1]:g} m is too big; the limit is "
+                         f"{MAX_SIZE_M:g} m a side")
+    walls = _walls_from_list(data["walls"], where)
+    _check_extent(walls, where)
+    start = _start_from_dict(data["start"], where)
+    lamps = _lamps_from_list(data.get("lamps", []), where)
+    ambient = data.get("ambient")
+    if ambient is not None and (not _is_num(ambient) or not 0 <= ambient <= MAX_LAMP_LEVEL):
+        raise WorldError(f"{where}: ambient: must be a number >= 0 and <= {MAX_LAMP_LEVEL:g} (ADC counts), "
+                         f"got {json.dumps(ambient)}")
 
-    walls_in = data["walls"]
+    world = World(name=name, size=(size[0], size[1]), walls=walls, start=start, lamps=tuple(lamps),
+                  ambient=None if ambient is None else float(ambient), description=description, source=where)
+    _check_grid(world, where)
+    _check_start_is_clear(world, where, body_radius)
+    return world
+
+
+def _walls_from_list(walls_in: object, where: str) -> list[dict[str, Any]]:
+    """The "walls" entries, each {"segment": [x1, y1, x2, y2]} or {"polygon": [[x, y], ...]}."""
     if not isinstance(walls_in, list):
         raise WorldError(f"{where}: walls: must be a list of {{\"segment\": ...}} or {{\"polygon\": ...}} entries")
     walls: list[dict[str, Any]] = []
@@ -654,8 +729,11 @@ def world_from_dict(data: object, where: str = "world", body_radius: float = DEF
             walls.append({"segment": seg})
         else:
             walls.append({"polygon": _check_polygon(wall["polygon"], f"{here}.polygon")})
+    return walls
 
-    start_in = data["start"]
+
+def _start_from_dict(start_in: object, where: str) -> tuple[float, float, float]:
+    """The "start" pose {"x": m, "y": m, "phi": rad}."""
     if not isinstance(start_in, dict):
         raise WorldError(f"{where}: start: must be an object {{\"x\": m, \"y\": m, \"phi\": rad}}")
     extra = sorted(set(start_in) - {"x", "y", "phi"})
@@ -666,12 +744,14 @@ def world_from_dict(data: object, where: str = "world", body_radius: float = DEF
             raise WorldError(f"{where}: start: missing '{key}'")
         if not _is_num(start_in[key]):
             raise WorldError(f"{where}: start.{key}: not a finite number ({json.dumps(start_in[key])})")
-    start = (float(start_in["x"]), float(start_in["y"]), float(start_in["phi"]))
+    return (float(start_in["x"]), float(start_in["y"]), float(start_in["phi"]))
 
-    lamps: list[Lamp] = []
-    lamps_in = data.get("lamps", [])
+
+def _lamps_from_list(lamps_in: object, where: str) -> list[Lamp]:
+    """The optional "lamps": {"x", "y", "level"[, "flicker_hz", "flicker_depth"]} each."""
     if not isinstance(lamps_in, list):
         raise WorldError(f"{where}: lamps: must be a list of {{\"x\", \"y\", \"level\"}} objects")
+    lamps: list[Lamp] = []
     for i, lamp in enumerate(lamps_in):
         here = f"{where}: lamps[{i}]"
         if not isinstance(lamp, dict):
@@ -685,23 +765,49 @@ def world_from_dict(data: object, where: str = "world", body_radius: float = DEF
         for key, value in lamp.items():
             if not _is_num(value):
                 raise WorldError(f"{here}.{key}: not a finite number ({json.dumps(value)})")
-        if lamp["level"] < 0:
-            raise WorldError(f"{here}.level: must be >= 0 (ADC counts at 1 m), got {lamp['level']}")
-        if lamp.get("flicker_hz", 0) < 0:
-            raise WorldError(f"{here}.flicker_hz: must be >= 0, got {lamp['flicker_hz']}")
+        if not 0 <= lamp["level"] <= MAX_LAMP_LEVEL:
+            raise WorldError(f"{here}.level: must be in 0..{MAX_LAMP_LEVEL:g} (ADC counts at 1 m), "
+                             f"got {lamp['level']}")
+        if not 0 <= lamp.get("flicker_hz", 0) <= MAX_FLICKER_HZ:
+            raise WorldError(f"{here}.flicker_hz: must be in 0..{MAX_FLICKER_HZ:g} Hz, got {lamp['flicker_hz']}")
+        if max(abs(lamp["x"]), abs(lamp["y"])) > MAX_COORD_M:
+            raise WorldError(f"{here}: ({lamp['x']}, {lamp['y']}) is more than {MAX_COORD_M:g} m from the origin "
+                             f"on an axis")
         depth = lamp.get("flicker_depth", DEFAULT_FLICKER_DEPTH)
         if not 0 <= depth <= 1:
             raise WorldError(f"{here}.flicker_depth: must be in [0, 1], got {depth}")
         lamps.append(Lamp(float(lamp["x"]), float(lamp["y"]), float(lamp["level"]),
                           float(lamp.get("flicker_hz", 0.0)), float(depth)))
+    return lamps
 
-    ambient = data.get("ambient")
-    if ambient is not None and (not _is_num(ambient) or ambient < 0):
-        raise WorldError(f"{where}: ambient: must be a number >= 0 (ADC counts), got {json.dumps(ambient)}")
 
-    world = World(name=name, size=(size[0], size[1]), walls=walls, start=start, lamps=tuple(lamps),
-                  ambient=None if ambient is None else float(ambient), description=description, source=where)
-    # The start pose: inside the area, clear of every wall.
+def _check_extent(walls: list[dict[str, Any]], where: str) -> None:
+    """Every wall point within MAX_COORD_M; at most MAX_SEGMENTS segments."""
+    n_segments = 0
+    for i, wall in enumerate(walls):
+        points = wall["segment"] if "segment" in wall else [v for pt in wall["polygon"] for v in pt]
+        n_segments += 1 if "segment" in wall else len(wall["polygon"])
+        if max(abs(v) for v in points) > MAX_COORD_M:
+            kind = "segment" if "segment" in wall else "polygon"
+            raise WorldError(f"{where}: walls[{i}].{kind}: a coordinate is beyond +-{MAX_COORD_M:g} m")
+    if n_segments > MAX_SEGMENTS:
+        raise WorldError(f"{where}: walls: {n_segments:,} segments (polygon edges included); "
+                         f"the limit is {MAX_SEGMENTS:,}")
+
+
+def _check_grid(world: World, where: str) -> None:
+    """The coverage grid fits, and measuring its cells against the walls stays quick."""
+    ny, nx = world.grid_shape(GRID_RESOLUTION)
+    work = nx * ny * max(1, world.n_walls)
+    if work > MAX_GRID_WORK:
+        raise WorldError(f"{where}: {nx * ny:,} coverage cells of {GRID_RESOLUTION:g} m times {world.n_walls:,} "
+                         f"wall segments is {work:,} distances to compute; the limit is {MAX_GRID_WORK:,} "
+                         f"(a smaller size or fewer walls)")
+
+
+def _check_start_is_clear(world: World, where: str, body_radius: float) -> None:
+    """The start pose: inside the area, clear of every wall."""
+    start, size = world.start, world.size
     if world.outside(np.array(start[:2])):
         raise WorldError(f"{where}: start: ({start[0]}, {start[1]}) is outside the world's size "
                          f"[0, {size[0]}] x [0, {size[1]}]")
@@ -709,20 +815,21 @@ def world_from_dict(data: object, where: str = "world", body_radius: float = DEF
         dist, _, nearest = world.nearest_wall(np.array(start[:2]), return_index=True)  # type: ignore[misc]
         if dist < body_radius:
             entry = int(world.segment_entry[int(nearest)])
-            kind = "segment" if "segment" in walls[entry] else "polygon"
+            kind = "segment" if "segment" in world.walls[entry] else "polygon"
             problem = "is inside" if dist < 0 else f"overlaps (centre {float(dist):.3f} m from it)"
             raise WorldError(f"{where}: start: the robot (radius {body_radius} m) at ({start[0]}, {start[1]}) "
                              f"{problem} walls[{entry}].{kind}")
-    return world
 
 
 def load_world(path: str | Path, body_radius: float = DEFAULT_BODY_RADIUS) -> World:
     """Read and validate a world file; WorldError names the file, the entry and the problem."""
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise WorldError(f"{path}: cannot read: {exc.strerror}") from exc
+    except UnicodeDecodeError as exc:
+        raise WorldError(f"{path}: not a world file: byte {exc.start} is not UTF-8 text") from exc
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:

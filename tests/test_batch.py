@@ -20,7 +20,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from host_sim.batch import BatchSim, from_recording
+from host_sim.batch import BatchSim
+from host_sim.replay import replay_batch
 from host_sim.interface import Actuate
 from host_sim.sil import SilController
 from host_sim.dynamics import ParamBatch
@@ -166,10 +167,10 @@ def _simulator_recording(path, seed, noise, duration=6.0):
     return load_recording(path)
 
 
-def test_from_recording_reproduces_a_simulator_recording(tmp_path):
+def test_replay_batch_reproduces_a_simulator_recording(tmp_path):
     rec = _simulator_recording(tmp_path / "quiet.csv", seed=None, noise=False)
     assert np.hypot(*(rec.pose[-1, :2] - rec.pose[0, :2])) > 0.1  # the robot went somewhere
-    res = from_recording(rec, [DEFAULT] * 3)  # the world comes from the sidecar
+    res = replay_batch(rec, [DEFAULT] * 3)  # the world comes from the sidecar
     assert res.pose.shape == (len(rec), 3, 3)
     for i in range(3):
         np.testing.assert_allclose(res.pose[:, i], rec.pose, rtol=0, atol=1e-9)
@@ -180,15 +181,15 @@ def test_from_recording_reproduces_a_simulator_recording(tmp_path):
     np.testing.assert_allclose(res.t, rec.t, rtol=0, atol=1e-9)
 
 
-def test_from_recording_with_noise_and_from_a_middle_row(tmp_path):
+def test_replay_batch_with_noise_and_from_a_middle_row(tmp_path):
     rec = _simulator_recording(tmp_path / "noisy.csv", seed=3, noise=True)
-    one = from_recording(rec, DEFAULT, seed=3)  # N = 1 with the recording's seed: its noise too
+    one = replay_batch(rec, DEFAULT, seed=3)  # N = 1 with the recording's seed: its noise too
     np.testing.assert_allclose(one.pose[:, 0], rec.pose, rtol=0, atol=1e-9)
     assert_adc_match(one.ir_on[:, 0], rec.ir_on)
     assert_adc_match(one.ir_amb[:, 0], rec.ir_amb)
     # From row 60 (wheel speeds estimated from the encoders), as replay does.
     batch = ParamBatch.from_params([DEFAULT, DEFAULT.replace(body_mass=0.6)])
-    mid = from_recording(rec, batch, start=60, stop=85, sensors=False)
+    mid = replay_batch(rec, batch, start=60, stop=85, sensors=False)
     ref = replay(rec, DEFAULT, ROOM, start=60, stop=85)
     assert mid.start == 60 and mid.ir_on is None
     np.testing.assert_allclose(mid.pose[:, 0], ref.pose, rtol=0, atol=1e-9)
@@ -204,7 +205,7 @@ def test_bad_inputs_are_refused():
         BatchSim(ROOM, DEFAULT, np.zeros((3, 2)))
 
 
-def test_from_recording_follows_a_robots_own_timing(tmp_path):
+def test_replay_batch_follows_a_robots_own_timing(tmp_path):
     """A robot's recording: rows at the times it recorded them, not at the nominal period."""
     sim = _simulator_recording(tmp_path / "sim.csv", seed=None, noise=False, duration=3.0)
     jitter = np.random.default_rng(5).uniform(-0.004, 0.004, len(sim))
@@ -215,7 +216,7 @@ def test_from_recording_follows_a_robots_own_timing(tmp_path):
             out.row(sim.t[k] + jitter[k], sim.cmd[k], sim.enc[k], sim.ir_on[k], sim.ir_amb[k], sim.vbat[k],
                     sim.pose[k])
     rec = load_recording(path)
-    res = from_recording(rec, [DEFAULT, DEFAULT], start=10, sensors=False)
+    res = replay_batch(rec, [DEFAULT, DEFAULT], start=10, sensors=False)
     ref = replay(rec, DEFAULT, ROOM, start=10)
     np.testing.assert_allclose(res.t, ref.t, rtol=0, atol=1e-12)
     for i in range(2):

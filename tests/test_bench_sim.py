@@ -49,7 +49,8 @@ def test_bench_sim_smoke(bench_only: None, tmp_path, capsys: pytest.CaptureFixtu
             if "|" in ln}
     report = json.loads(out_json.read_text())
     version = report["results"]["irsim"]["version"]
-    for label in (bench_sim.ROW_REPLAY, bench_sim.ROW_SIL, bench_sim.ROW_BATCH.format(n=8),
+    for label in (bench_sim.ROW_REPLAY, bench_sim.ROW_SIL, bench_sim.ROW_SIL_BEAM.format(rays=bench_sim.BEAM_RAYS),
+                  bench_sim.ROW_BATCH.format(n=8),
                   bench_sim.ROW_BATCH_IR.format(n=8), bench_sim.ROW_IRSIM.format(version=version)):
         assert label in rows, label
         assert len(rows[label]) == 5 and rows[label][0] != "not run"
@@ -74,3 +75,4 @@ def test_bench_sim_smoke(bench_only: None, tmp_path, capsys: pytest.CaptureFixtu
     b = report["results"]["batch_ir"]
     assert b["robot_steps_per_s"] == pytest.approx(8 * b["robot_periods_per_s"])
     assert "robot-step:" in out
+    assert report["results"]["sil_beam"]["beam_rays"] == bench_sim.BEAM_RAYS and "(b) beam:" in out

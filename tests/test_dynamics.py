@@ -4,8 +4,9 @@ The checks of issue 4, item 2-3:
 (a) symmetric torques -> straight line; (b) d = 0 is the textbook model; (c) no input,
 no friction -> kinetic energy conserved, and the fixed-step integrator converges;
 (d) an independent KKT solve of M q'' + V = E tau - A^T lambda agrees with the reduced
-model, and the constraints hold along a trajectory; (e) batch == scalar; (f) the matrix
-path == the closed form; (g) motors and encoders.
+model, and the constraints hold along a trajectory; (e) batch == scalar: in
+tests/test_scalar_batch_pairs.py with the other pairs; (f) the matrix path == the closed
+form; (g) motors and encoders.
 """
 from __future__ import annotations
 
@@ -55,11 +56,67 @@ def random_params(rng: np.random.Generator) -> RobotParams:
                      battery_voltage=f(3.0, 12.0), ticks_per_rev=float(rng.integers(100, 5000)))
 
 
+# --------------------------------------------------------------------------- #
+# reference formulas, written out here so that they check the library, not copy it
+# --------------------------------------------------------------------------- #
+def body_velocity(v, p) -> tuple[float, float]:
+    """(u, omega): forward speed (m/s) and yaw rate (rad/s) from the wheel speeds."""
+    r, b = p.wheel_radius, p.half_axle
+    return 0.5 * r * (v[0] + v[1]), 0.5 * r * (v[1] - v[0]) / b
+
+
+def wheel_speeds(u: float, omega: float, p) -> tuple[float, float]:
+    """(w_l, w_r) (rad/s) for a forward speed u and a yaw rate omega: body_velocity's inverse."""
+    r, b = p.wheel_radius, p.half_axle
+    return (u - b * omega) / r, (u + b * omega) / r
+
+
+def qdot(q, v, p) -> tuple[float, float, float, float, float]:
+    """q' = S(q) v, the kinematics written out (G a distance d ahead of the axle)."""
+    d = p.com_offset
+    u, w = body_velocity(v, p)
+    c, s = math.cos(q[2]), math.sin(q[2])
+    return (u * c - d * w * s, u * s + d * w * c, w, v[0], v[1])
+
+
+def kinetic_energy(q, q_dot, p) -> float:
+    """T = 1/2 q'^T M(q) q' (J), from the mass matrix."""
+    qd = np.asarray(q_dot, dtype=float)
+    return float(0.5 * qd @ dy.mass_matrix(q, p) @ qd)
+
+
+def kinetic_energy_reduced(v, p) -> float:
+    """T = 1/2 m_t u^2 + 1/2 J_t omega^2 (J), from the effective mass and inertia."""
+    m_t, j_t = dy.effective_inertias(p)
+    u, w = body_velocity(v, p)
+    return 0.5 * (m_t * u * u + j_t * w * w)
+
+
+def full_constrained_accel(q, q_dot, tau, p) -> tuple[np.ndarray, np.ndarray]:
+    """(q'', lambda) of  M q'' + V = E tau - A^T lambda,  A q'' + A' q' = 0  (KKT system; S not used).
+
+    lambda = (-F_lat, F_l, F_r): F_lat is the sideways ground force on the robot at the axle
+    (N, positive to the left), F_l, F_r the forward traction forces at the wheels (N).
+    q_dot must satisfy A q' = 0 (only then is this the robot's motion).
+    """
+    qd = np.asarray(q_dot, dtype=float)
+    a = dy.constraint_matrix(q, p)
+    kkt = np.zeros((8, 8))
+    kkt[:5, :5] = dy.mass_matrix(q, p)
+    kkt[:5, 5:] = a.T
+    kkt[5:, :5] = a
+    rhs = np.empty(8)
+    rhs[:5] = dy.input_matrix(q, p) @ np.asarray(tau, dtype=float) - dy.coriolis(q, qd, p)
+    rhs[5:] = -dy.constraint_matrix_dot(q, qd, p) @ qd
+    sol = np.linalg.solve(kkt, rhs)
+    return sol[:5], sol[5:]
+
+
 def accel_scale(v, tau, p, q=(0.0, 0.0, 0.0, 0.0, 0.0)) -> float:
     """Size of the terms summed into v' (so that tolerances are relative to them): H^-1 times
     |S^T E tau|, |S^T M S' v| and |S^T V| separately."""
     v = np.asarray(v, dtype=float)
-    qd = list(dy.qdot(q, v, p))
+    qd = list(qdot(q, v, p))
     qd[2] = p.wheel_radius / (2 * p.half_axle) * (abs(v[0]) + abs(v[1]))  # phi' before cancelling too
     m, vv, e, _a, s, s_dot = dy.matrices(q, qd, p)
     a = np.abs
@@ -84,7 +141,7 @@ def rk4_reduced(q, v, tau, dt, p):
     """Classical RK4 on X = (q, v), X' = (S(q) v, v'(v, tau)), tau held over the step."""
 
     def f(x):
-        return np.array([*dy.qdot(x[:5], x[5:], p), *dy.reduced_accel_fast(x[:5], x[5:], tau, p)])
+        return np.array([*qdot(x[:5], x[5:], p), *dy.reduced_accel_fast(x[:5], x[5:], tau, p)])
 
     x = rk4(f, np.array([*q, *v], dtype=float), dt)
     return x[:5], x[5:]
@@ -94,7 +151,7 @@ def rk4_full(q, qd, tau, dt, p):
     """RK4 on the full constrained system X = (q, q'), X' = (q', q''_KKT): no S anywhere."""
 
     def f(x):
-        return np.concatenate([x[5:], dy.full_constrained_accel(x[:5], x[5:], tau, p)[0]])
+        return np.concatenate([x[5:], full_constrained_accel(x[:5], x[5:], tau, p)[0]])
 
     x = rk4(f, np.concatenate([q, qd]), dt)
     return x[:5], x[5:]
@@ -123,7 +180,7 @@ def test_null_space_annihilates_constraints(q, p):
 def test_constraints_are_the_papers_scalar_equations_and_physical(q, v, p):
     """A q' = 0 is the paper's three equations; under it the axle centre C has no sideways velocity
     and each wheel's contact point is at rest (rolling without slipping)."""
-    xd, yd, phd, tld, trd = dy.qdot(q, v, p)
+    xd, yd, phd, tld, trd = qdot(q, v, p)
     r, b, d, phi = p.wheel_radius, p.half_axle, p.com_offset, q[2]
     c, s = math.cos(phi), math.sin(phi)
     scale = (abs(xd) + abs(yd) + (b + d + r) * abs(phd) + r * (abs(tld) + abs(trd))) * 1e-14 + 1e-300
@@ -153,7 +210,7 @@ def test_mass_matrix_from_the_bodies_kinetic_energy(q, qd, p):
         w_dot = g_dot - d * phd * n - side * b * phd * e  # W = G - d e + side b n
         t += 0.5 * p.wheel_mass * w_dot @ w_dot + 0.5 * p.wheel_inertia * spin ** 2
         t += 0.5 * p.wheel_inertia_diam * phd ** 2
-    assert dy.kinetic_energy(q, qd, p) == pytest.approx(t, rel=1e-12, abs=1e-300)
+    assert kinetic_energy(q, qd, p) == pytest.approx(t, rel=1e-12, abs=1e-300)
 
 
 @SETTINGS
@@ -238,7 +295,7 @@ def test_d_zero_is_the_textbook_model(q, v, tau, p):
     expect = np.array([(ud - b * wd) / r, (ud + b * wd) / r])
     got = dy.reduced_accel(q, v, tau, p)  # the Lagrangian matrix path
     assert np.allclose(got, expect, rtol=1e-12, atol=1e-12 * accel_scale(v, tau, p, q))
-    m, vv, _e, _a, s, s_dot = dy.matrices(q, dy.qdot(q, v, p), p)
+    m, vv, _e, _a, s, s_dot = dy.matrices(q, qdot(q, v, p), p)
     assert np.count_nonzero(m - np.diag(np.diag(m))) == 0 and not vv.any()
     u, w = (v[0] + v[1]) * r / 2, (v[1] - v[0]) * r / (2 * b)
     assert np.allclose(s @ v, [u * math.cos(q[2]), u * math.sin(q[2]), w, v[0], v[1]], rtol=1e-13, atol=1e-13)
@@ -253,13 +310,13 @@ def test_d_zero_step_is_exact_for_constant_torque_and_second_order_on_the_arc():
     tau = (0.002, 0.005)
     q, v = (0.0,) * 5, (1.0, 2.0)
     q, v = run(q, v, tau, 0.01, 100, p)
-    u0, w0 = dy.body_velocity((1.0, 2.0), p)
+    u0, w0 = body_velocity((1.0, 2.0), p)
     u1, w1 = u0 + (tau[0] + tau[1]) / r / m_t * 1.0, w0 + b * (tau[1] - tau[0]) / r / i_t * 1.0
-    assert np.allclose(v, dy.wheel_speeds(u1, w1, p), rtol=1e-12)
+    assert np.allclose(v, wheel_speeds(u1, w1, p), rtol=1e-12)
     assert q[2] == pytest.approx(w0 + 0.5 * (w1 - w0), rel=1e-12)  # phi = integral of a linear omega
     # circle
     v0 = (10.0, 14.0)
-    u, w = dy.body_velocity(v0, p)
+    u, w = body_velocity(v0, p)
     radius = u / w
     errs = []
     for dt in (0.02, 0.01, 0.005):
@@ -280,27 +337,27 @@ def test_kinetic_energy_conserved_without_input_and_friction(d):
     p = P.replace(com_offset=d, viscous_friction=0.0, coulomb_friction=0.0)
     p = p.replace(battery_voltage=24.0)  # headroom: no back-EMF braking at i_ref = 0 (motors.py)
     q, v = (0.0, 0.0, 0.3, 0.0, 0.0), (-20.0, 35.0)
-    t0 = dy.kinetic_energy(q, dy.qdot(q, v, p), p)
+    t0 = kinetic_energy(q, qdot(q, v, p), p)
     dt, worst = 1e-3, 0.0
     for k in range(10_000):
         tau = (mo.wheel_torque(0.0, v[0], p)[0], mo.wheel_torque(0.0, v[1], p)[0])
         assert tau == (0.0, 0.0)
         q, v = dy.step(q, v, tau, dt, p)
         if k % 500 == 0:
-            worst = max(worst, abs(dy.kinetic_energy(q, dy.qdot(q, v, p), p) / t0 - 1))
-    worst = max(worst, abs(dy.kinetic_energy_reduced(v, p) / t0 - 1))
+            worst = max(worst, abs(kinetic_energy(q, qdot(q, v, p), p) / t0 - 1))
+    worst = max(worst, abs(kinetic_energy_reduced(v, p) / t0 - 1))
     assert worst < 1e-12
     # the motion is not trivial: the offset COM trades forward speed against yaw rate
-    assert abs(dy.body_velocity(v, p)[0] - dy.body_velocity((-20.0, 35.0), p)[0]) > 0.01
+    assert abs(body_velocity(v, p)[0] - body_velocity((-20.0, 35.0), p)[0]) > 0.01
 
 
 def test_kinetic_energy_conserved_with_rk4_reference():
     """The same with the RK4 reference integrator (dt = 1 ms, 10 s): drift < 1e-6."""
     q, v = (0.0, 0.0, 0.3, 0.0, 0.0), (-20.0, 35.0)
-    t0 = dy.kinetic_energy_reduced(v, P)
+    t0 = kinetic_energy_reduced(v, P)
     for _ in range(10_000):
         q, v = rk4_reduced(q, v, (0.0, 0.0), 1e-3, P)
-    assert abs(dy.kinetic_energy(q, dy.qdot(q, v, P), P) / t0 - 1) < 1e-6
+    assert abs(kinetic_energy(q, qdot(q, v, P), P) / t0 - 1) < 1e-6
 
 
 @SETTINGS
@@ -308,7 +365,7 @@ def test_kinetic_energy_conserved_with_rk4_reference():
 def test_discrete_work_energy_balance(q, v, tau, dt, p):
     """Each step: T+ - T = tau . (theta+ - theta), to rounding (no energy made up by the integrator)."""
     q1, v1 = dy.step(q, v, tau, dt, p)
-    t0, t1 = dy.kinetic_energy_reduced(v, p), dy.kinetic_energy_reduced(v1, p)
+    t0, t1 = kinetic_energy_reduced(v, p), kinetic_energy_reduced(v1, p)
     work = tau[0] * (q1[3] - q[3]) + tau[1] * (q1[4] - q[4])
     scale = t0 + t1 + sum(abs(tau[j]) * (dt * (abs(v[j]) + abs(v1[j])) + abs(q[3 + j]) + abs(q1[3 + j]))
                           for j in range(2))
@@ -326,7 +383,7 @@ def test_fixed_step_converges_second_order():
     ref = np.array([*q_ref, *v_ref])
 
     def euler(q, v, tau, dt, p):
-        return (np.asarray(q) + dt * np.array(dy.qdot(q, v, p)),
+        return (np.asarray(q) + dt * np.array(qdot(q, v, p)),
                 np.asarray(v) + dt * np.array(dy.reduced_accel_fast(q, v, tau, p)))
 
     for stepper, order in ((dy.step, 2), (euler, 1)):
@@ -349,7 +406,7 @@ def test_kkt_solve_agrees_with_reduced_model(q, v, tau, p):
     qd = s @ np.array(v)
     vd = dy.reduced_accel(q, v, tau, p)
     qdd_reduced = s @ vd + dy.null_space_dot(q, qd, p) @ np.array(v)
-    qdd, lam = dy.full_constrained_accel(q, qd, tau, p)
+    qdd, lam = full_constrained_accel(q, qd, tau, p)
     # q'' = S v' + S' v: bound the terms before they cancel (phi' itself is a difference of wheel speeds)
     w_bound = p.wheel_radius / (2 * p.half_axle) * (abs(v[0]) + abs(v[1]))
     s_dot_bound = np.abs(dy.null_space_dot(q, (0.0, 0.0, w_bound, 0.0, 0.0), p))
@@ -358,7 +415,7 @@ def test_kkt_solve_agrees_with_reduced_model(q, v, tau, p):
     assert np.abs(qdd - qdd_reduced).max() < 1e-9 * scale
     # lambda: the traction forces F_i = (tau_i - I_w w_i') / r at the wheels
     f = (np.array(tau) - p.wheel_inertia * vd) / p.wheel_radius
-    force_scale = np.abs(lam).max() + p.total_mass * scale + np.abs(tau).max() / p.wheel_radius
+    force_scale = np.abs(lam).max() + (p.body_mass + 2 * p.wheel_mass) * scale + np.abs(tau).max() / p.wheel_radius
     assert np.abs(lam[1:] - f).max() <= 1e-9 * force_scale
 
 
@@ -378,7 +435,7 @@ def test_kkt_trajectory_keeps_the_constraints_and_follows_the_reduced_model():
         qr, vr = rk4_reduced(qr, vr, tau, dt, p)
         qs, vs = dy.step(qs, vs, tau, dt, p)
         worst_constraint = max(worst_constraint, np.abs(dy.constraint_matrix(qf, p) @ qdf).max())
-        assert np.abs(dy.constraint_matrix(qs, p) @ dy.qdot(qs, vs, p)).max() < 1e-14
+        assert np.abs(dy.constraint_matrix(qs, p) @ qdot(qs, vs, p)).max() < 1e-14
     assert worst_constraint < 1e-10
     assert np.abs(qf - qr).max() < 1e-9 and np.abs(qdf[3:] - vr).max() < 1e-8
     # the fixed-step integrator is close too (second order, dt = 2 ms)
@@ -386,7 +443,7 @@ def test_kkt_trajectory_keeps_the_constraints_and_follows_the_reduced_model():
 
 
 # --------------------------------------------------------------------------- #
-# (e) batch == scalar, (f) matrix path == closed form
+# (f) matrix path == closed form (batch == scalar: tests/test_scalar_batch_pairs.py)
 # --------------------------------------------------------------------------- #
 @SETTINGS
 @given(states, speeds, torques, robots())
@@ -394,7 +451,7 @@ def test_matrix_path_equals_closed_form(q, v, tau, p):
     a = dy.reduced_accel(q, v, tau, p)
     b = np.array(dy.reduced_accel_fast(q, v, tau, p))
     assert np.abs(a - b).max() <= 1e-12 * accel_scale(v, tau, p, q)
-    assert dy.kinetic_energy(q, dy.qdot(q, v, p), p) == pytest.approx(dy.kinetic_energy_reduced(v, p), rel=1e-12,
+    assert kinetic_energy(q, qdot(q, v, p), p) == pytest.approx(kinetic_energy_reduced(v, p), rel=1e-12,
                                                                       abs=1e-300)
 
 
@@ -407,50 +464,6 @@ def test_matrix_step_equals_fast_step(q, v, tau, dt, p):
     assert np.abs(va - np.array(vb)).max() <= 1e-12 * vscale
     qscale = np.abs(q).max() + dt * vscale * (1 + p.wheel_radius)
     assert np.abs(qa - np.array(qb)).max() <= 1e-12 * qscale
-
-
-def test_batch_equals_scalar_with_per_robot_parameters():
-    rng = np.random.default_rng(4)
-    n = 64
-    params = [random_params(rng) for _ in range(n)]
-    pb = dy.ParamBatch.from_params(params)
-    q = np.column_stack([rng.uniform(-5, 5, n), rng.uniform(-5, 5, n), rng.uniform(-40, 40, n),
-                         rng.uniform(-500, 500, n), rng.uniform(-500, 500, n)])
-    v = rng.uniform(-50, 50, (n, 2))
-    tau = rng.uniform(-0.1, 0.1, (n, 2))
-    dt = 0.004
-    acc = dy.reduced_accel_batch(q, v, tau, pb)
-    qn, vn = dy.step_batch(q, v, tau, dt, pb)
-    qdb = dy.qdot_batch(q, v, pb)
-    for i, p in enumerate(params):
-        assert pb.robot(i) == p
-        scale = accel_scale(v[i], tau[i], p, q[i])
-        assert np.abs(acc[i] - dy.reduced_accel_fast(q[i], v[i], tau[i], p)).max() <= 1e-12 * scale
-        qs, vs = dy.step(q[i], v[i], tau[i], dt, p)
-        assert np.allclose(vn[i], vs, rtol=1e-12, atol=1e-12 * (np.abs(v[i]).max() + dt * scale))
-        assert np.allclose(qn[i], qs, rtol=1e-12, atol=1e-12)
-        assert np.allclose(qdb[i], dy.qdot(q[i], v[i], p), rtol=1e-12, atol=1e-12)
-    # a shared RobotParams, a float dt, and writing in place give the same
-    qn2, vn2 = dy.step_batch(q, v, tau, dt, dy.ParamBatch.broadcast(P, n))
-    qc, vc = q.copy(), v.copy()
-    dy.step_batch(qc, vc, tau, dt, P, out=(qc, vc))
-    assert np.array_equal(qc, qn2) and np.array_equal(vc, vn2)
-    # per-robot dt
-    dts = rng.uniform(1e-3, 1e-2, n)
-    qd_, vd_ = dy.step_batch(q, v, tau, dts, pb)
-    for i in (0, 17, 63):
-        qs, vs = dy.step(q[i], v[i], tau[i], float(dts[i]), params[i])
-        assert np.allclose(qd_[i], qs, rtol=1e-12, atol=1e-12) and np.allclose(vd_[i], vs, rtol=1e-12)
-    # motors and encoders
-    i_ref = rng.uniform(-1.5, 1.5, (n, 2))
-    t_b, i_b = mo.wheel_torque_batch(i_ref, v, pb)
-    ticks = mo.encoder_ticks_batch(q[:, 3:], pb)
-    assert ticks.dtype == np.int64 and ticks.shape == (n, 2)
-    for i, p in enumerate(params):
-        for j in range(2):
-            t_s, i_s = mo.wheel_torque(i_ref[i, j], v[i, j], p)
-            assert t_b[i, j] == pytest.approx(t_s, rel=1e-12, abs=1e-15) and i_b[i, j] == pytest.approx(i_s, rel=1e-12)
-            assert ticks[i, j] == mo.encoder_ticks(q[i, 3 + j], p)
 
 
 def test_param_batch_from_vectors():
@@ -536,7 +549,7 @@ def test_no_chatter_at_rest_with_zero_reference():
     assert 5e-3 < dt_max < 1e-2
     for v0 in ((0.05, -0.05), (0.08, 0.06), (3.0, -2.0)):
         _q, hist = _coast(v0, 0.9 * dt_max)
-        energy = [dy.kinetic_energy_reduced(v, P) for v in hist]
+        energy = [kinetic_energy_reduced(v, P) for v in hist]
         assert np.all(np.diff(energy) <= 0)  # friction only takes energy out
         for j in range(2):
             # at most one zero crossing per wheel (the offset COM turns spin into forward speed: a
@@ -567,4 +580,22 @@ def test_encoder_ticks_floor_toward_minus_infinity(k, frac, tpr):
     theta = (k + frac) * 2 * math.pi / tpr
     assert mo.encoder_ticks(theta, p) == k
     assert mo.encoder_ticks_batch(np.array([theta]), p)[0] == k
-    assert mo.encoder_angle(k, p) <= theta < mo.encoder_angle(k + 1, p)
+    # encoder_angle(k) is the centre of tick k: half a tick above its lower edge
+    assert mo.encoder_angle(k, p) == pytest.approx((k + 0.5) * 2 * math.pi / tpr, rel=1e-15, abs=1e-15)
+
+
+@pytest.mark.parametrize("tpr", [1200.0, 48.0, 4096.0, 1000.0])
+def test_encoder_angle_round_trips_for_every_count(tpr):
+    """encoder_ticks(encoder_angle(k)) == k for every k in -10^6..10^6, scalar and batch (the lower
+    edge of the tick, k 2 pi / tpr, came back as k - 1 for ~17 % of k at 1200 ticks/rev)."""
+    p = P.replace(ticks_per_rev=tpr)
+    k = np.arange(-10**6, 10**6 + 1)
+    assert np.array_equal(mo.encoder_ticks_batch(mo.encoder_angle_batch(k, p), p), k)
+    pb = dy.ParamBatch.broadcast(p, 2)
+    k2 = np.stack([k, k[::-1]])  # (2, n): one row per robot of the ParamBatch
+    assert np.array_equal(mo.encoder_ticks_batch(mo.encoder_angle_batch(k2, pb), pb), k2)
+    if tpr == 1200.0:  # the scalar path for every k (2e6 calls, ~1 s)
+        ticks, angle = mo.encoder_ticks, mo.encoder_angle
+        assert all(ticks(angle(j, p), p) == j for j in range(-10**6, 10**6 + 1))
+        # and the old lower edge did fail, so this test can see the fault
+        assert sum(ticks(j * 2 * math.pi / tpr, p) != j for j in range(-10**4, 10**4)) > 1000

@@ -1,8 +1,9 @@
 """The fuzzy controller (firmware/fuzzy.py) against a peer library, the paper, and its docs.
 
 The peer is simpful (zero-order Sugeno): the same rule base built there by
-tools/bench_fuzzy.build_simpful, with the circular weights recomputed in
-floating point from the sensor geometry.  simpful's Sugeno output is
+tools/bench_fuzzy.build_simpful, with the circular weights taken from the
+floating-point geometry (host_sim/fuzzy_rulebase.circular_weight), which is
+checked here against the firmware's integer direction_weight.  simpful's Sugeno output is
 sum(w*z)/sum(w) over the rules, each rule separately, which is what the
 firmware computes, so the two may differ only by the firmware's fixed point:
 
@@ -36,8 +37,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from firmware import fuzzy as fz
+from host_sim import fuzzy_rulebase as rb
+from host_sim.fuzzy_rulebase import SENSOR_BEARINGS, circular_weight, singletons
 from tools import fuzzy_rules as fr
-from tools.bench_fuzzy import build_simpful, circular_weight, random_readings, singletons
+from tools.bench_fuzzy import build_simpful, random_readings
 
 ROOT = Path(__file__).resolve().parents[1]
 N_VECTORS = 10_000
@@ -119,7 +122,7 @@ def test_matches_simpful_within_fixed_point_resolution(rule_set: int, vectors: l
         diffs[k] = (ctl.left - sl, ctl.right - sr)
         mismatched_rounding += (ctl.left, ctl.right) != (int(np.floor(sl + 0.5)), int(np.floor(sr + 0.5)))
     worst = np.abs(diffs).max(axis=0)
-    print(f"\n{fr.RULE_SET_NAMES[rule_set]}: max |firmware - simpful| over {len(vectors)} vectors: "
+    print(f"\n{rb.RULE_SET_NAMES[rule_set]}: max |firmware - simpful| over {len(vectors)} vectors: "
           f"left {worst[0]:.4f}, right {worst[1]:.4f} mm/s; "
           f"a-priori bound {a_priori_bound(rule_set, 0):.3f} / {a_priori_bound(rule_set, 1):.3f}; "
           f"{mismatched_rounding} vectors where simpful rounded half up differs")
@@ -143,13 +146,25 @@ def test_firmware_is_exact_rational_arithmetic_rounded_half_up(rule_set: int, ve
 
 
 def test_circular_weights_match_the_geometry() -> None:
+    """The firmware's integer weights are the library's float sets at the sensors' bearings
+    (the float sets feed the simpful peer above, so this ties the peer to the firmware)."""
     for d in range(4):
         for i in range(fz.N_SENSORS):
-            assert fz.direction_weight(d, i) == round(fz.ONE * circular_weight(d, i))
-            assert circular_weight(d, i) == fr.circular_weight(d, 45 * i)
+            assert fz.direction_weight(d, i) == round(fz.ONE * circular_weight(d, SENSOR_BEARINGS[i]))
     # Every sensor belongs to the four directions with total weight 1.
     for i in range(fz.N_SENSORS):
         assert sum(fz.direction_weight(d, i) for d in range(4)) == fz.ONE
+
+
+@pytest.mark.parametrize("direction, bearing, weight", [
+    (0, 0.0, 1.0), (0, 45.0, 0.5), (0, 315.0, 0.5), (0, 22.5, 0.75), (0, -22.5, 0.75),
+    (0, 90.0, 0.0), (0, 180.0, 0.0), (1, 90.0, 1.0), (1, 135.0, 0.5), (2, 180.0, 1.0),
+    (3, 270.0, 1.0), (3, 0.0, 0.0), (3, 337.5, 0.25), (3, 630.0, 1.0),
+])
+def test_circular_sets_are_triangles_of_half_width_90_degrees(direction: int, bearing: float,
+                                                              weight: float) -> None:
+    """The float sets by hand (paper Fig. 16): bearings between the sensors and past 360 too."""
+    assert circular_weight(direction, bearing) == pytest.approx(weight)
 
 
 def test_simpful_takes_max_of_min_for_the_circular_sets() -> None:
@@ -285,11 +300,11 @@ PAPER_REFINED = [
 
 
 def test_names_follow_the_firmware_tables_and_the_paper() -> None:
-    assert [fr.describe_rule(a, act) for a, act in fz.RULES_FIRST] == PAPER_FIRST
-    assert [fr.describe_rule(a, act) for a, act in fz.RULES_REFINED] == PAPER_REFINED
-    z = dict(zip(fr.TERM_NAMES, singletons(MAX_SPEED)))
+    assert [rb.describe_rule(a, act) for a, act in fz.RULES_FIRST] == PAPER_FIRST
+    assert [rb.describe_rule(a, act) for a, act in fz.RULES_REFINED] == PAPER_REFINED
+    z = dict(zip(rb.TERM_NAMES, singletons(MAX_SPEED)))
     assert z["full_back"] < z["back"] < 0 < z["slow"] < z["ahead"] < z["fast"]
-    for name, (lt, rt) in zip(fr.ACTION_NAMES, fz.ACTIONS):
+    for name, (lt, rt) in zip(rb.ACTION_NAMES, fz.ACTIONS):
         left, right = singletons(MAX_SPEED)[lt], singletons(MAX_SPEED)[rt]
         if "right" in name:
             assert left > right, name
@@ -343,12 +358,12 @@ def compile_fcl(text: str):  # type: ignore[no-untyped-def]
 
 @BOTH
 def test_fcl_contains_every_rule_and_computes_the_same(rule_set: int, vectors: list[list[int]]) -> None:
-    text = fr.to_fcl(rule_set, MAX_SPEED)
+    text = rb.to_fcl(rule_set, MAX_SPEED)
     assert text.startswith("(*") and "FUNCTION_BLOCK twinbot_" in text and text.rstrip().endswith("END_FUNCTION_BLOCK")
     rules = re.findall(r"RULE (\d+) : IF (.*?) THEN left IS (\w+), right IS (\w+);", text)
     assert [int(k) for k, *_ in rules] == list(range(1, len(fz.RULE_SETS[rule_set]) + 1))
     for (_k, cond, lt, rt), (antecedent, action) in zip(rules, fz.RULE_SETS[rule_set]):
-        assert (lt, rt) == tuple(fr.TERM_NAMES[t] for t in fz.ACTIONS[action])
+        assert (lt, rt) == tuple(rb.TERM_NAMES[t] for t in fz.ACTIONS[action])
         if antecedent < fz.N_SENSORS:
             assert cond == f"s{antecedent + 1} IS near"
         elif antecedent == fz.ALWAYS:
@@ -364,7 +379,7 @@ def test_fcl_contains_every_rule_and_computes_the_same(rule_set: int, vectors: l
 
 
 def test_fcl_scales_with_max_speed() -> None:
-    text = fr.to_fcl(REFINED, 150)
+    text = rb.to_fcl(REFINED, 150)
     assert "TERM fast := 150;" in text and "TERM full_back := -150;" in text
     assert "TERM slow := 22;" in text  # 15 % of 150 = 22.5, truncated like the firmware
 
@@ -393,7 +408,7 @@ def test_cli(capsys: pytest.CaptureFixture[str]) -> None:
     assert "quick turn left" in out and "| 11 |" in out
     out = _cli(["--rules", "first"], capsys)
     assert "front = max(S1, min(S2, 1/2), min(S8, 1/2))" in out
-    assert _cli(["--rules", "first", "--fcl"], capsys) == fr.to_fcl(FIRST)
+    assert _cli(["--rules", "first", "--fcl"], capsys) == rb.to_fcl(FIRST)
     out = _cli(["--eval", "0", "1000", "0", "0", "0", "0", "0", "0"], capsys)
     assert out.rstrip().endswith(f"left = {infer(REFINED, only(1))[0]} mm/s, right = {infer(REFINED, only(1))[1]} mm/s")
     out = _cli(["--max-speed", "100", "--eval", *["0"] * 8], capsys)
@@ -403,7 +418,7 @@ def test_cli(capsys: pytest.CaptureFixture[str]) -> None:
 def test_docs_hold_the_current_tables_and_figure() -> None:
     doc = (ROOT / "docs" / "fuzzy.md").read_text(encoding="utf-8")
     for rs in (FIRST, REFINED):
-        assert fr.rule_table(rs) in doc
+        assert rb.rule_table(rs) in doc
     assert "fuzzy.png" in doc and (ROOT / "docs" / "fuzzy.png").exists()
 
 

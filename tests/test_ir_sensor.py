@@ -228,11 +228,11 @@ def test_bad_parameters_are_refused():
 # --------------------------------------------------------------------------- tools
 def test_plot_sensor_cli_writes_the_figures(tmp_path):
     pytest.importorskip("matplotlib")
-    from tools import plot_sensor
+    from tools import plot
 
     parser = argparse.ArgumentParser()
-    plot_sensor.register(parser.add_subparsers(), "sensor", "sensor figures")
-    args = parser.parse_args(["sensor", "--out", str(tmp_path)])
+    plot.register(parser.add_subparsers(), "plot", "figures")
+    args = parser.parse_args(["plot", "sensor", "--out", str(tmp_path)])
     assert args.func(args) == 0
     names = sorted(p.name for p in tmp_path.iterdir())
     assert names == ["fig10_power.png", "fig11_3d_L27.png", "fig12_3d_L78.png", "fig7_angle.png",
@@ -245,3 +245,43 @@ def test_bench_reports_timings():
 
     out = bench(repeats=3, batch=50)
     assert out["read_us"] > 0 and out["batch_reads_per_s"] > 0 and out["ray_cast_us"] > 0
+
+
+# --------------------------------------------------------------------------- the beam option
+BEAM = P.replace(ir_beam_rays=5, ir_beam_half_angle=0.35)
+
+
+def test_beam_batch_equals_single():
+    w = builtin_world("paper_room")
+    rng = np.random.default_rng(11)
+    poses = np.column_stack([rng.uniform(0.1, 1.9, 64), rng.uniform(0.1, 1.4, 64), rng.uniform(-4, 4, 64)])
+    power = rng.uniform(10, 100, 64)
+    off_b, on_b = ir.read_sensors_batch(w, poses, power, 0.0, BEAM)
+    single = np.array([ir.read_sensors(w, poses[i], float(power[i]), 0.0, BEAM)[1] for i in range(64)])
+    assert np.abs(single - on_b).max() <= 1 and (single == on_b).mean() > 0.99  # 1 count at a rounding tie
+    assert not np.array_equal(on_b, ir.read_sensors_batch(w, poses, power, 0.0, P)[1])  # the beam is on
+    noisy = ir.read_sensors(w, poses[0], 60.0, 0.0, BEAM, np.random.default_rng(3))
+    batch = ir.read_sensors_batch(w, poses[:1], 60.0, 0.0, BEAM, np.random.default_rng(3))
+    assert np.abs(noisy[1] - batch[1][0]).max() <= 1
+
+
+def test_beam_sees_a_corner_between_two_sensor_axes():
+    """A box corner at 22.5 degrees, between S1 and S2: invisible to single rays, seen by the beam."""
+    bearing, reach, half = math.radians(22.5), 0.10, 0.02  # the corner 4 cm from the rim; the box 2 cm half-diagonal
+    cx, cy = 1.0 + (reach + half) * math.cos(bearing), 1.0 + (reach + half) * math.sin(bearing)
+    corner = [[cx + half * math.cos(bearing + math.pi + k * math.pi / 2), cy + half * math.sin(bearing + math.pi + k * math.pi / 2)]
+              for k in range(4)]  # a square whose first corner points back at the robot
+    w = room([{"polygon": corner}])
+    off, on = ir.read_sensors(w, (1.0, 1.0, 0.0), 60, 0.0, P)
+    assert (on - off)[:2].max() == 0  # neither S1's nor S2's axis meets it
+    off, on = ir.read_sensors(w, (1.0, 1.0, 0.0), 60, 0.0, BEAM)
+    assert (on - off)[0] > 40 and (on - off)[1] > 40  # firmware NEAR_LO: both see an obstacle
+    off_b, on_b = ir.read_sensors_batch(w, np.array([[1.0, 1.0, 0.0]]), 60, 0.0, BEAM)
+    assert np.abs(on_b[0] - on).max() <= 1
+
+
+def test_beam_parameters_are_checked():
+    with pytest.raises(ValueError, match="ir_beam_rays"):
+        ir.response(0.1, 0, 60, P.replace(ir_beam_rays=2.5))
+    with pytest.raises(ValueError, match="ir_beam_half_angle"):
+        ir.response(0.1, 0, 60, P.replace(ir_beam_rays=3, ir_beam_half_angle=2.0))

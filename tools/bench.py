@@ -12,6 +12,8 @@ import importlib
 import textwrap
 from typing import Any
 
+from tools.arguments import help_and_error
+
 # (name, module, what it measures).
 BENCHMARKS = (
     ("protocol", "tools.bench_protocol",
@@ -49,7 +51,6 @@ def register(subparsers: Any, name: str, summary: str) -> None:
         importlib.import_module(module_name).register(sub, bench_name, bench_summary)
 
     def no_benchmark(args: argparse.Namespace) -> int:
-        parser.print_help()
-        return 2
+        return help_and_error(parser, "BENCHMARK", [b[0] for b in BENCHMARKS])
 
     parser.set_defaults(func=no_benchmark)

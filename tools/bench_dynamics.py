@@ -37,6 +37,35 @@ def _median_time(fn: Callable[[int], None], n: int, repeats: int = 5) -> float:
 
 
 def bench(n_steps: int = 20_000) -> dict[str, Any]:
+    fast, fast_motors, accel, matrix = _scalar_loops()
+    batch, batch_motors = _batch_loops()
+    n_matrix = max(1, n_steps // 50)
+    n_batch = max(1, n_steps // 50)
+    fast_s = _median_time(fast, n_steps) / n_steps
+    fast_m_s = _median_time(fast_motors, n_steps) / n_steps
+    out: dict[str, Any] = {
+        "python": sys.version.split()[0],
+        "machine": platform.machine(),
+        "dt_s": DT,
+        "fast_step_us": fast_s * 1e6,
+        "fast_step_motors_us": fast_m_s * 1e6,
+        "accel_fast_us": _median_time(accel, n_steps) / n_steps * 1e6,
+        "matrix_step_us": _median_time(matrix, n_matrix) / n_matrix * 1e6,
+        "batch_n": N_BATCH,
+        "batch_robot_steps_per_s": N_BATCH * n_batch / _median_time(batch, n_batch),
+        "batch_motors_robot_steps_per_s": N_BATCH * n_batch / _median_time(batch_motors, n_batch),
+        "realtime_factor_fast_step": DT / fast_s,
+        "realtime_factor_fast_step_motors": DT / fast_m_s,
+    }
+    out["matrix_over_fast"] = out["matrix_step_us"] / out["fast_step_us"]
+    return out
+
+
+Loop = Callable[[int], None]
+
+
+def _scalar_loops() -> tuple[Loop, Loop, Loop, Loop]:
+    """One robot, n steps: the fast step, with the motors, the acceleration alone, the matrix step."""
     import numpy as np
 
     from host_sim import dynamics as dy
@@ -68,6 +97,17 @@ def bench(n_steps: int = 20_000) -> dict[str, Any]:
         for _ in range(n):
             qa, va = dy.step_matrix(qa, va, tau, DT, P)
 
+    return fast, fast_motors, accel, matrix
+
+
+def _batch_loops() -> tuple[Loop, Loop]:
+    """N_BATCH robots of varied mass and centre of mass, n steps: without and with the motors."""
+    import numpy as np
+
+    from host_sim import dynamics as dy
+    from host_sim import motors as mo
+    from host_sim.params import DEFAULT as P
+
     rng = np.random.default_rng(0)
     pb = dy.ParamBatch.from_params([P.replace(com_offset=float(d), body_mass=float(m))
                                     for d, m in zip(rng.uniform(0, 0.03, N_BATCH), rng.uniform(0.4, 0.5, N_BATCH))])
@@ -87,26 +127,7 @@ def bench(n_steps: int = 20_000) -> dict[str, Any]:
             t, _i = mo.wheel_torque_batch(i_ref, v, pb)
             dy.step_batch(q, v, t, DT, pb, out=(q, v))
 
-    n_matrix = max(1, n_steps // 50)
-    n_batch = max(1, n_steps // 50)
-    fast_s = _median_time(fast, n_steps) / n_steps
-    fast_m_s = _median_time(fast_motors, n_steps) / n_steps
-    out: dict[str, Any] = {
-        "python": sys.version.split()[0],
-        "machine": platform.machine(),
-        "dt_s": DT,
-        "fast_step_us": fast_s * 1e6,
-        "fast_step_motors_us": fast_m_s * 1e6,
-        "accel_fast_us": _median_time(accel, n_steps) / n_steps * 1e6,
-        "matrix_step_us": _median_time(matrix, n_matrix) / n_matrix * 1e6,
-        "batch_n": N_BATCH,
-        "batch_robot_steps_per_s": N_BATCH * n_batch / _median_time(batch, n_batch),
-        "batch_motors_robot_steps_per_s": N_BATCH * n_batch / _median_time(batch_motors, n_batch),
-        "realtime_factor_fast_step": DT / fast_s,
-        "realtime_factor_fast_step_motors": DT / fast_m_s,
-    }
-    out["matrix_over_fast"] = out["matrix_step_us"] / out["fast_step_us"]
-    return out
+    return batch, batch_motors
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -24,6 +24,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 from firmware.manifest import BOARD_FILES
 from host_sim.micropython_tools import REPO_ROOT, mpy_cross_compile, run_micropython
@@ -37,9 +38,13 @@ TARGET_SPEEDUP = 30
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
     p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1],
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--cycles", type=int, default=5000, help="cycles timed under MicroPython (default 5000)")
-    p.add_argument("--repeats", type=int, default=2000, help="timed calls per fuzzy engine (default 2000)")
-    p.add_argument("--json", metavar="FILE", help="write every figure here")
+    from tools.arguments import int_range, output_file
+
+    p.add_argument("--cycles", type=int_range(1, 10_000_000), default=5000,
+                   help="cycles timed under MicroPython (default 5000)")
+    p.add_argument("--repeats", type=int_range(1, 10_000_000), default=2000,
+                   help="timed calls per fuzzy engine (default 2000)")
+    p.add_argument("--json", metavar="FILE", type=output_file, help="write every figure here")
     p.set_defaults(func=run)
 
 
@@ -127,10 +132,31 @@ def run(args: argparse.Namespace) -> int:
     except ImportError as exc:
         fuzzy = {"error": str(exc)}
 
-    parts = mp["parts_us"]
-    assert isinstance(parts, dict)
     print("twinbot bench firmware")
     print(f"command:     {command}")
+    _print_cycle(mp, heap, cp_cycle)
+    print()
+    speedup = None
+    if "error" in fuzzy:
+        print(f"fuzzy peers: not measured ({fuzzy['error']})")
+    else:
+        print(fuzzy.get("table", ""))
+        speedup = fuzzy.get("speedup_vs_fastest_peer")
+    print()
+    _print_targets(mp, heap, speedup)
+    print(f"\nelapsed: {time.monotonic() - t_start:.1f} s")
+    if args.json:
+        Path(args.json).write_text(json.dumps({
+            "command": command, "micropython": mp, "heap": heap, "cpython_cycle_us": cp_cycle,
+            "fuzzy": {k: v for k, v in fuzzy.items() if k != "table"},
+        }, indent=2, default=str))
+    return 0
+
+
+def _print_cycle(mp: dict[str, Any], heap: dict[str, Any], cp_cycle: float) -> None:
+    """The machine, then the control cycle's time, parts, allocation and heap."""
+    parts = mp["parts_us"]
+    assert isinstance(parts, dict)
     print(f"machine:     {platform.platform()}, {platform.processor() or platform.machine()}")
     print(f"python:      CPython {platform.python_version()}")
     print(f"micropython: MicroPython {mp['micropython']} unix port (64-bit)")
@@ -141,20 +167,15 @@ def run(args: argparse.Namespace) -> int:
     print("  parts, us per call: " + ", ".join(f"{k} {v:.1f}" for k, v in parts.items()))
     print(f"  heap allocated per cycle: {mp['alloc_bytes_per_cycle']:.2f} B; "
           f"cycles under heap_lock(): {'ok' if mp['heap_locked_cycles_ok'] else 'ALLOCATED'}")
-    print(f"  heap, all firmware modules from .mpy + a running Robot: {int(heap['in_use_bytes']) / 1024:.1f} KB "  # type: ignore[call-overload]
+    print(f"  heap, all firmware modules from .mpy + a running Robot: {int(heap['in_use_bytes']) / 1024:.1f} KB "
           f"in use; smallest -X heapsize that runs it: {heap['smallest_heap_kb']} KB")
     print(f"CPython {platform.python_version()}: one control cycle, median {cp_cycle:.1f} us")
-    print()
-    speedup = None
-    if "error" in fuzzy:
-        print(f"fuzzy peers: not measured ({fuzzy['error']})")
-    else:
-        print(fuzzy.get("table", ""))
-        speedup = fuzzy.get("speedup_vs_fastest_peer")
-    cycle_ok = mp["cycle_us_median"] <= TARGET_CYCLE_US  # type: ignore[operator]
+
+
+def _print_targets(mp: dict[str, Any], heap: dict[str, Any], speedup: float | None) -> None:
+    cycle_ok = mp["cycle_us_median"] <= TARGET_CYCLE_US
     alloc_ok = mp["alloc_bytes_per_cycle"] == 0 and mp["heap_locked_cycles_ok"]
-    heap_ok = heap["smallest_heap_kb"] <= TARGET_HEAP_KB  # type: ignore[operator]
-    print()
+    heap_ok = heap["smallest_heap_kb"] <= TARGET_HEAP_KB
     print("targets:")
     print(f"  [{'MET' if cycle_ok else 'MISSED'}]  cycle <= {TARGET_CYCLE_US} us on the unix port: "
           f"median {mp['cycle_us_median']} us")
@@ -164,10 +185,3 @@ def run(args: argparse.Namespace) -> int:
     if speedup is not None:
         print(f"  [{'MET' if speedup >= TARGET_SPEEDUP else 'MISSED'}]  one inference >= {TARGET_SPEEDUP}x faster than "
               f"the fastest peer on CPython: {speedup:.0f}x")
-    print(f"\nelapsed: {time.monotonic() - t_start:.1f} s")
-    if args.json:
-        Path(args.json).write_text(json.dumps({
-            "command": command, "micropython": mp, "heap": heap, "cpython_cycle_us": cp_cycle,
-            "fuzzy": {k: v for k, v in fuzzy.items() if k != "table"},
-        }, indent=2, default=str))
-    return 0

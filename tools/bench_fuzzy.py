@@ -20,10 +20,11 @@ not installed is listed under "unavailable" with the reason.
 
 The peer builds live here so that tests/test_fuzzy_peer.py checks exactly
 the simpful build that is timed.  They take the rule base from the firmware
-tables but recompute the circular weights in floating point from the
-geometry (sensor i at 45*i degrees, triangles of half-width 90 degrees), and
-express them as min(near, weight) with a constant input ("bias"), so the
-firmware's integer direction_weight is checked, not copied.
+tables but take the circular weights from the floating-point geometry
+(host_sim/fuzzy_rulebase.circular_weight: sensor i at 45*i degrees,
+triangles of half-width 90 degrees), and express them as min(near, weight)
+with a constant input ("bias"), so the firmware's integer direction_weight
+is checked, not copied.
 """
 from __future__ import annotations
 
@@ -37,7 +38,7 @@ import warnings
 from typing import Any, Callable
 
 from firmware import fuzzy as fz
-from tools.fuzzy_rules import RULE_SET_NAMES, TERM_NAMES, singletons
+from host_sim.fuzzy_rulebase import RULE_SET_NAMES, SENSOR_BEARINGS, TERM_NAMES, circular_weight, singletons
 
 Infer = Callable[[list[int]], tuple[float, float]]
 MAX_READING = 4095  # 12-bit ADC
@@ -46,12 +47,6 @@ MAX_READING = 4095  # 12-bit ADC
 # --------------------------------------------------------------------------- #
 # The rule base, independently of the firmware's integer arithmetic
 # --------------------------------------------------------------------------- #
-def circular_weight(direction: int, sensor: int) -> float:
-    """Weight of sensor i (bearing 45*i deg) in direction d (bearing 90*d deg)."""
-    diff = abs((45.0 * sensor - 90.0 * direction + 180.0) % 360.0 - 180.0)
-    return max(0.0, 1.0 - diff / 90.0)
-
-
 def peer_rules(rule_set: int) -> list[tuple[list[tuple[int, float]] | None, int, int]]:
     """(disjuncts, left term, right term) per firmware rule; disjuncts None = always.
 
@@ -67,7 +62,8 @@ def peer_rules(rule_set: int) -> list[tuple[list[tuple[int, float]] | None, int,
             disj = [(antecedent, 1.0)]
         else:
             d = antecedent - fz.N_SENSORS
-            disj = [(i, circular_weight(d, i)) for i in range(fz.N_SENSORS) if circular_weight(d, i) > 0]
+            weights = [circular_weight(d, bearing) for bearing in SENSOR_BEARINGS]
+            disj = [(i, w) for i, w in enumerate(weights) if w > 0]
         out.append((disj, lt, rt))
     return out
 
@@ -298,8 +294,6 @@ def bench_inference(repeats: int = 1000, max_speed: int = 200, seed: int = 1,
     "speedup_vs_fastest_peer": the smaller of the two (None without peers),
     "table": format_table() of all that, ...}.
     """
-    import importlib.metadata as md
-
     import numpy as np
 
     if repeats < 1:
@@ -312,6 +306,18 @@ def bench_inference(repeats: int = 1000, max_speed: int = 200, seed: int = 1,
         "machine": f"{platform.machine()} {platform.processor() or ''}".strip(),
         "engines": {}, "unavailable": {}, "fastest_peer": {}, "speedup": {},
     }
+    ours, reference = _time_firmware(vectors, max_speed)
+    result["engines"]["twinbot"] = ours
+    _time_peers(result, vectors[:peer_repeats],
+                {rs: ref[:peer_repeats] for rs, ref in reference.items()}, max_speed)
+    _rank_peers(result)
+    result["table"] = format_table(result)
+    return result
+
+
+def _time_firmware(vectors: list[list[int]], max_speed: int
+                   ) -> tuple[dict[str, Any], dict[str, list[tuple[float, float]]]]:
+    """The firmware engine's entry, and its setpoints per rule set (the peers' reference)."""
     reference: dict[str, list[tuple[float, float]]] = {}
     ours: dict[str, Any] = {"version": "firmware/fuzzy.py", "kind": "integer zero-order Sugeno",
                             "us": {}, "max_diff_mm_s": {}}
@@ -320,7 +326,13 @@ def bench_inference(repeats: int = 1000, max_speed: int = 200, seed: int = 1,
         reference[rs_name] = [infer(v) for v in vectors]
         ours["us"][rs_name], _ = _time(infer, vectors, None)
         ours["max_diff_mm_s"][rs_name] = 0.0
-    result["engines"]["twinbot"] = ours
+    return ours, reference
+
+
+def _time_peers(result: dict[str, Any], vectors: list[list[int]],
+                reference: dict[str, list[tuple[float, float]]], max_speed: int) -> None:
+    """Time each peer into result["engines"], or say in result["unavailable"] why not."""
+    import importlib.metadata as md
 
     for name, dist, build, kind in PEERS:
         try:
@@ -330,7 +342,7 @@ def bench_inference(repeats: int = 1000, max_speed: int = 200, seed: int = 1,
                 warnings.simplefilter("ignore", DeprecationWarning)
                 for rs, rs_name in enumerate(RULE_SET_NAMES):
                     infer = build(rs, max_speed)
-                    us, diff = _time(infer, vectors[:peer_repeats], reference[rs_name][:peer_repeats])
+                    us, diff = _time(infer, vectors, reference[rs_name])
                     entry["us"][rs_name] = us
                     entry["max_diff_mm_s"][rs_name] = diff
         except Exception as exc:  # not installed, or broken against this numpy
@@ -338,6 +350,10 @@ def bench_inference(repeats: int = 1000, max_speed: int = 200, seed: int = 1,
             continue
         result["engines"][name] = entry
 
+
+def _rank_peers(result: dict[str, Any]) -> None:
+    """The fastest peer per rule set and the firmware's speedup over it."""
+    ours = result["engines"]["twinbot"]
     for rs_name in RULE_SET_NAMES:
         peers = {n: e["us"][rs_name] for n, e in result["engines"].items() if n != "twinbot"}
         if peers:
@@ -345,8 +361,6 @@ def bench_inference(repeats: int = 1000, max_speed: int = 200, seed: int = 1,
             result["fastest_peer"][rs_name] = best
             result["speedup"][rs_name] = peers[best] / ours["us"][rs_name]
     result["speedup_vs_fastest_peer"] = min(result["speedup"].values()) if result["speedup"] else None
-    result["table"] = format_table(result)
-    return result
 
 
 def format_table(res: dict[str, Any]) -> str:

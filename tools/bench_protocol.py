@@ -24,8 +24,11 @@ imports (pymavlink) happen inside the functions, not at import time.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
+import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
@@ -72,25 +75,23 @@ MAVLINK_MSG_ID = 42042  # > 255: a MAVLink-2-only message id
 _MAV_TYPES = {"B": "uint8_t", "b": "int8_t", "H": "uint16_t", "h": "int16_t", "I": "uint32_t", "i": "int32_t"}
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
-    return value
+def _json_path(text: str) -> Path:
+    from tools.arguments import output_file
+
+    return Path(output_file(text))
 
 
 def register(subparsers: Any, name: str, summary: str) -> None:
     p = subparsers.add_parser(
         name, help=summary, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    p.add_argument("--frames", type=_positive_int, default=20000, metavar="N",
+    from tools.arguments import int_range
+
+    p.add_argument("--frames", type=int_range(1, 10_000_000), default=20000, metavar="N",
                    help="TELEMETRY frames per run (default 20000)")
-    p.add_argument("--repeats", type=_positive_int, default=5, metavar="R",
+    p.add_argument("--repeats", type=int_range(1, 1000), default=5, metavar="R",
                    help="runs per measurement; the median is reported (default 5)")
-    p.add_argument("--json", type=Path, metavar="FILE", help="also write every figure to FILE as JSON")
+    p.add_argument("--json", type=_json_path, metavar="FILE", help="also write every figure to FILE as JSON")
     p.set_defaults(func=run)
 
 
@@ -254,8 +255,6 @@ def generate_mavlink(msg_type: int, workdir: Path) -> tuple[Any, type]:
 
 def run_micropython_part(frames: int, repeats: int, workdir: Path) -> dict[str, Any]:
     """Run tools/mp_bench_protocol.py; return its figures plus the chunk it encoded."""
-    import json
-
     from host_sim.micropython_tools import REPO_ROOT, run_micropython
 
     chunk_file = workdir / "mp_chunk.bin"
@@ -278,39 +277,85 @@ def run_micropython_part(frames: int, repeats: int, workdir: Path) -> dict[str, 
 
 
 def run(args: argparse.Namespace) -> int:
-    import json
-    import tempfile
-
-    from protocol import messages
-    from protocol.framing import FrameDecoder, FrameEncoder
-    from tools.cli import CliError
-    from tools.mp_bench_protocol import telemetry_values
-
     n: int = args.frames
     repeats: int = args.repeats
-    mtype = messages.TELEMETRY
-    layout = _layout(mtype)
-    names = [f[0] for f in layout]
-    plen = messages.PAYLOAD_SIZE[mtype]
     command = f"twinbot bench protocol --frames {n} --repeats {repeats}"
     if args.json:
         command += f" --json {args.json}"
     t_start = time.perf_counter()
 
+    work = telemetry_workload(n)
+    results, stream = _bench_ours_cpython(work, repeats)
+    with tempfile.TemporaryDirectory(prefix="twinbot-bench-") as tmp:
+        workdir = Path(tmp)
+        results["pymavlink_cpython"] = _bench_pymavlink(work, repeats, workdir)
+        mp, mp_error = _bench_micropython(work, repeats, workdir, stream)
+    if mp is not None:
+        results["twinbot_micropython"] = mp
+
+    machine = _machine()
+    machine["micropython"] = (f"MicroPython {mp['version']} ({mp['sys_version']}; {mp['machine']})"
+                              if mp is not None else None)
+    report = {
+        "command": command,
+        "machine": machine,
+        "frames": n,
+        "repeats": repeats,
+        "message": "TELEMETRY",
+        "payload_bytes": work.payload_bytes,
+        "results": results,
+        "targets": _targets(results, mp, mp_error),
+        "elapsed_s": time.perf_counter() - t_start,
+    }
+    print_report(report, mp_error)
+    if args.json:
+        _write_json(args.json, report)
+    return 0 if mp is not None else 1
+
+
+@dataclass
+class Workload:
+    """The messages every implementation encodes and decodes: n TELEMETRY frames' values."""
+
+    msg_type: int
+    names: list[str]  # the fields, in layout order
+    payload_bytes: int
+    fields: list[tuple[Any, ...]]  # per frame, one value per field (arrays as tuples), as both APIs take them
+
+    @property
+    def n(self) -> int:
+        return len(self.fields)
+
+    def as_dicts(self) -> list[dict[str, Any]]:
+        return [dict(zip(self.names, f)) for f in self.fields]
+
+
+def telemetry_workload(n: int) -> Workload:
+    from protocol import messages
+    from tools.mp_bench_protocol import telemetry_values
+
+    mtype = messages.TELEMETRY
+    layout = _layout(mtype)
     _progress(f"building {n} TELEMETRY frames' values")
-    flat = [telemetry_values(k) for k in range(n)]
-    fields = [_split_fields(layout, v) for v in flat]  # one value per field, as both APIs take them
+    fields = [_split_fields(layout, telemetry_values(k)) for k in range(n)]
+    return Workload(mtype, [f[0] for f in layout], messages.PAYLOAD_SIZE[mtype], fields)
 
-    results: dict[str, Any] = {}
 
-    # ---- ours, CPython: encode
+def _bench_ours_cpython(work: Workload, repeats: int) -> tuple[dict[str, Any], bytes]:
+    """Our encode and decode on CPython, full and framing only; returns (results, the wire stream)."""
+    from protocol import messages
+    from protocol.framing import FrameEncoder
+    from tools.cli import CliError
+
+    mtype, n = work.msg_type, work.n
+
     def our_encode() -> list[bytes]:
         enc = FrameEncoder()
         pack, encode = messages.pack_payload, enc.encode
-        return [encode(mtype, pack(mtype, dict(zip(names, f)))) for f in fields]
+        return [encode(mtype, pack(mtype, dict(zip(work.names, f)))) for f in work.fields]
 
     t_enc, frames = _time_runs("CPython twinbot encode (pack_payload + encode)", repeats, our_encode)
-    payloads = [messages.pack_payload(mtype, dict(zip(names, f))) for f in fields]
+    payloads = [messages.pack_payload(mtype, d) for d in work.as_dicts()]
     stream = b"".join(frames)
 
     def our_frame_encode() -> list[bytes]:
@@ -322,16 +367,30 @@ def run(args: argparse.Namespace) -> int:
     if frames2 != frames:
         raise CliError("framing-only encode differs from pack_payload + encode")
     del frames2
+    t_dec, t_fdec = _time_our_decode(work, repeats, stream, payloads)
 
-    # ---- ours, CPython: decode
+    ours_over = _overhead([len(f) for f in frames], [len(p) for p in payloads])
+    full = {"encode": _rates(t_enc, n, len(stream)), "decode": _rates(t_dec, n, len(stream))}
+    framing = {"encode": _rates(t_fenc, n, len(stream)), "decode": _rates(t_fdec, n, len(stream))}
+    common = {"wire_bytes": len(stream), "overhead_bytes_per_frame": ours_over}
+    return {"twinbot_cpython": full | common, "twinbot_cpython_framing_only": framing | common}, stream
+
+
+def _time_our_decode(work: Workload, repeats: int, stream: bytes, payloads: list[bytes]
+                     ) -> tuple[list[float], list[float]]:
+    """Time decode_all + unpack_payload, then decode_all alone; check both give back what was encoded."""
+    from protocol import messages
+    from protocol.framing import FrameDecoder
+    from tools.cli import CliError
+
     def our_decode() -> list[dict[str, object]]:
         unpack = messages.unpack_payload
         return [unpack(t, p) for t, _s, p in FrameDecoder().decode_all(stream)]
 
     t_dec, decoded = _time_runs("CPython twinbot decode (decode_all + unpack_payload)", repeats, our_decode)
-    got = [tuple(d[k] for k in names) for d in decoded]
-    if got != fields:
-        raise CliError(f"twinbot decode: {len(got)} of {n} frames back, fields differ from those encoded")
+    got = [tuple(d[k] for k in work.names) for d in decoded]
+    if got != work.fields:
+        raise CliError(f"twinbot decode: {len(got)} of {work.n} frames back, fields differ from those encoded")
     del decoded, got
 
     def our_frame_decode() -> list[tuple[int, int, bytes]]:
@@ -340,97 +399,83 @@ def run(args: argparse.Namespace) -> int:
     t_fdec, fdec = _time_runs("CPython twinbot framing-only decode (decode_all)", repeats, our_frame_decode)
     if [p for _t, _s, p in fdec] != payloads:
         raise CliError("twinbot decode_all: payloads differ from those encoded")
-    del fdec
+    return t_dec, t_fdec
 
-    ours_over = _overhead([len(f) for f in frames], [len(p) for p in payloads])
-    results["twinbot_cpython"] = {
-        "encode": _rates(t_enc, n, len(stream)),
-        "decode": _rates(t_dec, n, len(stream)),
-        "wire_bytes": len(stream),
-        "overhead_bytes_per_frame": ours_over,
+
+def _bench_pymavlink(work: Workload, repeats: int, workdir: Path) -> dict[str, Any]:
+    """pymavlink's encode (message + pack) and decode (parse_buffer) of the same fields."""
+    from tools.cli import CliError
+
+    _progress("generating the MAVLink 2 dialect with mavgen")
+    try:
+        mavmod, mavcls = generate_mavlink(work.msg_type, workdir)
+    except (ImportError, RuntimeError) as exc:
+        raise CliError(f"pymavlink: {exc}") from exc
+
+    def mav_encode() -> list[bytes]:
+        mav = mavmod.MAVLink(None, srcSystem=1, srcComponent=1)
+        out: list[bytes] = []
+        append = out.append
+        for f in work.fields:
+            append(mavcls(*f).pack(mav))
+            mav.seq = (mav.seq + 1) & 0xFF  # as mav.send() would
+        return out
+
+    t_menc, mframes = _time_runs("pymavlink encode (message + pack)", repeats, mav_encode)
+    mav_over = _overhead([len(b) for b in mframes], [work.payload_bytes] * work.n)
+    short = sum(1 for b in mframes if len(b) != len(mframes[0]))
+    if short:
+        raise CliError(f"MAVLink 2 truncated {short} payloads (trailing zero bytes); the comparison needs full ones")
+    mstream = b"".join(mframes)
+    del mframes
+
+    def mav_decode() -> list[Any]:
+        mav = mavmod.MAVLink(None)
+        mav.robust_parsing = False
+        return mav.parse_buffer(mstream) or []
+
+    t_mdec, mdecoded = _time_runs("pymavlink decode (parse_buffer)", repeats, mav_decode)
+    mgot = [tuple(tuple(v) if isinstance(v, list) else v for v in (getattr(m, k) for k in work.names))
+            for m in mdecoded]
+    if mgot != work.fields:
+        raise CliError(f"pymavlink decode: {len(mgot)} of {work.n} messages back, fields differ from those encoded")
+    return {
+        "encode": _rates(t_menc, work.n, len(mstream)),
+        "decode": _rates(t_mdec, work.n, len(mstream)),
+        "wire_bytes": len(mstream),
+        "overhead_bytes_per_frame": mav_over,
     }
-    results["twinbot_cpython_framing_only"] = {
-        "encode": _rates(t_fenc, n, len(stream)),
-        "decode": _rates(t_fdec, n, len(stream)),
-        "wire_bytes": len(stream),
-        "overhead_bytes_per_frame": ours_over,
-    }
 
-    with tempfile.TemporaryDirectory(prefix="twinbot-bench-") as tmp:
-        workdir = Path(tmp)
 
-        # ---- pymavlink
-        _progress("generating the MAVLink 2 dialect with mavgen")
-        try:
-            mavmod, mavcls = generate_mavlink(mtype, workdir)
-        except (ImportError, RuntimeError) as exc:
-            raise CliError(f"pymavlink: {exc}") from exc
+def _bench_micropython(work: Workload, repeats: int, workdir: Path, stream: bytes
+                       ) -> tuple[dict[str, Any] | None, str]:
+    """The MicroPython part's figures, or (None, why it failed); its frames must be CPython's."""
+    from tools.cli import CliError
 
-        def mav_encode() -> list[bytes]:
-            mav = mavmod.MAVLink(None, srcSystem=1, srcComponent=1)
-            out: list[bytes] = []
-            append = out.append
-            for f in fields:
-                append(mavcls(*f).pack(mav))
-                mav.seq = (mav.seq + 1) & 0xFF  # as mav.send() would
-            return out
+    n = work.n
+    _progress(f"MicroPython: running tools/mp_bench_protocol.py ({n} frames x {repeats} runs x 3 loops)")
+    try:
+        mp = run_micropython_part(n, repeats, workdir)
+    except Exception as exc:  # RigError, a timeout, a failure inside MicroPython
+        mp_error = f"{type(exc).__name__}: {exc}"
+        _progress("MicroPython part failed: " + mp_error)
+        return None, mp_error
+    _progress(f"MicroPython part done in {mp['wall_s']:.1f} s")
+    chunk = mp.pop("chunk")
+    if chunk != stream[: len(chunk)]:
+        raise CliError("MicroPython encoded other bytes than CPython for the same values")
+    mp["frames_identical_to_cpython"] = mp["chunk_frames"]
+    extra = mp["wire_bytes"] - work.payload_bytes * n  # every frame MicroPython decoded, less the payloads
+    mp["overhead_bytes_per_frame"] = extra // n if extra % n == 0 else extra / n
+    return mp, ""
 
-        t_menc, mframes = _time_runs("pymavlink encode (message + pack)", repeats, mav_encode)
-        mav_over = _overhead([len(b) for b in mframes], [plen] * n)
-        short = sum(1 for b in mframes if len(b) != len(mframes[0]))
-        if short:
-            raise CliError(f"MAVLink 2 truncated {short} payloads (trailing zero bytes); the comparison needs full ones")
-        mstream = b"".join(mframes)
-        del mframes
 
-        def mav_decode() -> list[Any]:
-            mav = mavmod.MAVLink(None)
-            mav.robust_parsing = False
-            return mav.parse_buffer(mstream) or []
-
-        t_mdec, mdecoded = _time_runs("pymavlink decode (parse_buffer)", repeats, mav_decode)
-        mgot = [tuple(tuple(v) if isinstance(v, list) else v for v in (getattr(m, k) for k in names))
-                for m in mdecoded]
-        if mgot != fields:
-            raise CliError(f"pymavlink decode: {len(mgot)} of {n} messages back, fields differ from those encoded")
-        del mdecoded, mgot
-        results["pymavlink_cpython"] = {
-            "encode": _rates(t_menc, n, len(mstream)),
-            "decode": _rates(t_mdec, n, len(mstream)),
-            "wire_bytes": len(mstream),
-            "overhead_bytes_per_frame": mav_over,
-        }
-
-        # ---- MicroPython
-        _progress(f"MicroPython: running tools/mp_bench_protocol.py ({n} frames x {repeats} runs x 3 loops)")
-        mp: dict[str, Any] | None
-        mp_error = ""
-        try:
-            mp = run_micropython_part(n, repeats, workdir)
-        except Exception as exc:  # RigError, a timeout, a failure inside MicroPython
-            mp = None
-            mp_error = f"{type(exc).__name__}: {exc}"
-            _progress("MicroPython part failed: " + mp_error)
-        if mp is not None:
-            _progress(f"MicroPython part done in {mp['wall_s']:.1f} s")
-            chunk = mp.pop("chunk")
-            if chunk != stream[: len(chunk)]:
-                raise CliError("MicroPython encoded other bytes than CPython for the same values")
-            mp["frames_identical_to_cpython"] = mp["chunk_frames"]
-            extra = mp["wire_bytes"] - plen * n  # every frame MicroPython decoded, less the payloads
-            mp["overhead_bytes_per_frame"] = extra // n if extra % n == 0 else extra / n
-            results["twinbot_micropython"] = mp
-
-    # ---- report
-    machine = _machine()
-    if mp is not None:
-        machine["micropython"] = f"MicroPython {mp['version']} ({mp['sys_version']}; {mp['machine']})"
-    else:
-        machine["micropython"] = None
-
-    ratio = results["twinbot_cpython"]["decode"]["mb_per_s"] / results["pymavlink_cpython"]["decode"]["mb_per_s"]
-    ratio_fps = (results["twinbot_cpython"]["decode"]["frames_per_s"]
-                 / results["pymavlink_cpython"]["decode"]["frames_per_s"])
+def _targets(results: dict[str, Any], mp: dict[str, Any] | None, mp_error: str) -> dict[str, Any]:
+    """Each target of the brief, its figure and whether it is met (None: not run, with the error)."""
+    ours, mav = results["twinbot_cpython"], results["pymavlink_cpython"]
+    ratio = ours["decode"]["mb_per_s"] / mav["decode"]["mb_per_s"]
+    ratio_fps = ours["decode"]["frames_per_s"] / mav["decode"]["frames_per_s"]
+    ours_over, mav_over = ours["overhead_bytes_per_frame"], mav["overhead_bytes_per_frame"]
     targets: dict[str, Any] = {
         "cpython_decode_vs_pymavlink": {
             "ratio_mb_per_s": ratio, "ratio_frames_per_s": ratio_fps, "target": ">= 1", "met": ratio_fps >= 1.0},
@@ -447,27 +492,17 @@ def run(args: argparse.Namespace) -> int:
     else:
         targets["micropython_decode_mb_per_s"] = {"met": None, "error": mp_error}
         targets["micropython_alloc_per_received_byte"] = {"met": None, "error": mp_error}
+    return targets
 
-    total = time.perf_counter() - t_start
-    report = {
-        "command": command,
-        "machine": machine,
-        "frames": n,
-        "repeats": repeats,
-        "message": "TELEMETRY",
-        "payload_bytes": plen,
-        "results": results,
-        "targets": targets,
-        "elapsed_s": total,
-    }
-    print_report(report, mp_error)
-    if args.json:
-        try:
-            args.json.write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
-        except OSError as exc:
-            raise CliError(f"cannot write {args.json}: {exc}") from exc
-        print(f"\nfigures written to {args.json}")
-    return 0 if mp is not None else 1
+
+def _write_json(path: Path, report: dict[str, Any]) -> None:
+    from tools.cli import CliError
+
+    try:
+        path.write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    except OSError as exc:
+        raise CliError(f"cannot write {path}: {exc}") from exc
+    print(f"\nfigures written to {path}")
 
 
 ROW_OURS_CPY = "twinbot, CPython"

@@ -8,7 +8,9 @@ possible, nothing drawn:
       noise + contacts, 8 substeps per 40 ms).  The recording is made first
       by a SIL run of --seconds simulated seconds (refined rules).
   (b) SIL: one robot with the firmware in the loop (Simulation + SilController,
-      Simulation.run_fixed, speed max).
+      Simulation.run_fixed, speed max); and the same with each IR sensor a
+      beam of BEAM_RAYS rays (ir_beam_rays, docs/ir-sensor.md) instead of
+      one ray: the beam's cost.
   (c) batch: host_sim.batch.BatchSim, N robots (--batch-n, 1000) with N
       different parameter sets (mass, wheel radius, half axle, motor constant,
       frictions within +-10 %), replaying the recording's first
@@ -24,7 +26,8 @@ possible, nothing drawn:
       among ours is (a): one robot and a ring of 8 range readings per 40 ms.
 
 A robot-step is one robot advanced by one physics step (dt = 40 ms / 8 =
-5 ms: motor model, dynamics, contact test).  A robot-period is one robot
+5 ms: motor model at mid-step, dynamics, grip and wall tests, and the contact
+step where a wheel slips or a wall is hit).  A robot-period is one robot
 advanced by one 40 ms control period: 8 robot-steps plus the readings at the
 control instant (encoders, and the IR ring when sensors are on).  IR-SIM has
 no substeps: one env.step() is one robot-period and one robot-step.
@@ -59,6 +62,8 @@ PERTURBED = ("body_mass", "wheel_radius", "half_axle", "torque_constant", "visco
 
 ROW_REPLAY = "(a) replay, 1 robot, physics + motors + IR"
 ROW_SIL = "(b) SIL firmware, 1 robot"
+ROW_SIL_BEAM = "(b) SIL firmware, 1 robot, IR beam of {rays} rays"
+BEAM_RAYS = 5
 ROW_BATCH = "(c) batch, N={n} parameter sets, no IR"
 ROW_BATCH_IR = "(c) batch, N={n} parameter sets, with IR"
 ROW_IRSIM = "(d) IR-SIM {version}, 1 robot + 8-beam lidar"
@@ -67,15 +72,19 @@ ROW_IRSIM = "(d) IR-SIM {version}, 1 robot + 8-beam lidar"
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
     p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1],
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--seconds", type=float, default=30.0,
+    from tools.arguments import float_range, int_range, output_file
+
+    p.add_argument("--seconds", type=float_range(0.2, 3600, unit="s"), default=30.0,
                    help="simulated seconds of the single-robot workloads (a), (b), (d) (default 30)")
-    p.add_argument("--batch-n", type=int, default=TARGET_BATCH_N, help="robots in the batch (default 1000)")
-    p.add_argument("--batch-seconds", type=float, default=2.0,
+    p.add_argument("--batch-n", type=int_range(1, 1_000_000), default=TARGET_BATCH_N,
+                   help="robots in the batch (default 1000)")
+    p.add_argument("--batch-seconds", type=float_range(0.04, 3600, unit="s"), default=2.0,
                    help="simulated seconds of each batch run (default 2, i.e. 50 control periods)")
-    p.add_argument("--repeats", type=int, default=5, help="timed runs per workload; the median is kept (default 5)")
+    p.add_argument("--repeats", type=int_range(1, 1000), default=5,
+                   help="timed runs per workload; the median is kept (default 5)")
     p.add_argument("--profile", action="store_true",
                    help="profile (cProfile) every workload of ours, not only those that miss their target")
-    p.add_argument("--json", metavar="FILE", help="write every figure here")
+    p.add_argument("--json", metavar="FILE", type=output_file, help="write every figure here")
     p.set_defaults(func=run)
 
 
@@ -117,9 +126,10 @@ COMPONENTS = {
     "(a) replay": [
         ("IR sensors + encoders (SimRobot.sense)", "host_sim/sim_robot.py", "sense"),
         ("8 physics steps (SimRobot.advance)", "host_sim/sim_robot.py", "advance"),
-        ("  of which the wall test (_resolve_contact)", "host_sim/sim_robot.py", "_resolve_contact"),
-        ("  of which dynamics.step", "host_sim/dynamics.py", "step"),
-        ("  of which motors.wheel_torque", "host_sim/motors.py", "wheel_torque"),
+        ("  of which the wall test (_walls_in_reach)", "host_sim/sim_robot.py", "_walls_in_reach"),
+        ("  of which motors + dynamics (drive.drive_step)", "host_sim/drive.py", "drive_step"),
+        ("  of which the grip test (contact.traction_ok)", "host_sim/contact.py", "traction_ok"),
+        ("  of which contact steps (contact.slip_step)", "host_sim/contact.py", "slip_step"),
     ],
     "(b) SIL": [
         ("IR sensors + encoders (SimRobot.sense)", "host_sim/sim_robot.py", "sense"),
@@ -132,7 +142,9 @@ COMPONENTS = {
         ("  of which the ray cast (World.cast_robots)", "host_sim/world.py", "cast_robots"),
         ("motors (wheel_torque_batch)", "host_sim/motors.py", "wheel_torque_batch"),
         ("dynamics (step_batch)", "host_sim/dynamics.py", "step_batch"),
-        ("wall tests (BatchSim._resolve_contacts)", "host_sim/batch.py", "_resolve_contacts"),
+        ("grip tests (contact.traction_ok_batch)", "host_sim/contact.py", "traction_ok_batch"),
+        ("wall tests (BatchSim._walls_in_reach)", "host_sim/batch.py", "_walls_in_reach"),
+        ("contact steps (contact.slip_step_batch)", "host_sim/contact.py", "slip_step_batch"),
         ("encoders (encoder_ticks_batch)", "host_sim/motors.py", "encoder_ticks_batch"),
     ],
 }
@@ -238,17 +250,18 @@ def bench_replay(rec: Any, repeats: int) -> dict[str, Any]:
             "reproduces_recording": bool(np.array_equal(res.pose, rec.pose) and np.array_equal(res.enc, rec.enc))}
 
 
-def bench_sil(seconds: float, repeats: int) -> dict[str, Any]:
+def bench_sil(seconds: float, repeats: int, beam_rays: int = 1) -> dict[str, Any]:
     from host_sim.sil import SilController
     from host_sim.params import DEFAULT
     from host_sim.simulation import Simulation
     from host_sim.world import builtin_world
 
     world = builtin_world(WORLD)
+    params = DEFAULT.replace(ir_beam_rays=beam_rays)
     times = []
     result = None
     for _ in range(repeats):
-        sim = Simulation(world, DEFAULT, SilController(1), seed=0, substeps=SUBSTEPS)
+        sim = Simulation(world, params, SilController(1), seed=0, substeps=SUBSTEPS)
         t0 = time.perf_counter()
         result = sim.run_fixed(seconds)
         times.append(time.perf_counter() - t0)
@@ -257,7 +270,7 @@ def bench_sil(seconds: float, repeats: int) -> dict[str, Any]:
     periods = len(result.t)
     return {"sim_s": result.sim_seconds, "wall_s": wall, "times_s": times, "rtf": result.sim_seconds / wall,
             "periods": periods, "robot_steps_per_s": result.steps / wall, "robot_periods_per_s": periods / wall,
-            "collisions": result.collisions, "coverage": float(result.coverage[-1])}
+            "collisions": result.collisions, "coverage": float(result.coverage[-1]), "beam_rays": beam_rays}
 
 
 def batch_params(n: int, seed: int = 0) -> Any:
@@ -288,7 +301,7 @@ def bench_batch(rec: Any, n: int, seconds: float, sensors: bool, repeats: int) -
     collisions = 0
     spread = 0.0
     for _ in range(repeats):
-        # As host_sim.batch.from_recording from row 0 of a simulator recording:
+        # As host_sim.replay.replay_batch from row 0 of a simulator recording:
         # every robot at rest at the recorded start, emitters off until the first command.
         sim = BatchSim(world, params, start, initial_emitter_pct=0, substeps=SUBSTEPS, cycle_s=CYCLE_S)
         t0 = time.perf_counter()
@@ -440,6 +453,9 @@ def format_table(report: dict[str, Any]) -> str:
                  _num(a["robot_periods_per_s"]), _num(a["robot_steps_per_s"])))
     rows.append((ROW_SIL, _num(b["sim_s"], 1), _secs(b["wall_s"]), _num(b["rtf"]) + "x",
                  _num(b["robot_periods_per_s"]), _num(b["robot_steps_per_s"])))
+    bb = r["sil_beam"]
+    rows.append((ROW_SIL_BEAM.format(rays=bb["beam_rays"]), _num(bb["sim_s"], 1), _secs(bb["wall_s"]),
+                 _num(bb["rtf"]) + "x", _num(bb["robot_periods_per_s"]), _num(bb["robot_steps_per_s"])))
     for key, label in (("batch", ROW_BATCH), ("batch_ir", ROW_BATCH_IR)):
         c = r[key]
         rows.append((label.format(n=n), f"{_num(c['sim_s_per_robot'], 1)} x {n}", _secs(c["wall_s"]),
@@ -492,6 +508,8 @@ def targets(report: dict[str, Any]) -> list[dict[str, Any]]:
 
 
 def print_report(report: dict[str, Any]) -> None:
+    from host_sim.params import DEFAULT
+
     m = report["machine"]
     r = report["results"]
     print("twinbot bench sim")
@@ -507,12 +525,15 @@ def print_report(report: dict[str, Any]) -> None:
         print(textwrap.fill(text, 108, initial_indent=f"{label:<14}", subsequent_indent=" " * 14))
 
     note("robot-step:", "one robot advanced by one physics step of 5 ms (40 ms / 8): motor model, dynamics, "
-                        "contact test.  robot-period: one robot advanced by one 40 ms control period = 8 "
+                        "grip and wall tests, contact step where needed.  robot-period: one robot advanced by one 40 ms control period = 8 "
                         "robot-steps + the readings at the control instant (encoders; IR ring if on).  IR-SIM "
                         "has no substeps: one env.step() of 40 ms counts as one of each.")
     d = r["irsim"]
     note("(a):", f"replays the {r['replay']['sim_s']:.0f} s SIL recording (sensor noise on); reproduces the "
                  f"recording's pose and encoders bit for bit: {'yes' if r['replay']['reproduces_recording'] else 'NO'}")
+    b, bb = r["sil"], r["sil_beam"]
+    note("(b) beam:", f"each IR sensor {bb['beam_rays']} rays over +-{DEFAULT.ir_beam_half_angle:.2f} rad instead "
+                      f"of one: {b['rtf'] / bb['rtf']:.2f} times the wall time of (b)")
     c = r["batch_ir"]
     note("(c):", f"{report['batch_n']} parameter sets ({', '.join(PERTURBED)} x U(0.9, 1.1)) replay the first "
                  f"{c['sim_s_per_robot']:.1f} s of that recording; spread of the end positions "
@@ -539,71 +560,85 @@ def print_report(report: dict[str, Any]) -> None:
 
 def run(args: argparse.Namespace) -> int:
     blas = pin_blas_threads()
-    import numpy as np
-
     from host_sim.world import builtin_world
-    from tools.cli import CliError
 
-    if args.seconds < 0.2 or args.batch_seconds <= 0:
-        raise CliError("--seconds must be >= 0.2 (5 control periods) and --batch-seconds > 0")
-    if args.batch_n < 1 or args.repeats < 1:
-        raise CliError("--batch-n and --repeats must be >= 1")
     t_start = time.monotonic()
     command = (f"twinbot bench sim --seconds {args.seconds:g} --batch-n {args.batch_n} "
                f"--batch-seconds {args.batch_seconds:g} --repeats {args.repeats}"
                + (" --profile" if args.profile else ""))
-    results: dict[str, Any] = {}
     with tempfile.TemporaryDirectory(prefix="twinbot-bench-sim-") as tmp_name:
         tmp = Path(tmp_name)
         _progress(f"recording a {args.seconds:g} s SIL run in {WORLD}")
         rec = make_recording(tmp / "sil.csv", args.seconds)
-        _progress("(a) replay of the recording, one robot")
-        results["replay"] = bench_replay(rec, args.repeats)
-        _progress("(b) SIL, one robot")
-        results["sil"] = bench_sil(args.seconds, args.repeats)
-        _progress(f"(c) batch, N = {args.batch_n}, without and with IR")
-        results["batch"] = bench_batch(rec, args.batch_n, args.batch_seconds, False, args.repeats)
-        results["batch_ir"] = bench_batch(rec, args.batch_n, args.batch_seconds, True, args.repeats)
-        _progress("(d) IR-SIM on the same room")
-        try:
-            results["irsim"] = bench_irsim(rec, args.seconds, args.repeats, tmp)
-        except ImportError as exc:
-            results["irsim"] = {"error": f"ir-sim is not installed ({exc}); pip install ir-sim"}
+        results = _bench_all(args, rec, tmp)
         report: dict[str, Any] = {
             "command": command, "repeats": args.repeats, "batch_n": args.batch_n,
             "walls": len(builtin_world(WORLD).walls), "robot_step": "one robot advanced by one 5 ms physics step",
             "robot_period": "one robot advanced by one 40 ms control period (8 robot-steps + readings)",
-            "machine": {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
-                        "cpus": os.cpu_count(), "python": platform.python_version(), "numpy": np.__version__,
-                        "blas_threads": blas,
-                        "load": " ".join(f"{x:.2f}" for x in os.getloadavg())},
+            "machine": _machine(blas),  # after the runs: the load average they saw
             "results": results,
         }
         report["targets"] = targets(report)
         missed = {t["name"] for t in report["targets"] if t["met"] is False}
-        profiles: dict[str, Any] = {}
-        if args.profile or missed:
-            from host_sim.sil import SilController
-            from host_sim.params import DEFAULT
-            from host_sim.replay import replay
-            from host_sim.simulation import Simulation
-
-            world = builtin_world(WORLD)
-        if args.profile or "replay_rtf" in missed:
-            _progress("profiling (a)")
-            profiles["(a) replay"] = profile(lambda: replay(rec, DEFAULT, world, seed=0), COMPONENTS["(a) replay"])
-        if args.profile or "sil_rtf" in missed:
-            _progress("profiling (b)")
-            profiles["(b) SIL"] = profile(
-                lambda: Simulation(world, DEFAULT, SilController(1), seed=0).run_fixed(args.seconds),
-                COMPONENTS["(b) SIL"])
-        if args.profile or missed & {"batch_robot_steps", "batch_ir_robot_steps"}:
-            _progress("profiling (c)")
-            profiles["(c) batch with IR"] = profile(
-                lambda: bench_batch(rec, args.batch_n, args.batch_seconds, True, 1), COMPONENTS["(c) batch with IR"])
-        report["profiles"] = profiles
+        report["profiles"] = _profiles(args, rec, missed)
     report["elapsed_s"] = time.monotonic() - t_start
     print_report(report)
     if args.json:
         Path(args.json).write_text(json.dumps(report, indent=2, default=str))
     return 0
+
+
+def _bench_all(args: argparse.Namespace, rec: Any, tmp: Path) -> dict[str, Any]:
+    """(a) to (d) on the recording, in that order."""
+    results: dict[str, Any] = {}
+    _progress("(a) replay of the recording, one robot")
+    results["replay"] = bench_replay(rec, args.repeats)
+    _progress("(b) SIL, one robot")
+    results["sil"] = bench_sil(args.seconds, args.repeats)
+    _progress(f"(b) SIL, one robot, IR beam of {BEAM_RAYS} rays")
+    results["sil_beam"] = bench_sil(args.seconds, args.repeats, BEAM_RAYS)
+    _progress(f"(c) batch, N = {args.batch_n}, without and with IR")
+    results["batch"] = bench_batch(rec, args.batch_n, args.batch_seconds, False, args.repeats)
+    results["batch_ir"] = bench_batch(rec, args.batch_n, args.batch_seconds, True, args.repeats)
+    _progress("(d) IR-SIM on the same room")
+    try:
+        results["irsim"] = bench_irsim(rec, args.seconds, args.repeats, tmp)
+    except ImportError as exc:
+        results["irsim"] = {"error": f"ir-sim is not installed ({exc}); pip install ir-sim"}
+    return results
+
+
+def _machine(blas: str) -> dict[str, Any]:
+    import numpy as np
+
+    return {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
+            "cpus": os.cpu_count(), "python": platform.python_version(), "numpy": np.__version__,
+            "blas_threads": blas,
+            "load": " ".join(f"{x:.2f}" for x in os.getloadavg())}
+
+
+def _profiles(args: argparse.Namespace, rec: Any, missed: set[str]) -> dict[str, Any]:
+    """Where the time goes, for each part that missed its target (all of them with --profile)."""
+    profiles: dict[str, Any] = {}
+    if not (args.profile or missed):
+        return profiles
+    from host_sim.params import DEFAULT
+    from host_sim.replay import replay
+    from host_sim.sil import SilController
+    from host_sim.simulation import Simulation
+    from host_sim.world import builtin_world
+
+    world = builtin_world(WORLD)
+    if args.profile or "replay_rtf" in missed:
+        _progress("profiling (a)")
+        profiles["(a) replay"] = profile(lambda: replay(rec, DEFAULT, world, seed=0), COMPONENTS["(a) replay"])
+    if args.profile or "sil_rtf" in missed:
+        _progress("profiling (b)")
+        profiles["(b) SIL"] = profile(
+            lambda: Simulation(world, DEFAULT, SilController(1), seed=0).run_fixed(args.seconds),
+            COMPONENTS["(b) SIL"])
+    if args.profile or missed & {"batch_robot_steps", "batch_ir_robot_steps"}:
+        _progress("profiling (c)")
+        profiles["(c) batch with IR"] = profile(
+            lambda: bench_batch(rec, args.batch_n, args.batch_seconds, True, 1), COMPONENTS["(c) batch with IR"])
+    return profiles

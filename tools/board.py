@@ -16,7 +16,10 @@ fixed readings instead (a wall in front, wheels that do not turn).
 from __future__ import annotations
 
 import argparse
+import os
+import re
 import select
+import signal
 import socket
 import sys
 import tempfile
@@ -28,7 +31,9 @@ from host_sim.board_process import VirtualBoard, factory_image
 from host_sim.interface import TICK_MASK
 from protocol import messages as M
 from protocol.framing import FrameDecoder, FrameEncoder
+from tools.arguments import int_range, output_file, output_folder, tcp_port
 from tools.cli import CliError
+from tools.sim import plural
 
 
 # What the stand-in hardware reports: ambient light on every sensor, a wall
@@ -120,27 +125,45 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
                "  twinbot flash --port /dev/pts/N    flash it\n"
                "  mpremote connect /dev/pts/N resume repl",
     )
-    p.add_argument("--flash-dir", metavar="DIR",
-                   help="the board's flash as a folder (default: a new temporary folder holding this "
-                        "checkout's firmware); kept between runs")
-    p.add_argument("--image", metavar="FILE", help="the board's flash as a littlefs image file (blank if new)")
-    p.add_argument("--flash-kb", type=int, default=1024, help="size of a new --image, KB (default 1024)")
+    p.add_argument("--flash-dir", metavar="DIR", type=output_folder,
+                   help="the board's flash as a folder, kept between runs (default: a temporary folder "
+                        "holding this checkout's firmware, removed when the board stops)")
+    p.add_argument("--image", metavar="FILE", type=image_path,
+                   help="the board's flash as a littlefs image file (blank if new)")
+    p.add_argument("--flash-kb", type=int_range(64, 65536, unit="KB"), default=1024,
+                   help="size of a new --image, KB, 64..65536 (default 1024)")
     p.add_argument("--blank", action="store_true", help="start with empty flash (nothing to run until flashed)")
     p.add_argument("--world", default="paper_room", help="the twin's world (default paper_room)")
     p.add_argument("--standin", action="store_true", help="fixed readings instead of the simulated twin")
-    p.add_argument("--hw-port", type=int,
+    p.add_argument("--hw-port", type=tcp_port,
                    help="TCP port on 127.0.0.1 of another simulator serving the hardware link")
-    p.add_argument("--log", metavar="FILE", help="append the board's stderr here (tracebacks of the supervisor)")
+    p.add_argument("--log", metavar="FILE", type=output_file,
+                   help="append the board's stderr here (tracebacks of the supervisor)")
     p.set_defaults(func=run)
 
 
-def prepare_flash(args: argparse.Namespace) -> tuple[str, str]:
+LFS_MAGIC = b"littlefs"  # in the superblock, at the start of block 0 or 1
+LFS_BLOCK = 4096  # firmware/unix_board.py FileBlockDevice.BLOCK
+
+
+def image_path(text: str) -> str:
+    """--image: a new file, or an existing littlefs image (never some other file, which the board would refuse)."""
+    output_file(text)
+    path = Path(text)
+    if path.exists() and path.stat().st_size:
+        with open(path, "rb") as f:
+            head = f.read(2 * LFS_BLOCK)
+        if LFS_MAGIC not in head:
+            raise argparse.ArgumentTypeError(f"{text}: not a littlefs image (no littlefs superblock in its first "
+                                             f"two blocks); name a new file for a blank board")
+    return text
+
+
+def prepare_flash(args: argparse.Namespace, scratch: Path) -> tuple[str, str]:
     """The flash argument for the supervisor, and how to describe it."""
     if args.image:
         if args.flash_dir:
             raise CliError("give --image or --flash-dir, not both")
-        if args.flash_kb < 64:
-            raise CliError("--flash-kb must be at least 64 (littlefs needs a few blocks)")
         image = Path(args.image).resolve()
         return f"{image}:{args.flash_kb}", f"littlefs image {image} ({args.flash_kb} KB)"
     if args.flash_dir:
@@ -150,51 +173,69 @@ def prepare_flash(args: argparse.Namespace) -> tuple[str, str]:
         fresh = not folder.exists() or not any(folder.iterdir())
         folder.mkdir(parents=True, exist_ok=True)
     else:
-        folder = Path(tempfile.mkdtemp(prefix="twinbot-board-"))
+        folder = scratch / "flash"
+        folder.mkdir()
         fresh = True
     if fresh and not args.blank:
         factory_image(folder)
     return str(folder), f"folder {folder}"
 
 
-def run(args: argparse.Namespace) -> int:
-    flash, described = prepare_flash(args)
-    standin = None
-    twin = None
-    if args.hw_port is not None:
-        hw_port = args.hw_port
-    elif args.standin:
-        standin = StandInHardware()
-        standin.start()
-        hw_port = standin.port
-    else:
-        from host_sim.params import DEFAULT
-        from host_sim.board_twin import BoardTwin
-        from host_sim.world import WorldError, world_by_name_or_path
+STARTUP_S = 1.0  # a board that stops this soon never booted: say why instead of where to connect
 
-        try:
-            world = world_by_name_or_path(args.world, DEFAULT.body_radius)
-        except WorldError as exc:
-            raise CliError(str(exc)) from None
-        twin = BoardTwin(world, DEFAULT)
-        twin.start()
-        hw_port = twin.port
-    board = VirtualBoard(flash, hw_port, Path(args.log) if args.log else None)
-    print(f"twinbot board: {board.path}", flush=True)
-    print(f"  flash: {described}")
-    if standin:
-        print("  hardware: STAND-IN with fixed readings (a wall ahead, wheels that do not turn)")
-    elif twin:
-        print(f"  hardware: the simulated twin in {world.name}, real time "
-              f"(start at x={world.start[0]:.2f} m, y={world.start[1]:.2f} m)")
-    else:
-        print(f"  hardware: simulator at 127.0.0.1:{hw_port}")
-    print(f"  talk to it: twinbot serial {board.path}   |   flash it: twinbot flash --port {board.path}")
-    print("  Ctrl-C stops the board.", flush=True)
+
+def board_trouble(board: VirtualBoard, stderr_path: Path, offset: int) -> str:
+    """Why a board stopped: its exit status and the last line it printed (stdout: MicroPython's
+    tracebacks) or wrote on stderr (the supervisor's)."""
     try:
+        with open(stderr_path, "rb") as f:
+            f.seek(offset)
+            lines = f.read().decode("utf-8", "replace").strip().splitlines()
+    except OSError:
+        lines = []
+    last = lines[-1].strip() if lines else board.last_words()
+    errno_text = re.fullmatch(r"OSError: \[?(?:Errno )?(\d+)\]?", last)
+    if errno_text:  # MicroPython gives bare errno numbers
+        last += f" ({os.strerror(int(errno_text.group(1)))})"
+    reason = f": {last}" if last else ""
+    return f"the board stopped (exit status {board.proc.returncode}){reason}"
+
+
+def run(args: argparse.Namespace) -> int:
+    # SIGTERM (kill, a test's terminate()) unwinds like Ctrl-C does, so the scratch folder goes too.
+    signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))
+    with tempfile.TemporaryDirectory(prefix="twinbot-board-") as scratch:
+        return run_in(args, Path(scratch))
+
+
+def run_in(args: argparse.Namespace, scratch: Path) -> int:
+    """`twinbot board` with a scratch folder (the temporary flash, the board's stderr) removed afterwards."""
+    world = load_world(args)  # before anything is started or written
+    flash, described = prepare_flash(args, scratch)
+    standin, twin, hw_port = start_hardware(args, world)
+    stderr_path = Path(args.log) if args.log else scratch / "board-stderr.txt"
+    offset = stderr_path.stat().st_size if stderr_path.exists() else 0
+    board = VirtualBoard(flash, hw_port, stderr_path)
+    try:
+        deadline = time.monotonic() + STARTUP_S
+        while board.alive() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        if not board.alive():
+            raise CliError(f"{board_trouble(board, stderr_path, offset)}; flash: {described}")
+        print(f"twinbot board: {board.path}", flush=True)
+        print(f"  flash: {described}")
+        if standin:
+            print("  hardware: STAND-IN with fixed readings (a wall ahead, wheels that do not turn)")
+        elif twin and world:
+            print(f"  hardware: the simulated twin in {world.name}, real time "
+                  f"(start at x={world.start[0]:.2f} m, y={world.start[1]:.2f} m)")
+        else:
+            print(f"  hardware: simulator at 127.0.0.1:{hw_port}")
+        print(f"  talk to it: twinbot serial {board.path}   |   flash it: twinbot flash --port {board.path}")
+        print("  Ctrl-C stops the board.", flush=True)
         while board.alive():
             time.sleep(0.2)
-        print(f"twinbot board: the board stopped (exit status {board.proc.returncode})", file=sys.stderr)
+        print(f"twinbot board: {board_trouble(board, stderr_path, offset)}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         return 0
@@ -205,6 +246,34 @@ def run(args: argparse.Namespace) -> int:
         if twin:
             x, y, phi = twin.pose
             print(f"twinbot board: the twin ended at x={x:.3f} m, y={y:.3f} m, heading {phi:.2f} rad, "
-                  f"{twin.sim.robot.collisions} collisions")
+                  f"{plural(twin.sim.robot.collisions, 'collision')}")
             twin.stop()
 
+
+def load_world(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+    """The twin's world, or None when the hardware is the stand-in or another simulator."""
+    if args.hw_port is not None or args.standin:
+        return None
+    from host_sim.params import DEFAULT
+    from host_sim.world import WorldError, world_by_name_or_path
+
+    try:
+        return world_by_name_or_path(args.world, DEFAULT.body_radius)
+    except WorldError as exc:
+        raise CliError(str(exc)) from None
+
+
+def start_hardware(args: argparse.Namespace, world):  # type: ignore[no-untyped-def]
+    """(stand-in, twin, TCP port) of the board's hardware link."""
+    if args.hw_port is not None:
+        return None, None, args.hw_port
+    if args.standin:
+        standin = StandInHardware()
+        standin.start()
+        return standin, None, standin.port
+    from host_sim.board_twin import BoardTwin
+    from host_sim.params import DEFAULT
+
+    twin = BoardTwin(world, DEFAULT)
+    twin.start()
+    return None, twin, twin.port

@@ -17,8 +17,10 @@ SUBCOMMANDS = (
     ("serial", "serial protocol test harness: show, send and record frames on a port"),
     ("board", "run the firmware on a virtual board behind a pseudo-terminal"),
     ("flash", "compile the firmware with mpy-cross, copy it to a board with mpremote, check HELLO"),
+    ("diagnose", "where a recording and the twin disagree, in physical terms"),
     ("fuzzy", "the fuzzy controller: rule table, FCL, figure, evaluation"),
-    ("plot", "figures: the IR sensor model (the paper's Figs. 7-12), the built-in worlds"),
+    ("replay", "replay a recording open loop through the twin; how far the twin ends from it"),
+    ("plot", "figures: a recording, the IR sensor model (the paper's Figs. 7-12), the built-in worlds"),
     ("bench", "benchmarks that produce the README's figures"),
 )
 
@@ -28,7 +30,9 @@ _MODULES = {
     "serial": "tools.serial_harness",
     "board": "tools.board",
     "flash": "tools.flash",
+    "diagnose": "tools.diagnose",
     "fuzzy": "tools.fuzzy_rules",
+    "replay": "tools.replay",
     "plot": "tools.plot",
     "bench": "tools.bench",
 }
@@ -38,15 +42,33 @@ class CliError(Exception):
     """An error a user can act on: printed as one line, exit status 2."""
 
 
+# The host's own "this input is wrong" errors: each message names the file,
+# entry or value.  One that escapes a subcommand is still one line, exit 2.
+EXPECTED_ERRORS = frozenset({
+    "host_sim.world.WorldError", "host_sim.params.ParamsError", "host_sim.recording.RecordingError",
+    "host_sim.replay.ReplayError", "host_sim.frame_log.FrameLogError", "host_sim.serial_link.LinkError",
+})
+
+
+def _expected(exc: BaseException) -> bool:
+    return any(f"{c.__module__}.{c.__qualname__}" in EXPECTED_ERRORS for c in type(exc).__mro__)
+
+
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """The full parser, or (only=NAME) one that knows that subcommand alone."""
-    parser = argparse.ArgumentParser(
+    import importlib
+
+    from tools.arguments import OneLineParser
+    from tools.version import package_version
+
+    parser = OneLineParser(
         prog="twinbot",
         description="Firmware twin of a differential-drive robot with eight IR proximity sensors.",
         epilog="Run 'twinbot COMMAND --help' for the options of one command.",
     )
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    import importlib
+    parser.add_argument("--version", action="version", version=f"twinbot {package_version()}")
+    # dest is not "command": a subcommand's own --command option would overwrite it.
+    sub = parser.add_subparsers(dest="subcommand", metavar="COMMAND")
 
     for name, summary in SUBCOMMANDS:
         if only is not None and name != only:
@@ -63,12 +85,18 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser(chosen)
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
-        parser.print_help()
-        return 2
+        from tools.arguments import help_and_error
+
+        return help_and_error(parser, "COMMAND", [name for name, _ in SUBCOMMANDS])
     try:
         return int(args.func(args) or 0)
     except CliError as exc:
-        print(f"twinbot {args.command}: error: {exc}", file=sys.stderr)
+        print(f"twinbot {args.subcommand}: error: {exc}", file=sys.stderr)
+        return 2
+    except Exception as exc:
+        if not _expected(exc):
+            raise
+        print(f"twinbot {args.subcommand}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130

@@ -24,7 +24,9 @@ from pathlib import Path
 from firmware import config
 from firmware.manifest import BOARD_FILES, MAIN_PY
 from protocol import messages as M
+from tools.arguments import float_range
 from tools.cli import CliError
+from tools.serial_harness import host_hello
 from host_sim.micropython_tools import REPO_ROOT, mpy_cross_compile, mpy_cross_exe
 from host_sim.serial_link import LinkError, SerialLink, open_port
 
@@ -56,7 +58,8 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
                        epilog="examples:\n  twinbot flash --port /dev/ttyACM0\n"
                               "  twinbot board &   then   twinbot flash --port /dev/pts/N")
     p.add_argument("--port", required=True, help="the board's serial port (/dev/ttyACM0, /dev/pts/N)")
-    p.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for HELLO after the reset")
+    p.add_argument("--timeout", type=float_range(0.5, 600, unit="s"), default=10.0,
+                   help="seconds to wait for HELLO after the reset, 0.5..600 (default 10)")
     p.add_argument("--no-reset", action="store_true", help="copy only: no reset, no HELLO check")
     p.set_defaults(func=run)
 
@@ -142,9 +145,7 @@ def wait_for_hello(port: str, timeout: float) -> dict[str, object]:
             continue
         try:
             while time.monotonic() < deadline:
-                link.send(M.HELLO, {"protocol": M.PROTOCOL_VERSION, "fw_major": 0, "fw_minor": 0,
-                                    "fw_patch": 0, "board": M.BOARD_HOST, "sensors": 0,
-                                    "wheel_diameter_um": 0, "wheel_base_um": 0, "ticks_per_rev": 0})
+                link.send(M.HELLO, host_hello())
                 frame = link.wait_for(M.HELLO, 0.5)
                 if frame is not None:
                     return frame.fields

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from protocol import messages as M
 from host_sim.frame_log import FrameLogWriter, read_frame_log
+from firmware import config
 from tools.serial_harness import Display, status_text
 from host_sim.serial_link import Frame, SerialLink
 
@@ -19,9 +20,10 @@ from host_sim.serial_link import Frame, SerialLink
 def script() -> list[tuple[int, dict[str, object]]]:
     """What a robot and its host say in the first second of a session."""
     out: list[tuple[int, dict[str, object]]] = [
-        (M.HELLO, {"protocol": M.PROTOCOL_VERSION, "fw_major": 0, "fw_minor": 1, "fw_patch": 0,
-                   "board": M.BOARD_VIRTUAL, "sensors": 8, "wheel_diameter_um": 42000,
-                   "wheel_base_um": 96000, "ticks_per_rev": 1200}),
+        (M.HELLO, {"protocol": M.PROTOCOL_VERSION, "fw_major": config.FIRMWARE_VERSION[0],
+                   "fw_minor": config.FIRMWARE_VERSION[1], "fw_patch": config.FIRMWARE_VERSION[2],
+                   "board": M.BOARD_VIRTUAL, "sensors": 8, "wheel_diameter_um": config.WHEEL_DIAMETER_UM,
+                   "wheel_base_um": config.WHEEL_BASE_UM, "ticks_per_rev": config.TICKS_PER_REV}),
         (M.PARAM_SET, {"param": M.param_by_name("emitter_pct")[0], "value": 80}),
         (M.PARAM_VALUE, {"param": M.param_by_name("emitter_pct")[0], "value": 80}),
         (M.COMMAND, {"mode": M.MODE_HOST, "left": 150, "right": 120}),

@@ -3,7 +3,7 @@
 usage: micropython tools/mp_bench_firmware.py time N      cycle and part timings, allocations
        micropython tools/mp_bench_firmware.py heap N      load everything, run N cycles, report heap
 
-Prints one JSON object.  The robot runs on tools/mp_testhal.TestHal, whose
+Prints one JSON object.  The robot runs on firmware/hal_testbench.TestHal, whose
 own work (filling 8 ADC readings twice, copying frames) is part of the
 cycle time measured here, as the real ADC reads are on a board.
 """
@@ -70,6 +70,15 @@ def bench_time(n):
         "cycle_us_p90": durations[n * 9 // 10],
         "cycle_us_max": durations[-1],
     }
+    result["parts_us"] = time_parts(robot, n)
+    result["alloc_bytes_per_cycle"] = alloc_per_cycle(robot, hal, n, durations)
+    result["heap_locked_cycles_ok"] = cycles_run_heap_locked(robot, hal, n, durations)
+    result["faults"] = robot.faults
+    return result
+
+
+def time_parts(robot, n):
+    # Microseconds per call of each part of the cycle.
     parts = {}
     ir = robot.ir
     parts["ir_acquire"] = per_call(ir.acquire, n)
@@ -99,7 +108,10 @@ def bench_time(n):
         robot.send_telemetry(100, -100)
 
     parts["telemetry_frame"] = per_call(telemetry, n)
-    result["parts_us"] = parts
+    return parts
+
+
+def alloc_per_cycle(robot, hal, n, durations):
     # Allocations per cycle: the GC off, heap use before and after.
     gc.collect()
     gc.disable()
@@ -107,8 +119,11 @@ def bench_time(n):
     time_cycles(robot, hal, n, durations)
     after = gc.mem_alloc()
     gc.enable()
-    result["alloc_bytes_per_cycle"] = (after - before) / n
-    # And under heap_lock: any allocation raises.
+    return (after - before) / n
+
+
+def cycles_run_heap_locked(robot, hal, n, durations):
+    # n cycles under heap_lock: any allocation raises.
     locked = [0]
 
     def run_locked():
@@ -121,9 +136,7 @@ def bench_time(n):
         micropython.heap_unlock()
 
     run_locked()
-    result["heap_locked_cycles_ok"] = bool(locked[0])
-    result["faults"] = robot.faults
-    return result
+    return bool(locked[0])
 
 
 def bench_heap(n):

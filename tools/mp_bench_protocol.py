@@ -161,10 +161,50 @@ def main(argv):
     mtype = TELEMETRY
     fmt = FORMATS[mtype]
     plen = PAYLOAD_SIZE[mtype]
-    ticks_us = time.ticks_us
-    ticks_diff = time.ticks_diff
-    mem_alloc = gc.mem_alloc
 
+    vals = _chunk_values(chunk)
+    stream, ends = _encode_chunk(vals, chunk, fmt, mtype, plen)
+    end = ends[chunk - 1]
+    if stream_out:
+        with open(stream_out, "wb") as f:
+            f.write(memoryview(stream)[:end])
+    _check_round_trip(stream, ends, vals, n_frames, chunk, fmt, mtype, plen)
+    wire_bytes = _wire_bytes(ends, n_frames, chunk)
+    enc_us, dec_us, feed_us, enc_bytes = _time_loops(vals, stream, ends, n_frames, chunk, fmt, mtype, plen,
+                                                     repeats)
+    alloc_enc_1, alloc_enc, alloc_feed, alloc_unpack = _measure_alloc(vals, stream, ends, n_frames, chunk,
+                                                                      fmt, mtype, plen)
+    out = {
+        "implementation": sys.implementation.name,
+        "version": ".".join([str(x) for x in sys.implementation.version[:3]]),
+        "sys_version": sys.version,
+        "machine": getattr(sys.implementation, "_machine", ""),
+        "frames": n_frames,
+        "repeats": repeats,
+        "chunk_frames": chunk,
+        "payload_bytes": plen,
+        "wire_bytes": wire_bytes,
+        "heap_bytes": gc.mem_alloc() + gc.mem_free(),
+        "encode": _rates(enc_us, enc_bytes, n_frames),
+        "decode": _rates(dec_us, wire_bytes, n_frames),
+        "decode_feed": _rates(feed_us, wire_bytes, n_frames),
+        "alloc_encode_bytes": alloc_enc,
+        "alloc_encode_frames": n_frames,
+        "alloc_encode_one_frame_bytes": alloc_enc_1,
+        "alloc_encode_per_frame": (alloc_enc - alloc_enc_1) / (n_frames - 1) if n_frames > 1 else 0.0,
+        "alloc_feed_bytes": alloc_feed,
+        "alloc_feed_stream_bytes": wire_bytes,
+        "alloc_feed_per_byte": alloc_feed / wire_bytes,
+        "alloc_unpack_bytes": alloc_unpack,
+        "alloc_unpack_stream_bytes": end,
+        "alloc_unpack_per_byte": alloc_unpack / end,
+    }
+    import json
+
+    print(json.dumps(out))
+
+
+def _chunk_values(chunk):
     # The values of one chunk of frames, preallocated (not timed).
     import array
 
@@ -174,11 +214,17 @@ def main(argv):
         b = k * N_VALUES
         for j in range(N_VALUES):
             vals[b + j] = t[j]
+    return vals
 
-    # The chunk of frames to decode, as this port encodes them (not timed).
+
+def _encode_chunk(vals, chunk, fmt, mtype, plen):
+    # The chunk of frames to decode, as this port encodes them (not timed);
+    # returns the stream and the end offset of each frame in it.
+    import array
+
     enc = FrameEncoder()
     stream = bytearray(chunk * (plen + 8))
-    ends = array.array("I", bytearray(4 * chunk))  # end offset of each frame
+    ends = array.array("I", bytearray(4 * chunk))
     end = 0
     for k in range(chunk):
         b = k * N_VALUES
@@ -187,10 +233,10 @@ def main(argv):
         stream[end:end + n] = enc.view(n)
         end += n
         ends[k] = end
-    if stream_out:
-        with open(stream_out, "wb") as f:
-            f.write(memoryview(stream)[:end])
+    return stream, ends
 
+
+def _check_round_trip(stream, ends, vals, n_frames, chunk, fmt, mtype, plen):
     # Correctness (not timed): every frame of every pass back, every field equal.
     dec = FrameDecoder()
     got = 0
@@ -213,12 +259,22 @@ def main(argv):
     if got != n_frames or bad or dec.errors or dec.frames_lost:
         raise SystemExit("round trip failed: {} of {} frames, {} mismatched, {} errors, {} lost".format(
             got, n_frames, bad, dec.errors, dec.frames_lost))
+
+
+def _wire_bytes(ends, n_frames, chunk):
+    # Bytes of n_frames frames fed as the chunk again and again.
     wire_bytes = 0
     left = n_frames
     while left > 0:
         wire_bytes += ends[chunk - 1] if left >= chunk else ends[left - 1]
         left -= chunk
+    return wire_bytes
 
+
+def _time_loops(vals, stream, ends, n_frames, chunk, fmt, mtype, plen, repeats):
+    # Microseconds per run of the encode, decode-with-unpack and feed()-only loops.
+    ticks_us = time.ticks_us
+    ticks_diff = time.ticks_diff
     enc_us = []
     dec_us = []
     feed_us = []
@@ -247,10 +303,15 @@ def main(argv):
         feed_us.append(ticks_diff(t1, t0))
         if got != n_frames:
             raise SystemExit("feed() delivered {} of {} frames".format(got, n_frames))
+    return enc_us, dec_us, feed_us, enc_bytes
 
+
+def _measure_alloc(vals, stream, ends, n_frames, chunk, fmt, mtype, plen):
     # Allocation: untimed passes with the garbage collector off.  The encode
     # loop is measured for 1 frame and for all, to tell a per-call cost (the
-    # loop function's own state) from a per-frame one.
+    # loop function's own state) from a per-frame one.  Written out pass by
+    # pass: a helper taking the loop as an argument would add its own call.
+    mem_alloc = gc.mem_alloc
     e = FrameEncoder()
     gc.collect()
     gc.disable()
@@ -279,44 +340,17 @@ def main(argv):
     _feed_unpack_loop(d, stream, ends, chunk, chunk, fmt)  # one pass: the tuples stay until the gc runs
     alloc_unpack = mem_alloc() - a0
     gc.enable()
+    return alloc_enc_1, alloc_enc, alloc_feed, alloc_unpack
 
-    def rates(us_list, nbytes):
-        m = _median(us_list)
-        return {
-            "us": us_list,
-            "median_s": m / 1e6,
-            "frames_per_s": n_frames * 1e6 / m,
-            "mb_per_s": nbytes / m,  # bytes per microsecond = MB (1e6 bytes) per second
-        }
 
-    out = {
-        "implementation": sys.implementation.name,
-        "version": ".".join([str(x) for x in sys.implementation.version[:3]]),
-        "sys_version": sys.version,
-        "machine": getattr(sys.implementation, "_machine", ""),
-        "frames": n_frames,
-        "repeats": repeats,
-        "chunk_frames": chunk,
-        "payload_bytes": plen,
-        "wire_bytes": wire_bytes,
-        "heap_bytes": gc.mem_alloc() + gc.mem_free(),
-        "encode": rates(enc_us, enc_bytes),
-        "decode": rates(dec_us, wire_bytes),
-        "decode_feed": rates(feed_us, wire_bytes),
-        "alloc_encode_bytes": alloc_enc,
-        "alloc_encode_frames": n_frames,
-        "alloc_encode_one_frame_bytes": alloc_enc_1,
-        "alloc_encode_per_frame": (alloc_enc - alloc_enc_1) / (n_frames - 1) if n_frames > 1 else 0.0,
-        "alloc_feed_bytes": alloc_feed,
-        "alloc_feed_stream_bytes": wire_bytes,
-        "alloc_feed_per_byte": alloc_feed / wire_bytes,
-        "alloc_unpack_bytes": alloc_unpack,
-        "alloc_unpack_stream_bytes": end,
-        "alloc_unpack_per_byte": alloc_unpack / end,
+def _rates(us_list, nbytes, n_frames):
+    m = _median(us_list)
+    return {
+        "us": us_list,
+        "median_s": m / 1e6,
+        "frames_per_s": n_frames * 1e6 / m,
+        "mb_per_s": nbytes / m,  # bytes per microsecond = MB (1e6 bytes) per second
     }
-    import json
-
-    print(json.dumps(out))
 
 
 if __name__ == "__main__":

@@ -11,9 +11,10 @@ import sys
 import time
 
 from protocol import messages as M
+from tools.arguments import float_range, int_range, output_file, positive_float, positive_int, recording_file
 from tools.cli import CliError
 from host_sim.frame_log import FrameLogError, FrameLogWriter
-from host_sim.interface import TICK_MASK
+from host_sim.interface import CYCLE_S
 from host_sim.serial_link import Frame, LinkError, SerialLink
 
 MODES = {name.lower(): i for i, name in enumerate(M.MODE_NAMES)}
@@ -39,21 +40,32 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
         epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("port", help="device (/dev/ttyACM0, /dev/pts/N) or pyserial URL (loop://, socket://HOST:PORT)")
-    p.add_argument("--baud", type=int, default=115200, help="baud rate for real UARTs (default 115200)")
+    p.add_argument("--baud", type=int_range(50, 20_000_000), default=115200,
+                   help="baud rate for real UARTs (default 115200)")
     p.add_argument("--hello", action="store_true", help="send HELLO first (the board answers with its own)")
     p.add_argument("--command", nargs=3, metavar=("MODE", "LEFT", "RIGHT"),
                    help="send COMMAND: mode (stop, autonomous, host, teleop) and wheel setpoints in mm/s")
-    p.add_argument("--rate", type=float, default=10.0,
+    p.add_argument("--rate", type=float_range(0, 1000, unit="Hz"), default=10.0,
                    help="repeat --command at this rate in Hz, to keep the watchdog fed (0: send once; default 10)")
+    p.add_argument("--excite", action="store_true",
+                   help="drive the robot through the identification manoeuvre (HOST mode at 25 Hz: creep, steps, "
+                        "chirp, spins, arcs, reversals, bursts; it turns away from walls its IR sees and heads back "
+                        "beyond 0.5 m of its start); with --record F.csv, a recording for twinbot diagnose "
+                        "(default --duration 92 s: the manoeuvre twice)")
     p.add_argument("--param-set", action="append", default=[], metavar="NAME=VALUE", help="send PARAM_SET (repeatable)")
     p.add_argument("--param-get", action="append", default=[], metavar="NAME", help="send PARAM_GET (repeatable)")
-    p.add_argument("--record", metavar="FILE",
+    p.add_argument("--record", metavar="FILE", type=record_target,
                    help="record as you go: FILE.csv writes a recording (TELEMETRY rows, docs/recordings.md), "
                         "any other name a frame log of every frame (JSON lines, docs/frame-log.md)")
-    p.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C)")
-    p.add_argument("--count", type=int, help="stop after receiving this many good frames")
+    p.add_argument("--duration", type=positive_float, help="stop after this many seconds (default: until Ctrl-C)")
+    p.add_argument("--count", type=positive_int, help="stop after receiving this many good frames")
     p.add_argument("--quiet", action="store_true", help="no per-frame lines, only the counts")
     p.set_defaults(func=run)
+
+
+def record_target(text: str) -> str:
+    """--record: a recording (FILE.csv, with its sidecar) or a frame log, both writable files."""
+    return recording_file(text) if text.endswith(".csv") else output_file(text)
 
 
 def parse_param_set(text: str) -> tuple[int, int]:
@@ -171,12 +183,43 @@ class Display:
         self.stream.flush()
 
 
+class ManoeuvreDriver:
+    """--excite: each COMMAND from the manoeuvre, given the robot's latest TELEMETRY (its IR and odometry)."""
+
+    def __init__(self) -> None:
+        from host_sim.excitation import Manoeuvre
+
+        self.manoeuvre = Manoeuvre()
+        self.last: dict[str, object] | None = None
+        self.start: float | None = None
+
+    def frame(self, frame: Frame) -> None:
+        if frame.direction == "rx" and frame.msg_type == M.TELEMETRY:
+            self.last = frame.fields
+
+    def __call__(self) -> dict[str, object]:
+        from host_sim.excitation import odometry_of, reflected_of
+
+        now = time.monotonic()
+        if self.start is None:
+            self.start = now
+        left, right = self.manoeuvre.command(now - self.start, reflected_of(self.last), odometry_of(self.last))
+        return {"mode": M.MODE_HOST, "left": left, "right": right}
+
+
 def run(args: argparse.Namespace) -> int:
-    command = parse_command(args.command) if args.command else None
+    if args.excite and args.command:
+        raise CliError("--excite and --command both command the wheels: give one")
+    command: dict[str, object] | ManoeuvreDriver | None = parse_command(args.command) if args.command else None
+    if args.excite:
+        command = ManoeuvreDriver()
+        args.rate = 25.0
+        if args.duration is None:
+            from host_sim.excitation import CYCLE_S as MANOEUVRE_S
+
+            args.duration = 2 * MANOEUVRE_S
     param_sets = [parse_param_set(s) for s in args.param_set]
     param_gets = [_param(n)[0] for n in args.param_get]
-    if args.rate < 0:
-        raise CliError("--rate must be >= 0")
     display = Display(args.quiet)
     log: FrameLogWriter | TelemetryRecorder | None = None
     try:
@@ -190,6 +233,8 @@ def run(args: argparse.Namespace) -> int:
     def on_frame(frame: Frame) -> None:
         if log:
             log.frame(frame)
+        if isinstance(command, ManoeuvreDriver):
+            command.frame(frame)
         display.frame(frame)
 
     try:
@@ -215,29 +260,16 @@ def run(args: argparse.Namespace) -> int:
 
 
 class TelemetryRecorder:
-    """Writes a robot's TELEMETRY as a recording (the simulator's format), row by row."""
+    """`--record F.csv`: the robot's TELEMETRY as a recording (host_sim.recording, the simulator's format)."""
 
     def __init__(self, path: str, port: str) -> None:
         from host_sim.recording import RecordingWriter
 
-        self.writer = RecordingWriter(path, source="robot", sample_period=0.04, extra={"port": port})
-        self.last_tick: int | None = None
-        self.t_ms = 0  # unwrapped robot clock
+        self.writer = RecordingWriter(path, source="robot", sample_period=CYCLE_S, extra={"port": port})
 
     def frame(self, frame: Frame) -> None:
-        if frame.direction != "rx" or frame.msg_type != M.TELEMETRY:
-            return
-        f = frame.fields
-        tick = int(f["tick_ms"])  # type: ignore[call-overload]
-        if self.last_tick is not None:
-            step = (tick - self.last_tick) & TICK_MASK
-            if step == 0 or step > 0x20000000:  # a repeat, or the clock went back (a reset)
-                return
-            self.t_ms += step
-        self.last_tick = tick
-        self.writer.row(self.t_ms / 1000.0, (int(f["i_ref_l_ma"]) / 1000.0, int(f["i_ref_r_ma"]) / 1000.0),  # type: ignore[call-overload]
-                        (int(f["enc_l"]), int(f["enc_r"])), list(f["ir_on"]), list(f["ir_amb"]),  # type: ignore[call-overload]
-                        int(f["vbat_mv"]) / 1000.0)  # type: ignore[call-overload]
+        if frame.direction == "rx" and frame.msg_type == M.TELEMETRY:
+            self.writer.telemetry(frame.fields)
 
     def stats(self, t: float, counters: dict[str, int]) -> None:
         self.writer.meta["decoder"] = counters
@@ -246,22 +278,22 @@ class TelemetryRecorder:
         self.writer.close()
 
 
-def session(link: SerialLink, args: argparse.Namespace, command: dict[str, object] | None,
+def session(link: SerialLink, args: argparse.Namespace, command: dict[str, object] | ManoeuvreDriver | None,
             param_sets: list[tuple[int, int]], param_gets: list[int]) -> int:
     if args.hello:
-        link.send(M.HELLO, {"protocol": M.PROTOCOL_VERSION, "fw_major": 0, "fw_minor": 1, "fw_patch": 0,
-                            "board": M.BOARD_HOST, "sensors": 0, "wheel_diameter_um": 0,
-                            "wheel_base_um": 0, "ticks_per_rev": 0})
+        link.send(M.HELLO, host_hello())
     for pid, value in param_sets:
         link.send(M.PARAM_SET, {"param": pid, "value": value})
     for pid in param_gets:
         link.send(M.PARAM_GET, {"param": pid})
     next_command = time.monotonic()
     end = time.monotonic() + args.duration if args.duration is not None else None
+    silence = SilenceHint(args.port)
     while True:
         now = time.monotonic()
+        silence.check(link.decoder.frames, now)
         if command is not None and now >= next_command:
-            link.send(M.COMMAND, command)
+            link.send(M.COMMAND, command() if callable(command) else command)
             if args.rate > 0:
                 next_command = now + 1.0 / args.rate
             else:
@@ -276,3 +308,35 @@ def session(link: SerialLink, args: argparse.Namespace, command: dict[str, objec
         if end is not None:
             wait = min(wait, max(0.0, end - now))
         link.poll(wait)
+
+
+def host_hello() -> dict[str, object]:
+    """The host's HELLO: the package's version (tools/version.py), board HOST, no geometry (zeros)."""
+    from tools.version import version_triple
+
+    major, minor, patch = version_triple()
+    return {"protocol": M.PROTOCOL_VERSION, "fw_major": major, "fw_minor": minor, "fw_patch": patch,
+            "board": M.BOARD_HOST, "sensors": 0, "wheel_diameter_um": 0, "wheel_base_um": 0, "ticks_per_rev": 0}
+
+
+SILENT_S = 2.0  # no frame for this long: say what usually causes it
+
+
+class SilenceHint:
+    """After SILENT_S without a frame, one line on stderr on what to do (again after frames stop anew)."""
+
+    def __init__(self, port: str, silent_s: float = SILENT_S) -> None:
+        self.port = port
+        self.silent_s = silent_s
+        self.frames = -1
+        self.since = time.monotonic()
+        self.told = False
+
+    def check(self, frames: int, now: float) -> None:
+        if frames != self.frames:
+            self.frames, self.since, self.told = frames, now, False
+        elif not self.told and now - self.since >= self.silent_s:
+            self.told = True
+            print(f"twinbot serial: no frames for {self.silent_s:g} s on {self.port}: is the firmware running? "
+                  f"After mpremote it stays at the REPL: run `mpremote connect {self.port} reset` or press reset",
+                  file=sys.stderr, flush=True)

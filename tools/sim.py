@@ -13,6 +13,8 @@ import math
 import sys
 from pathlib import Path
 
+from tools.arguments import (image_file, int_range, non_negative_int, recording_file, sim_seconds, speed_factor,
+                             warn)
 from tools.cli import CliError
 
 EXAMPLES = """\
@@ -27,8 +29,10 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
     p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1], epilog=EXAMPLES,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     add_run_arguments(p)
-    p.add_argument("--record", metavar="FILE", help="write a recording: FILE (CSV) and FILE.json")
-    p.add_argument("--png", metavar="FILE", help="draw the world and the trajectory")
+    p.add_argument("--record", metavar="FILE", type=recording_file,
+                   help="write a recording: FILE (CSV) and FILE.json")
+    p.add_argument("--png", metavar="FILE", type=image_file,
+                   help="draw the world and the trajectory (any format matplotlib writes: .png, .svg, .pdf ...)")
     p.set_defaults(func=run)
 
 
@@ -36,36 +40,38 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--world", default="paper_room",
                    help="built-in world (paper_room, maze, arena) or a world JSON file (default paper_room)")
     p.add_argument("--rules", choices=("first", "refined"), default="refined", help="fuzzy rule set (default refined)")
-    p.add_argument("--duration", type=float, default=60.0, help="simulated seconds (default 60)")
+    p.add_argument("--duration", type=sim_seconds(), default=60.0,
+                   help="simulated seconds, 0.04 (one control period) to 86400 (default 60)")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--fixed", dest="mode", action="store_const", const="fixed",
                       help="fixed step: exactly repeatable (default)")
     mode.add_argument("--realtime", dest="mode", action="store_const", const="realtime",
                       help="variable step from the wall clock, as the paper's real-time loop")
     p.set_defaults(mode="fixed")
-    p.add_argument("--speed", default="max",
+    p.add_argument("--speed", default="max", type=speed_factor,
                    help="k x real time, or 'max' (fixed step only: as fast as possible; default max, "
                         "and 1 in --realtime)")
-    p.add_argument("--substeps", type=int, default=8, help="physics substeps per 40 ms control period (default 8)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (default 0)")
+    p.add_argument("--substeps", type=int_range(1, 1000), default=8,
+                   help="physics substeps per 40 ms control period, 1..1000 (default 8)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the sensor noise, >= 0 (default 0)")
     p.add_argument("--no-noise", action="store_true", help="noise-free sensors")
     p.add_argument("--params", metavar="FILE", help="robot parameters JSON (any subset; see host_sim/params.py)")
+    p.add_argument("--stop-at-exit", action="store_true",
+                   help="end the run when the robot leaves the world's area (found the exit), "
+                        "instead of simulating it off the map until --duration")
     p.add_argument("--pil", action="store_true",
                    help="run the firmware on a virtual board under MicroPython (processor in the loop)")
+    p.add_argument("--excite", action="store_true",
+                   help="drive the firmware through the identification manoeuvre (HOST mode: creep, steps, chirp, "
+                        "spins, arcs, reversals, bursts; IR-guarded) instead of exploring: a recording for "
+                        "twinbot diagnose")
 
 
-def parse_speed(text: str, mode: str) -> float:
-    if text == "max":
-        if mode == "realtime":
-            return 1.0
-        return math.inf
-    try:
-        speed = float(text)
-    except ValueError:
-        raise CliError(f"--speed must be a number (k x real time) or 'max', not {text!r}") from None
-    if not speed > 0:
-        raise CliError("--speed must be > 0")
-    return speed
+def parse_speed(speed: str | float, mode: str) -> float:
+    """The pace: 'max' is as fast as possible in fixed step, real time (1) in --realtime."""
+    if speed == "max":
+        return 1.0 if mode == "realtime" else math.inf
+    return float(speed)
 
 
 def load_inputs(args: argparse.Namespace):  # type: ignore[no-untyped-def]
@@ -77,10 +83,6 @@ def load_inputs(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         world = world_by_name_or_path(args.world, params.body_radius)
     except (ParamsError, WorldError) as exc:
         raise CliError(str(exc)) from None
-    if args.duration <= 0:
-        raise CliError("--duration must be > 0")
-    if args.substeps < 1:
-        raise CliError("--substeps must be >= 1")
     return params, world
 
 
@@ -92,10 +94,16 @@ def make_controller(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     rule_set = RULE_SETS[args.rules]
     if args.pil:
         try:
-            return PilController(rule_set)
+            controller: object = PilController(rule_set)
         except RuntimeError as exc:
             raise CliError(f"PIL: {exc}") from None
-    return SilController(rule_set)
+    else:
+        controller = SilController(rule_set)
+    if getattr(args, "excite", False):
+        from host_sim.excitation import ExcitedController
+
+        return ExcitedController(controller)
+    return controller
 
 
 class Progress:
@@ -127,23 +135,42 @@ def simulate(args: argparse.Namespace, params, world, recorder=None, label: str 
         sim = Simulation(world, params, controller, seed=args.seed, noise=not args.no_noise,
                          substeps=args.substeps, recorder=recorder)
         if args.mode == "realtime":
-            result = sim.run_realtime(args.duration, speed=speed, progress=progress)
+            result = sim.run_realtime(args.duration, speed=speed, progress=progress, stop_at_exit=args.stop_at_exit)
         else:
-            result = sim.run_fixed(args.duration, speed=speed, progress=progress)
+            result = sim.run_fixed(args.duration, speed=speed, progress=progress, stop_at_exit=args.stop_at_exit)
     finally:
         progress.close()
         controller.close()
+    if speed != math.inf and result.real_time_factor < KEPT_PACE * speed:
+        warn("sim", f"asked for {speed:g}x real time, kept {result.real_time_factor:.3g}x: this machine "
+                    "cannot keep that pace")
     return result
+
+
+KEPT_PACE = 0.9  # below this fraction of the asked --speed, the run says it could not keep up
+
+
+def plural(n: int, word: str) -> str:
+    return f"{n} {word}" if n == 1 else f"{n} {word}s"
 
 
 def summary(result, label: str = "") -> str:  # type: ignore[no-untyped-def]
     t90 = result.time_to(0.9)
     return (f"{label}coverage {100 * result.coverage[-1]:.1f} % of the free area, "
             f"90 % {'at ' + format(t90, '.1f') + ' s' if t90 is not None else 'not reached'}, "
-            f"{result.collisions} collisions, "
-            f"{'exit found at ' + format(result.exit_time, '.1f') + ' s' if result.exit_time is not None else 'no exit'}"
+            f"{plural(result.collisions, 'collision')}, {exit_text(result)}"
             f"; {result.sim_seconds:.1f} sim s in {result.wall_seconds:.2f} s "
             f"({result.real_time_factor:.0f}x real time, {result.mode} step, {result.controller})")
+
+
+def exit_text(result) -> str:  # type: ignore[no-untyped-def]
+    if result.exit_time is None:
+        return "no exit"
+    text = f"exit found at {result.exit_time:.1f} s"
+    off_map = result.sim_seconds - result.exit_time
+    if off_map > 0.5:
+        text += f" (then {off_map:,.0f} s simulated off the map; --stop-at-exit ends the run at the exit)"
+    return text
 
 
 def run(args: argparse.Namespace) -> int:
@@ -156,6 +183,7 @@ def run(args: argparse.Namespace) -> int:
             recorder = RecordingWriter(args.record, source="simulator", sample_period=0.04,
                                        robot=params.to_json(), world=world.to_dict(),
                                        extra={"controller": "PIL" if args.pil else "SIL", "rules": args.rules,
+                                              "excitation": "manoeuvre" if args.excite else "exploration",
                                               "seed": args.seed, "mode": args.mode, "substeps": args.substeps,
                                               "noise": not args.no_noise, "emitter_pct": 60})
         except RecordingError as exc:

@@ -1,6 +1,6 @@
-"""`twinbot plot sensor`: the paper's sensor figures (7, 8, 10, 11, 12), drawn from the model.
+"""The paper's sensor figures (7, 8, 10, 11, 12), drawn from the model (`twinbot plot sensor`).
 
-Each figure is a PNG in --out (default docs/figures):
+Each figure is a PNG in the output directory (`--out`, default docs/figures):
 
     fig7_angle.png     angle response: the target shape, the big and the small
                        dome polynomials, the blend zone and the blended A(angle)
@@ -14,15 +14,14 @@ Each figure is a PNG in --out (default docs/figures):
 "Light sensed" is what the firmware gets after the ambient subtraction:
 on - off = min(reflected, adc_max - ambient), without noise.
 
-`twinbot plot worlds` (register_worlds) draws the built-in worlds
-(worlds.png), for docs/worlds.md.
+plot_worlds draws the built-in worlds (worlds.png, `twinbot plot worlds`),
+for docs/worlds.md.
 
 matplotlib (Agg) is imported inside the functions: building the CLI parser
 stays cheap.
 """
 from __future__ import annotations
 
-import argparse
 import math
 from pathlib import Path
 from typing import Any
@@ -40,12 +39,6 @@ def _pyplot() -> Any:
     import matplotlib.pyplot as plt
 
     return plt
-
-
-def _params(path: str | None) -> Any:
-    from host_sim.params import DEFAULT, load_params
-
-    return load_params(path) if path else DEFAULT
 
 
 def sensed(distance: Any, angle: Any, power_pct: Any, p: Any) -> np.ndarray:
@@ -224,35 +217,3 @@ def plot_worlds(out_dir: str | Path = DEFAULT_OUT) -> Path:
     fig.savefig(path)
     plt.close(fig)
     return path
-
-
-# --------------------------------------------------------------------------- #
-# CLI
-# --------------------------------------------------------------------------- #
-def run(args: argparse.Namespace) -> int:
-    for path in plot_sensor_figures(args.out, _params(args.params)):
-        print(path)
-    return 0
-
-
-def run_worlds(args: argparse.Namespace) -> int:
-    print(plot_worlds(args.out))
-    return 0
-
-
-def register(subparsers: Any, name: str, summary: str) -> None:
-    """`twinbot plot sensor`: the paper's Figs. 7, 8, 10, 11 and 12 from the sensor model."""
-    parser = subparsers.add_parser(name, help=summary, description=__doc__,
-                                   formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--out", default=str(DEFAULT_OUT), metavar="DIR",
-                        help=f"directory for the PNG files (default {DEFAULT_OUT})")
-    parser.add_argument("--params", metavar="FILE", help="robot parameter file (JSON); default: the built-in set")
-    parser.set_defaults(func=run)
-
-
-def register_worlds(subparsers: Any, name: str, summary: str) -> None:
-    """`twinbot plot worlds`: the built-in worlds in one picture."""
-    parser = subparsers.add_parser(name, help=summary, description="Draw the built-in worlds (worlds.png).")
-    parser.add_argument("--out", default=str(DEFAULT_OUT), metavar="DIR",
-                        help=f"directory for the PNG file (default {DEFAULT_OUT})")
-    parser.set_defaults(func=run_worlds)

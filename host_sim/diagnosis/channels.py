@@ -1,0 +1,121 @@
+"""Residual channels: what the recording and the twin are compared on, row by row within each window.
+
+Each channel is a per-period quantity, so that a mismatch shows where it
+happens instead of accumulating along the window:
+
+- wheel_l, wheel_r: encoder ticks counted in the period (the wheel's speed);
+- forward, lateral, heading_rate: the body's motion in the period, in the
+  frame of its heading at the period's start (m, m, rad) — tracked only;
+- ir_0..ir_7: each sensor's reflected light (on − off, ADC counts) — tracked,
+  in a world with walls;
+- amb_0..amb_7: each sensor's ambient reading (counts) — likewise;
+- vbat: the battery voltage (V) against the twin's.
+
+Pose channels (x, y, phi at the window's end) give the fit of the whole
+trajectory; they are compared, not located (their residuals accumulate).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from host_sim.diagnosis.windows import WindowRun, Windows, sensors_on_track
+from host_sim.params import RobotParams
+from host_sim.recording import Recording
+from host_sim.world import World
+
+SENSOR_NAMES = ("S1 front", "S2 front-left", "S3 left", "S4 back-left", "S5 back", "S6 back-right",
+                "S7 right", "S8 front-right")
+WHEELS = ("wheel_l", "wheel_r")
+MOTION = ("forward", "lateral", "heading_rate")
+IR = tuple(f"ir_{k}" for k in range(8))
+AMBIENT = tuple(f"amb_{k}" for k in range(8))
+
+
+@dataclass
+class Channel:
+    """One compared quantity: recorded y and the twin's y_hat, per window and period."""
+
+    name: str
+    unit: str
+    y: np.ndarray  # (W, T - 1) recorded
+    y_hat: np.ndarray  # (W, N, T - 1) the twin, one row per parameter set
+    noise_floor: float  # the residual's standard deviation when the twin is right (quantisation, sensor noise)
+    locate: bool = True  # residuals per period (True) or accumulated along the window (pose)
+    relative: bool = True  # a mismatch must also be large against the signal (not for levels: vbat, ambient)
+
+    def residual(self, s: int = 0) -> np.ndarray:
+        """(W, T - 1) recorded minus the twin with parameter set s."""
+        return self.y - self.y_hat[:, s]
+
+
+def _motion(pose: np.ndarray) -> np.ndarray:
+    """(..., T, 3) poses -> (..., T - 1, 3): forward, lateral, heading change per period, in the start frame."""
+    d = np.diff(pose, axis=-2)
+    phi = pose[..., :-1, 2]
+    c, s = np.cos(phi), np.sin(phi)
+    out = np.empty(d.shape)
+    out[..., 0] = c * d[..., 0] + s * d[..., 1]
+    out[..., 1] = -s * d[..., 0] + c * d[..., 1]
+    out[..., 2] = (d[..., 2] + np.pi) % (2 * np.pi) - np.pi
+    return out
+
+
+def build_channels(rec: Recording, windows: Windows, run: WindowRun, robots: list[RobotParams],
+                   world: World | None) -> list[Channel]:
+    """Every channel the recording supports: recorded vs the twin's run (and its sensors on the track)."""
+    p = robots[0]
+    idx = windows.index
+    chans: list[Channel] = []
+    enc_rec = np.diff(rec.enc[idx], axis=1).astype(float)
+    enc_twin = np.diff(run.enc, axis=2).astype(float)
+    for w, name in enumerate(WHEELS):
+        # The recorded counts are floors, the twin's are not: an increment is off by up to a tick (1/6 tick^2).
+        chans.append(Channel(name, "ticks/period", enc_rec[..., w], enc_twin[..., w], float(np.sqrt(1 / 6))))
+    if rec.pose is not None:
+        chans += _motion_channels(rec, idx, run, p)
+        if world is not None and world.n_walls:
+            chans += _sensor_channels(rec, idx[:, 1:], robots, world)
+    vb = rec.vbat[idx[:, 1:]]
+    chans.append(Channel("vbat", "V", vb, np.repeat(np.full_like(vb, p.battery_voltage)[:, None], run.enc.shape[1], 1),
+                         0.005, relative=False))
+    return chans
+
+
+def _motion_channels(rec: Recording, idx: np.ndarray, run: WindowRun, p: RobotParams) -> list[Channel]:
+    assert rec.pose is not None
+    m_rec = _motion(rec.pose[idx])
+    m_twin = _motion(run.pose)
+    tick = 2 * np.pi * p.wheel_radius / p.ticks_per_rev  # m of rim per encoder tick
+    floors = (0.5 * tick, 0.5 * tick, 0.5 * tick / (2 * p.half_axle))
+    chans = [Channel(name, unit, m_rec[..., k], m_twin[..., k], floors[k])
+             for k, (name, unit) in enumerate(zip(MOTION, ("m/period", "m/period", "rad/period")))]
+    end_rec = rec.pose[idx[:, -1]]
+    for k, name in enumerate(("x", "y", "phi")):
+        chans.append(Channel(f"pose_{name}", "m" if k < 2 else "rad", end_rec[:, k:k + 1].copy(),
+                             run.pose[:, :, -1:, k], 0.0, locate=False))
+    return chans
+
+
+def _sensor_channels(rec: Recording, rows: np.ndarray, robots: list[RobotParams], world: World) -> list[Channel]:
+    on, amb = sensors_on_track(rec, rows, robots, world)  # (N, W, T - 1, 8)
+    p = robots[0]
+    refl_rec = (rec.ir_on - rec.ir_amb)[rows].astype(float)
+    refl_twin = (on - amb).astype(float).transpose(1, 0, 2, 3)
+    amb_twin = amb.astype(float).transpose(1, 0, 2, 3)
+    chans = []
+    for k in range(8):
+        chans.append(Channel(IR[k], "counts", refl_rec[..., k], refl_twin[..., k], float(np.sqrt(2) * p.ir_noise + 0.5)))
+        chans.append(Channel(AMBIENT[k], "counts", rec.ir_amb[rows][..., k].astype(float), amb_twin[..., k],
+                             float(p.ir_noise + 0.5), relative=False))
+    return chans
+
+
+def fit_percent(y: np.ndarray, y_hat: np.ndarray) -> float:
+    """100 (1 - |y - y_hat| / |y - mean(y)|): 100 a perfect twin, 0 no better than the mean, below 0 worse."""
+    spread = float(np.linalg.norm(y - y.mean()))
+    err = float(np.linalg.norm(y - y_hat))
+    if spread == 0.0:
+        return 100.0 if err == 0.0 else -np.inf
+    return 100.0 * (1.0 - err / spread)

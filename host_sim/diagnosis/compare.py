@@ -1,0 +1,93 @@
+"""Compare: the twin against a recording, channel by channel, on held-out windows; locate what is not noise.
+
+    cmp = compare(rec, params, world)        # windows of 1 s and 5 s
+    cmp.fit["wheel_l"]                        # held-out fit %, 1 s windows
+    cmp.findings                              # located mismatches
+
+Windows where the recorded robot touches a wall are a channel of their own
+("contact": the wheels' fit in those windows) and are left out of every other
+channel, so a collision cannot swamp a slow effect elsewhere.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from host_sim.diagnosis.channels import WHEELS, Channel, build_channels, fit_percent
+from host_sim.diagnosis.locate import Finding, contact_windows, input_lag, ljung_box, locate_channel, regimes
+from host_sim.diagnosis.windows import DEFAULT_SECONDS, Windows, make_windows, run_windows
+from host_sim.params import RobotParams
+from host_sim.recording import Recording
+from host_sim.world import World
+
+
+@dataclass
+class Comparison:
+    seconds: float  # window length
+    windows: Windows
+    channels: list[Channel]
+    contact: np.ndarray  # (W,) bool
+    fit: dict[str, float]  # held-out fit %, per channel (and "contact")
+    whiteness: dict[str, float] = field(default_factory=dict)  # Ljung-Box p-value per located channel
+    lag: dict[str, tuple[int, float]] = field(default_factory=dict)  # wheel channels: (lag, correlation)
+    findings: list[Finding] = field(default_factory=list)
+    pose: np.ndarray | None = None  # (W, T, 3) the twin's pose in every window (for pictures)
+
+    def channel(self, name: str) -> Channel:
+        return next(c for c in self.channels if c.name == name)
+
+
+def compare(rec: Recording, params: RobotParams, world: World | None, seconds: float = DEFAULT_SECONDS[0],
+            *, locate: bool = True) -> Comparison:
+    windows = make_windows(rec, seconds)
+    run = run_windows(rec, windows, params, world)
+    chans = build_channels(rec, windows, run, [params], world)
+    contact = contact_windows(rec, windows, params, world)
+    cmp = Comparison(seconds, windows, chans, contact, held_out_fit(chans, windows, contact), pose=run.pose[:, 0])
+    if locate:
+        _locate(cmp, rec, params, world)
+    return cmp
+
+
+def held_out_fit(chans: list[Channel], windows: Windows, contact: np.ndarray, s: int = 0) -> dict[str, float]:
+    """Fit % of every channel on the held-out windows away from walls; "contact" on those touching one."""
+    judged = windows.held_out & ~contact
+    fit = {c.name: fit_percent(c.y[judged], c.y_hat[judged, s]) for c in chans if judged.any()}
+    touching = windows.held_out & contact
+    if touching.any():
+        wheels = [c for c in chans if c.name in WHEELS]
+        fit["contact"] = fit_percent(np.concatenate([c.y[touching] for c in wheels]),
+                                     np.concatenate([c.y_hat[touching, s] for c in wheels]))
+    return fit
+
+
+def _locate(cmp: Comparison, rec: Recording, p: RobotParams, world: World | None) -> None:
+    reg = regimes(rec, cmp.windows, p, world)
+    keep = ~cmp.contact
+    t = rec.t[cmp.windows.index[:, :-1]]
+    for ch in cmp.channels:
+        if not ch.locate:
+            continue
+        resid = ch.residual()
+        found = locate_channel(ch, resid, keep, reg, t)
+        if found is None:
+            continue
+        cmp.findings.append(found)
+        cmp.whiteness[ch.name] = ljung_box(resid[keep])[1]
+        if ch.name in WHEELS:
+            u = rec.cmd[cmp.windows.index[:, :-1]][..., WHEELS.index(ch.name)]
+            cmp.lag[ch.name] = input_lag(resid[keep], u[keep])
+
+
+def compare_all(rec: Recording, params: RobotParams, world: World | None,
+                seconds: tuple[float, ...] = DEFAULT_SECONDS) -> list[Comparison]:
+    """One comparison per window length that fits the recording (the shortest one locates)."""
+    out = []
+    for i, s in enumerate(seconds):
+        if len(rec) > int(round(s / rec.sample_period)) * 3:
+            out.append(compare(rec, params, world, s, locate=i == 0))
+    return out
+
+
+__all__ = ["Comparison", "compare", "compare_all", "held_out_fit"]

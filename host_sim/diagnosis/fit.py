@@ -1,0 +1,279 @@
+"""Fit and choose: which effects of the library explain the located mismatch, and how large they are.
+
+Candidates are the library's effects at the sites the located channels point
+to (a wheel channel: the drive's effects; sensor k: that sensor's effects
+and the ring's latency; the battery: its resistance).  Each is fitted by
+bounded nonlinear least squares (scipy.optimize.least_squares) on the
+training windows, the residuals weighted by each channel's noise; the
+Jacobian comes from one batch run of the twin with every parameter nudged
+(the batch path: all windows and all nudges at once).
+
+Forward selection adds at most MAX_EFFECTS effects, one at a time, each the
+candidate with the lowest BIC on the training windows, accepted only if it
+is significant against the twin without it (F test) AND it improves the
+fit on the held-out windows by at least MIN_HELD_OUT_GAIN.  Candidates that
+explain the held-out data as well as the chosen one (within AMBIGUITY) are
+reported beside it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from scipy import optimize, stats
+
+from host_sim import effects as E
+from host_sim.diagnosis.channels import AMBIENT, IR, MOTION, WHEELS, Channel, build_channels
+from host_sim.diagnosis.windows import Windows, run_windows
+from host_sim.params import RobotParams
+from host_sim.recording import Recording
+from host_sim.world import World
+
+MAX_EFFECTS = 3
+SHORTLIST = 4  # candidates fitted in full after screening
+P_MAX = 1e-4  # F test against the twin without the effect
+MIN_HELD_OUT_GAIN = 0.10  # relative drop of the held-out weighted sum of squares
+AMBIGUITY = 0.02  # held-out costs within 2 % of the chosen one: "explains it equally well"
+DRIVE_EFFECTS = ("dry_friction", "viscous_friction", "wheel_radius", "torque_constant", "encoder_scale", "backlash",
+                 "track_width", "actuator_delay", "current_limit", "battery_resistance", "traction_limit",
+                 "caster_drag", "turning_resistance", "com_offset", "mass")
+SENSOR_EFFECTS = ("ir_gain", "ir_misalignment", "ir_offset", "ambient_leakage")
+
+
+@dataclass(frozen=True)
+class Candidate:
+    name: str
+    site: str | int
+
+    def label(self) -> str:
+        return f"{self.name}({self.site})" if self.site != "both" else self.name
+
+
+@dataclass
+class Model:
+    """A twin: nominal parameters plus chosen effects, with their values and how well it does."""
+
+    effects: list[Candidate]
+    values: list[list[float]]
+    params: RobotParams
+    cost_train: float
+    cost_test: float
+    n_train: int
+    ci95: list[list[tuple[float, float]]] = field(default_factory=list)
+    p_value: float = 1.0
+    alternatives: list[str] = field(default_factory=list)
+
+
+def candidates_for(channels: list[str]) -> list[Candidate]:
+    out: list[Candidate] = []
+    if any(c in WHEELS or c in MOTION or c == "vbat" for c in channels):
+        for name in DRIVE_EFFECTS:
+            out += [Candidate(name, s) for s in E.LIBRARY[name].sites()]
+    sensors = sorted({int(c.split("_")[1]) for c in channels if c.startswith(("ir_", "amb_"))})
+    for k in sensors:
+        out += [Candidate(name, k) for name in SENSOR_EFFECTS]
+    if sensors:
+        out.append(Candidate("ir_latency", "both"))
+    return out
+
+
+def objective_channels(channels: list[str], available: list[str]) -> list[str]:
+    """The channels a fit is judged on: the located ones and their family."""
+    wanted: set[str] = set()
+    for c in channels:
+        if c in WHEELS or c in MOTION or c == "vbat":
+            wanted |= set(WHEELS) | set(MOTION) | {"vbat"}
+        elif c.startswith(("ir_", "amb_")):
+            k = int(c.split("_")[1])
+            wanted |= {IR[k], AMBIENT[k]}
+    return [c for c in available if c in wanted]
+
+
+class Objective:
+    """Weighted residuals of the chosen channels, on the training and the held-out windows, for many twins."""
+
+    def __init__(self, rec: Recording, windows: Windows, world: World | None, names: list[str],
+                 sigma: dict[str, float], keep: np.ndarray) -> None:
+        self.rec, self.windows, self.world = rec, windows, world
+        self.names = names
+        self.sigma = sigma
+        self.train = keep & ~windows.held_out
+        self.test = keep & windows.held_out
+        self.sensors = any(n.startswith(("ir_", "amb_")) for n in names)
+        self.evaluations = 0
+
+    def residuals(self, robots: list[RobotParams]) -> tuple[np.ndarray, np.ndarray]:
+        """(train (N, n), test (N, m)) weighted residuals of N twins."""
+        self.evaluations += len(robots)
+        run = run_windows(self.rec, self.windows, robots, self.world)
+        chans = {c.name: c for c in build_channels(self.rec, self.windows, run, robots,
+                                                    self.world if self.sensors else None)}
+        train, test = [], []
+        for name in self.names:
+            c: Channel = chans[name]
+            r = (c.y[:, None, :] - c.y_hat) / self.sigma[name]  # (W, N, T')
+            train.append(r[self.train].transpose(1, 0, 2).reshape(len(robots), -1))
+            test.append(r[self.test].transpose(1, 0, 2).reshape(len(robots), -1))
+        return np.concatenate(train, axis=1), np.concatenate(test, axis=1)
+
+
+def _apply_all(base: RobotParams, effects: list[Candidate], values: list[list[float]]) -> RobotParams:
+    p = base
+    for cand, v in zip(effects, values):
+        p = E.apply(p, cand.name, cand.site, v)
+    return p
+
+
+def fit_model(obj: Objective, base: RobotParams, effects: list[Candidate], start: list[list[float]]) -> Model:
+    """Bounded least squares of the effects' parameters on the training windows."""
+    sizes = [len(E.LIBRARY[c.name].params) for c in effects]
+    lo = np.concatenate([E.bounds(c.name)[0] for c in effects])
+    hi = np.concatenate([E.bounds(c.name)[1] for c in effects])
+    x0 = np.clip(np.concatenate(start), lo, hi)
+    step = 1e-3 * (hi - lo)
+
+    def unpack(x: np.ndarray) -> list[list[float]]:
+        out, i = [], 0
+        for n in sizes:
+            out.append([float(v) for v in x[i:i + n]])
+            i += n
+        return out
+
+    cache: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+    def evaluate(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        key = x.tobytes()
+        if key not in cache:
+            # One batch: the twin at x and at x nudged along every parameter (away from the nearer bound).
+            h = np.where(x + step <= hi, step, -step)
+            points = [x] + [x + np.eye(len(x))[i] * h[i] for i in range(len(x))]
+            train, test = obj.residuals([_apply_all(base, effects, unpack(pt)) for pt in points])
+            jac = ((train[1:] - train[0]) / h[:, None]).T
+            cache.clear()
+            cache[key] = (train[0], jac, test[0])
+        return cache[key]
+
+    sol = optimize.least_squares(lambda x: evaluate(x)[0], x0, jac=lambda x: evaluate(x)[1], bounds=(lo, hi),
+                                 x_scale=hi - lo, max_nfev=30)
+    r_train, jac, r_test = evaluate(sol.x)
+    model = Model(list(effects), unpack(sol.x), _apply_all(base, effects, unpack(sol.x)),
+                  float(r_train @ r_train), float(r_test @ r_test), int(r_train.size))
+    model.ci95 = _intervals(sol.x, jac, r_train, sizes, lo, hi)
+    return model
+
+
+def _intervals(x: np.ndarray, jac: np.ndarray, r: np.ndarray, sizes: list[int], lo: np.ndarray,
+               hi: np.ndarray) -> list[list[tuple[float, float]]]:
+    """95 % intervals from the Jacobian, widened for the residuals' correlation along each window."""
+    n, k = jac.shape
+    s2 = float(r @ r) / max(n - k, 1)
+    rho = float(np.corrcoef(r[:-1], r[1:])[0, 1]) if n > 2 and r.std() > 0 else 0.0
+    inflate = (1 + max(rho, 0.0)) / (1 - min(max(rho, 0.0), 0.95))
+    try:
+        cov = np.linalg.pinv(jac.T @ jac) * s2 * inflate
+        half = 1.96 * np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    except np.linalg.LinAlgError:
+        half = np.full(k, np.inf)
+    out, i = [], 0
+    for size in sizes:
+        out.append([(float(max(lo[j], x[j] - half[j])), float(min(hi[j], x[j] + half[j]))) for j in range(i, i + size)])
+        i += size
+    return out
+
+
+def f_test(rss0: float, rss1: float, k: int, n: int, k_total: int) -> float:
+    if rss1 <= 0 or n <= k_total:
+        return 0.0 if rss0 > rss1 else 1.0
+    f = ((rss0 - rss1) / k) / (rss1 / (n - k_total))
+    return float(stats.f.sf(f, k, n - k_total)) if f > 0 else 1.0
+
+
+def bic(model: Model) -> float:
+    k = sum(len(v) for v in model.values)
+    n = max(model.n_train, 1)
+    return n * math.log(max(model.cost_train, 1e-300) / n) + k * math.log(n)
+
+
+def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candidate], keep: int) -> list[Candidate]:
+    """The `keep` candidates whose one Gauss-Newton step from absent promises the lowest training cost.
+
+    One batch run: the current model plus each candidate at its absent value, and nudged.
+    """
+    robots = [current.params]
+    slots = []
+    for cand in cands:
+        lo, hi = (np.array(b) for b in E.bounds(cand.name))
+        x0 = np.array(_start_values(base, cand))
+        h = np.where(x0 + 1e-2 * (hi - lo) <= hi, 1e-2 * (hi - lo), -1e-2 * (hi - lo))
+        first = len(robots)
+        robots.append(E.apply(current.params, cand.name, cand.site, list(x0)))
+        robots += [E.apply(current.params, cand.name, cand.site, list(x0 + np.eye(len(x0))[i] * h[i]))
+                   for i in range(len(x0))]
+        slots.append((first, h, lo - x0, hi - x0))
+    train, _test = obj.residuals(robots)
+    predicted = []
+    for first, h, dlo, dhi in slots:
+        r0 = train[first]
+        jac = ((train[first + 1:first + 1 + len(h)] - r0) / h[:, None]).T
+        step, *_ = np.linalg.lstsq(jac, -r0, rcond=None)
+        step = np.clip(step, dlo, dhi)
+        resid = r0 + jac @ step
+        predicted.append(float(resid @ resid))
+    order = np.argsort(predicted)
+    return [cands[i] for i in order[:keep]]
+
+
+def _pinned(base: RobotParams, model: Model) -> bool:
+    """The newest effect's value sits at a bound of its range that is not its absent value."""
+    cand, values = model.effects[-1], model.values[-1]
+    lo, hi = E.bounds(cand.name)
+    absent = E.absent_values(base, cand.name)
+    for v, a, b, off in zip(values, lo, hi, absent):
+        margin = 0.01 * (b - a)
+        if (v - a < margin and abs(off - a) > margin) or (b - v < margin and abs(b - off) > margin):
+            return True
+    return False
+
+
+def _start_values(base: RobotParams, cand: Candidate) -> list[float]:
+    """Where a fit starts: the nominal robot's own value for nominal parameters, else absent."""
+    effect = E.LIBRARY[cand.name]
+    if all(prm.absent is None for prm in effect.params):
+        return E.values(base, cand.name, cand.site)
+    return E.absent_values(base, cand.name)
+
+
+def select(obj: Objective, base: RobotParams, cands: list[Candidate],
+           progress: Callable[[str], None] | None = None) -> list[Model]:
+    """Forward selection: the chain of accepted models, nominal first."""
+    say = progress or (lambda _t: None)
+    r_train, r_test = obj.residuals([base])
+    chain = [Model([], [], base, float(r_train[0] @ r_train[0]), float(r_test[0] @ r_test[0]), int(r_train.size))]
+    for step in range(MAX_EFFECTS):
+        current = chain[-1]
+        pool = [c for c in cands if c not in current.effects]
+        if not pool:
+            break
+        say(f"effect {step + 1}: screening {len(pool)} candidates")
+        shortlist = screen(obj, base, current, pool, SHORTLIST)
+        tried = []
+        for cand in shortlist:
+            say(f"effect {step + 1}: fitting {cand.label()}")
+            tried.append(fit_model(obj, base, current.effects + [cand], current.values + [_start_values(base, cand)]))
+        # A value pinned at a fitting bound is a stand-in for something else, not a measurement.
+        tried = [m for m in tried if not _pinned(base, m)]
+        if not tried:
+            break
+        best = min(tried, key=bic)
+        k = sum(len(v) for v in best.values)
+        best.p_value = f_test(current.cost_train, best.cost_train, k - sum(len(v) for v in current.values),
+                              best.n_train, k)
+        gain = 1.0 - best.cost_test / current.cost_test if current.cost_test > 0 else 0.0
+        if best.p_value > P_MAX or gain < MIN_HELD_OUT_GAIN:
+            break
+        best.alternatives = [m.effects[-1].label() for m in tried
+                             if m is not best and m.cost_test <= best.cost_test * (1 + AMBIGUITY)]
+        chain.append(best)
+    return chain

@@ -1,0 +1,109 @@
+"""The diagnosis as a self-contained HTML page: the verdict, the effects, and the pictures that show them.
+
+Pictures (matplotlib, embedded as PNG):
+- each located channel's residual against time, before and after the fit;
+- the same residual by the regime that gives it away (mean per bin);
+- the recorded trajectory with the twin's prediction from the start of each long window, before and after.
+"""
+from __future__ import annotations
+
+import base64
+import html
+import io
+from typing import Any
+
+import numpy as np
+
+from host_sim.diagnosis.compare import Comparison
+from host_sim.diagnosis.report import Diagnosis
+from host_sim.recording import Recording
+
+
+def _png(fig: Any) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def _pyplot() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def residual_figure(rec: Recording, before: Comparison, after: Comparison | None, channel: str) -> str:
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(9, 2.6))
+    t = rec.t[before.windows.index[:, 1:]]
+    keep = ~before.contact
+    ax.plot(t[keep].ravel(), before.channel(channel).residual()[keep].ravel(), ".", ms=2, color="tab:red",
+            label="before: recorded − twin")
+    if after is not None:
+        ax.plot(t[keep].ravel(), after.channel(channel).residual()[keep].ravel(), ".", ms=2, color="tab:blue",
+                label="after the fit")
+    ax.axhline(0, color="k", lw=0.5)
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel(f"{channel} ({before.channel(channel).unit})")
+    ax.legend(loc="upper right", fontsize=8, markerscale=4)
+    return _png(fig)
+
+
+def regime_figure(finding_bins: list[dict[str, Any]], channel: str, unit: str) -> str:
+    plt = _pyplot()
+    bins = [b for b in finding_bins if b["key"] != "all"][:12]
+    fig, ax = plt.subplots(figsize=(9, 0.35 * len(bins) + 1))
+    ax.barh([str(b["regime"]) for b in bins], [float(b["mean"]) for b in bins], color="tab:red")
+    ax.axvline(0, color="k", lw=0.5)
+    ax.set_xlabel(f"mean residual of {channel} ({unit}) in the regimes where it is not noise")
+    ax.invert_yaxis()
+    return _png(fig)
+
+
+def trajectory_figure(rec: Recording, before: Comparison, after: Comparison | None) -> str | None:
+    if rec.pose is None or before.pose is None:
+        return None
+    plt = _pyplot()
+    panels = [("before", before)] + ([("after", after)] if after is not None and after.pose is not None else [])
+    fig, axes = plt.subplots(1, len(panels), figsize=(5 * len(panels), 4.5), squeeze=False)
+    for ax, (title, cmp) in zip(axes[0], panels):
+        ax.plot(rec.pose[:, 0], rec.pose[:, 1], color="k", lw=1, label="recorded (tracker)")
+        assert cmp.pose is not None
+        for w in range(len(cmp.pose)):
+            ax.plot(cmp.pose[w, :, 0], cmp.pose[w, :, 1], color="tab:red" if title == "before" else "tab:blue",
+                    lw=0.8, label="twin, from each window's start" if w == 0 else None)
+        ax.set_title(f"{title} the fit")
+        ax.set_aspect("equal")
+        ax.legend(fontsize=8)
+    return _png(fig)
+
+
+def render(rec: Recording, d: Diagnosis) -> str:
+    """The whole page."""
+    before = d.comparisons[0]
+    parts = [f"<h1>twinbot diagnose: {html.escape(d.recording)}</h1>",
+             f"<p><b>Verdict: {html.escape(d.verdict)}</b></p>"]
+    parts += [f"<p><i>{html.escape(n)}</i></p>" for n in d.notes]
+    parts.append("<pre>" + html.escape(d.summary()) + "</pre>")
+    traj = trajectory_figure(rec, d.comparisons[-1], d.after_long)
+    if traj:
+        parts.append(f'<h2>Trajectory</h2><img src="{traj}">')
+    for item in d.located:
+        ch = item["channel"]
+        finding = next(f for f in before.findings if f.channel == ch)
+        parts.append(f"<h2>{html.escape(ch)}</h2><p>{html.escape(item['words'])}</p>")
+        parts.append(f'<img src="{residual_figure(rec, before, d.after, ch)}">')
+        if len(finding.bins) > 1:
+            parts.append(f'<img src="{regime_figure(finding.bins, ch, before.channel(ch).unit)}">')
+    rows = "".join(f"<tr><td>{html.escape(k)}</td><td>{d.fit_before[k]:.1f}</td>"
+                   f"<td>{d.fit_after.get(k, float('nan')):.1f}</td></tr>" for k in d.fit_before
+                   if np.isfinite(d.fit_before[k]))
+    parts.append(f"<h2>Held-out fit %</h2><table border=1 cellpadding=3><tr><th>channel</th><th>before</th>"
+                 f"<th>after</th></tr>{rows}</table>")
+    return ("<!doctype html><html><head><meta charset='utf-8'><title>twinbot diagnose</title></head>"
+            "<body style='font-family: sans-serif; max-width: 1000px'>" + "\n".join(parts) + "</body></html>\n")

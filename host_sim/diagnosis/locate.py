@@ -1,0 +1,264 @@
+"""Locate: where and when the residuals are not noise, said in words.
+
+For every channel the residual (recorded minus twin, per period) is cut by
+regime — the wheel's speed, accelerating or cruising, turning or straight,
+direction of motion, sign of the command, heading in the world, battery
+level, distance to the wall seen by a sensor — and by time.  A regime bin is
+a mismatch when its mean residual is significant against the channel's
+noise (|z| >= Z_MIN, counting one sample per window and period), large
+against that noise (|mean| >= EFFECT_MIN noise levels) and large against
+the signal (|mean| >= RELATIVE_MIN of the recorded values' mean size): a
+long recording makes a tiny bias significant, and a tiny bias is no finding.  Spans are the
+stretches of time where the residual, smoothed over half a second, stays
+beyond the same size.
+
+Whiteness (Ljung-Box) and the cross-correlation of the residual with the
+command (a peak at a lag k > 0 means the robot answers k periods late) are
+reported as evidence.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from host_sim.diagnosis.channels import SENSOR_NAMES, Channel
+from host_sim.diagnosis.windows import Windows
+from host_sim.params import RobotParams
+from host_sim.recording import Recording
+from host_sim.world import World
+
+Z_MIN = 5.0
+EFFECT_MIN = 1.0  # noise levels: a smaller mean mismatch is within the noise of a single period
+RELATIVE_MIN = 0.05  # of the recorded signal's mean size in the bin: smaller does not matter to the robot
+SPAN_MIN_S = 0.4
+SMOOTH_S = 0.5
+REGIME_SHARE_MIN = 0.05  # a regime variable must explain this share of the residual's variation to be named
+CONTACT_MARGIN = 0.005  # m beyond the body's radius: within it, a window touches a wall
+
+
+@dataclass
+class Regimes:
+    """Labels of every window period (W, T - 1): name -> (label array, {label: words})."""
+
+    labels: dict[str, tuple[np.ndarray, dict[int, str]]] = field(default_factory=dict)
+
+    def add(self, name: str, values: np.ndarray, words: dict[int, str]) -> None:
+        self.labels[name] = (values, words)
+
+
+def _wheel_speeds(rec: Recording, idx: np.ndarray, p: RobotParams) -> np.ndarray:
+    """(W, T - 1, 2) rim speeds (m/s) from the recorded encoders, per period."""
+    d = np.diff(rec.enc[idx], axis=1).astype(float)
+    dt = np.diff(rec.t[idx], axis=1)[..., None]
+    return d * (2 * np.pi * p.wheel_radius / p.ticks_per_rev) / dt
+
+
+def regimes(rec: Recording, windows: Windows, p: RobotParams, world: World | None) -> Regimes:
+    idx = windows.index
+    rows = idx[:, :-1]  # a period is labelled by its first row
+    out = Regimes()
+    v = _wheel_speeds(rec, idx, p)
+    for w, side in enumerate(("left", "right")):
+        speed = np.abs(v[..., w])
+        out.add(f"speed_{side[0]}", np.digitize(speed, [0.005, 0.06]),
+                {0: f"with the {side} wheel at rest", 1: f"at low {side}-wheel speed", 2: f"at high {side}-wheel speed"})
+        cmd = rec.cmd[rows][..., w]
+        out.add(f"command_{side[0]}", np.sign(cmd).astype(int) + 1,
+                {0: f"with a negative {side} command", 1: f"with no {side} command", 2: f"with a positive {side} command"})
+    mean = v.mean(axis=-1)
+    accel = np.abs(np.diff(np.concatenate([mean[:, :1], mean], axis=1), axis=1)) / rec.sample_period
+    out.add("acceleration", (accel > 0.3).astype(int), {0: "when cruising", 1: "when accelerating or braking"})
+    yaw = (v[..., 1] - v[..., 0]) / (2 * p.half_axle)
+    out.add("turning", np.digitize(yaw, [-0.5, 0.5]), {0: "when turning right", 1: "when going straight",
+                                                        2: "when turning left"})
+    out.add("direction", (mean < -0.005).astype(int) + 2 * (np.abs(mean) <= 0.005),
+            {0: "when driving forwards", 1: "when driving backwards", 2: "when not moving"})
+    if np.ptp(rec.vbat) > 0.05:
+        out.add("battery", (rec.vbat[rows] < np.median(rec.vbat)).astype(int),
+                {0: "at high battery voltage", 1: "at low battery voltage"})
+    if rec.pose is not None:
+        heading = np.mod(rec.pose[rows][..., 2] + np.pi / 4, 2 * np.pi) // (np.pi / 2)
+        out.add("heading", heading.astype(int), {0: "heading +x", 1: "heading +y", 2: "heading -x", 3: "heading -y"})
+        if world is not None:
+            _wall_regimes(out, rec, rows, world)
+    return out
+
+
+def _wall_regimes(out: Regimes, rec: Recording, rows: np.ndarray, world: World) -> None:
+    """Per sensor: how far the wall it looks at is (along its axis, from the body's rim)."""
+    assert rec.pose is not None
+    bearings = [k * np.pi / 4 for k in range(8)]
+    dist, _angle, hit = world.cast_robots(rec.pose[rows], bearings, 1.0)
+    for k in range(8):
+        d = np.where(hit[..., k], dist[..., k], np.inf)
+        out.add(f"wall_{k}", np.digitize(d, [0.09, 0.18]),
+                {0: f"with a wall within 3 cm of {SENSOR_NAMES[k]}", 1: f"with a wall 3-12 cm from {SENSOR_NAMES[k]}",
+                 2: f"with no wall near {SENSOR_NAMES[k]}"})
+
+
+def contact_windows(rec: Recording, windows: Windows, p: RobotParams, world: World | None) -> np.ndarray:
+    """(W,) bool: the recorded robot touches a wall somewhere in the window (tracker needed)."""
+    if rec.pose is None or world is None or world.n_walls == 0:
+        return np.zeros(len(windows), dtype=bool)
+    idx = windows.index
+    dist, _normal = world.nearest_wall(rec.pose[idx.reshape(-1), :2])
+    near = dist.reshape(idx.shape) < p.body_radius + CONTACT_MARGIN
+    return near.any(axis=1)
+
+
+@dataclass
+class Finding:
+    """A channel whose residual is not noise, and where."""
+
+    channel: str
+    regime: str  # the regime bin where the mismatch is largest, in words ("" if everywhere alike)
+    regime_key: str  # e.g. "speed_l=1"
+    spans: list[tuple[float, float]]
+    mean: float  # mean residual in that regime (recorded - twin)
+    z: float
+    noise: float
+    bins: list[dict[str, object]]  # every significant bin: {regime, key, mean, z, n}
+
+
+def noise_level(ch: Channel, resid: np.ndarray) -> float:
+    """The residual's noise: the larger of the channel's floor and what its first differences say.
+
+    A slow mismatch cancels in first differences; white noise of variance s^2 gives them 2 s^2.
+    """
+    d = np.diff(resid, axis=1).ravel()
+    mad = float(np.median(np.abs(d - np.median(d)))) / 0.6745 / np.sqrt(2) if d.size else 0.0
+    return max(ch.noise_floor, mad, 1e-12)
+
+
+def relevant_regimes(channel: str) -> tuple[str, ...]:
+    """The regime variables that can tell something about a channel (prefixes of Regimes names)."""
+    if channel in ("wheel_l", "wheel_r"):
+        side = channel[-1]
+        return (f"speed_{side}", f"command_{side}", "acceleration", "turning", "direction", "battery")
+    if channel in ("forward", "lateral", "heading_rate"):
+        return ("speed_", "command_", "acceleration", "turning", "direction", "battery", "heading")
+    if channel.startswith(("ir_", "amb_")):
+        return (f"wall_{channel.split('_')[1]}", "heading", "turning", "direction")
+    return ("battery", "speed_", "acceleration")
+
+
+def locate_channel(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regimes, t: np.ndarray) -> Finding | None:
+    """Where the residual (W, T - 1) of the kept windows is not noise, or None if it is noise everywhere.
+
+    The regime named is the one that explains most of the residual's
+    variation (the largest share of its sum of squares between the bins of
+    one regime variable); within it, the bin with the largest mismatch.  A
+    residual alike in every regime is located "everywhere" (regime "").
+    """
+    r = resid[keep]
+    if r.size == 0:
+        return None
+    sigma = noise_level(ch, r)
+    bins: list[dict[str, object]] = []
+    y = ch.y[keep] if ch.relative else np.zeros_like(r)
+    overall = _bin_stats(r.ravel(), sigma, y.ravel())
+    if overall is not None:
+        bins.append({"regime": "", "key": "all", **overall})
+    best_share, best_bin = 0.0, None
+    total = float(((r - r.mean()) ** 2).sum()) or 1.0
+    wanted = relevant_regimes(ch.name)
+    for name, (labels, words) in reg.labels.items():
+        if not name.startswith(wanted):
+            continue
+        lab = labels[keep]
+        found = []
+        between = 0.0
+        for value, text in words.items():
+            part = r[lab == value]
+            if part.size:
+                between += part.size * (float(part.mean()) - float(r.mean())) ** 2
+            stat = _bin_stats(part, sigma, y[lab == value])
+            if stat is not None:
+                found.append({"regime": text, "key": f"{name}={value}", **stat})
+        bins += found
+        share = between / total
+        if found and share > best_share:
+            best_share, best_bin = share, max(found, key=lambda b: abs(float(b["mean"])))  # type: ignore[arg-type]
+    if not bins:
+        return None
+    chosen = best_bin if best_bin is not None and best_share >= REGIME_SHARE_MIN else (
+        bins[0] if bins[0]["key"] == "all" else best_bin)
+    assert chosen is not None
+    return Finding(ch.name, str(chosen["regime"]), str(chosen["key"]), spans(resid, keep, t, sigma),
+                   float(chosen["mean"]), float(chosen["z"]), sigma, bins)  # type: ignore[arg-type]
+
+
+def _bin_stats(r: np.ndarray, sigma: float, y: np.ndarray) -> dict[str, float] | None:
+    """Mean and z of a bin's residuals if they are a mismatch (significant, and large against the noise
+    and against the signal), else None."""
+    n = r.size
+    if n < 10:
+        return None
+    mean = float(r.mean())
+    z = mean / (max(float(r.std()), sigma) / np.sqrt(n))
+    if abs(z) < Z_MIN or abs(mean) < EFFECT_MIN * sigma or abs(mean) < RELATIVE_MIN * float(np.abs(y).mean()):
+        return None
+    return {"mean": mean, "z": z, "n": float(n)}
+
+
+def spans(resid: np.ndarray, keep: np.ndarray, t: np.ndarray, sigma: float) -> list[tuple[float, float]]:
+    """Time spans (s) where the smoothed residual stays beyond EFFECT_MIN noise floors."""
+    if not keep.any():
+        return []
+    period = float(np.median(np.diff(t[0]))) if t.shape[1] > 1 else 0.04
+    width = max(1, int(round(SMOOTH_S / period)))
+    kernel = np.ones(width) / width
+    found: list[tuple[float, float]] = []
+    for w in np.flatnonzero(keep):
+        smooth = np.convolve(resid[w], kernel, mode="same")
+        hot = np.abs(smooth) >= EFFECT_MIN * sigma
+        found += _runs(hot, t[w])
+    merged: list[tuple[float, float]] = []
+    for a, b in sorted(found):
+        if merged and a - merged[-1][1] <= 2.5 * period:
+            merged[-1] = (merged[-1][0], max(b, merged[-1][1]))
+        else:
+            merged.append((a, b))
+    return [(round(a, 2), round(b, 2)) for a, b in merged if b - a >= SPAN_MIN_S]
+
+
+def _runs(mask: np.ndarray, t: np.ndarray) -> list[tuple[float, float]]:
+    edges = np.diff(np.concatenate([[0], mask.astype(int), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    return [(float(t[a]), float(t[min(b, len(t) - 1)])) for a, b in zip(starts, ends)]
+
+
+def ljung_box(resid: np.ndarray, lags: int = 10) -> tuple[float, float]:
+    """(Q, p-value) of the Ljung-Box test on the residuals, windows pooled (autocorrelations within windows)."""
+    r = resid - resid.mean(axis=1, keepdims=True)
+    n_per = r.shape[1]
+    lags = min(lags, n_per - 2)
+    if lags < 1:
+        return 0.0, 1.0
+    denom = float((r * r).sum())
+    if denom == 0.0:
+        return 0.0, 1.0
+    n = r.size
+    q = 0.0
+    for k in range(1, lags + 1):
+        rho = float((r[:, k:] * r[:, :-k]).sum()) / denom
+        q += rho * rho / (n - k * r.shape[0])
+    q *= n * (n + 2)
+    return q, float(stats.chi2.sf(q, lags))
+
+
+def input_lag(resid: np.ndarray, u: np.ndarray, max_lag: int = 10) -> tuple[int, float]:
+    """(lag, correlation) of the largest cross-correlation between residual and input changes, lags 0..max_lag."""
+    du = np.diff(u, axis=1, prepend=u[:, :1])
+    best = (0, 0.0)
+    for k in range(0, min(max_lag, resid.shape[1] - 2) + 1):
+        a = resid[:, k:].ravel()
+        b = du[:, : du.shape[1] - k].ravel()
+        if a.std() == 0 or b.std() == 0:
+            continue
+        c = float(np.corrcoef(a, b)[0, 1])
+        if abs(c) > abs(best[1]):
+            best = (k, c)
+    return best

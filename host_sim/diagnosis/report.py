@@ -1,0 +1,169 @@
+"""The verdict and its evidence: a terminal summary and a stable JSON document (docs/diagnosis.md).
+
+Verdicts: "match" (nothing located: the twin reproduces the recording to
+its noise), "explained" (every located mismatch removed by named effects),
+"partly explained", "unexplained" (located, and nothing names it — never a
+wrong name).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from host_sim import effects as E
+from host_sim.diagnosis.compare import Comparison, compare_all
+from host_sim.diagnosis.fit import Model, Objective, candidates_for, objective_channels, select
+from host_sim.diagnosis.locate import Finding, noise_level
+from host_sim.diagnosis.windows import DEFAULT_SECONDS
+from host_sim.diagnosis.words import sentence
+from host_sim.params import RobotParams
+from host_sim.recording import Recording
+from host_sim.world import World
+
+MIN_WINDOWS = 6  # 1 s windows: fewer and the held-out judgement rests on one or two windows
+MIN_MOVING = 0.2  # share of periods in which a wheel turns: less and the recording says little of the physics
+
+
+class DiagnosisError(ValueError):
+    """The recording cannot be diagnosed; the message says why and what would help."""
+
+
+@dataclass
+class Diagnosis:
+    recording: str
+    verdict: str
+    comparisons: list[Comparison]
+    located: list[dict[str, Any]] = field(default_factory=list)
+    effects: list[dict[str, Any]] = field(default_factory=list)
+    fit_before: dict[str, float] = field(default_factory=dict)
+    fit_after: dict[str, float] = field(default_factory=dict)
+    unexplained: list[dict[str, Any]] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    model: Model | None = None  # the fitted twin, when effects were tried
+    after: Comparison | None = None  # the fitted twin judged on the same windows
+    after_long: Comparison | None = None  # ... and on the longest ones (pictures)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"recording": self.recording, "verdict": self.verdict, "located": self.located,
+                "effects": self.effects, "fit": {"before": _finite(self.fit_before), "after": _finite(self.fit_after)},
+                "unexplained": self.unexplained, "notes": self.notes}
+
+    def summary(self) -> str:
+        lines = [f"{self.recording}: {self.verdict}"]
+        lines += [f"  note: {n}" for n in self.notes]
+        for item in self.located:
+            lines.append(f"  - {item['words']} (fit {item['fit_before']:.0f} %)")
+        for e in self.effects:
+            where = f" ({e['wheel']} wheel)" if "wheel" in e else (f" (sensor {e['sensor']})" if "sensor" in e else "")
+            values = ", ".join(f"{k} = {v['value']:.4g} {v['unit']} [{v['ci95'][0]:.4g}, {v['ci95'][1]:.4g}]"
+                               for k, v in e["params"].items())
+            alt = e["evidence"]["explains_equally_well"]
+            lines.append(f"  effect: {e['name']}{where}: {values}" + (f"; as well: {', '.join(alt)}" if alt else ""))
+        for item in self.unexplained:
+            lines.append(f"  unexplained: {item['words']}")
+        shown = [k for k in self.fit_before if not k.startswith("amb_")]
+        lines.append("  held-out fit % per channel (1 s windows), before" + (" -> after" if self.effects else "") + ": "
+                     + ", ".join(f"{k} {self.fit_before[k]:.0f}" + (f" -> {self.fit_after.get(k, float('nan')):.0f}"
+                                                                    if self.effects else "") for k in shown))
+        return "\n".join(lines)
+
+
+def _finite(d: dict[str, float]) -> dict[str, float | None]:
+    return {k: (round(v, 2) if math.isfinite(v) else None) for k, v in d.items()}
+
+
+def check_data(rec: Recording, world: World | None) -> list[str]:
+    """Refuse what cannot be diagnosed; return notes on what this recording cannot show."""
+    period = rec.sample_period
+    if len(rec) * period < MIN_WINDOWS * DEFAULT_SECONDS[0]:
+        raise DiagnosisError(f"the recording lasts {len(rec) * period:.1f} s: too short to diagnose "
+                             f"(at least {MIN_WINDOWS * DEFAULT_SECONDS[0]:.0f} s; 60-90 s is better)")
+    moving = np.abs(np.diff(rec.enc, axis=0)).max(axis=1) > 0
+    if moving.mean() < MIN_MOVING:
+        raise DiagnosisError(f"the wheels turn in only {100 * moving.mean():.0f} % of the periods: too little "
+                             f"excitation to diagnose (run the identification manoeuvre: twinbot serial PORT --excite)")
+    notes = []
+    if rec.pose is None:
+        notes.append("no tracker pose: judged on the encoders and the battery only; effects on the body's motion "
+                     "(track width vs wheel radius, slip) and on the IR sensors cannot be told apart without it")
+    elif world is None or world.n_walls == 0:
+        notes.append("no walls known: the IR sensors are not judged")
+    return notes
+
+
+def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
+             seconds: tuple[float, ...] = DEFAULT_SECONDS, progress: Callable[[str], None] | None = None) -> Diagnosis:
+    notes = check_data(rec, world)
+    say = progress or (lambda _text: None)
+    say("comparing the twin with the recording")
+    comparisons = compare_all(rec, params, world, seconds)
+    first = comparisons[0]
+    if first.contact.all():
+        raise DiagnosisError("the robot touches a wall in every window: stuck against a wall the whole time, "
+                             "nothing else can be judged")
+    result = Diagnosis(str(rec.path or "recording"), "match", comparisons, [_located(first, f) for f in first.findings],
+                       fit_before=dict(first.fit), notes=notes)
+    if int(first.contact.sum()):
+        result.notes.append(f"{int(first.contact.sum())} of {len(first.contact)} windows touch a wall: judged apart "
+                            f"(channel 'contact')")
+    if not result.located:
+        result.fit_after = dict(first.fit)
+        return result
+    chain = _fit(rec, params, world, first, say)
+    final = chain[-1]
+    result.model = final
+    say("judging the fitted twin")
+    afters = compare_all(rec, final.params, world, seconds)
+    after = result.after = afters[0]
+    result.after_long = afters[-1]
+    result.fit_after = dict(after.fit)
+    result.effects = [_effect_entry(final, i, chain) for i in range(len(final.effects))]
+    remaining = [_located(after, f) for f in after.findings]
+    result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")} for item in remaining]
+    if not final.effects:
+        result.verdict = "unexplained"
+        result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")} for item in result.located]
+    else:
+        result.verdict = "explained" if not remaining else "partly explained"
+    return result
+
+
+def _located(cmp: Comparison, f: Finding) -> dict[str, Any]:
+    return {"channel": f.channel, "regime": f.regime, "spans": [list(s) for s in f.spans],
+            "fit_before": cmp.fit.get(f.channel, float("nan")), "words": sentence(f),
+            "mean_residual": f.mean, "z": f.z, "whiteness_p": cmp.whiteness.get(f.channel),
+            "input_lag_periods": cmp.lag.get(f.channel, (None,))[0]}
+
+
+def _fit(rec: Recording, params: RobotParams, world: World | None, first: Comparison,
+         say: Callable[[str], None]) -> list[Model]:
+    located = [f.channel for f in first.findings]
+    names = objective_channels(located, [c.name for c in first.channels])
+    keep = ~first.contact
+    sigma = {c.name: noise_level(c, c.residual()[keep]) for c in first.channels if c.name in names}
+    obj = Objective(rec, first.windows, world, names, sigma, keep)
+    return select(obj, params, candidates_for(located), progress=say)
+
+
+def _effect_entry(model: Model, i: int, chain: list[Model]) -> dict[str, Any]:
+    cand = model.effects[i]
+    effect = E.LIBRARY[cand.name]
+    entry: dict[str, Any] = {"name": cand.name}
+    if effect.site == "wheel":
+        entry["wheel"] = cand.site
+    elif effect.site == "sensor":
+        entry["sensor"] = cand.site
+    entry["params"] = {prm.name: {"value": model.values[i][j], "unit": prm.unit,
+                                  "ci95": list(model.ci95[i][j]) if model.ci95 else None,
+                                  "field": prm.field.format(w="l" if cand.site == "left" else "r")
+                                  if effect.site == "wheel" and cand.site != "both" else prm.field}
+                       for j, prm in enumerate(effect.params)}
+    step = chain[i + 1] if i + 1 < len(chain) else model
+    before = chain[i]
+    entry["evidence"] = {"doc": effect.doc, "p_value": step.p_value,
+                         "held_out_cost_before": before.cost_test, "held_out_cost_after": step.cost_test,
+                         "explains_equally_well": step.alternatives}
+    return entry

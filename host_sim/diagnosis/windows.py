@@ -1,0 +1,141 @@
+"""Multiple shooting: the twin replays a recording in short windows, each from the recorded state.
+
+A long open-loop replay drifts, and after a few seconds it says more about
+the drift than about the robot.  Windows restart the twin from what the
+recording says at their first row (tracker pose where there is one, wheel
+angles and speeds from the encoders) and drive it open loop with the
+recorded current references, so each window's residuals speak of the
+physics of those few seconds.  All windows run at once, one robot of a
+host_sim.batch.BatchSim each (host_sim/replay.replay_batch is the one-window
+case): the batch path does the heavy lifting.
+
+Without a tracker the twin starts every window at the origin of an empty
+world: its wheels and encoders are still comparable, its IR readings are not.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from host_sim import dynamics, ir_sensor, motors
+from host_sim.batch import BatchSim, robot_params
+from host_sim.params import RobotParams
+from host_sim.recording import Recording
+from host_sim.replay import ReplayError, replay_inputs, starts_at_rest, state_at, wheel_speeds_at
+from host_sim.world import World
+
+DEFAULT_SECONDS = (1.0, 5.0)
+
+
+@dataclass
+class Windows:
+    """W windows of T rows each: window w covers recording rows start[w] .. start[w] + T - 1."""
+
+    start: np.ndarray  # (W,) first row of each window
+    rows: int  # T, rows per window
+    held_out: np.ndarray  # (W,) bool: judged only, never fitted on
+
+    @property
+    def index(self) -> np.ndarray:
+        """(W, T) recording row of every window row."""
+        return self.start[:, None] + np.arange(self.rows)[None, :]
+
+    def __len__(self) -> int:
+        return len(self.start)
+
+
+def make_windows(rec: Recording, seconds: float, hold_out_every: int = 3) -> Windows:
+    """Back-to-back windows of `seconds` over the whole recording; every `hold_out_every`-th is held out.
+
+    Held-out windows are interleaved in time (windows 2, 5, 8, ...), so the
+    fit is judged on every part of the run, not only on its end.
+    """
+    rows = max(2, int(round(seconds / rec.sample_period)))
+    n = len(rec)
+    if n < rows + 1:
+        raise ReplayError(f"the recording has {n} rows, too short for one window of {seconds:g} s "
+                          f"({rows} rows at {rec.sample_period * 1000:g} ms)")
+    start = np.arange(0, n - rows, rows)  # the last row of each window has a row after it: its period is known
+    held_out = (np.arange(len(start)) % hold_out_every) == hold_out_every - 1
+    return Windows(start, rows, held_out)
+
+
+@dataclass
+class WindowRun:
+    """The twin's readings in every window (index [w, j] = recording row windows.index[w, j]).
+
+    With N parameter sets, axis 1 is the set: arrays (W, N, T, ...)."""
+
+    enc: np.ndarray  # (W, N, T, 2) encoder counts, unquantised (float): smooth in the parameters, for fitting
+    pose: np.ndarray  # (W, N, T, 3) pose of C
+
+
+def initial_states(rec: Recording, rows: np.ndarray, p: RobotParams) -> tuple[np.ndarray, np.ndarray]:
+    """(q (W, 5), v (W, 2)) at the given rows: as replay.state_at, the origin standing in for a missing tracker."""
+    q = np.empty((len(rows), 5))
+    v = np.empty((len(rows), 2))
+    for i, k in enumerate(rows):
+        if rec.pose is not None:
+            qk, vk = state_at(rec, int(k), p)
+        else:
+            theta = [motors.encoder_angle(int(rec.enc[k, w]), p) for w in range(2)]
+            qk = dynamics.q_from_axle_pose(0.0, 0.0, 0.0, p, theta[0], theta[1])
+            vk = (0.0, 0.0) if starts_at_rest(rec, int(k)) else wheel_speeds_at(rec, int(k), p)
+        q[i], v[i] = qk, vk
+    return q, v
+
+
+def run_windows(rec: Recording, windows: Windows, params: Any, world: World | None, *,
+                base: RobotParams | None = None, substeps: int = 8) -> WindowRun:
+    """Replay every window for every parameter set at once (physics only; see sensors_on_track).
+
+    params: one RobotParams, a sequence of N, or a ParamBatch of N (with base).
+    world: the walls (without a tracker the twin drives in an empty world).
+    """
+    batch_params, robots = robot_params(params, base)
+    n_sets = len(robots)
+    inputs = replay_inputs(rec)
+    idx = windows.index  # (W, T)
+    n_win, n_rows = idx.shape
+    # Robot w * N + s of the batch is window w with parameter set s.
+    q = np.empty((n_win, n_sets, 5))
+    v = np.empty((n_win, n_sets, 2))
+    for s, p in enumerate(robots):
+        q[:, s], v[:, s] = initial_states(rec, windows.start, p)
+    per_robot = robots[0] if n_sets == 1 else [p for _w in range(n_win) for p in robots]
+    sim = BatchSim(world if rec.pose is not None else None, per_robot, q=q.reshape(-1, 5), v=v.reshape(-1, 2),
+                   base=base, substeps=substeps)
+    cmd = np.repeat(inputs.cmd[idx.T][:, :, None, :], n_sets, axis=2).reshape(n_rows, n_win * n_sets, 2)
+    # One period per window row for all windows: the robot's clock ticks whole milliseconds, so a
+    # recording's periods are equal but for overruns, which the median over the windows ignores.
+    period = np.median(inputs.period[idx], axis=0)
+    res = sim.run_inputs(cmd, substeps=substeps, sensors=False, period=period)
+    assert res.theta is not None
+    counts = res.theta * (_ticks_per_rev(robots, n_win) / (2 * np.pi))
+    enc = counts.reshape(n_rows, n_win, n_sets, 2).transpose(1, 2, 0, 3)
+    pose = res.pose.reshape(n_rows, n_win, n_sets, 3).transpose(1, 2, 0, 3)
+    return WindowRun(enc, pose)
+
+
+def _ticks_per_rev(robots: list[RobotParams], n_win: int) -> np.ndarray:
+    """(W * N, 2) counts per wheel turn of every batch robot (window-major), each wheel's own."""
+    per_set = np.array([[p.ticks_per_rev + p.ticks_per_rev_delta_l, p.ticks_per_rev + p.ticks_per_rev_delta_r]
+                        for p in robots])
+    return np.tile(per_set, (n_win, 1))
+
+
+def sensors_on_track(rec: Recording, rows: np.ndarray, robots: list[RobotParams], world: World,
+                     seed: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The twin's IR ring (on, ambient), each (N, *rows.shape, 8), read at the recorded poses of `rows`."""
+    assert rec.pose is not None
+    inputs = replay_inputs(rec)
+    rng = np.random.default_rng(seed) if seed is not None else None
+    flat = rows.reshape(-1)
+    on = np.empty((len(robots), flat.size, ir_sensor.N_SENSORS), dtype=np.int64)
+    amb = np.empty_like(on)
+    for s, p in enumerate(robots):
+        amb[s], on[s] = ir_sensor.read_sensors_batch(world, rec.pose[flat], inputs.emitter[flat], rec.t[flat], p, rng)
+    shape = (len(robots), *rows.shape, ir_sensor.N_SENSORS)
+    return on.reshape(shape), amb.reshape(shape)

@@ -1,0 +1,43 @@
+"""Findings in words a robotics engineer reads at a glance."""
+from __future__ import annotations
+
+from host_sim.diagnosis.channels import SENSOR_NAMES
+from host_sim.diagnosis.locate import Finding
+
+
+def what(channel: str, mean: float) -> str:
+    """What the robot does differently from the twin, from the sign of recorded minus twin."""
+    more = mean > 0
+    if channel in ("wheel_l", "wheel_r"):
+        side = "left" if channel == "wheel_l" else "right"
+        return f"the {side} wheel turns {'faster' if more else 'slower'} than the twin's"
+    if channel == "forward":
+        return f"the robot advances {'more' if more else 'less'} per period than the twin"
+    if channel == "lateral":
+        return f"the robot drifts to its {'left' if more else 'right'} where the twin does not"
+    if channel == "heading_rate":
+        return f"the robot turns {'more to the left' if more else 'more to the right'} than the twin"
+    if channel.startswith("ir_"):
+        return f"sensor {SENSOR_NAMES[int(channel[3:])]} sees {'more' if more else 'less'} reflected light than the twin's"
+    if channel.startswith("amb_"):
+        return f"sensor {SENSOR_NAMES[int(channel[4:])]} sees {'more' if more else 'less'} ambient light than the twin's"
+    if channel == "vbat":
+        return f"the battery voltage is {'higher' if more else 'lower'} than the twin's"
+    return f"{channel} differs"
+
+
+def spans_text(spans: list[tuple[float, float]], most: int = 4) -> str:
+    if not spans:
+        return ""
+    longest = sorted(sorted(spans, key=lambda s: s[0] - s[1])[:most])
+    text = ", ".join(f"{a:.0f}–{b:.0f} s" if round(b) > round(a) else f"{a:.1f}–{b:.1f} s" for a, b in longest)
+    return text + (f" and {len(spans) - most} more" if len(spans) > most else "")
+
+
+def sentence(f: Finding) -> str:
+    """e.g. "the left wheel turns slower than the twin's at low left-wheel speed, 12–14 s, 40–52 s"."""
+    parts = [what(f.channel, f.mean)]
+    parts.append(f.regime if f.regime else "everywhere")
+    text = " ".join(parts)
+    when = spans_text(f.spans)
+    return f"{text}, {when}" if when else text

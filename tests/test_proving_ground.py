@@ -1,0 +1,287 @@
+"""The proving ground's MuJoCo plant: it runs, it records, the twin replays it, and each effect is physical.
+
+The plant is the independent "real robot" that diagnosis (issue 9) is proved
+on, so the tests hold it to three things: (1) with no effect on, the twin
+(host_sim.replay) replays its recordings closely; (2) every named effect
+changes the physics in the direction physics says; (3) it is deterministic
+and writes recordings in the project's one format, the answer key apart.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from host_sim.interface import Actuate
+from host_sim.params import DEFAULT
+from host_sim.recording import load_recording
+from host_sim.sil import SilController
+from host_sim.world import builtin_world
+from tools.proving_ground import effects, excitation
+from tools.proving_ground.agreement import compare
+from tools.proving_ground.cases import make_case
+from tools.proving_ground.plant import Plant
+from tools.proving_ground.recorder import ProgramController, record
+from tools.proving_ground.robot_model import PlantSpec, nominal_spec
+
+ARENA = builtin_world("arena")
+EXACT = nominal_spec().replace(tracker_noise_xy=0.0, tracker_noise_phi=0.0)  # a perfect tracker
+
+
+@dataclass
+class Run:
+    enc: np.ndarray  # (n, 2) ticks at each control instant
+    pose: np.ndarray  # (n, 3) true pose of C
+    refl: np.ndarray  # (n, 8) on - off
+    vbat: np.ndarray  # (n,) V
+
+
+def drive(spec: PlantSpec, program: list[tuple[float, float]], pose=(1.0, 1.0, 0.0), world=ARENA,
+          emitter: int = 60, seed: int = 0) -> Run:
+    """Play current references (A) open loop, one pair per 40 ms; the readings before each."""
+    plant = Plant(spec, world, pose, seed)
+    enc, poses, refl, vbat = [], [], [], []
+    for left, right in program + [(0.0, 0.0)]:
+        s = plant.sense()
+        enc.append((s.enc_l, s.enc_r))
+        poses.append(plant.true_pose())
+        refl.append(np.subtract(s.adc_on, s.adc_off))
+        vbat.append(s.vbat_mv / 1000)
+        plant.actuate(Actuate(round(left * 1000), round(right * 1000), emitter))
+        plant.advance(0.04)
+    return Run(np.array(enc), np.array(poses), np.array(refl), np.array(vbat))
+
+
+def with_effect(name: str, value: float, where: effects.Where = "both", base: PlantSpec = EXACT) -> PlantSpec:
+    return effects.apply(base, name, value, where)
+
+
+def travelled(run: Run) -> float:
+    return float(np.hypot(*(run.pose[-1, :2] - run.pose[0, :2])))
+
+
+# --------------------------------------------------------------------------- runs and records
+def test_plant_is_deterministic_and_its_recording_loads(tmp_path):
+    world = builtin_world("paper_room")
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    record(a, nominal_spec(), world, SilController(1), 4.0, seed=5)
+    record(b, nominal_spec(), world, SilController(1), 4.0, seed=5)
+    assert a.read_text() == b.read_text()
+    rec = load_recording(a)
+    assert len(rec) == 100 and rec.pose is not None
+    assert rec.meta["source"] == "robot" and rec.meta["plant"] == "mujoco"
+    assert rec.enc[-1].min() > 50  # the firmware drove it
+    assert rec.emitter is not None and rec.emitter[0] == 0 and rec.emitter[-1] > 0  # off until the first actuation
+    c = tmp_path / "c.csv"
+    record(c, nominal_spec(), world, SilController(1), 4.0, seed=6)
+    assert c.read_text() != a.read_text()  # the seed sets the noise
+
+
+def test_nominal_plant_rolls_without_slip_on_its_true_wheels():
+    run = drive(EXACT, [(0.03, 0.03)] * 25)
+    wheel_distance = np.mean(run.enc[-1]) * 2 * math.pi / 1200 * 0.021
+    assert travelled(run) == pytest.approx(wheel_distance, rel=0.005)
+    assert abs(run.pose[-1, 2]) < 0.002  # straight
+
+
+# --------------------------------------------------------------------------- the twin replays it
+def test_with_no_effect_the_twin_replays_the_firmware_on_the_plant(tmp_path):
+    world = builtin_world("paper_room")
+    path = tmp_path / "sil.csv"
+    record(path, EXACT, world, SilController(1), 20.0, seed=3)
+    a = compare(load_recording(path), world, window_s=1.0)
+    assert a.windows >= 10
+    assert a.speed_rel_rms < 0.03  # encoder quantisation is ~1.6 %
+    assert a.pos_err_p95 < 0.003 and a.head_err_p95 < math.radians(1.0)
+
+
+def test_with_no_effect_the_twin_replays_an_excitation_program(tmp_path):
+    path = tmp_path / "prog.csv"
+    prog = excitation.program(np.random.default_rng(1), 20.0)
+    record(path, EXACT, ARENA, ProgramController(prog, guard=150), 20.0, seed=3)
+    a = compare(load_recording(path), ARENA, window_s=1.0)
+    assert a.windows >= 15
+    assert a.speed_rel_rms < 0.035
+    assert a.pos_err_p95 < 0.004 and a.head_err_p95 < math.radians(1.5)
+
+
+# --------------------------------------------------------------------------- each effect is physical
+def test_effects_are_described_completely():
+    for e in effects.EFFECTS.values():
+        assert e.unit and e.param and e.doc
+        for lo, hi in e.ranges:
+            assert lo < hi and not lo <= e.absent <= hi, e.name  # realistic values, away from "absent"
+    assert any(not e.in_library for e in effects.EFFECTS.values())
+    assert effects.apply(EXACT, "dry_friction", 1.5e-3, "left") == EXACT  # the absent value changes nothing
+    with pytest.raises(ValueError, match="sensor 0..7"):
+        effects.apply(EXACT, "ir_gain", 1.2, "left")
+
+
+def test_dry_friction_slows_its_wheel_at_low_speed():
+    run = drive(with_effect("dry_friction", 3.5e-3, "left"), [(0.02, 0.02)] * 25)
+    nominal = drive(EXACT, [(0.02, 0.02)] * 25)
+    assert run.enc[-1, 0] < 0.6 * nominal.enc[-1, 0]
+    assert run.enc[-1, 1] == pytest.approx(nominal.enc[-1, 1], rel=0.1)
+    held = drive(with_effect("dry_friction", 3.5e-3, "both"), [(0.012, 0.012)] * 10)
+    assert np.abs(held.enc[-1]).max() <= 1  # below breakaway it does not creep
+
+
+def test_viscous_friction_lowers_the_top_speed_of_its_wheel():
+    run = drive(with_effect("viscous_friction", 6e-4, "right"), [(0.03, 0.03)] * 40)
+    speed = np.diff(run.enc[-6:], axis=0).mean(0)
+    assert speed[1] < 0.6 * speed[0]
+
+
+def test_wheel_radius_is_distance_per_turn():
+    run = drive(with_effect("wheel_radius", 0.022, "both"), [(0.03, 0.03)] * 25)
+    turned = np.mean(run.enc[-1]) * 2 * math.pi / 1200
+    assert travelled(run) / turned == pytest.approx(0.022, rel=0.005)
+    left_small = drive(with_effect("wheel_radius", 0.020, "left"), [(0.03, 0.03)] * 25)
+    theta = left_small.enc[-1] * 2 * math.pi / 1200
+    turn = left_small.pose[-1, 2]  # the heading follows the ground each wheel covers
+    assert turn == pytest.approx((0.021 * theta[1] - 0.020 * theta[0]) / (2 * 0.048), abs=0.003)
+    assert abs(turn - 0.021 * (theta[1] - theta[0]) / (2 * 0.048)) > 0.05
+
+
+def test_track_width_sets_the_turn_per_wheel_turn():
+    run = drive(with_effect("track_width", 0.051), [(-0.025, 0.025)] * 25)
+    d_theta = np.diff(run.enc[-1]) [0] * 2 * math.pi / 1200
+    assert run.pose[-1, 2] / d_theta == pytest.approx(0.021 / (2 * 0.051), rel=0.01)
+
+
+def test_actuator_delay_holds_the_current_back():
+    run = drive(with_effect("actuator_delay", 0.05), [(0.05, 0.05)] * 5)
+    nominal = drive(EXACT, [(0.05, 0.05)] * 5)
+    assert nominal.enc[1].min() > 0 and run.enc[1].max() == 0  # still at rest 40 ms after the command
+    assert run.enc[3].min() > 0
+
+
+def test_torque_constant_strengthens_its_motor():
+    run = drive(with_effect("torque_constant", 0.0046, "left"), [(0.02, 0.02)] * 15)
+    assert run.enc[-1, 0] > 1.2 * run.enc[-1, 1]
+
+
+def test_current_limit_caps_the_push():
+    limited = drive(with_effect("current_limit", 0.04), [(0.12, 0.12)] * 5)
+    full = drive(EXACT, [(0.12, 0.12)] * 5)
+    at_limit = drive(EXACT, [(0.04, 0.04)] * 5)
+    assert limited.enc[-1, 0] == pytest.approx(at_limit.enc[-1, 0], abs=2)
+    assert limited.enc[-1, 0] < 0.6 * full.enc[-1, 0]
+
+
+def test_battery_resistance_sags_the_voltage_under_load():
+    run = drive(with_effect("battery_resistance", 2.0), [(0.0, 0.0)] * 5 + [(0.1, -0.1)] * 10)
+    nominal = drive(EXACT, [(0.0, 0.0)] * 5 + [(0.1, -0.1)] * 10)
+    assert nominal.vbat.mean() == pytest.approx(7.4, abs=0.02)
+    assert run.vbat[2] == pytest.approx(7.4 - 2.0 * 0.08, abs=0.02)  # the electronics' quiescent draw
+    assert run.vbat[8:14].mean() < run.vbat[:5].mean() - 0.05  # the motors draw more
+
+
+def test_traction_limit_lets_the_wheels_slip():
+    burst = [(0.25, 0.25)] * 6
+    slippery = drive(with_effect("traction_limit", 0.1), burst)
+    grippy = drive(EXACT, burst)
+    def turned(run: Run) -> float:
+        return float(np.mean(run.enc[-1])) * 2 * math.pi / 1200 * 0.021
+    assert turned(grippy) == pytest.approx(travelled(grippy), rel=0.01)
+    assert turned(slippery) > 1.2 * travelled(slippery)
+
+
+def test_caster_drag_slows_the_robot():
+    run = drive(with_effect("caster_drag", 0.03), [(0.02, 0.02)] * 30)
+    nominal = drive(EXACT, [(0.02, 0.02)] * 30)
+    assert travelled(run) < 0.8 * travelled(nominal)
+
+
+def test_turning_resistance_resists_spinning_not_rolling():
+    spin = [(-0.025, 0.025)] * 25
+    run, nominal = drive(with_effect("turning_resistance", 0.0008), spin), drive(EXACT, spin)
+    assert run.pose[-1, 2] < 0.8 * nominal.pose[-1, 2]
+    straight = [(0.025, 0.025)] * 25
+    assert travelled(drive(with_effect("turning_resistance", 0.0008), straight)) == pytest.approx(
+        travelled(drive(EXACT, straight)), rel=0.05)
+
+
+def test_com_offset_makes_a_spin_creep_forward():
+    spin = [(-0.025, 0.025)] * 25
+    forward = {d: float(drive(with_effect("com_offset", d), spin).enc[-1].sum()) for d in (0.0, 0.015, 0.03)}
+    assert abs(forward[0.0]) < 0.2 * forward[0.015] < 0.2 * forward[0.03]
+
+
+def test_a_heavier_body_accelerates_slower():
+    step = [(0.05, 0.05)] * 4
+    assert drive(with_effect("mass", 0.6), step).enc[-1, 0] < 0.9 * drive(EXACT, step).enc[-1, 0]
+
+
+def test_encoder_scale_counts_more_per_turn():
+    run = drive(with_effect("encoder_scale", 1240.0, "left"), [(0.03, 0.03)] * 25)
+    assert run.enc[-1, 0] / run.enc[-1, 1] == pytest.approx(1240 / 1200, rel=0.01)
+    assert abs(run.pose[-1, 2]) < 0.002  # the wheels themselves turn alike
+
+
+def test_backlash_lets_the_motor_turn_before_the_wheel():
+    prog = [(0.03, 0.03)] * 10 + [(-0.03, -0.03)] * 20
+    def lag(run: Run) -> float:  # encoder distance minus true distance, at the end of the reversal
+        enc_dist = float(np.mean(run.enc[-1])) * 2 * math.pi / 1200 * 0.021
+        moved = float(np.dot(run.pose[-1, :2] - run.pose[0, :2], [1.0, 0.0]))
+        return enc_dist - moved
+    assert abs(lag(drive(EXACT, prog))) < 0.0004
+    assert lag(drive(with_effect("backlash", 0.1, "both"), prog)) < -0.0015  # ~ r * gap: the wheel lags
+
+
+NEAR_WALL = (1.0, 1.85, 0.0)  # 15 cm below the arena's top wall: sensor 2 (left) faces it
+
+
+def test_ir_gain_scales_that_sensor_only():
+    base, gained = drive(EXACT, [(0, 0)] * 3, NEAR_WALL), drive(with_effect("ir_gain", 1.5, 2), [(0, 0)] * 3, NEAR_WALL)
+    clean = drive(EXACT.replace(ir={**EXACT.ir, "noise": 0.0}), [(0, 0)] * 3, NEAR_WALL).refl[-1]
+    assert clean[2] > 50
+    assert gained.refl[-1, 2] - base.refl[-1, 2] == pytest.approx(0.5 * clean[2], abs=2)
+    assert np.array_equal(np.delete(gained.refl[-1], 2), np.delete(base.refl[-1], 2))
+
+
+def test_ir_misalignment_turns_the_sensor_away_from_the_wall():
+    base = drive(EXACT, [(0, 0)] * 3, NEAR_WALL).refl[-1]
+    turned = drive(with_effect("ir_misalignment", 0.3, 2), [(0, 0)] * 3, NEAR_WALL).refl[-1]
+    assert turned[2] < 0.8 * base[2] and turned[1] == base[1]
+
+
+def test_ir_offset_and_ambient_leakage_shift_that_sensor_only():
+    base = drive(EXACT, [(0, 0)] * 3).refl[-1]
+    offset = drive(with_effect("ir_offset", 40.0, 5), [(0, 0)] * 3).refl[-1]
+    leaky = drive(with_effect("ambient_leakage", 0.2, 6), [(0, 0)] * 3).refl[-1]
+    assert offset[5] - base[5] == pytest.approx(40, abs=1) and np.array_equal(np.delete(offset, 5), np.delete(base, 5))
+    assert leaky[6] - base[6] == pytest.approx(0.2 * 150, abs=1)  # the arena's ambient is the default 150 counts
+    assert np.array_equal(np.delete(leaky, 6), np.delete(base, 6))
+
+
+def test_ir_latency_shows_the_pose_of_earlier():
+    quiet = EXACT.replace(ir={**EXACT.ir, "noise": 0.0})
+    spin = [(-0.03, 0.03)] * 30
+    now = drive(quiet, spin, NEAR_WALL).refl
+    late = drive(effects.apply(quiet, "ir_latency", 0.08), spin, NEAR_WALL).refl
+    assert np.abs(now[10:] - now[8:-2]).max() > 50  # the readings change as it turns...
+    assert np.abs(late[10:] - now[8:-2]).max() <= 3  # ...and the late ones are those of two periods before
+
+
+def test_floor_tilt_turns_the_robot_downhill():
+    tilted = effects.apply(EXACT, "floor_tilt", 0.015).replace(floor_tilt_direction=-math.pi / 2)  # downhill: -y
+    run, nominal = drive(tilted, [(0.02, 0.02)] * 40), drive(EXACT, [(0.02, 0.02)] * 40)
+    assert run.pose[-1, 2] < nominal.pose[-1, 2] - 0.02  # G ahead of the axle swings the nose downhill
+    assert run.pose[-1, 1] < nominal.pose[-1, 1] - 0.002
+
+
+# --------------------------------------------------------------------------- blind cases
+def test_make_case_writes_a_recording_and_a_separate_answer_key(tmp_path):
+    rec_path, key_path = make_case(7, tmp_path, duration=3.0)
+    rec = load_recording(rec_path)
+    key = json.loads(key_path.read_text())
+    assert len(rec) == 75 and rec.meta["plant"] == "mujoco"
+    assert key_path.parent != rec_path.parent
+    assert all(e["name"] in effects.EFFECTS for e in key["effects"])
+    # The sidecar does not give it away: it describes the nominal robot the user believes in.
+    assert rec.meta["robot"] == DEFAULT.to_json() and "effects" not in rec.meta
+    assert make_case(7, tmp_path / "again", duration=3.0)[0].read_text() == rec_path.read_text()

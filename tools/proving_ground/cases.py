@@ -1,0 +1,114 @@
+"""Blind cases: a random effect, magnitude, world, start and excitation, recorded on the plant.
+
+    rec_path, key_path = make_case(seed, out_dir)
+
+draws, from `seed` alone:
+
+- the effect: none (an effect-free control, probability CONTROL_SHARE) or
+  one of effects.EFFECTS, with its site (wheel or sensor) and a value from
+  its realistic ranges (floor_tilt also draws the downhill direction);
+- the world (a built-in one) and a start pose clear of the walls;
+- the excitation: the firmware's own exploration in SIL (either rule set),
+  or a random current-reference program (excitation.program) with an IR guard;
+
+runs the plant for `duration` seconds and writes the recording
+(out_dir/case_NNNN.csv, source "robot", plant "mujoco", the nominal robot
+in its sidecar) and, apart, the answer key
+(key_dir/case_NNNN.answer.json, default out_dir/answer_keys/): what was
+concealed and the plant's true values.  Only a scorer should read it.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from host_sim.sil import SilController
+from host_sim.world import BUILTIN_NAMES, World, builtin_world
+from tools.proving_ground import effects, excitation
+from tools.proving_ground.recorder import ProgramController, record
+from tools.proving_ground.robot_model import PlantSpec, nominal_spec
+
+CONTROL_SHARE = 0.15  # fraction of cases with no effect at all
+START_MARGIN = 0.15  # m from C to any wall at the start
+GUARD_COUNTS = 150  # reflected counts that pause an excitation program
+
+
+def _start(world: World, rng: np.random.Generator) -> tuple[float, float, float]:
+    res = 0.05
+    reachable = world.free_cells(res, reachable=True)  # where the robot can go from the world's start
+    clear = reachable & world.free_cells(res, START_MARGIN)
+    iy, ix = np.nonzero(clear if clear.any() else reachable)
+    k = int(rng.integers(len(iy)))
+    xs, ys = world.cell_centres(res)
+    return float(xs[ix[k]]), float(ys[iy[k]]), float(rng.uniform(-math.pi, math.pi))
+
+
+def draw_effect(rng: np.random.Generator) -> tuple[PlantSpec, list[dict[str, object]]]:
+    """A plant spec with at most one concealed effect, and its description for the answer key."""
+    spec = nominal_spec()
+    if rng.random() < CONTROL_SHARE:
+        return spec, []
+    effect = list(effects.EFFECTS.values())[int(rng.integers(len(effects.EFFECTS)))]
+    sites = effect.sites()
+    where = sites[int(rng.integers(len(sites)))]
+    value = effect.draw(rng)
+    spec = effects.apply(spec, effect.name, value, where)
+    entry: dict[str, object] = {"name": effect.name, "in_library": effect.in_library,
+                                "params": {effect.param: {"value": value, "unit": effect.unit,
+                                                          "absent": effect.absent}}}
+    if effect.applies_to == "wheel":
+        entry["wheel"] = where
+    elif effect.applies_to == "sensor":
+        entry["sensor"] = where
+    if effect.name == "floor_tilt":
+        direction = float(rng.uniform(-math.pi, math.pi))
+        spec = spec.replace(floor_tilt_direction=direction)
+        entry["params"]["floor_tilt_direction"] = {"value": direction, "unit": "rad"}  # type: ignore[index]
+    return spec, [entry]
+
+
+def make_case(seed: int, out_dir: str | Path, duration: float = 90.0,
+              key_dir: str | Path | None = None) -> tuple[Path, Path]:
+    """Record one blind case; returns (recording path, answer key path)."""
+    rng = np.random.default_rng([seed, 2024])
+    spec, concealed = draw_effect(rng)
+    world = builtin_world(BUILTIN_NAMES[int(rng.integers(len(BUILTIN_NAMES)))])
+    start = _start(world, rng)
+    if rng.random() < 0.5:
+        rules = int(rng.integers(2))
+        controller: object = SilController(rules)
+        how = {"kind": "firmware", "rule_set": rules}
+    else:
+        controller = ProgramController(excitation.program(rng, duration), guard=GUARD_COUNTS)
+        how = {"kind": "program", "guard_counts": GUARD_COUNTS}
+    out_dir = Path(out_dir)
+    key_dir = Path(key_dir) if key_dir is not None else out_dir / "answer_keys"
+    out_dir.mkdir(parents=True, exist_ok=True)
+    key_dir.mkdir(parents=True, exist_ok=True)
+    name = f"case_{seed:04d}"
+    rec_path = out_dir / f"{name}.csv"
+    record(rec_path, spec, world, controller, duration, seed=seed, pose=start)
+    key = {"case": name, "seed": seed, "recording": rec_path.name, "world": world.name, "start": start,
+           "excitation": how, "duration": duration, "verdict_expected": _expected(concealed),
+           "effects": concealed, "plant": _jsonable(dataclasses.asdict(spec))}
+    key_path = key_dir / f"{name}.answer.json"
+    key_path.write_text(json.dumps(key, indent=1) + "\n")
+    return rec_path, key_path
+
+
+def _expected(concealed: list[dict[str, object]]) -> str:
+    if not concealed:
+        return "match"
+    return "explained" if all(e["in_library"] for e in concealed) else "unexplained"
+
+
+def _jsonable(value: object) -> object:
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    return value

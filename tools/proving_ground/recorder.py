@@ -1,0 +1,97 @@
+"""Scenarios on the plant, written as recordings in the project's one format.
+
+    run(plant, controller, duration, writer)      # one control period at a time
+    record(path, spec, world, controller, ...)    # a recording (source "robot", plant "mujoco")
+
+Each control period (40 ms): the plant's readings go to the controller
+(anything with `cycle(Sense) -> Actuate`: host_sim's SilController, or
+`ProgramController` below), its currents to the plant, one row to the
+recording (t, the references, the encoders, IR on/ambient, vbat, the emitter power, and the
+tracker's noisy pose of C taken at the readings), then the physics runs on.
+
+The sidecar says source "robot" and plant "mujoco", with the twin's
+nominal robot parameters (what a user would believe their robot is) and
+the world; the plant's true values and effects never go in it.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+from host_sim.interface import CYCLE_S, Actuate, Sense
+from host_sim.params import DEFAULT
+from host_sim.recording import RecordingWriter
+from host_sim.world import World
+from tools.proving_ground.plant import Plant
+from tools.proving_ground.robot_model import PlantSpec
+
+
+
+class ProgramController:
+    """Given current references (A), one pair per control period, open loop; zero after the end.
+
+    guard: counts of reflected light (on - off) on any front sensor (S8, S1,
+    S2) above which the program pauses with zero current until the wall is
+    out of sight again (keeps open-loop excitation off the walls); None = no guard.
+    """
+
+    name = "program"
+
+    def __init__(self, currents: Sequence[tuple[float, float]], emitter_pct: int = 60,
+                 guard: float | None = None) -> None:
+        self.currents = list(currents)
+        self.k = 0
+        self.emitter_pct = emitter_pct
+        self.guard = guard
+
+    def cycle(self, s: Sense) -> Actuate:
+        left, right = self.currents[self.k] if self.k < len(self.currents) else (0.0, 0.0)
+        self.k += 1
+        if self.guard is not None and s.adc_on:
+            seen = max(s.adc_on[i] - s.adc_off[i] for i in (7, 0, 1, 3, 4, 5))
+            front = left + right > 0
+            near_front = max(s.adc_on[i] - s.adc_off[i] for i in (7, 0, 1)) > self.guard
+            near_back = max(s.adc_on[i] - s.adc_off[i] for i in (3, 4, 5)) > self.guard
+            if seen > self.guard and ((front and near_front) or (not front and near_back)):
+                left = right = 0.0
+        return Actuate(round(left * 1000), round(right * 1000), self.emitter_pct)
+
+    def close(self) -> None:
+        pass
+
+
+def run(plant: Plant, controller: object, duration: float, writer: RecordingWriter | None = None,
+        cycle_s: float = CYCLE_S) -> list[tuple[float, float, float]]:
+    """Drive the plant for `duration` s; returns the true pose of C at each control instant."""
+    truth = []
+    for _ in range(int(round(duration / cycle_s))):
+        pose = plant.true_pose()
+        seen = plant.tracker_pose()
+        pct = plant.emitter_pct  # the power of this reading's emitter-on sample
+        s = plant.sense()
+        a: Actuate = controller.cycle(s)  # type: ignore[attr-defined]
+        plant.actuate(a)
+        if writer is not None:
+            writer.row(plant.t, (a.i_left_ma / 1000.0, a.i_right_ma / 1000.0), (s.enc_l, s.enc_r), s.adc_on,
+                       s.adc_off, s.vbat_mv / 1000.0, seen, emitter_pct=pct)
+        truth.append(pose)
+        plant.advance(cycle_s)
+    return truth
+
+
+def record(path: str | Path, spec: PlantSpec, world: World, controller: object, duration: float, seed: int = 0,
+           pose: tuple[float, float, float] | None = None, extra: dict[str, object] | None = None
+           ) -> list[tuple[float, float, float]]:
+    """Run a scenario and write it as a recording; returns the true poses (not written)."""
+    plant = Plant(spec, world, pose, seed)
+    meta = {"plant": "mujoco", "controller": getattr(controller, "name", "?"), "seed": seed,
+            "emitter_pct": getattr(controller, "emitter_pct", 60), **(extra or {})}
+    with RecordingWriter(path, source="robot", sample_period=CYCLE_S, robot=DEFAULT.to_json(),
+                         world=world.to_dict(), extra=meta) as writer:
+        truth = run(plant, controller, duration, writer)
+    return truth
+
+
+def wrap(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
