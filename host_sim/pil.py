@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 from host_sim.interface import TICK_MASK, Actuate, Sense, setup_frames
+from host_sim.params import RobotParams
 from protocol import messages as M
 from protocol.framing import HEADER_SIZE, FrameDecoder, FrameEncoder
 
@@ -82,7 +83,8 @@ class PilController:
 
     name = "PIL"
 
-    def __init__(self, rule_set: int = 1, flash_dir: Path | None = None, log: Path | None = None) -> None:
+    def __init__(self, rule_set: int = 1, flash_dir: Path | None = None, log: Path | None = None,
+                 params: RobotParams | None = None) -> None:
         from host_sim.board_process import VirtualBoard, factory_image
         from host_sim.serial_link import SerialLink
 
@@ -96,7 +98,7 @@ class PilController:
         try:
             self.link.accept(timeout=20)
             self.host = SerialLink.open(self.board.path)
-            for frame in setup_frames(rule_set):
+            for frame in setup_frames(rule_set, params=params):
                 self.host.send_raw(frame)
             time.sleep(0.2)  # the commands wait in the board's input before cycle 0
         except Exception:
