@@ -130,9 +130,9 @@ class FuzzyController:
         self.right = 0
         self.rule_set = 0
         self.max_speed = 0
-        self._sum_l: list[int] = []
-        self._sum_r: list[int] = []
-        self._count: list[int] = []
+        self._sum_l = [0] * (ALWAYS + 1)
+        self._sum_r = [0] * (ALWAYS + 1)
+        self._count = [0] * (ALWAYS + 1)
         self.configure(rule_set, max_speed)
 
     def configure(self, rule_set: int, max_speed: int) -> None:
@@ -144,21 +144,25 @@ class FuzzyController:
         adds w_a * sum instead of one term per rule; the integers are the
         same, in fewer steps.
         """
-        if rule_set not in (0, 1):
+        if rule_set != 0 and rule_set != 1:
             raise ValueError("rule_set must be 0 (first) or 1 (refined)")
         self.rule_set = rule_set
         self.max_speed = max_speed
-        sum_l = [0] * (ALWAYS + 1)
-        sum_r = [0] * (ALWAYS + 1)
-        count = [0] * (ALWAYS + 1)
-        for antecedent, action in RULE_SETS[rule_set]:
-            lt, rt = ACTIONS[action]
-            sum_l[antecedent] += TERMS[lt] * max_speed // 100
-            sum_r[antecedent] += TERMS[rt] * max_speed // 100
+        sum_l = self._sum_l  # refilled in place: a PARAM_SET allocates nothing
+        sum_r = self._sum_r
+        count = self._count
+        for a in range(ALWAYS + 1):
+            sum_l[a] = 0
+            sum_r[a] = 0
+            count[a] = 0
+        rules = RULE_SETS[rule_set]
+        for k in range(len(rules)):
+            rule = rules[k]
+            antecedent = rule[0]
+            action = ACTIONS[rule[1]]
+            sum_l[antecedent] += TERMS[action[0]] * max_speed // 100
+            sum_r[antecedent] += TERMS[action[1]] * max_speed // 100
             count[antecedent] += 1
-        self._sum_l = sum_l
-        self._sum_r = sum_r
-        self._count = count
 
     def infer(self, reflected: list[int]) -> None:
         """Set self.left, self.right (mm/s) from the 8 reflected readings."""

@@ -10,6 +10,17 @@ allocate on the heap.
 from protocol.compat import const
 
 TICK_MASK = const(0x3FFFFFFF)  # clocks wrap modulo 2**30 ms, as MicroPython's ticks_ms
+_HALF_WRAP = const(0x20000000)
+
+
+def count_delta(new: int, old: int) -> int:
+    """new - old for encoder counts that may wrap within [-2**29, 2**29) (the RP2040 HAL's)."""
+    d = new - old
+    if d >= _HALF_WRAP:
+        d = d - _HALF_WRAP - _HALF_WRAP
+    elif d < -_HALF_WRAP:
+        d = d + _HALF_WRAP + _HALF_WRAP
+    return d
 
 
 class Hal:
@@ -17,9 +28,13 @@ class Hal:
 
     board = 0  # protocol.messages.BOARD_* kind, reported in HELLO
     overrun = False  # set by wait_cycle when the last cycle overran its period
+    repl_link = False  # the host link is the USB REPL port (mpremote may break in)
 
     def wait_cycle(self, period_ms: int) -> int:
-        """Block until the next control cycle starts; return its tick, ms (mod 2**30)."""
+        """Block until the next control cycle starts; return its tick, ms (mod 2**30).
+
+        A board with a hardware watchdog feeds it here: a loop that stalls
+        stops being fed and the watchdog stops the motors."""
         raise NotImplementedError
 
     def set_emitters(self, pct: int) -> None:
@@ -45,8 +60,8 @@ class Hal:
         """Copy what the host sent into buf without blocking; return the count."""
         raise NotImplementedError
 
-    def host_write(self, data: memoryview) -> None:
-        """Send bytes to the host."""
+    def host_write(self, buf: bytearray, n: int) -> None:
+        """Send buf[:n] to the host (MicroPython streams: write(buf, n), no allocation)."""
         raise NotImplementedError
 
     def end_cycle(self) -> None:

@@ -9,17 +9,29 @@
 - Host link: the USB serial port (or a UART, config.HOST_UART).
 
 Cycles are timed with time.ticks_ms(); a cycle that starts late sets
-`overrun` (the OVERRUN flag in telemetry).  Not run in CI (no board there):
+`overrun` (the OVERRUN flag in telemetry).  The hardware watchdog
+(machine.WDT, WATCHDOG_MS) is fed at the start of every cycle: a loop that
+stalls is reset by it, and a reset stops the motor PWM.  close() (the
+firmware hands the port to the REPL) switches it off again, which
+MicroPython's WDT cannot: the RP2040's WATCHDOG_CTRL enable bit is cleared.
+Encoder counts wrap within +-2**29 so that the interrupt handlers never
+make a big int (31-bit small ints); deltas are taken modulo 2**30.  Not run in CI (no board there):
 mpy-cross and mypy against the rp2 stubs check it.
 """
 import time
 
-from machine import ADC, PWM, Pin
+from machine import ADC, PWM, WDT, Pin, mem32
 
 from firmware import config
 from firmware.hal import TICK_MASK, Hal
 from firmware.hostlink import StdioLink, UartLink
 from protocol import wire
+
+
+WATCHDOG_MS = 1500  # > the longest cycle (1000 ms); the RP2040 allows up to 8388
+_WATCHDOG_CTRL_CLR = 0x40058000 + 0x3000  # WATCHDOG_CTRL, atomic bit-clear alias
+_WATCHDOG_ENABLE = 1 << 30
+_ENC_WRAP = 0x20000000  # counts stay in [-2**29, 2**29)
 
 
 class Rp2040Hal(Hal):
@@ -45,19 +57,30 @@ class Rp2040Hal(Hal):
         self._enc_a[1].irq(handler=self._edge_right, trigger=edges, hard=True)
         uart = config.HOST_UART
         self.link = StdioLink() if uart is None else UartLink(*uart)
+        self.repl_link = uart is None
         self.overrun = False
         self._next = time.ticks_ms()
+        self.wdt = WDT(timeout=WATCHDOG_MS)
 
     # Encoder edges (hard interrupts: no allocation, no long work).
     def _edge_left(self, pin: Pin) -> None:
-        self.counts[0] += 1 if pin.value() != self._enc_b[0].value() else -1
+        self._count(0, 1 if pin.value() != self._enc_b[0].value() else -1)
 
     def _edge_right(self, pin: Pin) -> None:
         # The right motor is mounted mirrored: the same rotation of the robot's
         # wheel forward gives the opposite phase.
-        self.counts[1] += 1 if pin.value() == self._enc_b[1].value() else -1
+        self._count(1, 1 if pin.value() == self._enc_b[1].value() else -1)
+
+    def _count(self, side: int, step: int) -> None:
+        c = self.counts[side] + step
+        if c >= _ENC_WRAP:
+            c = c - _ENC_WRAP - _ENC_WRAP
+        elif c < -_ENC_WRAP:
+            c = c + _ENC_WRAP + _ENC_WRAP
+        self.counts[side] = c
 
     def wait_cycle(self, period_ms: int) -> int:
+        self.wdt.feed()
         late = time.ticks_diff(time.ticks_ms(), self._next)
         if late < 0:
             time.sleep_ms(-late)
@@ -104,8 +127,8 @@ class Rp2040Hal(Hal):
     def host_read(self, buf: bytearray) -> int:
         return self.link.read(buf)
 
-    def host_write(self, data: memoryview) -> None:
-        self.link.write(data)
+    def host_write(self, buf: bytearray, n: int) -> None:
+        self.link.write(buf, n)
 
     def end_cycle(self) -> None:
         pass
@@ -113,3 +136,4 @@ class Rp2040Hal(Hal):
     def close(self) -> None:
         self.set_currents(0, 0)
         self.emitter_pwm.duty_u16(0)
+        mem32[_WATCHDOG_CTRL_CLR] = _WATCHDOG_ENABLE  # the REPL must not be reset under the user

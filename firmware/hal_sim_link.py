@@ -26,7 +26,12 @@ class HardwareGone(SystemExit):
 
 
 class SimLinkHal(BufferedHal):
-    """BufferedHal whose readings arrive as HW_SENSE frames and whose outputs leave as HW_ACTUATE."""
+    """BufferedHal whose readings arrive as HW_SENSE frames and whose outputs leave as HW_ACTUATE.
+
+    Its host link is stdin/stdout, the board's REPL port.  Its watchdog is on
+    the simulator's side (host_sim/pil.py): HW_ACTUATE overdue, motors off."""
+
+    repl_link = True
 
     def __init__(self, host: str, port: int) -> None:
         BufferedHal.__init__(self)
@@ -77,8 +82,8 @@ class SimLinkHal(BufferedHal):
     def host_read(self, buf: bytearray) -> int:
         return self.link.read(buf)
 
-    def host_write(self, data: memoryview) -> None:
-        self.link.write(data)
+    def host_write(self, buf: bytearray, n: int) -> None:
+        self.link.write(buf, n)
 
     def close(self) -> None:
         self.sock.close()
@@ -91,4 +96,4 @@ class SimLinkHal(BufferedHal):
         """
         struct.pack_into(_ACTUATE_FMT, self.tx.body, 3, self.tick, self.i_left, self.i_right, self.power_used)
         n = self.tx.finish(wire.HW_ACTUATE, 9)
-        self.sock.write(self.tx.view(n))
+        self.sock.write(self.tx.frame, n)  # type: ignore[call-arg]  # streams take (buf, max_len)

@@ -11,6 +11,7 @@ from firmware.hal import TICK_MASK
 class TestHal:
     board = 2  # BOARD_VIRTUAL
     overrun = False
+    repl_link = True  # as the USB port; a test sets False for a UART
 
     def __init__(self, in_size: int = 2048, out_size: int = 8192) -> None:
         self.t = 0
@@ -60,8 +61,7 @@ class TestHal:
         self.in_pos += n
         return n
 
-    def host_write(self, data: memoryview) -> None:
-        n = len(data)
+    def host_write(self, data: bytearray, n: int) -> None:
         if self.out_len + n > len(self.out):
             self.out_len = 0  # keep the newest frames
         for k in range(n):

@@ -47,8 +47,8 @@ class StdioLink:
             n += 1
         return n
 
-    def write(self, data: memoryview) -> None:
-        self._out.write(data)
+    def write(self, buf: bytearray, n: int) -> None:
+        self._out.write(buf, n)
 
 
 class UartLink:
@@ -70,5 +70,5 @@ class UartLink:
         n = self.uart.readinto(buf)
         return n if n else 0
 
-    def write(self, data: memoryview) -> None:
-        self.uart.write(data)
+    def write(self, buf: bytearray, n: int) -> None:
+        self.uart.write(buf, n)  # type: ignore[call-arg]  # streams take (buf, max_len); the stubs do not say

@@ -12,7 +12,14 @@ step is taken along:
 Position in micrometres, heading in 1/2**30 turn (wrapped, so it stays a
 small int on 32-bit boards); the heading is a sum of exact integer steps, so
 it does not drift by rounding.  Every port gives the same pose bit for bit.
+
+Every intermediate stays within +-2**30 (an RP2040's small ints are 31-bit:
+beyond that MicroPython allocates a big int): the wrap works around the
+half-turn point, and the geometry is turned into per-tick factors by
+div_round(), a long division in small ints, so configure() allocates
+nothing either (a PARAM_SET of the geometry calls it).
 """
+from firmware.hal import count_delta
 from firmware.trig import cos_q14, sin_q14, sinc_q14
 from protocol.compat import const
 
@@ -20,7 +27,9 @@ EULER = const(0)
 MIDPOINT = const(1)
 EXACT = const(2)
 
-HEADING_TURN = const(1 << 30)  # heading units per turn
+HEADING_TURN = 1 << 30  # heading units per turn (a big int on 32-bit ports: not used per cycle)
+HEADING_MASK = const(0x3FFFFFFF)
+_HALF = const(0x20000000)  # half a turn
 _PI_NUM = const(355)  # pi ~ 355/113, error 8.5e-8
 _PI_DEN = const(113)
 
@@ -29,12 +38,9 @@ class Odometry:
     """Pose (x_um, y_um, heading) from cumulative encoder ticks; no allocation per update."""
 
     def __init__(self, wheel_diameter_um: int, wheel_base_um: int, ticks_per_rev: int, method: int = EXACT) -> None:
-        # micrometres per tick, Q8
-        self.um_per_tick_q8 = (_PI_NUM * wheel_diameter_um * 256 + _PI_DEN * ticks_per_rev // 2) // (
-            _PI_DEN * ticks_per_rev)
-        # heading units per tick of difference (dR - dL): D / (2 * TPR * W) of a turn
-        self.heading_per_tick = ((wheel_diameter_um << 30) + ticks_per_rev * wheel_base_um) // (
-            2 * ticks_per_rev * wheel_base_um)
+        self.um_per_tick_q8 = 0
+        self.heading_per_tick = 0
+        self.configure(wheel_diameter_um, wheel_base_um, ticks_per_rev)
         self.method = method
         self.x_um = 0
         self.y_um = 0
@@ -43,10 +49,17 @@ class Odometry:
         self._last_r = 0
         self._started = False
 
+    def configure(self, wheel_diameter_um: int, wheel_base_um: int, ticks_per_rev: int) -> None:
+        """Set the geometry (diameter up to 2**21 um, base up to 2**21 um, ticks per turn up to 2**16)."""
+        # micrometres per tick, Q8: pi * D * 256 / TPR
+        self.um_per_tick_q8 = div_round(_PI_NUM * wheel_diameter_um, 8, _PI_DEN, ticks_per_rev)
+        # heading units per tick of difference (dR - dL): D / (2 * TPR * W) of a turn
+        self.heading_per_tick = div_round(wheel_diameter_um, 29, ticks_per_rev, wheel_base_um)
+
     def reset(self, x_um: int = 0, y_um: int = 0, heading: int = 0) -> None:
         self.x_um = x_um
         self.y_um = y_um
-        self.heading = heading & (HEADING_TURN - 1)
+        self.heading = heading & HEADING_MASK
         self._started = False
 
     def update(self, enc_l: int, enc_r: int) -> None:
@@ -55,8 +68,8 @@ class Odometry:
             self._last_r = enc_r
             self._started = True
             return
-        dl = enc_l - self._last_l
-        dr = enc_r - self._last_r
+        dl = count_delta(enc_l, self._last_l)
+        dr = count_delta(enc_r, self._last_r)
         self._last_l = enc_l
         self._last_r = enc_r
         self.step(dl, dr)
@@ -71,9 +84,51 @@ class Odometry:
         if method == EULER:
             a = th >> 14  # binary angle, 65536 per turn
         else:
-            a = (th + (dth >> 1)) >> 14
+            # (th + dth/2) >> 14, computed around the half turn to stay below 2**30
+            a = ((th - _HALF + (dth >> 1)) >> 14) + (_HALF >> 14)
             if method == EXACT and dth:
-                s = (s * sinc_q14(dth >> 7) + 8192) >> 14
-        self.x_um += (s * cos_q14(a) + 8192) >> 14
-        self.y_um += (s * sin_q14(a) + 8192) >> 14
-        self.heading = (th + dth) & (HEADING_TURN - 1)
+                s = mul_q14(s, sinc_q14(dth >> 7))
+        self.x_um += mul_q14(s, cos_q14(a))
+        self.y_um += mul_q14(s, sin_q14(a))
+        # (th + dth) mod 2**30 without passing 2**30: both terms first taken into [0, 2**30)
+        h = (th - _HALF) + ((dth & HEADING_MASK) - _HALF)
+        self.heading = h if h >= 0 else h + _HALF + _HALF
+
+
+def mul_q14(s: int, c: int) -> int:
+    """(s * c + 8192) >> 14 for |c| <= 2**14, exactly, without a product beyond 2**30."""
+    return (s >> 14) * c + (((s & 16383) * c + 8192) >> 14)
+
+
+def div_round(x: int, shift: int, m1: int, m2: int) -> int:
+    """round(x * 2**shift / (m1 * m2)), half up, with every intermediate a small int.
+
+    x >= 0 below 2**30, m1 and m2 >= 1 below 2**29, result below 2**30.  Long
+    division one bit at a time; the remainder is kept as a * m2 + b (a < m1,
+    b < m2) so that the product m1 * m2 is never formed.
+    """
+    q = 0
+    a = 0
+    b = 0
+    nbits = 0
+    v = x
+    while v:
+        nbits += 1
+        v >>= 1
+    for k in range(nbits + shift - 1, -1, -1):
+        bit = (x >> (k - shift)) & 1 if k >= shift else 0
+        b = 2 * b + bit
+        a = 2 * a
+        if b >= m2:
+            b -= m2
+            a += 1
+        q = 2 * q
+        if a >= m1:
+            a -= m1
+            q += 1
+    # round half up: add one if 2 * remainder >= m1 * m2
+    b = 2 * b
+    a = 2 * a
+    if b >= m2:
+        a += 1
+    return q + 1 if a >= m1 else q

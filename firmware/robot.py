@@ -6,14 +6,17 @@ decides the wheel setpoints (AUTONOMOUS: the fuzzy explorer; HOST, TELEOP:
 the host's COMMAND, guarded by the watchdog; STOP: zero) -> wheel PI ->
 current references -> TELEMETRY.
 
-A cycle allocates nothing in steady state (tests run it under
+No path allocates once the robot is built, whatever the host sends (tests
+run every message type, every parameter and hostile frames under
 micropython.heap_lock()).  An exception inside a cycle never ends the loop:
-it is counted, reported by a LOG frame, and the robot goes to STOP with its
-motors at zero and the FAULT flag set.
+the motors go to zero at once, it is counted and reported by a LOG frame,
+and the robot goes to STOP with the FAULT flag set.
 
-The host link also carries mpremote: a frame that begins 0x0D 0x03 (its
-"\\r Ctrl-C") is never a valid frame of protocol version 1, so it is taken
-as a request to stop the firmware and hand the port to the REPL.
+On a board whose host link is the USB REPL port, mpremote interrupts with
+0x0D 0x03 ("\\r Ctrl-C").  Those two bytes stop the firmware only when they
+are the first bytes after a whole silent cycle (mpremote starts on a quiet
+port; a protocol host sends 0x00 before every frame); anywhere else, and
+always on a UART, they are line noise like any other.
 """
 import struct
 
@@ -40,13 +43,36 @@ P_KI = const(8)
 P_ODOMETRY = const(9)
 P_MAX_SPEED = const(10)
 P_CURRENT_LIMIT = const(11)
-N_PARAMS = const(12)
+P_WHEEL_DIAMETER = const(12)
+P_WHEEL_BASE = const(13)
+P_TICKS_PER_REV = const(14)
+N_PARAMS = const(15)
 MAX_RX_PER_CYCLE = const(512)  # bounds the cycle time under a flood of bytes
+MAX_DT_MS = const(2000)  # a longer gap (a stalled board) counts as this much: keeps the PI in range
 
-_TELEMETRY_FMT = "<IBHii8H8HhhH"
+_TELEMETRY_FMT = "<IBHii8H8HhhHhhiiiB"
+_TELEMETRY_SIZE = const(70)
 _PARAM_FMT = "<Bi"
-_HELLO_FMT = "<6B"
+_HELLO_FMT = "<6BIIH"
+_HELLO_SIZE = const(16)
 _NACK_FMT = "<3B"
+
+# The fault LOG names the exception without allocating: names in one blob
+# (RAM is scarce), ended by '|', in the order of the classes tried.
+_FAULT_CLASSES = (OSError, ZeroDivisionError, IndexError, KeyError, TypeError, ValueError,
+                  AttributeError, MemoryError, RuntimeError, Exception)
+_FAULT_TEXT = (b"fault # in cycle : OSError|ZeroDivisionError|IndexError|KeyError|TypeError|ValueError|"
+               b"AttributeError|MemoryError|RuntimeError|Exception|")
+
+
+def geometry_defaults() -> tuple[int, int, int]:
+    """(wheel diameter um, wheel base um, ticks per turn): robot_geometry.py if the board has
+    one (written at flash time), else config's defaults."""
+    try:
+        import robot_geometry as g  # type: ignore[import-not-found]
+    except ImportError:
+        g = config
+    return (g.WHEEL_DIAMETER_UM, g.WHEEL_BASE_UM, g.TICKS_PER_REV)
 
 
 class BreakToRepl(Exception):
@@ -62,10 +88,16 @@ class Robot:
         for pid in range(1, N_PARAMS):
             self.params[pid] = M.PARAM_LIMITS[pid][2]
         p = self.params
+        geometry = geometry_defaults()
+        for k in range(3):
+            pid = P_WHEEL_DIAMETER + k
+            lo, hi, _default = M.PARAM_LIMITS[pid]
+            if not lo <= geometry[k] <= hi:
+                raise ValueError("robot_geometry: parameter {} = {} is outside {}..{}".format(pid, geometry[k], lo, hi))
+            p[pid] = geometry[k]
         self.ir = IRArray(hal, p[P_EMITTER], p[P_AVERAGING], p[P_WINDOW])
         self.fuzzy = FuzzyController(p[P_RULE_SET], p[P_MAX_SPEED])
-        self.odometry = Odometry(config.WHEEL_DIAMETER_UM, config.WHEEL_BASE_UM, config.TICKS_PER_REV,
-                                 p[P_ODOMETRY])
+        self.odometry = Odometry(p[P_WHEEL_DIAMETER], p[P_WHEEL_BASE], p[P_TICKS_PER_REV], p[P_ODOMETRY])
         q8 = self.odometry.um_per_tick_q8
         self.wheel_l = WheelLoop(q8, p[P_KP], p[P_KI], p[P_CURRENT_LIMIT])
         self.wheel_r = WheelLoop(q8, p[P_KP], p[P_KI], p[P_CURRENT_LIMIT])
@@ -87,6 +119,11 @@ class Robot:
         self.tx = FrameEncoder()
         self.rx = FrameDecoder()
         self._rx_one = bytearray(1)
+        self._digits = bytearray(12)
+        # Breaks are honoured only on the USB REPL port, never on a UART.
+        self.repl_link = bool(getattr(hal, "repl_link", False))
+        self._silent = True  # no byte arrived in the last whole cycle
+        self._break_armed = False  # a 0x0D began the first burst after silence
 
     # -- the cycle -------------------------------------------------------
 
@@ -95,6 +132,8 @@ class Robot:
         tick = hal.wait_cycle(self.params[P_CYCLE])  # type: ignore[attr-defined]
         self.tick = tick
         dt = 0 if self._last_tick < 0 else (tick - self._last_tick) & TICK_MASK
+        if dt > MAX_DT_MS:
+            dt = MAX_DT_MS
         self._last_tick = tick
         self.ir.acquire()
         enc = self.enc
@@ -171,25 +210,70 @@ class Robot:
                 self.on_fault(exc)
 
     def safe_state(self) -> None:
+        """Motors to zero at once, then STOP."""
+        try:
+            self.hal.set_currents(0, 0)  # type: ignore[attr-defined]
+        except Exception:  # noqa: BLE001
+            pass
         self.mode = M.MODE_STOP
         self.setpoint_l = 0
         self.setpoint_r = 0
         self.wheel_l.reset()
         self.wheel_r.reset()
-        try:
-            self.hal.set_currents(0, 0)  # type: ignore[attr-defined]
-        except Exception:  # noqa: BLE001
-            pass
 
     def on_fault(self, exc: Exception) -> None:
         self.faults += 1
         self.fault_pending = True
         self.safe_state()
         try:
-            self.log(M.LOG_ERROR, "fault #{} in cycle {}: {}: {}".format(
-                self.faults, self.cycles, type(exc).__name__, exc))
+            self.log_fault(exc)
         except Exception:  # noqa: BLE001 - the link itself may be what failed
             pass
+
+    def log_fault(self, exc: Exception) -> None:
+        """LOG ERROR "fault #N in cycle C: Name [first int argument]", without allocating."""
+        body = self.tx.body
+        body[3] = M.LOG_ERROR
+        t = _FAULT_TEXT
+        k = _put(body, 4, t, 0, 7)  # "fault #"
+        k = self._put_int(body, k, self.faults)
+        k = _put(body, k, t, 7, 17)  # " in cycle "
+        k = self._put_int(body, k, self.cycles)
+        k = _put(body, k, t, 17, 19)  # ": "
+        start = 19
+        for cls in _FAULT_CLASSES:
+            end = start
+            while t[end] != 0x7C:  # '|'
+                end += 1
+            if isinstance(exc, cls):
+                k = _put(body, k, t, start, end)
+                break
+            start = end + 1
+        args = exc.args
+        if len(args) and isinstance(args[0], int) and -1000000000 < args[0] < 1000000000:
+            body[k] = 0x20
+            k = self._put_int(body, k + 1, args[0])
+        self._send(M.LOG, k - 3)
+
+    def _put_int(self, body: bytearray, k: int, value: int) -> int:
+        """Decimal digits of value at body[k:]; the end position."""
+        if value < 0:
+            body[k] = 0x2D
+            k += 1
+            value = -value
+        d = self._digits
+        n = 0
+        while True:
+            d[n] = 0x30 + value % 10
+            n += 1
+            value //= 10
+            if not value:
+                break
+        while n:
+            n -= 1
+            body[k] = d[n]
+            k += 1
+        return k
 
     # -- host messages ---------------------------------------------------
 
@@ -199,7 +283,8 @@ class Robot:
         One at a time so that nothing after mpremote's break is consumed:
         the REPL must see the Ctrl-A that follows it.  A partial frame that
         gets no byte for a whole cycle is dropped (the sender died mid-frame),
-        so the next frame, or a break, starts clean.
+        so the next frame starts clean.  On the REPL link, 0x0D 0x03 as the
+        first bytes after a silent cycle is mpremote's break.
         """
         one = self._rx_one
         dec = self.rx
@@ -209,12 +294,20 @@ class Robot:
             if hal.host_read(one) <= 0:  # type: ignore[attr-defined]
                 break
             got += 1
+            b = one[0]
+            if self._break_armed:
+                if b == 0x03:
+                    raise BreakToRepl()
+                self._break_armed = False
+            elif got == 1 and self._silent and b == 0x0D and self.repl_link:
+                self._break_armed = True
             dec.feed(one, 0, 1)
             if dec.ready:
                 self.handle(dec.msg_type, dec.seq, dec.body)
-            elif dec.pending_starts_with(0x0D, 0x03):
-                raise BreakToRepl()
-        if not got:
+        if got:
+            self._silent = False
+        else:
+            self._silent = True
             dec.abandon_partial()
 
     def handle(self, msg_type: int, seq: int, b: bytearray) -> None:
@@ -249,7 +342,7 @@ class Robot:
                 self.nack(seq, msg_type, M.ERR_UNKNOWN_PARAM)
         elif msg_type == M.HELLO:
             self.send_hello()
-        elif msg_type in (M.TELEMETRY, M.PARAM_VALUE, M.LOG, M.HW_SENSE, M.HW_ACTUATE):
+        else:  # TELEMETRY, PARAM_VALUE, ACK, NACK, LOG, HW_*: not for the robot
             self.nack(seq, msg_type, M.ERR_UNSUPPORTED)
 
     def set_param(self, pid: int, value: int) -> int:
@@ -261,35 +354,43 @@ class Robot:
             return M.ERR_OUT_OF_RANGE
         p = self.params
         p[pid] = value
-        if pid in (P_EMITTER, P_AVERAGING, P_WINDOW):
+        if pid == P_EMITTER or pid == P_AVERAGING or pid == P_WINDOW:
             self.ir.configure(p[P_EMITTER], p[P_AVERAGING], p[P_WINDOW])
-        elif pid in (P_RULE_SET, P_MAX_SPEED):
+        elif pid == P_RULE_SET or pid == P_MAX_SPEED:
             self.fuzzy.configure(p[P_RULE_SET], p[P_MAX_SPEED])
         elif pid == P_ODOMETRY:
             self.odometry.method = value
-        elif pid in (P_KP, P_KI, P_CURRENT_LIMIT):
-            for w in (self.wheel_l, self.wheel_r):
+        elif pid == P_KP or pid == P_KI or pid == P_CURRENT_LIMIT:
+            for k in range(2):
+                w = self.wheel_r if k else self.wheel_l
                 w.kp = p[P_KP]
                 w.ki = p[P_KI]
                 w.limit = p[P_CURRENT_LIMIT]
+        elif pid >= P_WHEEL_DIAMETER:
+            odo = self.odometry
+            odo.configure(p[P_WHEEL_DIAMETER], p[P_WHEEL_BASE], p[P_TICKS_PER_REV])
+            self.wheel_l.um_per_tick_q8 = odo.um_per_tick_q8
+            self.wheel_r.um_per_tick_q8 = odo.um_per_tick_q8
         return 0
 
     # -- frames to the host ----------------------------------------------
 
     def _send(self, msg_type: int, payload_len: int) -> None:
         n = self.tx.finish(msg_type, payload_len)
-        self.hal.host_write(self.tx.view(n))  # type: ignore[attr-defined]
+        self.hal.host_write(self.tx.frame, n)  # type: ignore[attr-defined]
 
     def send_telemetry(self, il: int, ir: int) -> None:
         on = self.ir.on
         am = self.ir.ambient
         enc = self.enc
+        odo = self.odometry
         struct.pack_into(
             _TELEMETRY_FMT, self.tx.body, 3, self.tick, self.mode, self.flags, enc[0], enc[1],
             on[0], on[1], on[2], on[3], on[4], on[5], on[6], on[7],
             am[0], am[1], am[2], am[3], am[4], am[5], am[6], am[7],
-            il, ir, self.vbat)
-        self._send(M.TELEMETRY, 53)
+            il, ir, self.vbat, self.setpoint_l, self.setpoint_r,
+            odo.x_um, odo.y_um, odo.heading, self.ir.power)
+        self._send(M.TELEMETRY, _TELEMETRY_SIZE)
 
     def send_param(self, pid: int) -> None:
         struct.pack_into(_PARAM_FMT, self.tx.body, 3, pid, self.params[pid])
@@ -297,18 +398,20 @@ class Robot:
 
     def send_hello(self) -> None:
         v = config.FIRMWARE_VERSION
+        p = self.params
         struct.pack_into(_HELLO_FMT, self.tx.body, 3, M.PROTOCOL_VERSION, v[0], v[1], v[2],
-                         self.hal.board, 8)  # type: ignore[attr-defined]
-        self._send(M.HELLO, 6)
+                         self.hal.board, 8, p[P_WHEEL_DIAMETER], p[P_WHEEL_BASE],  # type: ignore[attr-defined]
+                         p[P_TICKS_PER_REV])
+        self._send(M.HELLO, _HELLO_SIZE)
 
     def nack(self, seq: int, msg_type: int, error: int) -> None:
         struct.pack_into(_NACK_FMT, self.tx.body, 3, seq, msg_type, error)
         self._send(M.NACK, 3)
 
-    def log(self, level: int, text: str) -> None:
-        data = text.encode()[:M.MAX_PAYLOAD - 1]
-        body = self.tx.body
-        body[3] = level
-        for k in range(len(data)):
-            body[4 + k] = data[k]
-        self._send(M.LOG, 1 + len(data))
+
+def _put(body: bytearray, k: int, src: bytes, start: int, end: int) -> int:
+    """Copy src[start:end] to body[k:]; the end position (no slice: no allocation)."""
+    for i in range(start, end):
+        body[k] = src[i]
+        k += 1
+    return k

@@ -64,7 +64,11 @@ def sinc_q14(half_angle_q24: int) -> int:
     Taylor series to a**4 (error below 4e-3 at a quarter turn, below 1e-6
     for the few degrees an odometry step turns).
     """
-    # a in radians, Q14: a_q24 * 2*pi * 2**14 / 2**24, with pi = 355/113.
-    a = (half_angle_q24 * 710) // (113 * 1024)
+    # a in radians, Q14: a_q24 * 2*pi * 2**14 / 2**24 = a_q24 * 355 / 57856 with
+    # pi = 355/113, split so that no product passes 2**30 (31-bit small ints).
+    a = (half_angle_q24 // 57856) * 355 + ((half_angle_q24 % 57856) * 355) // 57856
     a2 = (a * a) >> 14
-    return ONE_Q14 - a2 // 6 + ((a2 * a2) >> 14) // 120
+    hi = a2 >> 7
+    lo = a2 & 127
+    a4 = hi * hi + ((2 * hi * lo * 128 + lo * lo) >> 14)  # (a2 * a2) >> 14, exactly
+    return ONE_Q14 - a2 // 6 + a4 // 120

@@ -12,7 +12,20 @@ alone can never exceed the current limit.  All in integers:
     acc  [um]   += e * dt_ms
     I    [mA]    = ki * acc / 1_000_000           (ki: 1/1000 mA per mm)
     iref [mA]    = clamp(P + I, -limit, +limit)
+
+An RP2040's small ints are 31-bit: every product here is split so that it
+stays within +-2**30 for every parameter in its range (tests run the loop
+on a 32-bit MicroPython under heap_lock), given |e| <= E_MAX (clamped),
+dt_ms <= 2000 (the robot clamps it) and fewer than 2**16 ticks per cycle.
+The integral is capped at ACC_CAP: with a tiny ki its term then saturates
+below the current limit (ki = 1 reaches 536 mA).
 """
+from firmware.hal import count_delta
+from protocol.compat import const
+
+E_MAX = const(10000)  # mm/s: speed errors beyond are clamped (10 m/s)
+ACC_CAP = const(0x20000000)  # um: the integral's bound whatever ki
+
 
 
 class WheelLoop:
@@ -43,26 +56,38 @@ class WheelLoop:
             self._started = True
             self.speed = 0
             return
-        d = ticks - self._last
+        d = count_delta(ticks, self._last)
         self._last = ticks
-        den = dt_ms << 8
-        self.speed = (2 * d * self.um_per_tick_q8 + den) // (2 * den)
+        # round(d * q8 / (256 * dt)), half up, with q8 = qh * 256 + ql split
+        q8 = self.um_per_tick_q8
+        self.speed = (2 * d * (q8 >> 8) + dt_ms + ((2 * d * (q8 & 255)) >> 8)) // (2 * dt_ms)
 
     def control(self, setpoint: int, dt_ms: int) -> int:
         """PI step towards setpoint (mm/s); returns the current reference, mA."""
         self.setpoint = setpoint
         e = setpoint - self.speed
+        if e > E_MAX:
+            e = E_MAX
+        elif e < -E_MAX:
+            e = -E_MAX
         limit = self.limit
         p = (self.kp * e) // 1000
         acc = self.acc + e * dt_ms
         ki = self.ki
         if ki:
-            acc_max = (limit * 1000000) // ki
+            # floor(limit * 10**6 / ki) in two steps, capped at ACC_CAP
+            q = (limit * 1000) // ki
+            acc_max = ACC_CAP
+            if q < ACC_CAP // 1000:
+                acc_max = q * 1000 + ((limit * 1000 - q * ki) * 1000) // ki
+            if acc_max > ACC_CAP:
+                acc_max = ACC_CAP
             if acc > acc_max:
                 acc = acc_max
             elif acc < -acc_max:
                 acc = -acc_max
-            i_term = (ki * acc) // 1000000
+            # floor(ki * acc / 10**6), with acc = hi * 1000 + lo
+            i_term = (ki * (acc // 1000) + (ki * (acc % 1000)) // 1000) // 1000
         else:
             acc = 0
             i_term = 0

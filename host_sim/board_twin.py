@@ -18,6 +18,9 @@ from host_sim.simulation import Simulation
 from host_sim.world import World
 
 
+WATCHDOG_S = 1.5  # as the RP2040 HAL's hardware watchdog (firmware/hal_rp2040.py WATCHDOG_MS)
+
+
 class _LinkOnly:
     """The board's firmware as a controller: nothing but the hardware link."""
 
@@ -32,7 +35,7 @@ class _LinkOnly:
 
 class BoardTwin:
     def __init__(self, world: World, params: RobotParams, seed: int = 0, speed: float = 1.0) -> None:
-        self.link = PilLink()
+        self.link = PilLink(watchdog_s=WATCHDOG_S)
         self.port = self.link.port
         self.speed = speed
         self.sim = Simulation(world, params, _LinkOnly(self.link), seed=seed)

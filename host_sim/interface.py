@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from firmware.config import DEFAULT_CYCLE_MS
 from firmware.fuzzy import RULE_SET_NAMES
 from firmware.hal import TICK_MASK
+from host_sim.params import RobotParams
 from protocol import messages as M
 from protocol.framing import FrameEncoder
 
@@ -48,10 +49,29 @@ class Actuate:
     emitter_pct: int  # IR emitter pulse width, the light power L
 
 
-def setup_frames(rule_set: int, mode: int = M.MODE_AUTONOMOUS) -> list[bytes]:
-    """What the host says to the firmware before its first cycle: the rule set, then the mode."""
+def geometry_from_params(wheel_radius_m: float, half_axle_m: float, ticks_per_rev: int) -> tuple[int, int, int]:
+    """The firmware's geometry parameters (wheel_diameter_um, wheel_base_um, ticks_per_rev) of a
+    robot given as RobotParams does; protocol.messages.geometry_frames turns them into PARAM_SETs."""
+    return round(2 * wheel_radius_m * 1e6), round(2 * half_axle_m * 1e6), int(ticks_per_rev)
+
+
+def firmware_geometry(p: RobotParams) -> tuple[int, int, int]:
+    """(wheel_diameter_um, wheel_base_um, ticks_per_rev) of the robot p describes, as its firmware needs them.
+
+    The firmware knows one wheel diameter and one encoder: those of the mean wheel, when a fitted
+    parameter file gives the two wheels different radii or encoders."""
+    radius = p.wheel_radius + 0.5 * (p.wheel_radius_delta_l + p.wheel_radius_delta_r)
+    ticks = p.ticks_per_rev + 0.5 * (p.ticks_per_rev_delta_l + p.ticks_per_rev_delta_r)
+    return geometry_from_params(radius, p.half_axle, round(ticks))
+
+
+def setup_frames(rule_set: int, mode: int = M.MODE_AUTONOMOUS, params: RobotParams | None = None) -> list[bytes]:
+    """What the host says to the firmware before its first cycle: the robot's geometry (when the host
+    knows the robot's parameters), the rule set, then the mode.  ValueError: a geometry the firmware
+    cannot hold (outside its parameter ranges)."""
     enc = FrameEncoder()
-    return [
+    frames = M.geometry_frames(enc, *firmware_geometry(params)) if params is not None else []
+    return frames + [
         enc.encode(M.PARAM_SET, M.pack_payload(M.PARAM_SET, {"param": M.param_by_name("rule_set")[0],
                                                                "value": rule_set})),
         enc.encode(M.COMMAND, M.pack_payload(M.COMMAND, {"mode": mode, "left": 0, "right": 0})),

@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 from host_sim.interface import TICK_MASK, Actuate, Sense, setup_frames
+from host_sim.params import RobotParams
 from protocol import messages as M
 from protocol.framing import HEADER_SIZE, FrameDecoder, FrameEncoder
 
@@ -21,7 +22,14 @@ from protocol.framing import HEADER_SIZE, FrameDecoder, FrameEncoder
 class PilLink:
     """The simulator's end of a virtual board's hardware link (TCP on 127.0.0.1)."""
 
-    def __init__(self) -> None:
+    def __init__(self, watchdog_s: float | None = None) -> None:
+        # watchdog_s: the board's hardware watchdog, modelled here.  If no
+        # HW_ACTUATE comes that long after a HW_SENSE (the firmware's loop
+        # stalled), the motors get zero current, as an RP2040's watchdog
+        # reset would leave them; None: wait (lockstep runs, up to 10 s).
+        self.watchdog_s = watchdog_s
+        self.watchdog_trips = 0
+        self.last_emitter = 0
         self.server = socket.create_server(("127.0.0.1", 0))
         self.port = self.server.getsockname()[1]
         self.conn: socket.socket | None = None
@@ -45,10 +53,14 @@ class PilLink:
                                               "vbat_mv": s.vbat_mv})
         self.conn.sendall(self.enc.encode(M.HW_SENSE, payload))
         dec = self.dec
+        self.conn.settimeout(10 if self.watchdog_s is None else self.watchdog_s)
         while True:
             try:
                 data = self.conn.recv(4096)
             except socket.timeout:
+                if self.watchdog_s is not None:
+                    self.watchdog_trips += 1
+                    return Actuate(0, 0, self.last_emitter)
                 raise RuntimeError("the virtual board did not answer HW_SENSE within 10 s") from None
             if not data:
                 raise RuntimeError("the virtual board closed its hardware link (it stopped or was reset)")
@@ -57,6 +69,7 @@ class PilLink:
                 i = dec.feed(data, i, end)
                 if dec.ready and dec.msg_type == M.HW_ACTUATE:
                     f = M.unpack_payload(M.HW_ACTUATE, dec.body[HEADER_SIZE:HEADER_SIZE + dec.payload_len])
+                    self.last_emitter = f["emitter_pct"]  # type: ignore[assignment]
                     return Actuate(f["i_ref_l_ma"], f["i_ref_r_ma"], f["emitter_pct"])  # type: ignore[arg-type]
 
     def close(self) -> None:
@@ -70,7 +83,8 @@ class PilController:
 
     name = "PIL"
 
-    def __init__(self, rule_set: int = 1, flash_dir: Path | None = None, log: Path | None = None) -> None:
+    def __init__(self, rule_set: int = 1, flash_dir: Path | None = None, log: Path | None = None,
+                 params: RobotParams | None = None) -> None:
         from host_sim.board_process import VirtualBoard, factory_image
         from host_sim.serial_link import SerialLink
 
@@ -84,7 +98,7 @@ class PilController:
         try:
             self.link.accept(timeout=20)
             self.host = SerialLink.open(self.board.path)
-            for frame in setup_frames(rule_set):
+            for frame in setup_frames(rule_set, params=params):
                 self.host.send_raw(frame)
             time.sleep(0.2)  # the commands wait in the board's input before cycle 0
         except Exception:

@@ -130,10 +130,12 @@ class RecordingWriter:
         self.rows += 1
 
     def telemetry(self, f: dict[str, object], *, t: float | None = None,
-                  pose: tuple[float, float, float] | None = None) -> bool:
+                  pose: tuple[float, float, float] | None = None, emitter_pct: float | None = None) -> bool:
         """One TELEMETRY frame's fields as a row; False if it repeats a tick or the clock went back (a reset).
 
         t: the time of the row (default: the robot's clock, unwrapped, from its first frame).
+        emitter_pct: the emitter power truly in force for the on-reading (a simulator knows it), instead of
+        the firmware's report.
         Fields an older firmware does not send (emitter_pct, set-points, odometry) are left empty.
         """
         tick = int(f["tick_ms"])  # type: ignore[call-overload]
@@ -148,7 +150,7 @@ class RecordingWriter:
             firmware = (int(f["mode"]), int(f["sp_l"]) / 1000.0, int(f["sp_r"]) / 1000.0,  # type: ignore[call-overload]
                         int(f["odo_x"]) / 1e6, int(f["odo_y"]) / 1e6,  # type: ignore[call-overload]
                         _heading_rad(int(f["odo_heading"])))  # type: ignore[call-overload]
-        emitter = f.get("emitter_pct")
+        emitter = f.get("emitter_pct") if emitter_pct is None else emitter_pct
         self.row(self._t_ms / 1000.0 if t is None else t,
                  (int(f["i_ref_l_ma"]) / 1000.0, int(f["i_ref_r_ma"]) / 1000.0),  # type: ignore[call-overload]
                  (int(f["enc_l"]), int(f["enc_r"])), list(f["ir_on"]), list(f["ir_amb"]),  # type: ignore[call-overload]

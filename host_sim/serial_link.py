@@ -58,6 +58,9 @@ def open_port(port: str, baudrate: int = 115200, timeout: float = 0.05):  # -> s
         raise LinkError(f"cannot open '{port}': {text}") from exc
 
 
+IDLE_TIMEOUT_S = 0.2  # a partial frame older than this is abandoned: its sender died mid-frame
+
+
 class SerialLink:
     """Protocol endpoint on an open port: send(), poll() and counters."""
 
@@ -69,6 +72,7 @@ class SerialLink:
         self.t0 = time.monotonic()
         self.sent = 0
         self._buf = bytearray(4096)
+        self._last_rx = 0.0  # when the last byte arrived (link time)
 
     @classmethod
     def open(cls, port: str, baudrate: int = 115200, on_frame=None) -> SerialLink:
@@ -115,6 +119,10 @@ class SerialLink:
         dec = self.decoder
         i, end = 0, len(data)
         now = self.now()
+        if end and dec.partial and now - self._last_rx > IDLE_TIMEOUT_S:
+            dec.abandon_partial()  # stale: counted in 'abandoned'
+        if end:
+            self._last_rx = now
         while i < end:
             j = dec.feed(data, i, end)
             if dec.ready:
@@ -143,4 +151,4 @@ def _reframe(dec: FrameDecoder) -> bytes:
     from protocol.cobs import encode
 
     n = 3 + dec.payload_len + 2
-    return encode(bytes(dec.body[:n])) + b"\x00"
+    return b"\x00" + encode(bytes(dec.body[:n])) + b"\x00"

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from firmware.hal_buffered import BufferedHal
 from host_sim.interface import Actuate, Sense, setup_frames
+from host_sim.params import RobotParams
 from protocol import messages as M
 from protocol.framing import FrameDecoder
 
@@ -31,8 +32,8 @@ class _InProcessHal(BufferedHal):
         del self.inbox[:n]
         return n
 
-    def host_write(self, data: memoryview) -> None:
-        self.outbox += data
+    def host_write(self, buf: bytearray, n: int) -> None:
+        self.outbox += buf[:n]
 
     def end_cycle(self) -> None:
         pass
@@ -41,12 +42,13 @@ class _InProcessHal(BufferedHal):
 class SilController:
     name = "SIL"
 
-    def __init__(self, rule_set: int = 1) -> None:
+    def __init__(self, rule_set: int = 1, params: RobotParams | None = None) -> None:
+        """params: the robot the firmware runs on (its geometry is sent first); None: the firmware's defaults."""
         from firmware.robot import Robot
 
         self.hal = _InProcessHal()
         self.robot = Robot(self.hal)
-        for frame in setup_frames(rule_set):
+        for frame in setup_frames(rule_set, params=params):
             self.hal.inbox += frame
 
     def send(self, frame: bytes) -> None:

@@ -222,14 +222,15 @@ class _RecordingRows:
     def __init__(self, writer: RecordingWriter, controller: object) -> None:
         self.writer = writer
         self.telemetry: Callable[..., list[dict[str, object]]] | None = getattr(controller, "telemetry", None)
-        self.truth: dict[int, tuple[float, tuple[float, float, float]]] = {}
+        # tick -> (time, pose, emitter power in force): the simulator's truth for the row of that cycle
+        self.truth: dict[int, tuple[float, tuple[float, float, float], int]] = {}
 
     def cycle(self, t: float, pose: tuple[float, float, float], s: Sense, a: Actuate, emitter_pct: int) -> None:
         if self.telemetry is None:
             self.writer.row(t, (a.i_left_ma / 1000.0, a.i_right_ma / 1000.0), (s.enc_l, s.enc_r), s.adc_on,
                             s.adc_off, s.vbat_mv / 1000.0, pose, emitter_pct=emitter_pct)
             return
-        self.truth[s.tick_ms] = (t, pose)
+        self.truth[s.tick_ms] = (t, pose, emitter_pct)
         self._write(self.telemetry())
 
     def finish(self) -> None:
@@ -240,4 +241,4 @@ class _RecordingRows:
         for f in frames:
             truth = self.truth.pop(int(f["tick_ms"]), None)  # type: ignore[call-overload]
             if truth is not None:  # else a frame from before this run
-                self.writer.telemetry(f, t=truth[0], pose=truth[1])
+                self.writer.telemetry(f, t=truth[0], pose=truth[1], emitter_pct=truth[2])

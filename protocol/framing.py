@@ -1,35 +1,40 @@
-"""Frames on the wire: COBS(version | type | seq | payload | CRC16-LE) + 0x00.
+"""Frames on the wire: 0x00 + COBS(version | type | seq | payload | CRC16-LE) + 0x00.
 
-FrameEncoder and FrameDecoder own preallocated buffers, so the firmware's
-send and receive paths allocate nothing once they are constructed.  The
-decoder never raises on wire data: every bad frame is dropped at the next
-0x00 and counted by reason, and sequence gaps are counted as they happen.
+The leading 0x00 ends whatever junk came before (REPL text, a dead sender's
+half frame), so junk never costs the next frame.  FrameEncoder and
+FrameDecoder own preallocated buffers, so the firmware's send and receive
+paths allocate nothing once they are constructed.  The decoder never raises
+on wire data: every bad frame is dropped at the next 0x00 and counted by
+reason, and sequence gaps are counted as they happen (a HELLO starts the
+count afresh: the peer may have restarted).
 """
 from protocol.cobs import _copy_bytes, decode_into, encode_into
 from protocol.compat import const
 from protocol.crc16 import CRC_INIT, crc16_byte, crc16_update
-from protocol.wire import N_TYPES, PAYLOAD_SIZE, PROTOCOL_VERSION, SCHEMA, UNKNOWN, VARIABLE_TYPE
+from protocol.wire import HELLO, N_TYPES, PAYLOAD_SIZE, PROTOCOL_VERSION, SCHEMA, UNKNOWN, VARIABLE_TYPE
 
 HEADER_SIZE = const(3)  # version, type, seq
 CRC_SIZE = const(2)
 MAX_BODY = const(254)  # so that COBS adds exactly one byte
-MAX_ENCODED = const(255)  # COBS(body) without the delimiter
-OVERHEAD = const(7)  # header + CRC + COBS code byte + delimiter
+MAX_ENCODED = const(255)  # COBS(body) without the delimiters
+MAX_FRAME = const(257)  # leading 0x00 + COBS(body) + trailing 0x00
+OVERHEAD = const(8)  # header + CRC + COBS code byte + two delimiters
 
 
 class FrameEncoder:
     """Builds frames; numbers them with a wrapping 8-bit sequence.
 
     Firmware use, allocation-free: struct.pack_into(fmt, enc.body, 3, ...),
-    then n = enc.finish(msg_type, payload_len) and write enc.view(n).
-    Host use: enc.encode(msg_type, payload_bytes) -> bytes.
+    then n = enc.finish(msg_type, payload_len) and write the first n bytes
+    of enc.frame (MicroPython streams take `write(buf, n)` without
+    allocating).  Host use: enc.encode(msg_type, payload_bytes) -> bytes.
     """
 
     def __init__(self) -> None:
         self.seq = 0
         self.body = bytearray(MAX_BODY)
-        self.frame = bytearray(MAX_ENCODED + 1)
-        self._views: dict[int, memoryview] = {}  # frame length -> view (a few lengths in use)
+        self.frame = bytearray(MAX_FRAME)
+        self._views: dict[int, memoryview] | None = None  # frame length -> view (host and test use)
 
     def finish(self, msg_type: int, payload_len: int) -> int:
         """Frame the payload already in body[3:]; return the frame length."""
@@ -39,16 +44,22 @@ class FrameEncoder:
         body[2] = self.seq
         self.seq = (self.seq + 1) & 0xFF
         end = HEADER_SIZE + payload_len
-        crc = crc16_update(CRC_INIT, body, 0, end)
-        crc = crc16_byte(crc, SCHEMA[msg_type])
+        crc = _crc(body, end, msg_type)
         body[end] = crc & 0xFF
         body[end + 1] = crc >> 8
-        n = encode_into(body, end + CRC_SIZE, self.frame, 0)
-        self.frame[n] = 0
+        frame = self.frame
+        frame[0] = 0
+        n = encode_into(body, end + CRC_SIZE, frame, 1)
+        frame[n] = 0
         return n + 1
 
     def view(self, n: int) -> memoryview:
-        """A memoryview of the first n frame bytes, cached per length."""
+        """A memoryview of the first n frame bytes, cached per length.
+
+        For hosts and tests: the first call for a length allocates a view,
+        so the firmware writes (enc.frame, n) instead."""
+        if self._views is None:
+            self._views = {}
         v = self._views.get(n)
         if v is None:
             v = memoryview(self.frame)[:n]
@@ -63,6 +74,14 @@ class FrameEncoder:
         _copy_bytes(self.body, HEADER_SIZE, payload, 0, n)
         m = self.finish(msg_type, n)
         return bytes(self.frame[:m])
+
+
+def _crc(body: bytearray, end: int, msg_type: int) -> int:
+    """CRC-16 of body[:end], then of the type's 16-bit schema value, low byte first."""
+    crc = crc16_update(CRC_INIT, body, 0, end)
+    schema = SCHEMA[msg_type]
+    crc = crc16_byte(crc, schema & 0xFF)
+    return crc16_byte(crc, schema >> 8)
 
 
 class FrameDecoder:
@@ -106,9 +125,10 @@ class FrameDecoder:
         self._n = 0
         self._overflow = False
 
-    def pending_starts_with(self, b0: int, b1: int) -> bool:
-        """True if the unfinished frame so far begins with bytes b0, b1."""
-        return self._n >= 2 and self._raw[0] == b0 and self._raw[1] == b1
+    @property
+    def partial(self) -> bool:
+        """True while an unfinished frame (or an overflow) is held."""
+        return self._n > 0 or self._overflow
 
     @property
     def errors(self) -> int:
@@ -170,13 +190,11 @@ class FrameDecoder:
         if plen != size and not (msg_type == VARIABLE_TYPE and plen > size):
             self.length_errors += 1
             return False
-        crc = crc16_update(CRC_INIT, body, 0, m - CRC_SIZE)
-        crc = crc16_byte(crc, SCHEMA[msg_type])
-        if crc != body[m - 2] | (body[m - 1] << 8):
+        if _crc(body, m - CRC_SIZE, msg_type) != body[m - 2] | (body[m - 1] << 8):
             self.crc_errors += 1
             return False
         seq = body[2]
-        if self._last_seq >= 0:
+        if self._last_seq >= 0 and msg_type != HELLO:  # a HELLO may follow a restart
             gap = (seq - self._last_seq - 1) & 0xFF
             if gap:
                 self.seq_gaps += 1

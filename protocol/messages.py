@@ -9,17 +9,21 @@ misreading them.  SPEC.md documents every field with its unit.
 import struct
 
 from protocol.crc16 import crc16
+from protocol.framing import FrameEncoder
 from protocol.wire import *  # noqa: F403  (the numbers, re-exported for hosts)
 
 # (type, name, ((field, struct code, count), ...)); count 0 = rest of payload.
 LAYOUTS = (
     (HELLO, "HELLO", (("protocol", "B", 1), ("fw_major", "B", 1), ("fw_minor", "B", 1),
-                      ("fw_patch", "B", 1), ("board", "B", 1), ("sensors", "B", 1))),
+                      ("fw_patch", "B", 1), ("board", "B", 1), ("sensors", "B", 1),
+                      ("wheel_diameter_um", "I", 1), ("wheel_base_um", "I", 1), ("ticks_per_rev", "H", 1))),
     (TELEMETRY, "TELEMETRY", (("tick_ms", "I", 1), ("mode", "B", 1), ("flags", "H", 1),
                               ("enc_l", "i", 1), ("enc_r", "i", 1),
                               ("ir_on", "H", 8), ("ir_amb", "H", 8),
                               ("i_ref_l_ma", "h", 1), ("i_ref_r_ma", "h", 1),
-                              ("vbat_mv", "H", 1))),
+                              ("vbat_mv", "H", 1), ("sp_l", "h", 1), ("sp_r", "h", 1),
+                              ("odo_x", "i", 1), ("odo_y", "i", 1), ("odo_heading", "i", 1),
+                              ("emitter_pct", "B", 1))),
     (COMMAND, "COMMAND", (("mode", "B", 1), ("left", "h", 1), ("right", "h", 1))),
     (PARAM_SET, "PARAM_SET", (("param", "B", 1), ("value", "i", 1))),
     (PARAM_GET, "PARAM_GET", (("param", "B", 1),)),
@@ -52,6 +56,9 @@ PARAMS = (
     (9, "odometry", 0, 2, 2, "0 Euler, 1 midpoint, 2 exact arc"),
     (10, "max_speed", 0, 1000, 200, "mm/s wheel-speed setpoint limit"),
     (11, "current_limit", 0, 3000, 500, "mA current reference limit"),
+    (12, "wheel_diameter_um", 10000, 200000, 42000, "um wheel diameter (odometry, wheel speeds)"),
+    (13, "wheel_base_um", 20000, 1000000, 96000, "um between the wheel contact points (odometry)"),
+    (14, "ticks_per_rev", 100, 16000, 1200, "encoder ticks per wheel revolution"),
 )
 
 VARIABLE = bytearray(N_TYPES)  # 1 where the payload's last field runs to its end
@@ -69,10 +76,9 @@ def schema_text(name: str, fields: tuple[tuple[str, str, int], ...]) -> str:
     return " ".join(parts)
 
 
-def schema_byte(name: str, fields: tuple[tuple[str, str, int], ...]) -> int:
-    """The byte folded into every frame's CRC (SPEC.md section 1)."""
-    crc = crc16(schema_text(name, fields).encode())
-    return (crc & 0xFF) ^ (crc >> 8)
+def schema_value(name: str, fields: tuple[tuple[str, str, int], ...]) -> int:
+    """The 16-bit value folded into every frame's CRC, low byte first (SPEC.md section 1)."""
+    return crc16(schema_text(name, fields).encode())
 
 
 def _build() -> None:
@@ -87,6 +93,20 @@ def _build() -> None:
 
 
 _build()
+
+
+def geometry_frames(encoder: "FrameEncoder", wheel_diameter_um: int, wheel_base_um: int, ticks_per_rev: int) -> list[bytes]:
+    """The three PARAM_SET frames that give a robot its geometry (parameters 12..14).
+
+    ValueError names a value outside its range.  encoder: a framing.FrameEncoder."""
+    out = []
+    for name, value in (("wheel_diameter_um", wheel_diameter_um), ("wheel_base_um", wheel_base_um),
+                        ("ticks_per_rev", ticks_per_rev)):
+        pid, _name, lo, hi, _default, unit = param_by_name(name)
+        if not isinstance(value, int) or not lo <= value <= hi:
+            raise ValueError("{} = {!r} is outside {}..{} ({})".format(name, value, lo, hi, unit))
+        out.append(encoder.encode(PARAM_SET, pack_payload(PARAM_SET, {"param": pid, "value": value})))
+    return out
 
 
 def is_known(msg_type: int) -> bool:

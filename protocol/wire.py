@@ -7,6 +7,8 @@ field layouts and packing for hosts, and derives PAYLOAD_SIZE and SCHEMA
 from the layouts; a test checks that the two agree (as MAVLink compiles
 its CRC_EXTRA bytes into generated code).  SPEC.md documents every value.
 """
+from array import array
+
 from protocol.compat import const
 
 PROTOCOL_VERSION = const(1)
@@ -25,25 +27,27 @@ HW_SENSE = const(0x10)
 HW_ACTUATE = const(0x11)
 LOG = const(0x20)
 
-# (type, payload size, schema byte); LOG's size is that of its fixed part.
+# (type, payload size, schema value); LOG's size is that of its fixed part.
+# The 16-bit schema value is the CRC of the layout's text (messages.py), and
+# no two types share one (a test checks it).
 _TYPES = (
-    (HELLO, 6, 0xF8),
-    (TELEMETRY, 53, 0x9E),
-    (COMMAND, 5, 0xA2),
-    (PARAM_SET, 5, 0x36),
-    (PARAM_GET, 1, 0xC9),
-    (PARAM_VALUE, 5, 0xDE),
-    (ACK, 2, 0xBE),
-    (NACK, 3, 0x9E),
-    (HW_SENSE, 46, 0xB0),
-    (HW_ACTUATE, 9, 0xA7),
-    (LOG, 1, 0x7D),
+    (HELLO, 16, 0x170C),
+    (TELEMETRY, 70, 0xFD01),
+    (COMMAND, 5, 0xC361),
+    (PARAM_SET, 5, 0xC2F4),
+    (PARAM_GET, 1, 0xF33A),
+    (PARAM_VALUE, 5, 0x21FF),
+    (ACK, 2, 0x50EE),
+    (NACK, 3, 0x0F91),
+    (HW_SENSE, 46, 0x68D8),
+    (HW_ACTUATE, 9, 0xE344),
+    (LOG, 1, 0xD9A4),
 )
 N_TYPES = const(0x21)  # types are below this
 UNKNOWN = const(0xFF)  # PAYLOAD_SIZE of a type that does not exist
 VARIABLE_TYPE = const(0x20)  # LOG: its text runs to the end of the payload
 PAYLOAD_SIZE = bytearray(b"\xff" * N_TYPES)
-SCHEMA = bytearray(N_TYPES)
+SCHEMA = array("H", bytes(2 * N_TYPES))  # 16-bit schema value per type (0: no such type)
 for _t, _size, _schema in _TYPES:
     PAYLOAD_SIZE[_t] = _size
     SCHEMA[_t] = _schema
@@ -96,4 +100,7 @@ PARAM_LIMITS = (
     (0, 2, 2),  # 9 odometry
     (0, 1000, 200),  # 10 max_speed
     (0, 3000, 500),  # 11 current_limit
+    (10000, 200000, 42000),  # 12 wheel_diameter_um
+    (20000, 1000000, 96000),  # 13 wheel_base_um
+    (100, 16000, 1200),  # 14 ticks_per_rev
 )

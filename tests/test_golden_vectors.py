@@ -53,7 +53,7 @@ def test_coverage() -> None:
     texts = [len(c["fields"]["text"].encode()) for c in CASES if c["type"] == "LOG"]
     assert 0 in texts and messages.MAX_PAYLOAD - 1 in texts
     frames = [bytes.fromhex(c["frame"]) for c in CASES]
-    assert max(len(f) for f in frames) == framing.MAX_ENCODED + 1
+    assert max(len(f) for f in frames) == framing.MAX_FRAME
     assert len({c["name"] for c in CASES}) == len(CASES)
 
 
@@ -73,10 +73,11 @@ def test_case_encodes_and_decodes(case: dict) -> None:
     assert (t, seq) == (msg_type, case["seq"])
     assert messages.unpack_payload(msg_type, payload) == _as_struct(case["fields"])
 
-    assert frame[-1] == 0
-    body = ref.decode(frame[:-1])
+    assert frame[0] == 0 and frame[-1] == 0
+    body = ref.decode(frame[1:-1])
     assert body[:3] == bytes([messages.PROTOCOL_VERSION, msg_type, case["seq"]])
-    crc = ref_crc(body[:-2] + bytes([messages.SCHEMA[msg_type]]))
+    schema = messages.SCHEMA[msg_type]
+    crc = ref_crc(body[:-2] + bytes([schema & 0xFF, schema >> 8]))
     assert body[-2:] == bytes([crc & 0xFF, crc >> 8])
 
 

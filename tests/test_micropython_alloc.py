@@ -8,6 +8,7 @@ MemoryError), then again with the GC disabled comparing gc.mem_alloc().
 from __future__ import annotations
 
 import re
+import struct
 from pathlib import Path
 
 import pytest
@@ -59,3 +60,14 @@ def test_no_allocation_64k_heap(form: str, mpy_dir: Path) -> None:
     r = run_micropython(SCRIPT, heapsize="64k", path=path, timeout=120)
     _check(r)
     assert ("framing.mpy" if form == "mpy" else "protocol/framing.py") in r.stdout
+
+
+def test_firmware_formats_match_layouts() -> None:
+    """firmware/robot.py packs TELEMETRY and HELLO with the layouts' formats and sizes."""
+    from firmware import robot
+
+    assert robot._TELEMETRY_FMT == messages.FORMATS[messages.TELEMETRY]
+    assert robot._TELEMETRY_SIZE == messages.PAYLOAD_SIZE[messages.TELEMETRY]
+    assert struct.calcsize(robot._HELLO_FMT) == struct.calcsize(messages.FORMATS[messages.HELLO])
+    assert robot._HELLO_FMT.replace("6B", "BBBBBB") == messages.FORMATS[messages.HELLO]
+    assert robot._HELLO_SIZE == messages.PAYLOAD_SIZE[messages.HELLO]

@@ -47,4 +47,4 @@ def test_protocol_round_trip_under_micropython(tmp_path):
     )
     r = run_micropython(script, heapsize="64k")
     assert r.returncode == 0, r.stdout + r.stderr
-    assert r.stdout.split() == ["12", "[(2,", "-300,", "250),", "(2,", "-300,", "250)]", "2", "1"]
+    assert r.stdout.split() == ["13", "[(2,", "-300,", "250),", "(2,", "-300,", "250)]", "2", "1"]

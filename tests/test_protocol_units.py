@@ -26,10 +26,6 @@ FIXED_TYPES = [t for t, _n, _f in messages.LAYOUTS if not messages.VARIABLE[t]]
 ALL_TYPES = [t for t, _n, _f in messages.LAYOUTS]
 
 
-def _fold(crc: int) -> int:
-    return (crc & 0xFF) ^ (crc >> 8)
-
-
 def _fields(msg_type: int, pick) -> dict:
     """Fields of msg_type with each integer chosen by pick(code, k)."""
     out: dict = {}
@@ -287,15 +283,15 @@ def test_unpack_wrong_size() -> None:
 
 
 @pytest.mark.parametrize("layout", messages.LAYOUTS, ids=[n for _t, n, _f in messages.LAYOUTS])
-def test_schema_byte_is_folded_crc_of_schema_text(layout) -> None:
-    """SCHEMA[type] == (crc & 0xFF) ^ (crc >> 8) with crc = CRC-16 of schema_text, as documented,
+def test_schema_value_is_crc_of_schema_text(layout) -> None:
+    """SCHEMA[type] is the CRC-16 of schema_text (16 bits), as documented,
     and PAYLOAD_SIZE[type] is the struct size of the layout (the numbers the firmware uses
     agree with the layouts the host uses)."""
     msg_type, name, fields = layout
     text = messages.schema_text(name, fields)
     assert text.startswith(name + " ")
     crc = crc16.crc16_update_pure(crc16.CRC_INIT, text.encode(), 0, len(text.encode()))
-    assert messages.SCHEMA[msg_type] == _fold(crc)
+    assert messages.SCHEMA[msg_type] == crc == messages.schema_value(name, fields)
     assert messages.PAYLOAD_SIZE[msg_type] == struct.calcsize(messages.FORMATS[msg_type])
 
 
@@ -320,17 +316,43 @@ def test_schema_text_sees_every_change(layout) -> None:
         assert messages.schema_text(name, fields[::-1]) != base
 
 
+def test_schema_values_are_distinct() -> None:
+    """No two message types share a schema value (a layout cannot pass for another's)."""
+    values = [messages.SCHEMA[t] for t in ALL_TYPES]
+    assert len(set(values)) == len(values)
+    assert all(v != 0 for v in values)
+
+
+def test_renamed_layouts_change_the_schema_value() -> None:
+    """None of 900 renamed variants of COMMAND's fields shares the schema value of COMMAND or of
+    any other type (with an 8-bit schema byte, 2 of them collided with TELEMETRY's).  A random
+    change escapes with probability 2**-16, the CRC-16 of the layout text."""
+    _t, name, fields = next(lay for lay in messages.LAYOUTS if lay[1] == "COMMAND")
+    base = messages.schema_value(name, fields)
+    values = set()
+    for k in range(900):
+        renamed = tuple((f + str(k), c, n) if i == k % len(fields) else (f, c, n)
+                        for i, (f, c, n) in enumerate(fields))
+        values.add(messages.schema_value(name, renamed))
+    assert base not in values
+    assert not values & {messages.SCHEMA[t] for t in ALL_TYPES}
+
+
 @pytest.mark.parametrize("msg_type", FIXED_TYPES, ids=[messages.NAMES[t] for t in FIXED_TYPES])
-def test_other_schema_byte_is_rejected(msg_type: int) -> None:
-    """A frame built with a different schema byte (other message definitions) fails the CRC."""
+def test_other_schema_value_is_rejected(msg_type: int) -> None:
+    """A frame built with a different schema value (other message definitions: every value one
+    byte away, and every other type's) fails the CRC."""
     size = messages.PAYLOAD_SIZE[msg_type]
     body = bytearray([messages.PROTOCOL_VERSION, msg_type, 0]) + bytes(range(1, size + 1))
-    for schema in range(256):
-        crc = crc16.crc16_byte(crc16.crc16(body), schema)
-        frame = cobs.encode(body + bytes([crc & 0xFF, crc >> 8])) + b"\x00"
+    own = messages.SCHEMA[msg_type]
+    others = {(own & 0xFF00) | k for k in range(256)} | {(own & 0xFF) | (k << 8) for k in range(256)}
+    others |= {messages.SCHEMA[t] for t in ALL_TYPES}
+    for schema in sorted(others):
+        crc = crc16.crc16_byte(crc16.crc16_byte(crc16.crc16(body), schema & 0xFF), schema >> 8)
+        frame = b"\x00" + cobs.encode(body + bytes([crc & 0xFF, crc >> 8])) + b"\x00"
         dec = framing.FrameDecoder()
         got = dec.decode_all(frame)
-        if schema == messages.SCHEMA[msg_type]:
+        if schema == own:
             assert len(got) == 1
         else:
             assert got == [] and dec.crc_errors == 1
@@ -342,21 +364,22 @@ def test_other_schema_byte_is_rejected(msg_type: int) -> None:
 @pytest.mark.parametrize("msg_type", FIXED_TYPES, ids=[messages.NAMES[t] for t in FIXED_TYPES])
 @pytest.mark.parametrize("fill", [0x00, 0x5A, 0xFF])
 def test_frame_overhead_fixed_types(msg_type: int, fill: int) -> None:
-    """Every fixed-size frame is exactly payload + OVERHEAD (7) bytes, whatever the bytes."""
-    assert framing.OVERHEAD == 7
+    """Every fixed-size frame is exactly payload + OVERHEAD (8) bytes, whatever the bytes,
+    and begins and ends with 0x00 (nothing before it can spoil it)."""
+    assert framing.OVERHEAD == 8
     size = messages.PAYLOAD_SIZE[msg_type]
     frame = framing.FrameEncoder().encode(msg_type, bytes([fill]) * size)
     assert len(frame) == size + framing.OVERHEAD
-    assert frame[-1] == 0 and 0 not in frame[:-1]
+    assert frame[0] == 0 and frame[-1] == 0 and 0 not in frame[1:-1]
 
 
 def test_frame_overhead_log_all_lengths() -> None:
-    """LOG frames of every text length 0..248 are payload + 7 bytes; the longest is 256 bytes."""
+    """LOG frames of every text length 0..248 are payload + 8 bytes; the longest is 257 bytes."""
     enc = framing.FrameEncoder()
     for n in range(messages.MAX_PAYLOAD):
         frame = enc.encode(messages.LOG, b"\x02" + b"\xff" * n)
         assert len(frame) == 1 + n + framing.OVERHEAD
-    assert len(frame) == framing.MAX_ENCODED + 1
+    assert len(frame) == framing.MAX_ENCODED + 2 == framing.MAX_FRAME
     with pytest.raises(ValueError):
         enc.encode(messages.LOG, b"\x02" + b"a" * messages.MAX_PAYLOAD)
 
@@ -371,3 +394,19 @@ def test_encoder_sequence_wraps() -> None:
             seqs.append(s)
     assert seqs == [k & 0xFF for k in range(300)]
     assert dec.seq_gaps == 0 and dec.frames_lost == 0
+
+
+# ------------------------------------------------------------------ fields
+
+
+@pytest.mark.parametrize("value", [0, 1, -1, 255, 256, -256, 0x7FFFFFFF, -0x80000000, 123456789, -987654321])
+def test_field_readers_match_struct(value: int) -> None:
+    """protocol.fields reads what struct packs, at any offset, signs included."""
+    from protocol import fields
+
+    buf = bytearray(3) + struct.pack("<i", value) + bytearray(2)
+    assert fields.read_i32(buf, 3) == value
+    v16 = value & 0xFFFF
+    buf16 = bytearray(1) + struct.pack("<H", v16)
+    assert fields.read_u16(buf16, 1) == v16
+    assert fields.read_i16(buf16, 1) == struct.unpack("<h", struct.pack("<H", v16))[0]

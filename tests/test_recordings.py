@@ -73,3 +73,16 @@ def test_a_version_1_recording_still_loads_and_replays_with_the_sidecars_emitter
     inputs = replay_inputs(rec)
     assert inputs.emitter.tolist() == [0.0, 60.0]  # a simulator run's emitters come on with its first actuation
     assert inputs.at_rest and np.allclose(inputs.period, 0.04)
+
+
+def test_a_simulated_run_records_what_the_firmware_reported_and_what_the_emitters_did(tmp_path):
+    path = tmp_path / "sil.csv"
+    with RecordingWriter(path, source="simulator", sample_period=0.04, extra={"mode": "fixed"}) as w:
+        run = Simulation(ROOM, DEFAULT, SilController(1), seed=2, recorder=w).run_fixed(2.0)
+    rec = load_recording(path)
+    assert open(path).readline().strip().split(",") == COLUMNS
+    assert len(rec) == len(run.t) and np.array_equal(rec.cmd, run.cmd) and np.array_equal(rec.pose, run.pose)
+    assert rec.emitter is not None and rec.emitter[0] == 0 and (rec.emitter[1:] == 60).all()
+    assert replay_inputs(rec).emitter.tolist() == rec.emitter.tolist()
+    assert rec.firmware is not None and (rec.firmware[:, 0] == 1).all()  # AUTONOMOUS: the firmware's own view
+    assert np.abs(rec.firmware[:, 1:3]).max() > 0.05  # the set-points its fuzzy controller gave the wheels

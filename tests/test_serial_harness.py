@@ -25,7 +25,8 @@ def telemetry_frame(enc: FrameEncoder, k: int) -> bytes:
     return enc.encode(M.TELEMETRY, M.pack_payload(M.TELEMETRY, {
         "tick_ms": 40 * k, "mode": M.MODE_HOST, "flags": M.FLAG_WATCHDOG if k == 3 else 0,
         "enc_l": k, "enc_r": -k, "ir_on": [k] * 8, "ir_amb": [1] * 8,
-        "i_ref_l_ma": 10, "i_ref_r_ma": -10, "vbat_mv": 7400,
+        "i_ref_l_ma": 10, "i_ref_r_ma": -10, "vbat_mv": 7400, "sp_l": 0, "sp_r": 0,
+        "odo_x": 0, "odo_y": 0, "odo_heading": 0, "emitter_pct": 60,
     }))
 
 

@@ -59,4 +59,4 @@ def test_worked_example_and_overhead():
     enc = FrameEncoder()
     frame = enc.encode(M.COMMAND, M.pack_payload(M.COMMAND, {"mode": M.MODE_HOST, "left": -300, "right": 250}))
     assert "wire              " + frame.hex(" ") in SPEC
-    assert OVERHEAD == 7 and "Framing adds 7 bytes" in SPEC
+    assert OVERHEAD == 8 and "Framing adds 8 bytes" in SPEC

@@ -55,7 +55,8 @@ def collect(link, seconds, msg_type=M.TELEMETRY):
 def test_telemetry_flows_with_ambient_removed_by_the_firmware(board):
     link = SerialLink.open(board.path)
     try:
-        link.send(M.HELLO, {"protocol": 1, "fw_major": 0, "fw_minor": 0, "fw_patch": 0, "board": 1, "sensors": 0})
+        link.send(M.HELLO, {"protocol": 1, "fw_major": 0, "fw_minor": 0, "fw_patch": 0, "board": 1, "sensors": 0,
+                            "wheel_diameter_um": 0, "wheel_base_um": 0, "ticks_per_rev": 0})
         hello = link.wait_for(M.HELLO, 5)
         assert hello is not None and hello.fields["board"] == M.BOARD_VIRTUAL and hello.fields["sensors"] == 8
         frames = collect(link, 1.0)
@@ -131,9 +132,12 @@ def test_flash_a_blank_board_then_it_answers_hello(tmp_path, standin):
     try:
         r = mpremote(vb.path, "ls")
         assert r.returncode == 0 and "main.py" not in r.stdout  # blank
-        r = run_twinbot("flash", "--port", vb.path, timeout=240)
+        robot = tmp_path / "big_wheels.json"  # a robot of its own: its geometry goes on the board
+        robot.write_text('{"wheel_radius": 0.026, "half_axle": 0.055}')
+        r = run_twinbot("flash", "--port", vb.path, "--params", str(robot), timeout=240)
         assert r.returncode == 0, r.stdout + r.stderr
         assert "the board answered HELLO: firmware 0.2.0" in r.stdout
+        assert "the board's geometry: wheel_diameter_um 52000, wheel_base_um 110000, ticks_per_rev 1200" in r.stdout
         r = mpremote(vb.path, "ls", ":firmware")
         assert "robot.mpy" in r.stdout and "robot.py" not in r.stdout
     finally:

@@ -24,7 +24,7 @@ from pathlib import Path
 from firmware import config
 from firmware.manifest import BOARD_FILES, MAIN_PY
 from protocol import messages as M
-from tools.arguments import float_range
+from tools.arguments import float_range, input_file
 from tools.cli import CliError
 from tools.serial_harness import host_hello
 from host_sim.micropython_tools import REPO_ROOT, mpy_cross_compile, mpy_cross_exe
@@ -61,6 +61,10 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
     p.add_argument("--timeout", type=float_range(0.5, 600, unit="s"), default=10.0,
                    help="seconds to wait for HELLO after the reset, 0.5..600 (default 10)")
     p.add_argument("--no-reset", action="store_true", help="copy only: no reset, no HELLO check")
+    p.add_argument("--params", metavar="FILE", type=input_file,
+                   help="the robot's parameter file (host_sim/params.py; e.g. one twinbot diagnose --write-params "
+                        "wrote): its wheel diameter, wheel base and encoder counts go on the board as "
+                        "robot_geometry.py, and HELLO must report them back")
     p.set_defaults(func=run)
 
 
@@ -158,6 +162,7 @@ def wait_for_hello(port: str, timeout: float) -> dict[str, object]:
 
 def run(args: argparse.Namespace) -> int:
     port = args.port
+    geometry = geometry_of(args.params) if args.params else None
     try:
         open_port(port).close()  # a clear error for a missing or busy port, before mpremote
     except LinkError as exc:
@@ -167,25 +172,7 @@ def run(args: argparse.Namespace) -> int:
     emitted = mpy_cross_version()
     check_mpy_compatible(board, emitted)
     with tempfile.TemporaryDirectory(prefix="twinbot-flash-") as tmp:
-        stage = Path(tmp)
-        files = compile_tree(stage)
-        total = sum(f.stat().st_size for f in files)
-        need = blocks_needed(files, board.block_size)
-        print(f"flash: {len(files)} files, {total / 1024:.1f} KB of .mpy v{emitted[0]}.{emitted[1]} for "
-              f"'{board.platform}'; the board has {board.free_bytes / 1024:.0f} KB free")
-        if need > board.free_blocks:
-            raise CliError(f"board out of space: the firmware needs about {need * board.block_size // 1024} KB "
-                           f"({need} blocks of {board.block_size} B), the board has "
-                           f"{board.free_bytes // 1024} KB free; remove files with: mpremote connect {port} rm ...")
-        for folder in ("firmware", "protocol"):
-            mpremote(port, "rm", "-r", f":{folder}")  # absent on a blank board: that is fine
-        r = mpremote(port, "cp", "-r", str(stage / "protocol"), str(stage / "firmware"), ":",
-                     "+", "cp", str(stage / "main.py"), ":main.py", timeout=300)
-        if r.returncode != 0:
-            text = _fail_text(r)
-            if "ENOSPC" in r.stdout + r.stderr or "28" in text:
-                raise CliError(f"board out of space while copying: {text}")
-            raise CliError(f"copying to the board failed: {text}")
+        copy_firmware(port, Path(tmp), board, emitted, geometry)
     print("flash: copied", flush=True)
     if args.no_reset:
         return 0
@@ -197,4 +184,65 @@ def run(args: argparse.Namespace) -> int:
           f"protocol {hello['protocol']}, board {board_name}, {hello['sensors']} IR sensors")
     if version != tuple(config.FIRMWARE_VERSION):
         raise CliError(f"the board runs firmware {version}, not the {tuple(config.FIRMWARE_VERSION)} just flashed")
+    check_geometry(hello, geometry)
     return 0
+
+
+GEOMETRY_NAMES = ("wheel_diameter_um", "wheel_base_um", "ticks_per_rev")
+
+
+def geometry_of(path: str) -> tuple[int, int, int]:
+    """The firmware geometry of a parameter file, checked against the firmware's parameter ranges."""
+    from host_sim.interface import firmware_geometry
+    from host_sim.params import ParamsError, load_params
+
+    try:
+        geometry = firmware_geometry(load_params(path))
+    except ParamsError as exc:
+        raise CliError(str(exc)) from None
+    for name, value in zip(GEOMETRY_NAMES, geometry):
+        _pid, _name, lo, hi, _default, unit = M.param_by_name(name)
+        if not lo <= value <= hi:
+            raise CliError(f"--params {path}: {name} = {value} is outside what the firmware holds, {lo}..{hi} ({unit})")
+    return geometry
+
+
+def copy_firmware(port: str, stage: Path, board: BoardInfo, emitted: tuple[int, int],
+                  geometry: tuple[int, int, int] | None) -> None:
+    files = compile_tree(stage)
+    if geometry is not None:
+        extra = stage / "robot_geometry.py"
+        extra.write_text("# Written by twinbot flash --params: this robot's geometry (firmware/robot.py reads it).\n"
+                         + "".join(f"{n.upper()} = {v}\n" for n, v in zip(GEOMETRY_NAMES, geometry)))
+        files.append(extra)
+    total = sum(f.stat().st_size for f in files)
+    need = blocks_needed(files, board.block_size)
+    print(f"flash: {len(files)} files, {total / 1024:.1f} KB of .mpy v{emitted[0]}.{emitted[1]} for "
+          f"'{board.platform}'; the board has {board.free_bytes / 1024:.0f} KB free")
+    if need > board.free_blocks:
+        raise CliError(f"board out of space: the firmware needs about {need * board.block_size // 1024} KB "
+                       f"({need} blocks of {board.block_size} B), the board has "
+                       f"{board.free_bytes // 1024} KB free; remove files with: mpremote connect {port} rm ...")
+    for folder in ("firmware", "protocol"):
+        mpremote(port, "rm", "-r", f":{folder}")  # absent on a blank board: that is fine
+    extra_cp = ["+", "cp", str(stage / "robot_geometry.py"), ":robot_geometry.py"] if geometry is not None else []
+    r = mpremote(port, "cp", "-r", str(stage / "protocol"), str(stage / "firmware"), ":",
+                 "+", "cp", str(stage / "main.py"), ":main.py", *extra_cp, timeout=300)
+    if r.returncode != 0:
+        text = _fail_text(r)
+        if "ENOSPC" in r.stdout + r.stderr or "28" in text:
+            raise CliError(f"board out of space while copying: {text}")
+        raise CliError(f"copying to the board failed: {text}")
+
+
+def check_geometry(hello: dict[str, object], expected: tuple[int, int, int] | None) -> None:
+    """Say aloud when the board's geometry is not the one asked for (or, without --params, not the twin's)."""
+    reported = tuple(int(hello.get(n, 0)) for n in GEOMETRY_NAMES)  # type: ignore[call-overload]
+    text = ", ".join(f"{n} {v}" for n, v in zip(GEOMETRY_NAMES, reported))
+    print(f"flash: the board's geometry: {text}")
+    if expected is not None and reported != expected:
+        want = ", ".join(f"{n} {v}" for n, v in zip(GEOMETRY_NAMES, expected))
+        raise CliError(f"the board reports {text}, but --params asks for {want}")
+    if expected is None and reported != (config.WHEEL_DIAMETER_UM, config.WHEEL_BASE_UM, config.TICKS_PER_REV):
+        print("flash: note: this board keeps a geometry of its own (robot_geometry.py from an earlier "
+              "--params); simulate it with twinbot sim --params describing the same robot")

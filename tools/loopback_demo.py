@@ -22,7 +22,8 @@ def script() -> list[tuple[int, dict[str, object]]]:
     out: list[tuple[int, dict[str, object]]] = [
         (M.HELLO, {"protocol": M.PROTOCOL_VERSION, "fw_major": config.FIRMWARE_VERSION[0],
                    "fw_minor": config.FIRMWARE_VERSION[1], "fw_patch": config.FIRMWARE_VERSION[2],
-                   "board": M.BOARD_VIRTUAL, "sensors": 8}),
+                   "board": M.BOARD_VIRTUAL, "sensors": 8, "wheel_diameter_um": config.WHEEL_DIAMETER_UM,
+                   "wheel_base_um": config.WHEEL_BASE_UM, "ticks_per_rev": config.TICKS_PER_REV}),
         (M.PARAM_SET, {"param": M.param_by_name("emitter_pct")[0], "value": 80}),
         (M.PARAM_VALUE, {"param": M.param_by_name("emitter_pct")[0], "value": 80}),
         (M.COMMAND, {"mode": M.MODE_HOST, "left": 150, "right": 120}),
@@ -32,7 +33,8 @@ def script() -> list[tuple[int, dict[str, object]]]:
         out.append((M.TELEMETRY, {
             "tick_ms": 40 * k, "mode": M.MODE_HOST, "flags": 0, "enc_l": 9 * k, "enc_r": 7 * k,
             "ir_on": [300 + near, 250, 120, 90, 80, 95, 130, 260 + near], "ir_amb": [60, 55, 50, 48, 47, 49, 52, 58],
-            "i_ref_l_ma": 120, "i_ref_r_ma": 100, "vbat_mv": 7400 - k,
+            "i_ref_l_ma": 120, "i_ref_r_ma": 100, "vbat_mv": 7400 - k, "sp_l": 150, "sp_r": 120,
+            "odo_x": 4000 * k, "odo_y": 0, "odo_heading": 0, "emitter_pct": 80,
         }))
     out.append((M.LOG, {"level": M.LOG_INFO, "text": "demo: obstacle ahead, slowing down"}))
     return out

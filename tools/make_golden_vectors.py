@@ -100,14 +100,34 @@ def _raw_frame(version: int, msg_type: int, seq: int, payload: bytes, schema: in
     """A frame with a correct CRC but any header (for version / type / length errors)."""
     body = bytes([version, msg_type, seq]) + payload
     crc = crc16.crc16(body)
-    crc = crc16.crc16_byte(crc, messages.SCHEMA[msg_type] if schema is None else schema)
-    return cobs.encode(body + bytes([crc & 0xFF, crc >> 8])) + b"\x00"
+    value = messages.SCHEMA[msg_type] if schema is None else schema
+    crc = crc16.crc16_byte(crc16.crc16_byte(crc, value & 0xFF), value >> 8)
+    return b"\x00" + cobs.encode(body + bytes([crc & 0xFF, crc >> 8])) + b"\x00"
 
 
 def _flip(frame: bytes, index: int, mask: int) -> bytes:
     b = bytearray(frame)
     b[index] ^= mask
     return bytes(b)
+
+
+def _sequence_streams(add, cmd, ack, log) -> None:  # type: ignore[no-untyped-def]
+    """Streams about sequence numbers and frame boundaries: restarts, wraps, dead senders, long frames."""
+    T = messages.TYPES
+    hello = _frame(T["HELLO"], 0, {"protocol": 1, "fw_major": 0, "fw_minor": 3, "fw_patch": 0, "board": 2,
+                                   "sensors": 8, "wheel_diameter_um": 42000, "wheel_base_um": 96000,
+                                   "ticks_per_rev": 1200})
+    add("junk without a delimiter costs no frame", [(b"\x05\x01\x02", "cobs"), (cmd(20, 1, 1), "COMMAND"),
+                                                     (cmd(21)[:6], "a dead sender's half frame"),
+                                                     (cmd(22, 2, 2), "COMMAND")],
+        [("COMMAND", 20), ("COMMAND", 22)], cobs_errors=1, length_errors=1, seq_gaps=1, frames_lost=1)
+    add("HELLO after a restart is no gap", [(ack(40), "ACK"), (ack(41), "ACK"), (hello, "HELLO"), (ack(1), "ACK")],
+        [("ACK", 40), ("ACK", 41), ("HELLO", 0), ("ACK", 1)])
+    add("sequence wraps", [(ack(254), "ACK"), (ack(255), "ACK"), (ack(0), "ACK"), (ack(2), "ACK")],
+        [("ACK", 254), ("ACK", 255), ("ACK", 0), ("ACK", 2)], seq_gaps=1, frames_lost=1)
+    add("longest frames back to back", [(log(10, "L" * MAX_TEXT), "LOG"), (log(11, "\x00" * MAX_TEXT), "LOG"),
+                                        (log(12, ""), "LOG")],
+        [("LOG", 10), ("LOG", 11), ("LOG", 12)])
 
 
 def _streams(rng: random.Random) -> list[dict]:
@@ -152,18 +172,14 @@ def _streams(rng: random.Random) -> list[dict]:
     add("bad headers", [
         (_raw_frame(2, T["ACK"], 0, b"\x00\x07"), "version"),
         (_raw_frame(1, 0x7E, 1, b"\x01\x02", schema=0), "unknown type"),
-        (cobs.encode(b"\x01\x07\x02\x00") + b"\x00", "too short"),
+        (b"\x00" + cobs.encode(b"\x01\x07\x02\x00") + b"\x00", "too short"),
         (_raw_frame(1, T["COMMAND"], 3, b"\x02\x00\x00\x00"), "COMMAND one byte short"),
         (_raw_frame(1, T["ACK"], 4, b"\x01\x02\x03"), "ACK one byte long"),
         (_raw_frame(1, T["ACK"], 5, b"\x05\x07", schema=messages.SCHEMA[T["NACK"]]), "wrong schema"),
         (b"\x00\x00\x00", "empty chunks"),
         (ack(6), "ACK"),
     ], [("ACK", 6)], version_errors=1, unknown_types=1, length_errors=3, crc_errors=1)
-    add("sequence wraps", [(ack(254), "ACK"), (ack(255), "ACK"), (ack(0), "ACK"), (ack(2), "ACK")],
-        [("ACK", 254), ("ACK", 255), ("ACK", 0), ("ACK", 2)], seq_gaps=1, frames_lost=1)
-    add("longest frames back to back", [(log(10, "L" * MAX_TEXT), "LOG"), (log(11, "\x00" * MAX_TEXT), "LOG"),
-                                        (log(12, ""), "LOG")],
-        [("LOG", 10), ("LOG", 11), ("LOG", 12)])
+    _sequence_streams(add, cmd, ack, log)
     return streams
 
 

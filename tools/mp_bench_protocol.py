@@ -46,7 +46,8 @@ import time
 from protocol.framing import FrameDecoder, FrameEncoder
 from protocol.messages import FORMATS, PAYLOAD_SIZE, TELEMETRY
 
-N_VALUES = 24  # flat TELEMETRY values: tick, mode, flags, enc_l, enc_r, 8 ir_on, 8 ir_amb, 2 i_ref, vbat
+N_VALUES = 30  # flat TELEMETRY values: tick, mode, flags, enc_l, enc_r, 8 ir_on, 8 ir_amb, 2 i_ref, vbat,
+# 2 set-points, odometry x, y, heading, emitter power
 CHUNK_FRAMES = 1024  # frames held in RAM; a multiple of 256, so the wrapping sequence runs on across passes
 
 
@@ -84,7 +85,12 @@ def telemetry_values(k):
     il = (k * 7) % 1001 - 500
     ir = 500 - (k * 11) % 1001
     vbat = 8400 - (k * 3 // 100) % 1200
-    return tuple([tick, mode, flags, enc_l, enc_r] + on + amb + [il, ir, vbat])
+    sp_l = (k * 5) % 401 - 200
+    sp_r = 200 - (k * 3) % 401
+    odo_x = _wrap_i32(1500 * k - 700000)
+    odo_y = _wrap_i32(350000 - 900 * k)
+    heading = (k * 2654435) & 0x3FFFFFFF
+    return tuple([tick, mode, flags, enc_l, enc_r] + on + amb + [il, ir, vbat, sp_l, sp_r, odo_x, odo_y, heading, 60])
 
 
 def _encode_loop(enc, vals, n_frames, chunk, fmt, mtype, plen):
@@ -100,7 +106,7 @@ def _encode_loop(enc, vals, n_frames, chunk, fmt, mtype, plen):
         pack_into(fmt, body, 3, v[b], v[b + 1], v[b + 2], v[b + 3], v[b + 4], v[b + 5], v[b + 6],
                   v[b + 7], v[b + 8], v[b + 9], v[b + 10], v[b + 11], v[b + 12], v[b + 13], v[b + 14],
                   v[b + 15], v[b + 16], v[b + 17], v[b + 18], v[b + 19], v[b + 20], v[b + 21],
-                  v[b + 22], v[b + 23])
+                  v[b + 22], v[b + 23], v[b + 24], v[b + 25], v[b + 26], v[b + 27], v[b + 28], v[b + 29])
         total += finish(mtype, plen)
         b += N_VALUES
         if b == wrap:

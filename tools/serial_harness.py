@@ -311,12 +311,12 @@ def session(link: SerialLink, args: argparse.Namespace, command: dict[str, objec
 
 
 def host_hello() -> dict[str, object]:
-    """The host's HELLO: the package's version (tools/version.py), board HOST."""
+    """The host's HELLO: the package's version (tools/version.py), board HOST, no geometry (zeros)."""
     from tools.version import version_triple
 
     major, minor, patch = version_triple()
     return {"protocol": M.PROTOCOL_VERSION, "fw_major": major, "fw_minor": minor, "fw_patch": patch,
-            "board": M.BOARD_HOST, "sensors": 0}
+            "board": M.BOARD_HOST, "sensors": 0, "wheel_diameter_um": 0, "wheel_base_um": 0, "ticks_per_rev": 0}
 
 
 SILENT_S = 2.0  # no frame for this long: say what usually causes it

@@ -86,19 +86,22 @@ def load_inputs(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     return params, world
 
 
-def make_controller(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+def make_controller(args: argparse.Namespace, params=None):  # type: ignore[no-untyped-def]
+    """The firmware in the loop, configured with the robot's geometry (params) as flashing it would be."""
     from host_sim.interface import RULE_SETS
     from host_sim.pil import PilController
     from host_sim.sil import SilController
 
     rule_set = RULE_SETS[args.rules]
-    if args.pil:
-        try:
-            controller: object = PilController(rule_set)
-        except RuntimeError as exc:
-            raise CliError(f"PIL: {exc}") from None
-    else:
-        controller = SilController(rule_set)
+    try:
+        if args.pil:
+            controller: object = PilController(rule_set, params=params)
+        else:
+            controller = SilController(rule_set, params=params)
+    except RuntimeError as exc:
+        raise CliError(f"PIL: {exc}") from None
+    except ValueError as exc:
+        raise CliError(f"--params: the firmware cannot hold this robot's geometry: {exc}") from None
     if getattr(args, "excite", False):
         from host_sim.excitation import ExcitedController
 
@@ -129,7 +132,7 @@ def simulate(args: argparse.Namespace, params, world, recorder=None, label: str 
     from host_sim.simulation import Simulation
 
     speed = parse_speed(args.speed, args.mode)
-    controller = make_controller(args)
+    controller = make_controller(args, params)
     progress = Progress(args.duration, label)
     try:
         sim = Simulation(world, params, controller, seed=args.seed, noise=not args.no_noise,

@@ -22,11 +22,11 @@ from protocol import framing, wire  # what the firmware imports (not the host-si
 
 TELEMETRY = wire.TELEMETRY
 COMMAND = wire.COMMAND
-TELEMETRY_FMT = "<IBHii8H8HhhH"  # as firmware/robot.py; checked against wire.PAYLOAD_SIZE
+TELEMETRY_FMT = "<IBHii8H8HhhHhhiiiB"  # as firmware/robot.py; checked against wire.PAYLOAD_SIZE
 CHUNKS = (1, 2, 3, 5, 8, 13, 64, 100, 255, 256, 300, 701)
 PHASES = ("none", "byte by byte", "chunks", "encode", "probe")
 SENT = 300
-STREAM_CAP = 4096
+STREAM_CAP = 6144
 
 
 def fail(msg):
@@ -109,10 +109,10 @@ def send(enc, dec, rx, count, result):
     for s in range(count):
         struct.pack_into(fmt, body, 3, s * 40, 1, 0x0004, s, -s,
                          s, 1, 2, 3, 4, 5, 6, 65535, 0, 9, 10, 11, 12, 13, 14, s,
-                         -s, s, 7400)
+                         -s, s, 7400, s, -s, s * 1000, -s * 1000, s * 4000, 60)
         m = enc.finish(TELEMETRY, size)
-        v = enc.view(m)
-        for k in range(len(v)):  # the "UART"
+        v = enc.frame  # the firmware writes (frame, m): no view is made
+        for k in range(m):  # the "UART"
             rx[k] = v[k]
         dec.feed(rx, 0, m)
         if dec.ready and dec.msg_type == TELEMETRY and dec.payload_len == size:
@@ -215,7 +215,7 @@ def main():
 
     enc = framing.FrameEncoder()
     decs = [framing.FrameDecoder(), framing.FrameDecoder(), framing.FrameDecoder()]
-    rx = bytearray(framing.MAX_ENCODED + 1)
+    rx = bytearray(framing.MAX_FRAME)
     warm_up(enc, decs, stream, n, rx)
 
     result = [0, 0, 0, 0, 0]

@@ -30,9 +30,16 @@ def frames_of(data):
     return FrameDecoder().decode_all(data)
 
 
+TELEMETRY_FMT = "<IBHii8H8HhhHhhiiiB"  # as firmware/robot.py
+SP_L = 24  # indices in the unpacked TELEMETRY tuple
+ODO_X = 26
+ODO_HEADING = 28
+EMITTER = 29
+
+
 def telemetry(data):
     """Unpacked TELEMETRY tuples, oldest first."""
-    return [struct.unpack("<IBHii8H8HhhH", p) for t, _s, p in frames_of(data) if t == W.TELEMETRY]
+    return [struct.unpack(TELEMETRY_FMT, p) for t, _s, p in frames_of(data) if t == W.TELEMETRY]
 
 
 def robot_with(rule_set=1, mode=W.MODE_AUTONOMOUS):
@@ -139,7 +146,7 @@ def check_watchdog_stops_motors():
     assert robot.flags & W.FLAG_WATCHDOG
     assert hal.current == [0, 0], hal.current
     last = telemetry(hal.take_output())[-1]
-    assert last[2] & W.FLAG_WATCHDOG and last[21] == 0 and last[22] == 0
+    assert last[2] & W.FLAG_WATCHDOG and last[21] == 0 and last[22] == 0 and last[SP_L] == 0
     hal.give(command(W.MODE_HOST, 100, 100))  # commands again: driving again
     robot.cycle()
     assert not robot.flags & W.FLAG_WATCHDOG and robot.setpoint_l == 100
@@ -200,10 +207,11 @@ def check_parameters_set_get_and_refuse():
 
 def check_hello_answered():
     hal, robot = robot_with(1, W.MODE_STOP)
-    hal.give(ENC.encode(W.HELLO, bytes(6)))
+    hal.give(ENC.encode(W.HELLO, bytes(16)))
     robot.cycle()
-    hellos = [struct.unpack("<6B", p) for t, _s, p in frames_of(hal.take_output()) if t == W.HELLO]
+    hellos = [struct.unpack("<6BIIH", p) for t, _s, p in frames_of(hal.take_output()) if t == W.HELLO]
     assert hellos and hellos[0][0] == W.PROTOCOL_VERSION and hellos[0][4] == W.BOARD_VIRTUAL
+    assert hellos[0][6:] == (42000, 96000, 1200)
 
 
 def check_telemetry_every_cycle_in_sequence():
@@ -219,23 +227,160 @@ def check_telemetry_every_cycle_in_sequence():
     assert ticks == sorted(ticks)
 
 
-def check_random_bytes_on_the_uart_do_not_stop_the_loop():
+def noise_run(repl_link):
+    """300 cycles of unfiltered random bursts with mpremote's 0D 03 planted inside them, at
+    their start, and after silent cycles (on the UART only); the robot keeps driving."""
     hal, robot = robot_with(1, W.MODE_AUTONOMOUS)
+    hal.repl_link = repl_link
+    robot.repl_link = repl_link
     x = 987654321
+    planted = 0
     for k in range(300):
         junk = bytearray(23)
         for j in range(23):
             x = (x * 1103515245 + 12345) & 0x7FFFFFFF
             junk[j] = (x >> 16) & 0xFF
-            if junk[j] == 0x0D:  # never the start of a break request
-                junk[j] = 0x0E
+        if k % 7 == 0:
+            junk[0] = 0x0D  # a burst that begins like a break, but no silence before it
+            junk[1] = 0x03
+            planted += 1
+        if k % 5 == 0:
+            junk[9] = 0x0D
+            junk[10] = 0x03
+            planted += 1
+        if k % 50 == 25 and not repl_link:
+            robot.cycle()  # a silent cycle, then 0D 03 first: still noise on a UART
+            hal.give(b"\r\x03")
+            planted += 1
         hal.give(junk)
         if k % 10 == 0:
             hal.give(command(W.MODE_AUTONOMOUS))
         robot.cycle()
+    assert planted > 100
     assert robot.cycles >= 300 and robot.faults == 0
     assert robot.rx.errors > 0  # the junk was seen and dropped
     assert robot.mode == W.MODE_AUTONOMOUS
+
+
+def check_unfiltered_noise_does_not_stop_the_loop_on_usb():
+    noise_run(True)
+
+
+def check_unfiltered_noise_does_not_stop_the_loop_on_a_uart():
+    noise_run(False)
+
+
+def check_a_uart_never_breaks():
+    hal, robot = robot_with(1, W.MODE_HOST)
+    hal.repl_link = False
+    robot = Robot(hal)
+    robot.cycle()
+    robot.cycle()  # silent
+    hal.give(b"\r\x03\r\x01")
+    assert not breaks(robot)
+
+
+def check_break_needs_silence_before_it():
+    hal, robot = robot_with(1, W.MODE_HOST)
+    hal.give(b"\r\x03\r\x01")  # right after the setup frames: no silent cycle
+    assert not breaks(robot)
+
+
+def check_fault_while_driving_zeroes_the_currents_at_once():
+    hal, robot = robot_with(1, W.MODE_HOST)
+    for _ in range(5):
+        hal.give(command(W.MODE_HOST, 150, -150))
+        robot.cycle()
+    assert hal.current[0] > 0 and hal.current[1] < 0, hal.current
+    err = OSError(5)
+
+    def broken(out):
+        raise err
+
+    hal.read_ir = broken  # every cycle now raises, before set_currents is reached
+    hal.give(command(W.MODE_HOST, 150, -150))
+    robot.run(1)
+    assert hal.current == [0, 0], hal.current
+    for _ in range(3):
+        hal.give(command(W.MODE_HOST, 150, -150))
+        robot.run(1)
+        assert hal.current == [0, 0] and robot.mode == W.MODE_STOP
+    logs = [p for t, _s, p in frames_of(hal.take_output()) if t == W.LOG]
+    assert logs[0] == bytes([W.LOG_ERROR]) + b"fault #1 in cycle 6: OSError 5", logs[0]
+
+
+def check_wheel_loops_restart_on_a_mode_change():
+    accs = []
+    for new_mode in (W.MODE_HOST, W.MODE_TELEOP):
+        hal, robot = robot_with(1, W.MODE_HOST)
+        for _ in range(10):
+            hal.give(command(W.MODE_HOST, 150, 150))
+            robot.cycle()
+        hal.give(command(new_mode, 150, 150))
+        robot.cycle()
+        accs.append(robot.wheel_l.acc)
+    same, changed = accs
+    assert changed == 150 * 40, changed  # one step from zero: integral and speed were reset
+    assert same > changed, (same, changed)
+
+
+def check_telemetry_carries_the_firmwares_view():
+    hal, robot = robot_with(1, W.MODE_HOST)
+    hal.give(param_set(1, 70))
+    for _ in range(10):
+        hal.give(command(W.MODE_HOST, 120, 80))
+        robot.cycle()
+    tm = telemetry(hal.take_output())[-1]
+    assert (tm[SP_L], tm[SP_L + 1]) == (120, 80)
+    odo = robot.odometry
+    assert (tm[ODO_X], tm[ODO_X + 1], tm[ODO_HEADING]) == (odo.x_um, odo.y_um, odo.heading)
+    assert tm[ODO_X] > 0 and tm[ODO_HEADING] != 0
+    assert tm[EMITTER] == 70
+
+
+def check_geometry_parameters_reconfigure_the_odometry():
+    hal, robot = robot_with(1, W.MODE_STOP)
+    q8 = robot.odometry.um_per_tick_q8
+    hal.give(param_set(12, 84000))  # twice the wheel diameter
+    hal.give(param_set(14, 600))  # half the ticks per turn
+    hal.give(param_set(13, 19999))  # below the range: refused
+    robot.cycle()
+    assert robot.odometry.um_per_tick_q8 == 4 * q8 or abs(robot.odometry.um_per_tick_q8 - 4 * q8) <= 2
+    assert robot.wheel_l.um_per_tick_q8 == robot.odometry.um_per_tick_q8
+    hal.give(ENC.encode(W.HELLO, bytes(16)))
+    robot.cycle()
+    out = frames_of(hal.take_output())
+    hello = [struct.unpack("<6BIIH", p) for t, _s, p in out if t == W.HELLO][0]
+    assert hello[6:] == (84000, 96000, 600), hello
+    nacks = [struct.unpack("<3B", p)[2] for t, _s, p in out if t == W.NACK]
+    assert nacks == [W.ERR_OUT_OF_RANGE]
+
+
+class _BoardGeometry:  # what a robot_geometry.py written at flash time holds
+    WHEEL_DIAMETER_UM = 50000
+    WHEEL_BASE_UM = 110000
+    TICKS_PER_REV = 2000
+
+
+def check_geometry_file_of_the_board_is_used():
+    sys.modules["robot_geometry"] = _BoardGeometry
+    try:
+        robot = Robot(TestHal())
+    finally:
+        del sys.modules["robot_geometry"]
+    assert robot.params[12:15] == [50000, 110000, 2000], robot.params
+    assert robot.odometry.um_per_tick_q8 == Robot(TestHal()).odometry.um_per_tick_q8 * 50000 * 1200 // (42000 * 2000) or \
+        abs(robot.odometry.um_per_tick_q8 * 42000 * 2000 - Robot(TestHal()).odometry.um_per_tick_q8 * 50000 * 1200) < 42000 * 2000
+    _BoardGeometry.TICKS_PER_REV = 3  # out of range: refused at start, naming it
+    sys.modules["robot_geometry"] = _BoardGeometry
+    try:
+        Robot(TestHal())
+        raise AssertionError("accepted ticks_per_rev 3")
+    except ValueError as exc:
+        assert "robot_geometry" in str(exc)
+    finally:
+        del sys.modules["robot_geometry"]
+        _BoardGeometry.TICKS_PER_REV = 2000
 
 
 def check_exception_in_a_cycle_is_survived():
@@ -268,6 +413,7 @@ def breaks(robot):
 
 def check_break_request_stops_and_leaves_the_rest():
     hal, robot = robot_with(1, W.MODE_HOST)
+    robot.cycle()  # a silent cycle: mpremote starts on a quiet port
     hal.give(b"\r\x03\r\x01")  # mpremote: Ctrl-C, then Ctrl-A for the raw REPL
     assert breaks(robot)
     assert bytes(hal.inbox[hal.in_pos:hal.in_len]) == b"\r\x01"  # left for the REPL

@@ -63,7 +63,7 @@ def main():
     hal.give(host)
     for k in range(12):
         robot.cycle()
-    hal.give(enc.encode(M.HELLO, bytes(6)))
+    hal.give(enc.encode(M.HELLO, bytes(16)))
     robot.cycle()
     frames = []
     for r in range(2):
