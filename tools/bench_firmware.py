@@ -105,13 +105,16 @@ def micropython_heap() -> tuple[dict[str, object], dict[str, object]]:
 
 def wasm_heap_steps() -> list[str]:
     """tools/mp_heap_firmware.main as top-level execs, the load one module at a time
-    (BOARD_FILES order, the modules its load() imports)."""
-    import firmware.robot  # noqa: F401  (so sys.modules names what load() imports)
-    import protocol.framing  # noqa: F401
+    (BOARD_FILES order, the modules its load() imports, as a fresh interpreter finds them)."""
+    import subprocess
 
+    probe = ("import sys; sys.path.insert(0, 'tools'); import mp_heap_firmware as H; H.load(); "
+             "print(' '.join(sys.modules))")
+    r = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, cwd=REPO_ROOT, check=True)
+    loaded = set(r.stdout.split())
     modules = [rel[:-3].replace("/", ".").removesuffix(".__init__") for rel in BOARD_FILES]
     steps = ["import mp_heap_firmware as H", "base = gc.mem_alloc()"]
-    steps += [f"__import__({m!r})" for m in modules if m in sys.modules]
+    steps += [f"__import__({m!r})" for m in modules if m in loaded]
     steps += ["before = gc.mem_alloc()", "hal = H.board()", "harness = gc.mem_alloc() - before",
               "robot = H.make_robot(hal)", f"H.run_cycles(robot, hal, {HEAP_CYCLES})",
               "print(H.figures(base, harness, robot))"]
