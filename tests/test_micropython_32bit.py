@@ -35,47 +35,42 @@ def test_the_check_bites_on_32_bits_only(wasm_micropython) -> None:
     assert r.stdout.strip() == "maxsize 9223372036854775807 alloc at 2**30-1: 0 alloc at 2**30: 0"
 
 
-def test_golden_vectors_bit_for_bit_on_32_bits(wasm_micropython) -> None:
-    """All 12,500 firmware golden vectors give the same outputs on the 32-bit port."""
+def test_golden_vectors_bit_for_bit_and_allocation_free_on_32_bits(wasm_micropython) -> None:
+    """All 12,500 firmware golden vectors (max_speed 0..1000, power 0..100, every averaging method
+    and window, kp and ki up to 100,000, current_limit up to 3000, multi-turn odometry steps, encoder
+    counts at the wrap) give the same outputs on the 32-bit port, with every call into the firmware
+    inside heap_lock().  Every parameter at its minimum and maximum, the geometry included, is driven
+    by test_control_cycles_allocate_nothing_on_32_bits."""
     header = json.loads(GOLDEN.read_text(encoding="ascii").split("\n", 1)[0])
-    r = run_micropython_wasm(CHECKER, wasm_path(GOLDEN), files=[GOLDEN])
+    r = run_micropython_wasm(CHECKER, wasm_path(GOLDEN), "--locked", files=[GOLDEN])
     assert r.returncode == 0, r.stdout + r.stderr
-    m = re.fullmatch(r"firmware vectors: (\d+) cases ok \(.*\)\n", r.stdout)
+    m = re.fullmatch(r"firmware vectors: (\d+) cases ok \(.*\), heap locked\n", r.stdout)
     assert m and int(m.group(1)) == header["total"], r.stdout
 
 
-def _only(kinds: tuple[str, ...], tmp_path: Path) -> Path:
-    """The golden file restricted to some kinds of case (the header's counts to match)."""
+def test_locked_vectors_catch_a_big_int(wasm_micropython, tmp_path) -> None:
+    """An encoder count past the HAL's range (2**31) makes the wheel loop compute with big ints: the
+    locked check names the allocation on the 32-bit port, while the 64-bit unix port, locked too,
+    passes the same case (its small ints reach 2**62)."""
+    from firmware.wheels import WheelLoop
+
     lines = GOLDEN.read_text(encoding="ascii").splitlines()
     header = json.loads(lines[0])
-    keep = [ln for ln in lines[1:] if json.loads(ln)[0] in kinds]
-    header["counts"] = {k: (v if k in kinds else 0) for k, v in header["counts"].items()}
-    out = tmp_path / "subset.jsonl"
-    out.write_text("\n".join([json.dumps(header), *keep]) + "\n")
-    return out
-
-
-def _locked_run(path: Path) -> str:
-    # Outside the repository: the file appears as /outside/<name> in the port.
-    r = run_micropython_wasm(CHECKER, wasm_path(path), "--locked", files=[path])
-    return r.stdout + r.stderr
-
-
-def test_fuzzy_and_ir_vectors_allocate_nothing_on_32_bits(wasm_micropython, tmp_path) -> None:
-    """Every fuzzy inference (max_speed 0..1000, both rule sets) and IR cycle (every averaging
-    method and window, power 0..100) of the golden vectors runs inside heap_lock() on 31-bit ints."""
-    out = _locked_run(_only(("fz", "ir"), tmp_path))
-    assert re.fullmatch(r"firmware vectors: 11000 cases ok \(fz 10000, ir 1000, od 0, wh 0\), heap locked\n", out), out
-
-
-@pytest.mark.xfail(strict=True, reason=(
-    "known, not yet fixed (issue 10 point 4): odometry.step forms (dr - dl) * heading_per_tick past 2**30 "
-    "for steps of ~30,000 ticks, and the wheel vectors feed encoder counts up to 2**31 (the HAL wraps them "
-    "within 2**29), so these cases allocate big ints on the RP2040"))
-@pytest.mark.parametrize("kind", ["od", "wh"])
-def test_odometry_and_wheel_vectors_allocate_nothing_on_32_bits(kind, wasm_micropython, tmp_path) -> None:
-    out = _locked_run(_only((kind,), tmp_path))
-    assert out.startswith("firmware vectors: ") and "heap locked" in out, out
+    header["counts"] = {k: (1 if k == "wh" else 0) for k in header["counts"]}
+    loop = WheelLoop(20000, 400, 2000, 3000)
+    steps = []
+    for k, ticks in enumerate((2 ** 31, 2 ** 31 + 300, 2 ** 31 + 650)):
+        dt = 0 if k == 0 else 40
+        loop.measure(ticks, dt)
+        loop.control(200, dt)
+        steps.append([ticks, dt, 200, loop.speed, loop.current, loop.acc, 1 if loop.clamped else 0])
+    bad = tmp_path / "bigint.jsonl"
+    bad.write_text(json.dumps(header) + "\n" + json.dumps(["wh", 20000, 400, 2000, 3000, steps]) + "\n")
+    r = run_micropython_wasm(CHECKER, wasm_path(bad), "--locked", files=[bad])
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert r.stdout.startswith("firmware vectors: FAIL line 2 (wh case 0): allocation in wheel measure"), r.stdout
+    r = run_micropython(CHECKER, str(bad), "--locked")
+    assert r.returncode == 0 and "1 cases ok" in r.stdout, r.stdout + r.stderr
 
 
 def test_protocol_allocates_nothing_on_32_bits(wasm_micropython) -> None:

@@ -29,6 +29,16 @@ class Mismatch(Exception):
     pass
 
 
+def wrap(count):
+    """An encoder count as the HALs keep it, within [-2**29, 2**29) (as the generator's _wrap)."""
+    half = 1 << 29
+    if count >= half:
+        return count - half - half
+    if count < -half:
+        return count + half + half
+    return count
+
+
 _lock = None  # micropython.heap_lock / heap_unlock under --locked
 
 
@@ -133,8 +143,8 @@ class Checker:
                 if start is None:
                     call(step, dl, dr, what="odometry step")
                 else:
-                    el += dl
-                    er += dr
+                    el = wrap(el + dl)
+                    er = wrap(er + dr)
                     call(update, el, er, what="odometry update")
                 if (i + 1) % self.every == 0 or i == n - 1:
                     poses.append(od.x_um)
