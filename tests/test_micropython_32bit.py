@@ -75,7 +75,7 @@ def test_locked_vectors_catch_a_big_int(wasm_micropython, tmp_path) -> None:
 
 def test_protocol_allocates_nothing_on_32_bits(wasm_micropython) -> None:
     """tests/mp/alloc_check.py (frames, garbage, corrupted frames, overflows; send and receive under
-    heap_lock) in a 64 KB heap of the 32-bit port."""
+    heap_lock) on the 32-bit port."""
     r = run_micropython_wasm(MP / "alloc_check.py", heapsize="64k")
     assert r.returncode == 0, r.stdout + r.stderr
     assert "no MemoryError" in r.stdout and r.stdout.rstrip().endswith("alloc: ok"), r.stdout
