@@ -46,7 +46,8 @@ import time
 from protocol.framing import FrameDecoder, FrameEncoder
 from protocol.messages import FORMATS, PAYLOAD_SIZE, TELEMETRY
 
-N_VALUES = 24  # flat TELEMETRY values: tick, mode, flags, enc_l, enc_r, 8 ir_on, 8 ir_amb, 2 i_ref, vbat
+N_VALUES = 30  # flat TELEMETRY values: tick, mode, flags, enc_l, enc_r, 8 ir_on, 8 ir_amb, 2 i_ref, vbat,
+#                2 speed setpoints, odometry x, y, heading, emitter power
 CHUNK_FRAMES = 1024  # frames held in RAM; a multiple of 256, so the wrapping sequence runs on across passes
 
 
@@ -62,9 +63,10 @@ def telemetry_values(k):
     the first 1024 frames); IR readings span 0..4095 (ambient 100..611, plus
     a reflection that grows and saturates as obstacles come and go,
     differently per sensor); current references swing between -500 and
-    500 mA; the battery sags.  mode is never 0, so MAVLink 2 (whose last
-    payload byte is this field after its field reordering) never truncates
-    the payload.
+    500 mA; the battery sags; the robot drives along a spiral (odometry
+    x, y in um, heading in 1/2**30 turn).  mode and emitter_pct are never
+    0, so MAVLink 2 (whose last payload byte is emitter_pct after its field
+    reordering) never truncates the payload.
     """
     tick = (1000 + 40 * k) & 0xFFFFFFFF
     mode = 1 + (k // 500) % 3
@@ -84,7 +86,13 @@ def telemetry_values(k):
     il = (k * 7) % 1001 - 500
     ir = 500 - (k * 11) % 1001
     vbat = 8400 - (k * 3 // 100) % 1200
-    return tuple([tick, mode, flags, enc_l, enc_r] + on + amb + [il, ir, vbat])
+    sp_l = (k * 13) % 401 - 200
+    sp_r = 200 - (k * 17) % 401
+    odo_x = _wrap_i32(250 * k - 1000000)
+    odo_y = _wrap_i32(700000 - 130 * k)
+    heading = (k * 2654435) & 0x3FFFFFFF
+    emitter = 1 + (k // 50) % 100
+    return tuple([tick, mode, flags, enc_l, enc_r] + on + amb + [il, ir, vbat, sp_l, sp_r, odo_x, odo_y, heading, emitter])
 
 
 def _encode_loop(enc, vals, n_frames, chunk, fmt, mtype, plen):
@@ -100,7 +108,8 @@ def _encode_loop(enc, vals, n_frames, chunk, fmt, mtype, plen):
         pack_into(fmt, body, 3, v[b], v[b + 1], v[b + 2], v[b + 3], v[b + 4], v[b + 5], v[b + 6],
                   v[b + 7], v[b + 8], v[b + 9], v[b + 10], v[b + 11], v[b + 12], v[b + 13], v[b + 14],
                   v[b + 15], v[b + 16], v[b + 17], v[b + 18], v[b + 19], v[b + 20], v[b + 21],
-                  v[b + 22], v[b + 23])
+                  v[b + 22], v[b + 23], v[b + 24], v[b + 25], v[b + 26], v[b + 27], v[b + 28],
+                  v[b + 29])
         total += finish(mtype, plen)
         b += N_VALUES
         if b == wrap:
