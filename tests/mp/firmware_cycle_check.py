@@ -62,8 +62,9 @@ def hostile_and_every_message(enc):
         expect.append((pid, value))
 
     drive = command_frame(enc, M.MODE_HOST, 150, -120)
-    for pid in range(1, len(M.PARAM_LIMITS)):
-        lo, hi, default = M.PARAM_LIMITS[pid]
+    limits = M.PARAM_LIMITS
+    for pid in range(1, len(limits) // 3):
+        lo, hi, default = limits[3 * pid], limits[3 * pid + 1], limits[3 * pid + 2]
         for value in (lo, hi, hi + 1, lo - 1, default):
             ok = lo <= value <= hi
             add(enc.encode(M.PARAM_SET, struct.pack("<Bi", pid, value)), pid if ok else -1, value)
