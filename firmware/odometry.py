@@ -14,8 +14,9 @@ small int on 32-bit boards); the heading is a sum of exact integer steps, so
 it does not drift by rounding.  Every port gives the same pose bit for bit.
 
 Every intermediate stays within +-2**30 (an RP2040's small ints are 31-bit:
-beyond that MicroPython allocates a big int) for wheel steps below 2**29
-ticks, the HAL's wrap range (tests run the golden vectors on a 32-bit
+beyond that MicroPython allocates a big int) for a step of less than 2 m of
+centre travel (1 m/s for a 1 s cycle is 1 m) and a pose within 1 km of the
+origin, whatever the step turns (tests run the golden vectors on a 32-bit
 MicroPython under heap_lock): the wrap works around the half-turn point,
 the turn of a step is taken modulo a turn by mulmod_turn() (a step may turn
 several times over: an encoder glitch, lost cycles), and the geometry is
