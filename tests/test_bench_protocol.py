@@ -8,7 +8,6 @@ import json
 
 import pytest
 
-from protocol import messages as M
 from tools import bench_protocol, cli
 
 
@@ -52,7 +51,7 @@ def test_bench_protocol_smoke(bench_only: None, tmp_path, capsys: pytest.Capture
     for label in (bench_protocol.ROW_OURS_CPY, bench_protocol.ROW_MAV, bench_protocol.ROW_OURS_CPY_FRAMING,
                   bench_protocol.ROW_OURS_MP, bench_protocol.ROW_OURS_MP_FEED):
         assert label in rows, label
-    assert rows[bench_protocol.ROW_OURS_CPY][-1] == "8"
+    assert rows[bench_protocol.ROW_OURS_CPY][-1] == "8"  # 0x00 + COBS code byte + header 3 + CRC 2 + 0x00
     assert rows[bench_protocol.ROW_OURS_MP][-1] == "8"
     assert rows[bench_protocol.ROW_MAV][-1] == "12"
     assert "command:     twinbot bench protocol --frames 500 --repeats 1" in captured.out
@@ -66,11 +65,10 @@ def test_bench_protocol_smoke(bench_only: None, tmp_path, capsys: pytest.Capture
             assert results[key][part]["frames_per_s"] > 0, (key, part)
             assert results[key][part]["mb_per_s"] > 0, (key, part)
     assert results["twinbot_micropython"]["decode_feed"]["mb_per_s"] > 0
-    # 8: COBS + header + CRC + a 0x00 before and after each frame (protocol/SPEC.md)
     assert results["twinbot_cpython"]["overhead_bytes_per_frame"] == 8
     assert results["twinbot_micropython"]["overhead_bytes_per_frame"] == 8
     assert results["pymavlink_cpython"]["overhead_bytes_per_frame"] == 12
-    assert results["twinbot_cpython"]["wire_bytes"] == 500 * (M.PAYLOAD_SIZE[M.TELEMETRY] + 8)
+    assert results["twinbot_cpython"]["wire_bytes"] == 500 * (70 + 8)
     assert results["twinbot_micropython"]["frames_identical_to_cpython"] == 500
     targets = report["targets"]
     assert targets["cpython_decode_vs_pymavlink"]["ratio_frames_per_s"] > 0

@@ -194,6 +194,7 @@ def test_odometry_coverage() -> None:
     assert 50000 <= min(c[2] for c in cases) < 60000 and 190000 < max(c[2] for c in cases) <= 200000
     assert 100 <= min(c[3] for c in cases) < 200 and 4900 < max(c[3] for c in cases) <= 5000
     assert 200 < sum(c[4] is not None for c in cases) < 800
+    assert all(-2 ** 29 <= v < 2 ** 29 for c in cases if c[4] for v in c[4])  # the HALs' count range
     straight = rotation = big_turn = 0
     for c in cases:
         steps, (q8, hpt, *poses) = c[5], c[6]
@@ -214,11 +215,15 @@ def test_odometry_coverage() -> None:
 
 
 def test_wheel_coverage() -> None:
-    """Gains and limits from 0 up, resets, dt 0, both saturated and linear PI steps."""
+    """Gains and limits from 0 to their maxima, resets, dt 0, both saturated and linear PI steps,
+    encoder counts across the HALs' wrap at +-2**29 (never beyond it)."""
     cases = load()[1]["wh"]
-    assert min(c[2] for c in cases) == 0 and max(c[2] for c in cases) > 90000
-    assert min(c[3] for c in cases) == 0 and max(c[3] for c in cases) > 90000
+    assert min(c[2] for c in cases) == 0 and max(c[2] for c in cases) == 100000
+    assert min(c[3] for c in cases) == 0 and max(c[3] for c in cases) == 100000
     assert {0, 3000} <= {c[4] for c in cases}
+    counts = [s[0] for c in cases for s in c[5]]
+    assert -2 ** 29 <= min(counts) and max(counts) < 2 ** 29
+    assert any(a > 2 ** 28 and b < -2 ** 28 for c in cases for a, b in zip([s[0] for s in c[5]], [s[0] for s in c[5][1:]]))
     steps = [s for c in cases for s in c[5]]
     assert sum(s[2] is None for s in steps) > 200
     assert sum(s[1] == 0 for s in steps) >= len(cases)

@@ -410,3 +410,14 @@ def test_field_readers_match_struct(value: int) -> None:
     buf16 = bytearray(1) + struct.pack("<H", v16)
     assert fields.read_u16(buf16, 1) == v16
     assert fields.read_i16(buf16, 1) == struct.unpack("<h", struct.pack("<H", v16))[0]
+
+
+def test_wire_parameter_limits_match_messages() -> None:
+    """The firmware's flat PARAM_LIMITS (min, max, default at 3p..3p+2) and the hosts'
+    messages.PARAMS agree, id by id, and id 0 does not exist."""
+    from protocol import wire
+
+    limits = list(wire.PARAM_LIMITS)
+    assert len(limits) == 3 * (len(messages.PARAMS) + 1) and limits[:3] == [0, 0, 0]
+    for pid, _name, lo, hi, default, _unit in messages.PARAMS:
+        assert limits[3 * pid : 3 * pid + 3] == [lo, hi, default], pid

@@ -203,3 +203,43 @@ def test_record_csv_writes_the_recording_format(pty_pair, tmp_path):
     np.testing.assert_allclose(rec.t, [0.04 * k for k in range(6)])
     assert rec.enc[:, 0].tolist() == list(range(6)) and rec.cmd[0].tolist() == [0.01, -0.01]
     assert rec.ir_on[3].tolist() == [3] * 8 and rec.vbat[0] == 7.4
+
+
+def _poll_until(link, want: int, timeout: float = 2.0) -> list:
+    got: list = []
+    deadline = time.monotonic() + timeout
+    while len(got) < want and time.monotonic() < deadline:
+        got += link.poll(0.02)
+    return got
+
+
+def test_host_abandons_a_stale_partial_frame_on_a_pty(pty_pair):
+    """A sender that dies mid-frame: after IDLE_TIMEOUT_S of silence the host drops the half frame
+    (counted in 'abandoned'), so its tail cannot glue onto what comes next; a frame that only
+    pauses for less than that still arrives whole."""
+    from host_sim.serial_link import IDLE_TIMEOUT_S, SerialLink
+
+    link = SerialLink.open(pty_pair.path)
+    try:
+        enc = FrameEncoder()
+        frame = telemetry_frame(enc, 1)
+        # A pause shorter than the timeout: the frame arrives whole.
+        pty_pair.write(frame[:30])
+        assert _poll_until(link, 1, 0.1) == []
+        time.sleep(IDLE_TIMEOUT_S / 4)
+        pty_pair.write(frame[30:])
+        got = _poll_until(link, 1)
+        assert [f.seq for f in got] == [0] and link.decoder.abandoned == 0
+        # A dead sender: half a frame, silence, then a new sender's bytes without a leading 0x00.
+        stale = telemetry_frame(enc, 2)
+        pty_pair.write(stale[:30])
+        assert _poll_until(link, 1, 0.1) == [] and link.decoder.partial
+        time.sleep(IDLE_TIMEOUT_S * 2)
+        fresh = telemetry_frame(enc, 3)[1:]  # no leading 0x00: only the timeout separates it
+        pty_pair.write(fresh)
+        got = _poll_until(link, 1)
+        assert link.decoder.abandoned == 1
+        assert [f.seq for f in got] == [2]  # telemetry #3 carries seq 2 (#2 never completed)
+        assert got[0].fields["tick_ms"] == 120
+    finally:
+        link.close()

@@ -1,6 +1,6 @@
 """`twinbot bench protocol`: what the serial protocol costs, against MAVLink 2.
 
-Builds FRAMES TELEMETRY frames (53-byte payload) from realistic values and
+Builds FRAMES TELEMETRY frames (70-byte payload) from realistic values and
 times, as medians over REPEATS runs:
 
   * CPython, ours: encode = messages.pack_payload + FrameEncoder.encode, from
@@ -8,7 +8,7 @@ times, as medians over REPEATS runs:
     messages.unpack_payload of every frame to a dict.  Also "framing only":
     encode of ready payloads and decode_all without unpacking.
   * CPython, pymavlink: a MAVLink dialect with one message holding the same
-    fields (so the same 53-byte payload) is generated at bench time with
+    fields (so the same 70-byte payload) is generated at bench time with
     pymavlink's mavgen (wire protocol 2.0, language Python); encode =
     building the message object + msg.pack(mav); decode = mav.parse_buffer
     over the whole stream (robust_parsing off), giving message objects.
@@ -36,8 +36,9 @@ SUMMARY = "frame encode/decode throughput and overhead: ours against pymavlink, 
 
 DESCRIPTION = """\
 Measures the serial protocol (protocol/) on TELEMETRY frames, the robot's
-main traffic: 53-byte payload (tick, mode, flags, two encoder counts, eight IR
-readings with emitters on and eight ambient, two current references, battery).
+main traffic: 70-byte payload (tick, mode, flags, two encoder counts, eight IR
+readings with emitters on and eight ambient, two current references, battery,
+two speed setpoints, odometry x, y and heading, emitter power).
 
 What is measured, each figure the median of REPEATS runs (time.perf_counter
 on CPython, time.ticks_us on MicroPython), rates in frames/s and in MB/s of

@@ -232,6 +232,11 @@ def _odometry_steps(rng: random.Random, n: int, base: int) -> list[int]:
     return steps
 
 
+def _wrap(count: int) -> int:
+    """An encoder count as the HALs keep it: wrapped within [-2**29, 2**29)."""
+    return (count + 2 ** 29) % 2 ** 30 - 2 ** 29
+
+
 def _odometry_run(d: int, w: int, tpr: int, method: int, start: list[int] | None,
                   steps: list[int]) -> tuple[int, int, list[int]]:
     od = odometry.Odometry(d, w, tpr, method)
@@ -245,8 +250,8 @@ def _odometry_run(d: int, w: int, tpr: int, method: int, start: list[int] | None
         if start is None:
             od.step(dl, dr)
         else:
-            el += dl
-            er += dr
+            el = _wrap(el + dl)
+            er = _wrap(er + dr)
             od.update(el, er)
         if (i + 1) % ODOMETRY_EVERY == 0 or i == n - 1:
             poses += [od.x_um, od.y_um, od.heading]
@@ -263,8 +268,8 @@ def _odometry_cases(rng: random.Random) -> list[list]:
         steps = _odometry_steps(rng, rng.randint(10, 50), base)
         start = None
         if rng.randrange(3) == 0:
-            start = [rng.choice((0, rng.randint(-10 ** 6, 10 ** 6), rng.randint(-2 ** 31, 2 ** 31),
-                                 2 ** 30 - rng.randint(0, 500))) for _ in range(2)]
+            start = [rng.choice((0, rng.randint(-10 ** 6, 10 ** 6), rng.randint(-2 ** 29, 2 ** 29 - 1),
+                                 2 ** 29 - rng.randint(1, 500))) for _ in range(2)]
         q8 = hpt = 0
         expected: list = []
         for method in ODOMETRY_METHODS:
@@ -282,11 +287,11 @@ def _wheel_cases(rng: random.Random) -> list[list]:
         d = rng.randint(20000, 80000)
         tpr = rng.randint(100, 5000)
         q8 = odometry.Odometry(d, 96000, tpr).um_per_tick_q8
-        kp = rng.choice((0, 2000, rng.randint(0, 100000), rng.randint(0, 10000)))
-        ki = rng.choice((0, 20000, rng.randint(0, 100000), rng.randint(0, 50000)))
+        kp = rng.choice((0, 2000, 100000, rng.randint(0, 100000), rng.randint(0, 10000)))
+        ki = rng.choice((0, 20000, 100000, rng.randint(0, 100000), rng.randint(0, 50000)))
         limit = rng.choice((0, 500, 3000) + tuple(rng.randint(1, 3000) for _ in range(7)))
         loop = wheels.WheelLoop(q8, kp, ki, limit)
-        ticks = rng.choice((0, rng.randint(-2 ** 31, 2 ** 31)))
+        ticks = rng.choice((0, rng.randint(-2 ** 29, 2 ** 29 - 1), 2 ** 29 - rng.randint(1, 2000)))
         speed = rng.randint(-300, 300)  # mm/s, the wheel's true speed
         setpoint = rng.randint(-1000, 1000)
         steps = []
@@ -295,7 +300,7 @@ def _wheel_cases(rng: random.Random) -> list[list]:
             if rng.randrange(8) == 0:
                 setpoint = rng.choice((0, rng.randint(-1000, 1000), rng.randint(-50, 50)))
             speed += (setpoint - speed) // 3 + rng.randint(-20, 20)
-            ticks += (speed * dt * 256 + rng.randint(0, q8)) // q8  # um over um per tick (Q8)
+            ticks = _wrap(ticks + (speed * dt * 256 + rng.randint(0, q8)) // q8)  # um over um per tick (Q8)
             sp = None if rng.randrange(15) == 0 else setpoint
             loop.measure(ticks, dt)
             if sp is None:

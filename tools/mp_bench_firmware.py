@@ -1,7 +1,7 @@
 """MicroPython side of `twinbot bench firmware` (run by tools/bench_firmware.py).
 
 usage: micropython tools/mp_bench_firmware.py time N      cycle and part timings, allocations
-       micropython tools/mp_bench_firmware.py heap N      load everything, run N cycles, report heap
+(the heap figures come from tools/mp_heap_firmware.py)
 
 Prints one JSON object.  The robot runs on firmware/hal_testbench.TestHal, whose
 own work (filling 8 ADC readings twice, copying frames) is part of the
@@ -139,25 +139,15 @@ def cycles_run_heap_locked(robot, hal, n, durations):
     return bool(locked[0])
 
 
-def bench_heap(n):
-    hal = make_hal()  # the test board is not the firmware: not counted
-    gc.collect()
-    base = gc.mem_alloc()
-    hal, robot = make_robot(hal)
-    for k in range(n):
-        hal.reflection[k & 7] = (k * 331) % 3000
-        robot.cycle()
-    gc.collect()
-    return {"heap_in_use": gc.mem_alloc() - base, "heap_total": gc.mem_alloc() + gc.mem_free(),
-            "cycles": robot.cycles, "faults": robot.faults}
-
-
 def main():
     what = sys.argv[1]
     n = int(sys.argv[2])
-    result = bench_time(n) if what == "time" else bench_heap(n)
+    if what != "time":
+        raise SystemExit("usage: mp_bench_firmware.py time N")
+    result = bench_time(n)
     result["micropython"] = ".".join(str(v) for v in sys.implementation.version[:3])
     print(json.dumps(result))
 
 
-main()
+if __name__ == "__main__":
+    main()

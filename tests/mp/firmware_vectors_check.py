@@ -7,6 +7,11 @@ time, so a small heap is enough.  Prints 'firmware vectors: N cases ok (fz
 .., ir .., od .., wh ..)'; on the first difference prints the line, the case
 and both values and exits 1.  Only MicroPython built-ins (json, sys); CPython
 runs it too (tests/test_firmware_vectors.py imports check_file).
+
+With --locked (MicroPython only) every call into the firmware runs inside
+micropython.heap_lock(): on a 32-bit port, where small ints are 31-bit, any
+intermediate beyond +-2**30 would be a big int, an allocation, and so a
+MemoryError, reported as 'FAIL line N ...: allocation in ...'.
 """
 import json
 import sys
@@ -22,6 +27,41 @@ FORMAT_VERSION = 1
 
 class Mismatch(Exception):
     pass
+
+
+def wrap(count):
+    """An encoder count as the HALs keep it, within [-2**29, 2**29) (as the generator's _wrap)."""
+    half = 1 << 29
+    if count >= half:
+        return count - half - half
+    if count < -half:
+        return count + half + half
+    return count
+
+
+_lock = None  # micropython.heap_lock / heap_unlock under --locked
+
+
+def call(fn, a=None, b=None, c=None, what=""):
+    """fn(), fn(a), fn(a, b) or fn(a, b, c), inside heap_lock() under --locked (fn made beforehand: a bound
+    method is an allocation)."""
+    if _lock is not None:
+        _lock[0]()
+    try:
+        if a is None:
+            fn()
+        elif b is None:
+            fn(a)
+        elif c is None:
+            fn(a, b)
+        else:
+            fn(a, b, c)
+    except MemoryError:
+        if _lock is not None:
+            _lock[1]()
+        raise Mismatch("allocation in " + what)
+    if _lock is not None:
+        _lock[1]()
 
 
 class ReplayHal:
@@ -62,8 +102,8 @@ class Checker:
         for speed in (self.speed, other):
             for rs in (0, 1):
                 c = self.ctl[rs]
-                c.configure(rs, speed)
-                c.infer(readings)
+                call(c.configure, rs, speed, what="fuzzy configure")
+                call(c.infer, readings, what="fuzzy infer")
                 got.append(c.left)
                 got.append(c.right)
         expect("left, right (rule set 0, 1) at max_speed {}, {}".format(self.speed, other), got, want)
@@ -72,12 +112,13 @@ class Checker:
         _k, power, method, window, inputs, want = case
         hal = self.hal
         arr = IRArray(hal, power, method, window)
+        acquire = arr.acquire
         expect("cycles", len(inputs), len(want))
         for c in range(len(inputs)):
             cyc = inputs[c]
             hal.ambient = cyc[:8]
             hal.on = cyc[8:]
-            arr.acquire()
+            call(acquire, what="IR acquire")
             got = list(arr.reflected) + list(arr.value) + [1 if arr.saturated else 0]
             expect("cycle {} reflected + value + saturated".format(c), got, want[c])
 
@@ -86,22 +127,25 @@ class Checker:
         n = len(steps) // 2
         for m in range(3):
             od = Odometry(d, w, tpr, m)
+            call(od.configure, d, w, tpr, what="odometry configure")  # PARAM_SET's path
+            step = od.step
+            update = od.update
             expect("um_per_tick_q8, heading_per_tick", [od.um_per_tick_q8, od.heading_per_tick], want[:2])
             poses = []
             el = er = 0
             if start is not None:
                 el = start[0]
                 er = start[1]
-                od.update(el, er)
+                call(update, el, er, what="odometry update")
             for i in range(n):
                 dl = steps[2 * i]
                 dr = steps[2 * i + 1]
                 if start is None:
-                    od.step(dl, dr)
+                    call(step, dl, dr, what="odometry step")
                 else:
-                    el += dl
-                    er += dr
-                    od.update(el, er)
+                    el = wrap(el + dl)
+                    er = wrap(er + dr)
+                    call(update, el, er, what="odometry update")
                 if (i + 1) % self.every == 0 or i == n - 1:
                     poses.append(od.x_um)
                     poses.append(od.y_um)
@@ -111,13 +155,16 @@ class Checker:
     def wh(self, case):
         _k, q8, kp, ki, limit, steps = case
         loop = WheelLoop(q8, kp, ki, limit)
+        measure = loop.measure
+        reset = loop.reset
+        control = loop.control
         for i in range(len(steps)):
             ticks, dt, sp = steps[i][:3]
-            loop.measure(ticks, dt)
+            call(measure, ticks, dt, what="wheel measure")
             if sp is None:
-                loop.reset()
+                call(reset, what="wheel reset")
             else:
-                loop.control(sp, dt)
+                call(control, sp, dt, what="wheel control")
             got = [loop.speed, loop.current, loop.acc, 1 if loop.clamped else 0]
             expect("step {} speed, current, acc, clamped".format(i), got, steps[i][3:])
 
@@ -155,15 +202,22 @@ def check_file(path):
 
 
 def main(argv):
+    global _lock
+    if len(argv) == 3 and argv[2] == "--locked":
+        import micropython
+
+        _lock = (micropython.heap_lock, micropython.heap_unlock)
+        argv = argv[:2]
     if len(argv) != 2:
-        print("usage: firmware_vectors_check.py FILE")
+        print("usage: firmware_vectors_check.py FILE [--locked]")
         sys.exit(2)
     try:
         counts, total = check_file(argv[1])
     except Mismatch as e:
         print("firmware vectors: FAIL " + str(e))
         sys.exit(1)
-    print("firmware vectors: {} cases ok ({})".format(total, ", ".join("{} {}".format(k, counts[k]) for k in KINDS)))
+    print("firmware vectors: {} cases ok ({}){}".format(
+        total, ", ".join("{} {}".format(k, counts[k]) for k in KINDS), ", heap locked" if _lock else ""))
 
 
 if __name__ == "__main__":
