@@ -46,9 +46,13 @@ TARGET_SPEEDUP = 30
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
     p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1],
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--cycles", type=int, default=5000, help="cycles timed under MicroPython (default 5000)")
-    p.add_argument("--repeats", type=int, default=2000, help="timed calls per fuzzy engine (default 2000)")
-    p.add_argument("--json", metavar="FILE", help="write every figure here")
+    from tools.arguments import int_range, output_file
+
+    p.add_argument("--cycles", type=int_range(1, 10_000_000), default=5000,
+                   help="cycles timed under MicroPython (default 5000)")
+    p.add_argument("--repeats", type=int_range(1, 10_000_000), default=2000,
+                   help="timed calls per fuzzy engine (default 2000)")
+    p.add_argument("--json", metavar="FILE", type=output_file, help="write every figure here")
     p.set_defaults(func=run)
 
 
