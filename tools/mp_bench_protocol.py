@@ -47,7 +47,7 @@ from protocol.framing import FrameDecoder, FrameEncoder
 from protocol.messages import FORMATS, PAYLOAD_SIZE, TELEMETRY
 
 N_VALUES = 30  # flat TELEMETRY values: tick, mode, flags, enc_l, enc_r, 8 ir_on, 8 ir_amb, 2 i_ref, vbat,
-#                2 speed setpoints, odometry x, y, heading, emitter power
+# 2 set-points, odometry x, y, heading, emitter power
 CHUNK_FRAMES = 1024  # frames held in RAM; a multiple of 256, so the wrapping sequence runs on across passes
 
 
@@ -63,10 +63,9 @@ def telemetry_values(k):
     the first 1024 frames); IR readings span 0..4095 (ambient 100..611, plus
     a reflection that grows and saturates as obstacles come and go,
     differently per sensor); current references swing between -500 and
-    500 mA; the battery sags; the robot drives along a spiral (odometry
-    x, y in um, heading in 1/2**30 turn).  mode and emitter_pct are never
-    0, so MAVLink 2 (whose last payload byte is emitter_pct after its field
-    reordering) never truncates the payload.
+    500 mA; the battery sags.  mode is never 0, so MAVLink 2 (whose last
+    payload byte is this field after its field reordering) never truncates
+    the payload.
     """
     tick = (1000 + 40 * k) & 0xFFFFFFFF
     mode = 1 + (k // 500) % 3
@@ -86,13 +85,12 @@ def telemetry_values(k):
     il = (k * 7) % 1001 - 500
     ir = 500 - (k * 11) % 1001
     vbat = 8400 - (k * 3 // 100) % 1200
-    sp_l = (k * 13) % 401 - 200
-    sp_r = 200 - (k * 17) % 401
-    odo_x = _wrap_i32(250 * k - 1000000)
-    odo_y = _wrap_i32(700000 - 130 * k)
+    sp_l = (k * 5) % 401 - 200
+    sp_r = 200 - (k * 3) % 401
+    odo_x = _wrap_i32(1500 * k - 700000)
+    odo_y = _wrap_i32(350000 - 900 * k)
     heading = (k * 2654435) & 0x3FFFFFFF
-    emitter = 1 + (k // 50) % 100
-    return tuple([tick, mode, flags, enc_l, enc_r] + on + amb + [il, ir, vbat, sp_l, sp_r, odo_x, odo_y, heading, emitter])
+    return tuple([tick, mode, flags, enc_l, enc_r] + on + amb + [il, ir, vbat, sp_l, sp_r, odo_x, odo_y, heading, 60])
 
 
 def _encode_loop(enc, vals, n_frames, chunk, fmt, mtype, plen):
@@ -108,8 +106,7 @@ def _encode_loop(enc, vals, n_frames, chunk, fmt, mtype, plen):
         pack_into(fmt, body, 3, v[b], v[b + 1], v[b + 2], v[b + 3], v[b + 4], v[b + 5], v[b + 6],
                   v[b + 7], v[b + 8], v[b + 9], v[b + 10], v[b + 11], v[b + 12], v[b + 13], v[b + 14],
                   v[b + 15], v[b + 16], v[b + 17], v[b + 18], v[b + 19], v[b + 20], v[b + 21],
-                  v[b + 22], v[b + 23], v[b + 24], v[b + 25], v[b + 26], v[b + 27], v[b + 28],
-                  v[b + 29])
+                  v[b + 22], v[b + 23], v[b + 24], v[b + 25], v[b + 26], v[b + 27], v[b + 28], v[b + 29])
         total += finish(mtype, plen)
         b += N_VALUES
         if b == wrap:
@@ -170,10 +167,50 @@ def main(argv):
     mtype = TELEMETRY
     fmt = FORMATS[mtype]
     plen = PAYLOAD_SIZE[mtype]
-    ticks_us = time.ticks_us
-    ticks_diff = time.ticks_diff
-    mem_alloc = gc.mem_alloc
 
+    vals = _chunk_values(chunk)
+    stream, ends = _encode_chunk(vals, chunk, fmt, mtype, plen)
+    end = ends[chunk - 1]
+    if stream_out:
+        with open(stream_out, "wb") as f:
+            f.write(memoryview(stream)[:end])
+    _check_round_trip(stream, ends, vals, n_frames, chunk, fmt, mtype, plen)
+    wire_bytes = _wire_bytes(ends, n_frames, chunk)
+    enc_us, dec_us, feed_us, enc_bytes = _time_loops(vals, stream, ends, n_frames, chunk, fmt, mtype, plen,
+                                                     repeats)
+    alloc_enc_1, alloc_enc, alloc_feed, alloc_unpack = _measure_alloc(vals, stream, ends, n_frames, chunk,
+                                                                      fmt, mtype, plen)
+    out = {
+        "implementation": sys.implementation.name,
+        "version": ".".join([str(x) for x in sys.implementation.version[:3]]),
+        "sys_version": sys.version,
+        "machine": getattr(sys.implementation, "_machine", ""),
+        "frames": n_frames,
+        "repeats": repeats,
+        "chunk_frames": chunk,
+        "payload_bytes": plen,
+        "wire_bytes": wire_bytes,
+        "heap_bytes": gc.mem_alloc() + gc.mem_free(),
+        "encode": _rates(enc_us, enc_bytes, n_frames),
+        "decode": _rates(dec_us, wire_bytes, n_frames),
+        "decode_feed": _rates(feed_us, wire_bytes, n_frames),
+        "alloc_encode_bytes": alloc_enc,
+        "alloc_encode_frames": n_frames,
+        "alloc_encode_one_frame_bytes": alloc_enc_1,
+        "alloc_encode_per_frame": (alloc_enc - alloc_enc_1) / (n_frames - 1) if n_frames > 1 else 0.0,
+        "alloc_feed_bytes": alloc_feed,
+        "alloc_feed_stream_bytes": wire_bytes,
+        "alloc_feed_per_byte": alloc_feed / wire_bytes,
+        "alloc_unpack_bytes": alloc_unpack,
+        "alloc_unpack_stream_bytes": end,
+        "alloc_unpack_per_byte": alloc_unpack / end,
+    }
+    import json
+
+    print(json.dumps(out))
+
+
+def _chunk_values(chunk):
     # The values of one chunk of frames, preallocated (not timed).
     import array
 
@@ -183,11 +220,17 @@ def main(argv):
         b = k * N_VALUES
         for j in range(N_VALUES):
             vals[b + j] = t[j]
+    return vals
 
-    # The chunk of frames to decode, as this port encodes them (not timed).
+
+def _encode_chunk(vals, chunk, fmt, mtype, plen):
+    # The chunk of frames to decode, as this port encodes them (not timed);
+    # returns the stream and the end offset of each frame in it.
+    import array
+
     enc = FrameEncoder()
     stream = bytearray(chunk * (plen + 8))
-    ends = array.array("I", bytearray(4 * chunk))  # end offset of each frame
+    ends = array.array("I", bytearray(4 * chunk))
     end = 0
     for k in range(chunk):
         b = k * N_VALUES
@@ -196,10 +239,10 @@ def main(argv):
         stream[end:end + n] = enc.view(n)
         end += n
         ends[k] = end
-    if stream_out:
-        with open(stream_out, "wb") as f:
-            f.write(memoryview(stream)[:end])
+    return stream, ends
 
+
+def _check_round_trip(stream, ends, vals, n_frames, chunk, fmt, mtype, plen):
     # Correctness (not timed): every frame of every pass back, every field equal.
     dec = FrameDecoder()
     got = 0
@@ -222,12 +265,22 @@ def main(argv):
     if got != n_frames or bad or dec.errors or dec.frames_lost:
         raise SystemExit("round trip failed: {} of {} frames, {} mismatched, {} errors, {} lost".format(
             got, n_frames, bad, dec.errors, dec.frames_lost))
+
+
+def _wire_bytes(ends, n_frames, chunk):
+    # Bytes of n_frames frames fed as the chunk again and again.
     wire_bytes = 0
     left = n_frames
     while left > 0:
         wire_bytes += ends[chunk - 1] if left >= chunk else ends[left - 1]
         left -= chunk
+    return wire_bytes
 
+
+def _time_loops(vals, stream, ends, n_frames, chunk, fmt, mtype, plen, repeats):
+    # Microseconds per run of the encode, decode-with-unpack and feed()-only loops.
+    ticks_us = time.ticks_us
+    ticks_diff = time.ticks_diff
     enc_us = []
     dec_us = []
     feed_us = []
@@ -256,10 +309,15 @@ def main(argv):
         feed_us.append(ticks_diff(t1, t0))
         if got != n_frames:
             raise SystemExit("feed() delivered {} of {} frames".format(got, n_frames))
+    return enc_us, dec_us, feed_us, enc_bytes
 
+
+def _measure_alloc(vals, stream, ends, n_frames, chunk, fmt, mtype, plen):
     # Allocation: untimed passes with the garbage collector off.  The encode
     # loop is measured for 1 frame and for all, to tell a per-call cost (the
-    # loop function's own state) from a per-frame one.
+    # loop function's own state) from a per-frame one.  Written out pass by
+    # pass: a helper taking the loop as an argument would add its own call.
+    mem_alloc = gc.mem_alloc
     e = FrameEncoder()
     gc.collect()
     gc.disable()
@@ -288,44 +346,17 @@ def main(argv):
     _feed_unpack_loop(d, stream, ends, chunk, chunk, fmt)  # one pass: the tuples stay until the gc runs
     alloc_unpack = mem_alloc() - a0
     gc.enable()
+    return alloc_enc_1, alloc_enc, alloc_feed, alloc_unpack
 
-    def rates(us_list, nbytes):
-        m = _median(us_list)
-        return {
-            "us": us_list,
-            "median_s": m / 1e6,
-            "frames_per_s": n_frames * 1e6 / m,
-            "mb_per_s": nbytes / m,  # bytes per microsecond = MB (1e6 bytes) per second
-        }
 
-    out = {
-        "implementation": sys.implementation.name,
-        "version": ".".join([str(x) for x in sys.implementation.version[:3]]),
-        "sys_version": sys.version,
-        "machine": getattr(sys.implementation, "_machine", ""),
-        "frames": n_frames,
-        "repeats": repeats,
-        "chunk_frames": chunk,
-        "payload_bytes": plen,
-        "wire_bytes": wire_bytes,
-        "heap_bytes": gc.mem_alloc() + gc.mem_free(),
-        "encode": rates(enc_us, enc_bytes),
-        "decode": rates(dec_us, wire_bytes),
-        "decode_feed": rates(feed_us, wire_bytes),
-        "alloc_encode_bytes": alloc_enc,
-        "alloc_encode_frames": n_frames,
-        "alloc_encode_one_frame_bytes": alloc_enc_1,
-        "alloc_encode_per_frame": (alloc_enc - alloc_enc_1) / (n_frames - 1) if n_frames > 1 else 0.0,
-        "alloc_feed_bytes": alloc_feed,
-        "alloc_feed_stream_bytes": wire_bytes,
-        "alloc_feed_per_byte": alloc_feed / wire_bytes,
-        "alloc_unpack_bytes": alloc_unpack,
-        "alloc_unpack_stream_bytes": end,
-        "alloc_unpack_per_byte": alloc_unpack / end,
+def _rates(us_list, nbytes, n_frames):
+    m = _median(us_list)
+    return {
+        "us": us_list,
+        "median_s": m / 1e6,
+        "frames_per_s": n_frames * 1e6 / m,
+        "mb_per_s": nbytes / m,  # bytes per microsecond = MB (1e6 bytes) per second
     }
-    import json
-
-    print(json.dumps(out))
 
 
 if __name__ == "__main__":
