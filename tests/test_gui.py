@@ -269,9 +269,11 @@ def test_record_every_robot(make_app: Any, tmp_path: Path) -> None:
 
 def telemetry(enc: FrameEncoder, k: int) -> bytes:
     """The k-th TELEMETRY frame of a robot driving straight ahead, 100 ticks a frame on both wheels."""
+    metres = 100 * k * 2 * math.pi * DEFAULT.wheel_radius / DEFAULT.ticks_per_rev  # its own odometry agrees
     f = {"tick_ms": 40 * k, "mode": M.MODE_AUTONOMOUS, "flags": 0, "enc_l": 100 * k, "enc_r": 100 * k,
          "ir_on": [900, 300, 160, 160, 160, 160, 160, 300], "ir_amb": [150] * 8, "i_ref_l_ma": 10,
-         "i_ref_r_ma": 10, "vbat_mv": 7400}
+         "i_ref_r_ma": 10, "vbat_mv": 7400, "sp_l": 100, "sp_r": 100, "odo_x": round(metres * 1e6), "odo_y": 0,
+         "odo_heading": 0, "emitter_pct": 60}
     return enc.encode(M.TELEMETRY, M.pack_payload(M.TELEMETRY, f))
 
 
