@@ -392,7 +392,7 @@ def _ambient_batch(world: World, poses: np.ndarray, t: Any, p: RobotParams, c: _
 
 
 def _read(world: World, poses: np.ndarray, power_pct: Any, t: Any, p: RobotParams,
-          rng: np.random.Generator | None) -> tuple[np.ndarray, np.ndarray]:
+          rng: np.random.Generator | None, quantise: bool = True) -> tuple[np.ndarray, np.ndarray]:
     c = _consts(p)
     refl = _reflected_batch(world, poses, power_pct, p, c)
     amb_off, amb_on = _ambient_batch(world, poses, t, p, c)
@@ -406,6 +406,8 @@ def _read(world: World, poses: np.ndarray, power_pct: Any, t: Any, p: RobotParam
         noise = rng.standard_normal((2,) + refl.shape) * p.ir_noise
         off = off + noise[0]
         on = on + noise[1]
+    if not quantise:
+        return np.clip(off, 0.0, c.adc_max), np.clip(on, 0.0, c.adc_max)
     return _quantise(off, c.adc_max), _quantise(on, c.adc_max)
 
 
@@ -541,10 +543,12 @@ def read_sensors(world: World, pose: Any, power_pct: float = 60.0, t: float = 0.
 
 
 def read_sensors_batch(world: World, poses: Any, power_pct: Any = 60.0, t: Any = 0.0, p: RobotParams = DEFAULT,
-                       rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
+                       rng: np.random.Generator | None = None, quantise: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """N robots at poses (N, 3): (adc_off (N, 8), adc_on (N, 8)).
 
     power_pct and t may be scalars or (N,) arrays, one per robot.
+    quantise=False: the light before the ADC rounds it (floats within its
+    range), smooth in the parameters: what a fit compares.
     """
     q = np.asarray(poses, dtype=float)
     if q.ndim != 2 or q.shape[1] != 3:
@@ -552,7 +556,7 @@ def read_sensors_batch(world: World, poses: Any, power_pct: Any = 60.0, t: Any =
     power = np.asarray(power_pct, dtype=float)
     if power.ndim:
         power = power[:, None]
-    return _read(world, q, power, t, p, rng)
+    return _read(world, q, power, t, p, rng, quantise)
 
 
 # --------------------------------------------------------------------------- #
