@@ -38,6 +38,14 @@ level * max(0, cos(axis, direction to lamp)) / d^2 when no wall hides it,
 flickering as level * (1 + depth sin(2 pi f t)) if asked; the emitter-on
 reading is taken ir_on_delay after the emitter-off one, so a flickering lamp
 leaks into on - off as it does on the robot.
+
+Effects (host_sim/effects.py, docs/effects.md "IR sensor effects"), absent
+by default and then without any effect on a reading: per pair k a gain
+ir_gain_scale[k] on its reflected light, its axis turned by
+ir_misalignment[k] about its mount (ray, incidence angle, beam and lamp term
+follow it), ir_offset[k] counts and ambient_leakage[k] times the ambient
+added to its emitter-on reading; and ir_latency, the readings describing the
+pose of that long ago (PoseHistory, read_sensors_track).
 """
 from __future__ import annotations
 
