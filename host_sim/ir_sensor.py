@@ -147,15 +147,15 @@ class _Consts:
         self.misaligned = any(d != 0.0 for d in p.ir_misalignment)
         self.axis_bearings = tuple(b + d for b, d in zip(BEARINGS, p.ir_misalignment))  # turned axes
         self.ray_bearings = tuple(a + o for a in self.axis_bearings for o in beam_offsets)  # sensor-major
-        self.axis_origins: list[tuple[float, float]] | None = None
-        self.ray_origins: list[tuple[float, float]] | None = None
+        self.axis_origins: tuple[tuple[float, float], ...] | None = None
+        self.ray_origins: tuple[tuple[float, float], ...] | None = None
         self.r_cos = [r] * N_SENSORS  # body_radius * cos(misalignment): the mount's distance along the axis
         if self.misaligned:
             # A pair turns about its mount on the rim: its rays start r (u_mount - u_axis) from the
             # centre, so that a ray's length minus r is still the distance from the sensor.
-            self.axis_origins = [(r * (math.cos(b) - math.cos(a)), r * (math.sin(b) - math.sin(a)))
-                                 for b, a in zip(BEARINGS, self.axis_bearings)]
-            self.ray_origins = [o for o in self.axis_origins for _ in beam_offsets]
+            self.axis_origins = tuple((r * (math.cos(b) - math.cos(a)), r * (math.sin(b) - math.sin(a)))
+                                      for b, a in zip(BEARINGS, self.axis_bearings))
+            self.ray_origins = tuple(o for o in self.axis_origins for _ in beam_offsets)
             self.r_cos = [r * math.cos(d) for d in p.ir_misalignment]
         self.r_cos_col = np.array(self.r_cos)[:, None]
         self.gain_scale = None if all(g == 1.0 for g in p.ir_gain_scale) else list(p.ir_gain_scale)

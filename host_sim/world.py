@@ -345,7 +345,9 @@ class World:
         sin, x cos, x sin, y cos, y sin, x, y, 1] (of phi), so f @ W = h @ K
         with K = G @ W computed once.
         """
-        key = (tuple(float(b) for b in bearings), None if origins is None else tuple(map(tuple, origins)))
+        # The sensor model passes tuples: used as they are, no key is built per call.
+        key = (bearings if type(bearings) is tuple else tuple(float(b) for b in bearings),
+               origins if origins is None or type(origins) is tuple else tuple(map(tuple, origins)))
         kern = self._robot_kernels.get(key)
         if kern is None:
             b = np.asarray(key[0])
