@@ -133,8 +133,9 @@ def sensors_on_track(rec: Recording, rows: np.ndarray, robots: list[RobotParams]
     The readings are not rounded to counts (as the encoder counts of
     run_windows): the residuals are then smooth in the parameters, so a fit
     sees the effect of a small step (a latency of a fraction of a
-    millisecond moves a reading by a fraction of a count).  A twin with an ir_latency reads, for row k, the recorded (tracker) pose
-    at t_k - ir_latency, linear between the rows (ir_sensor.pose_at), as the
+    millisecond moves a reading by a fraction of a count).  A twin with an
+    ir_latency reads, for row k, the recorded (tracker) pose at t_k -
+    ir_latency, linear between the rows (ir_sensor.pose_at), as the
     simulator's robot does between its control instants.
     """
     assert rec.pose is not None
