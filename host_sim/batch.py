@@ -22,7 +22,8 @@ host_sim/simulation.Simulation do for one robot, for all N at once:
    (ir_sensor.read_sensors_batch, at the emitter power of the previous
    actuation: `emitter_pct`, 60 % by default; a simulator robot that was just
    switched on reads its first sample with the emitters off,
-   `initial_emitter_pct=0`);
+   `initial_emitter_pct=0`; with an ir_latency, at the pose of that long ago,
+   linear between the earlier control instants' poses, as SimRobot does);
 2. the current references of that row are applied (row j of the results is
    the state *before* row j's command acts: the recording format's convention,
    so results and recordings line up row for row);
@@ -61,7 +62,7 @@ robots near a wall), the IR ring one read_sensors_batch per group and
 period: `twinbot bench sim` measures it (tools/bench_sim.py).
 
 Sensors with N parameter sets: robots are grouped by their IR parameters
-(body radius, range, every ir_* value, ADC bits) and each group is read with
+(body radius, range, every ir_* value, ambient leakage, ADC bits) and each group is read with
 one read_sensors_batch call, so N robots differing only in their dynamics
 cost one call.
 """
@@ -88,7 +89,8 @@ N_SENSORS = ir_sensor.N_SENSORS
 # RobotParams fields the IR model reads: robots that agree on all of them
 # share one read_sensors_batch call.
 IR_FIELDS = tuple(f.name for f in dataclasses.fields(RobotParams)
-                  if f.name.startswith("ir_") or f.name in ("body_radius", "sensor_range", "adc_bits"))
+                  if f.name.startswith("ir_") or f.name in ("body_radius", "sensor_range", "adc_bits",
+                                                             "ambient_leakage"))
 
 
 @dataclass
@@ -151,6 +153,8 @@ class _SubParams:
 
 class BatchSim:
     """N robots stepped together: state q (N, 5), v (N, 2) as in host_sim/dynamics.py."""
+
+    _ir_history: ir_sensor.PoseHistory | None = None  # the poses at the last readings, for ir_latency
 
     def __init__(self, world: World | None, params: RobotParams | Sequence[RobotParams] | ParamBatch,
                  poses: Any = None, *, q: Any = None, v: Any = None, t: float = 0.0,
@@ -293,16 +297,30 @@ class BatchSim:
 
     def read_sensors(self, rng: np.random.Generator | None = None,
                      pose: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """(adc_on, adc_off), each (N, 8): the IR ring now, at the emitter power in force."""
+        """(adc_on, adc_off), each (N, 8): the IR ring now, at the emitter power in force.
+
+        pose: the robots' pose now (default self.pose).  Robots with an
+        ir_latency read the pose of that long ago, linear between the poses
+        of the earlier calls (ir_sensor.PoseHistory, as SimRobot.sense).
+        """
         pose = self.pose if pose is None else pose
+        latency = max(p.ir_latency for _idx, p in self._ir_groups)
+        if latency > 0:
+            if self._ir_history is None:
+                self._ir_history = ir_sensor.PoseHistory(latency)
+            self._ir_history.add(self.t, pose)
         on = np.empty((self.n, N_SENSORS), dtype=np.int64)
         off = np.empty((self.n, N_SENSORS), dtype=np.int64)
         for idx, p in self._ir_groups:
+            at, t = pose, self.t
+            if p.ir_latency > 0:
+                assert self._ir_history is not None
+                t = self.t - p.ir_latency
+                at = self._ir_history.at(t)
             if idx is None:
-                off[:], on[:] = ir_sensor.read_sensors_batch(self.world, pose, self.emitter_now, self.t, p, rng)
+                off[:], on[:] = ir_sensor.read_sensors_batch(self.world, at, self.emitter_now, t, p, rng)
             else:
-                off[idx], on[idx] = ir_sensor.read_sensors_batch(self.world, pose[idx], self.emitter_now,
-                                                                 self.t, p, rng)
+                off[idx], on[idx] = ir_sensor.read_sensors_batch(self.world, at[idx], self.emitter_now, t, p, rng)
         return on, off
 
     # ------------------------------------------------------------------ physics

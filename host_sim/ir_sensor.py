@@ -38,6 +38,14 @@ level * max(0, cos(axis, direction to lamp)) / d^2 when no wall hides it,
 flickering as level * (1 + depth sin(2 pi f t)) if asked; the emitter-on
 reading is taken ir_on_delay after the emitter-off one, so a flickering lamp
 leaks into on - off as it does on the robot.
+
+Effects (host_sim/effects.py, docs/effects.md "IR sensor effects"), absent
+by default and then without any effect on a reading: per pair k a gain
+ir_gain_scale[k] on its reflected light, its axis turned by
+ir_misalignment[k] about its mount (ray, incidence angle, beam and lamp term
+follow it), ir_offset[k] counts and ambient_leakage[k] times the ambient
+added to its emitter-on reading; and ir_latency, the readings describing the
+pose of that long ago (PoseHistory, read_sensors_track).
 """
 from __future__ import annotations
 
@@ -130,7 +138,29 @@ class _Consts:
         self.powers = np.arange(6.0)
         self.beam_n, off, self.beam_w = beam(p)
         self.beam_w_list = self.beam_w.tolist()
-        self.beam_bearings = tuple(b + o for b in BEARINGS for o in off.tolist())  # sensor-major
+        self.reach = p.sensor_range + p.body_radius
+        self._effects(p, off.tolist())
+
+    def _effects(self, p: RobotParams, beam_offsets: list[float]) -> None:
+        """The per-pair effects (host_sim/effects.py); None where absent, so the reading skips them."""
+        r = p.body_radius
+        self.misaligned = any(d != 0.0 for d in p.ir_misalignment)
+        self.axis_bearings = tuple(b + d for b, d in zip(BEARINGS, p.ir_misalignment))  # turned axes
+        self.ray_bearings = tuple(a + o for a in self.axis_bearings for o in beam_offsets)  # sensor-major
+        self.axis_origins: tuple[tuple[float, float], ...] | None = None
+        self.ray_origins: tuple[tuple[float, float], ...] | None = None
+        self.r_cos = [r] * N_SENSORS  # body_radius * cos(misalignment): the mount's distance along the axis
+        if self.misaligned:
+            # A pair turns about its mount on the rim: its rays start r (u_mount - u_axis) from the
+            # centre, so that a ray's length minus r is still the distance from the sensor.
+            self.axis_origins = tuple((r * (math.cos(b) - math.cos(a)), r * (math.sin(b) - math.sin(a)))
+                                      for b, a in zip(BEARINGS, self.axis_bearings))
+            self.ray_origins = tuple(o for o in self.axis_origins for _ in beam_offsets)
+            self.r_cos = [r * math.cos(d) for d in p.ir_misalignment]
+        self.r_cos_col = np.array(self.r_cos)[:, None]
+        self.gain_scale = None if all(g == 1.0 for g in p.ir_gain_scale) else list(p.ir_gain_scale)
+        self.offset = None if all(o == 0.0 for o in p.ir_offset) else list(p.ir_offset)
+        self.leakage = None if all(k == 0.0 for k in p.ambient_leakage) else list(p.ambient_leakage)
 
 
 _CACHE: dict[int, _Consts] = {}
@@ -181,8 +211,23 @@ def check_params(p: RobotParams) -> None:
         problems.append(f"ir_beam_rays must be a whole number >= 1, got {p.ir_beam_rays}")
     elif p.ir_beam_rays > 1 and not 0 < p.ir_beam_half_angle < math.pi / 2:
         problems.append(f"ir_beam_half_angle must be in (0, pi/2) rad, got {p.ir_beam_half_angle}")
+    problems += _effect_problems(p)
     if problems:
         raise ValueError("IR sensor parameters: " + "; ".join(problems))
+
+
+def _effect_problems(p: RobotParams) -> list[str]:
+    problems = []
+    for name in ("ir_gain_scale", "ir_misalignment", "ir_offset", "ambient_leakage"):
+        if len(getattr(p, name)) != N_SENSORS:
+            problems.append(f"{name} needs {N_SENSORS} values, one per sensor")
+    if any(g < 0 for g in p.ir_gain_scale):
+        problems.append(f"ir_gain_scale must be >= 0, got {p.ir_gain_scale}")
+    if any(not abs(d) < math.pi / 2 for d in p.ir_misalignment):
+        problems.append(f"ir_misalignment must be within +-pi/2 rad, got {p.ir_misalignment}")
+    if not 0 <= p.ir_latency <= 1.0:
+        problems.append(f"ir_latency must be in 0..1 s, got {p.ir_latency}")
+    return problems
 
 
 def _smoothstep(u: np.ndarray) -> np.ndarray:
@@ -250,170 +295,142 @@ def response(distance: Any, angle: Any, power_pct: Any, p: RobotParams = DEFAULT
 
 
 # --------------------------------------------------------------------------- #
-# Geometry of the ring and ambient light
+# Geometry of the ring
 # --------------------------------------------------------------------------- #
 _BEAR = np.array(BEARINGS)
 
 
-def sensor_rays(poses: Any, p: RobotParams = DEFAULT) -> tuple[np.ndarray, np.ndarray]:
-    """Positions (..., 8, 2) on the rim and unit axes (..., 8, 2) of the sensors of robots at poses (..., 3)."""
+def sensor_axes(poses: Any, p: RobotParams = DEFAULT) -> tuple[np.ndarray, np.ndarray]:
+    """(mounts, axes), unit vectors (..., 8, 2) of robots at poses (..., 3).
+
+    Sensor k sits on the rim at C + body_radius * mounts[k] (bearing 45 k
+    degrees) and looks along axes[k]: its mount direction turned by
+    ir_misalignment[k] (the same array when no pair is misaligned).
+    """
     q = np.asarray(poses, dtype=float)
-    ang = q[..., 2:3] + _BEAR
-    axes = np.stack([np.cos(ang), np.sin(ang)], -1)
-    return q[..., None, :2] + p.body_radius * axes, axes
+    mounts = _unit(q[..., 2:3] + _BEAR)
+    c = _consts(p)
+    return mounts, (_unit(q[..., 2:3] + np.array(c.axis_bearings)) if c.misaligned else mounts)
+
+
+def _unit(ang: np.ndarray) -> np.ndarray:
+    out = np.empty(ang.shape + (2,))
+    out[..., 0] = np.cos(ang)
+    out[..., 1] = np.sin(ang)
+    return out
 
 
 def reflection(world: World, poses: Any, p: RobotParams = DEFAULT) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(distance from the sensor (m), incidence angle (rad), hit) of each sensor, shape (..., 8).
+    """(distance from the sensor (m), incidence angle (rad), hit) along each sensor's axis, shape (..., 8).
 
-    The ray leaves the robot's centre along the sensor's axis; the distance
-    from the sensor is that minus body_radius, at least 0 (a wall pushed
-    into the rim touches the sensor).
+    The ray leaves the robot's centre along the sensor's axis (a misaligned
+    pair's ray starts where its turned axis passes one body radius behind
+    its mount); the distance from the sensor is its length minus
+    body_radius, at least 0 (a wall pushed into the rim touches the sensor).
     """
+    c = _consts(p)
     q = np.asarray(poses, dtype=float)
-    reach = p.sensor_range + p.body_radius
     if q.ndim == 1:
-        d, a, h = world.cast_robot(float(q[0]), float(q[1]), float(q[2]), BEARINGS, reach)
+        d, a, h = world.cast_robot(float(q[0]), float(q[1]), float(q[2]), c.axis_bearings, c.reach, c.axis_origins)
     else:
-        d, a, h = world.cast_robots(q, BEARINGS, reach)
+        d, a, h = world.cast_robots(q, c.axis_bearings, c.reach, c.axis_origins)
     return np.maximum(d - p.body_radius, 0.0), a, h
 
 
-def lamp_gains(world: World, positions: Any, axes: Any, occlusion: bool = True,
-               viewpoints: Any = None) -> list[np.ndarray]:
-    """Per lamp, the geometric factor max(0, cos(axis, to lamp)) / d^2 (1/m^2) of sensors at positions (..., 2).
-
-    d is at least LAMP_MIN_DISTANCE.  With occlusion, a lamp hidden by a
-    wall gives 0; the line of sight is tested from `viewpoints` (default:
-    the sensors themselves; the robot's centre, broadcast over its
-    sensors, is what read_sensors uses: 8 times fewer tests, the same
-    answer except at the edge of a shadow).
-    """
-    pos = np.asarray(positions, dtype=float)
-    ax = np.asarray(axes, dtype=float)
-    gains = []
-    for lamp in world.lamps:
-        vec = np.array([lamp.x, lamp.y]) - pos
-        d = np.sqrt((vec * vec).sum(-1))
-        cos = (vec * ax).sum(-1) / np.maximum(d, 1e-12)
-        g = np.maximum(cos, 0.0) / np.maximum(d, LAMP_MIN_DISTANCE) ** 2
-        if occlusion and world.n_walls:
-            seen = world.visible(pos if viewpoints is None else np.asarray(viewpoints, dtype=float),
-                                 (lamp.x, lamp.y))
-            g = g * seen
-        gains.append(g)
-    return gains
-
-
-def _ambient(world: World, gains: list[np.ndarray], t: Any, p: RobotParams) -> Any:
-    level: Any = p.ir_ambient if world.ambient is None else world.ambient
-    for lamp, g in zip(world.lamps, gains):
-        level = level + lamp.level_at(t) * g
-    return level
-
-
-def ambient_level(world: World, positions: Any, axes: Any, t: Any = 0.0, p: RobotParams = DEFAULT,
-                  occlusion: bool = True) -> np.ndarray:
-    """Ambient light (ADC counts) seen by sensors at positions (..., 2) looking along axes (..., 2) at time t (s).
-
-    The world's global level (ir_ambient when the world sets none) plus, for
-    each lamp not hidden by a wall (occlusion=True), level(t) * max(0,
-    cos(axis, direction to the lamp)) / d^2, d in m (at least
-    LAMP_MIN_DISTANCE), level(t) = level (1 + depth sin(2 pi f t)) for a
-    flickering lamp.  t broadcasts against the batch shape.
-    """
-    shape = np.broadcast_shapes(np.shape(positions), np.shape(axes))[:-1]
-    level = _ambient(world, lamp_gains(world, positions, axes, occlusion), t, p)
-    return np.broadcast_to(np.asarray(level, dtype=float), np.broadcast_shapes(shape, np.shape(level))).copy()
-
-
 # --------------------------------------------------------------------------- #
-# Readings
+# Readings, N robots (numpy)
 # --------------------------------------------------------------------------- #
 def _quantise(v: np.ndarray, adc_max: int) -> np.ndarray:
     """Round half to even, clip to 0..adc_max: the ADC's integer counts."""
     return np.minimum(np.maximum(np.rint(v), 0.0), adc_max).astype(np.int64)
 
 
-def _robot_lamp_gains(world: World, poses: np.ndarray, axes: np.ndarray, p: RobotParams) -> np.ndarray:
-    """lamp_gains for whole robots: (..., 8, n_lamps), line of sight from each robot's centre.
-
-    Sensor k sits at C + R u_k; with v = lamp - C, the sensor-to-lamp
-    vector is v - R u_k, so u_k . (lamp - sensor) = u_k . v - R and
-    |lamp - sensor|^2 = |v|^2 - 2 R u_k . v + R^2: one product for all.
-    """
-    centre = poses[..., :2]
-    vx = world.lamp_xy[:, 0] - centre[..., 0:1]  # (..., L)
-    vy = world.lamp_xy[:, 1] - centre[..., 1:2]
-    dot = axes[..., 0:1] * vx[..., None, :] + axes[..., 1:2] * vy[..., None, :]  # (..., 8, L)
-    r = p.body_radius
-    d2 = np.maximum((vx * vx + vy * vy)[..., None, :] - 2.0 * r * dot + r * r, 1e-24)
-    g = np.maximum(dot - r, 0.0) / (np.sqrt(d2) * np.maximum(d2, LAMP_MIN_DISTANCE ** 2))
-    if world.n_walls:
-        g = g * world.lamps_visible(centre)[..., None, :]
-    return g
-
-
-def _axes(poses: np.ndarray) -> np.ndarray:
-    ang = poses[..., 2:3] + _BEAR
-    axes = np.empty(ang.shape + (2,))
-    axes[..., 0] = np.cos(ang)
-    axes[..., 1] = np.sin(ang)
-    return axes
-
-
-def _read(world: World, poses: np.ndarray, power_pct: Any, t: Any, p: RobotParams,
-          rng: np.random.Generator | None) -> tuple[np.ndarray, np.ndarray]:
-    c = _consts(p)
+def _reflected_batch(world: World, poses: np.ndarray, power_pct: Any, p: RobotParams, c: _Consts) -> np.ndarray:
+    """Reflected light (counts) of every sensor, (N, 8): response along its axis, or its beam's weighted sum."""
     if c.beam_n == 1:
         dist, ang, _hit = reflection(world, poses, p)
         refl = response(dist, ang, power_pct, p)
     else:  # the beam: n rays per sensor, the weighted sum of their reflections
-        d, ang, _hit = world.cast_robots(poses, c.beam_bearings, p.sensor_range + p.body_radius)
+        d, ang, _hit = world.cast_robots(poses, c.ray_bearings, c.reach, c.ray_origins)
         shape = poses.shape[:-1] + (N_SENSORS, c.beam_n)
         power = np.asarray(power_pct, dtype=float)
         rays = response(np.maximum(d - p.body_radius, 0.0).reshape(shape), ang.reshape(shape),
                         power[..., None] if power.ndim else power, p)
         refl = rays @ c.beam_w
-    base = p.ir_ambient if world.ambient is None else world.ambient
-    if world.lamps:
-        gains = _robot_lamp_gains(world, poses, _axes(poses), p)
-        t_arr = np.asarray(t, dtype=float)  # scalar, or one time per robot
-        amb_off = base + (gains * world.lamp_levels(t_arr)[..., None, :]).sum(-1)
-        if world.flickers:
-            amb_on = base + (gains * world.lamp_levels(t_arr + p.ir_on_delay)[..., None, :]).sum(-1)
-        else:
-            amb_on = amb_off
+    return refl if c.gain_scale is None else refl * np.array(c.gain_scale)
+
+
+def _robot_lamp_gains(world: World, poses: np.ndarray, p: RobotParams, c: _Consts) -> np.ndarray:
+    """Per sensor and lamp, max(0, cos(axis, to lamp)) / max(d, LAMP_MIN_DISTANCE)^2 (1/m^2): (..., 8, n_lamps).
+
+    Sensor k sits at C + R u_k and looks along a_k (u_k turned by its
+    misalignment); with v = lamp - C, a_k . (lamp - sensor) = a_k . v -
+    R cos(misalignment) and |lamp - sensor|^2 = |v|^2 - 2 R u_k . v + R^2:
+    one product for all.  The line of sight is tested from the robot's
+    centre: 8 times fewer tests, the same answer but at a shadow's edge.
+    """
+    mounts, axes = sensor_axes(poses, p)
+    centre = poses[..., :2]
+    vx = world.lamp_xy[:, 0] - centre[..., 0:1]  # (..., L)
+    vy = world.lamp_xy[:, 1] - centre[..., 1:2]
+    dot = mounts[..., 0:1] * vx[..., None, :] + mounts[..., 1:2] * vy[..., None, :]  # (..., 8, L)
+    r = p.body_radius
+    d2 = np.maximum((vx * vx + vy * vy)[..., None, :] - 2.0 * r * dot + r * r, 1e-24)
+    if c.misaligned:
+        facing = axes[..., 0:1] * vx[..., None, :] + axes[..., 1:2] * vy[..., None, :] - c.r_cos_col
     else:
-        amb_off = amb_on = base
+        facing = dot - r
+    g = np.maximum(facing, 0.0) / (np.sqrt(d2) * np.maximum(d2, LAMP_MIN_DISTANCE ** 2))
+    if world.n_walls:
+        g = g * world.lamps_visible(centre)[..., None, :]
+    return g
+
+
+def _ambient_batch(world: World, poses: np.ndarray, t: Any, p: RobotParams, c: _Consts) -> tuple[Any, Any]:
+    """(ambient at the emitter-off reading, at the emitter-on one): the world's level plus the lamps."""
+    base = p.ir_ambient if world.ambient is None else world.ambient
+    if not world.lamps:
+        return base, base
+    gains = _robot_lamp_gains(world, poses, p, c)
+    t_arr = np.asarray(t, dtype=float)  # scalar, or one time per robot
+    amb_off = base + (gains * world.lamp_levels(t_arr)[..., None, :]).sum(-1)
+    if not world.flickers:
+        return amb_off, amb_off
+    return amb_off, base + (gains * world.lamp_levels(t_arr + p.ir_on_delay)[..., None, :]).sum(-1)
+
+
+def _read(world: World, poses: np.ndarray, power_pct: Any, t: Any, p: RobotParams,
+          rng: np.random.Generator | None, quantise: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    c = _consts(p)
+    refl = _reflected_batch(world, poses, power_pct, p, c)
+    amb_off, amb_on = _ambient_batch(world, poses, t, p, c)
     off = amb_off + np.zeros_like(refl)
     on = amb_on + refl
+    if c.leakage is not None:  # the emitter-on reading sees more of the ambient light
+        on = on + np.array(c.leakage) * amb_on
+    if c.offset is not None:  # the emitter pulse coupling into the receiver
+        on = on + np.array(c.offset)
     if rng is not None and p.ir_noise > 0:
         noise = rng.standard_normal((2,) + refl.shape) * p.ir_noise
         off = off + noise[0]
         on = on + noise[1]
+    if not quantise:
+        return np.clip(off, 0.0, c.adc_max), np.clip(on, 0.0, c.adc_max)
     return _quantise(off, c.adc_max), _quantise(on, c.adc_max)
 
 
-def _read_one(world: World, x: float, y: float, phi: float, power_pct: float, t: float, p: RobotParams,
-              rng: np.random.Generator | None) -> tuple[list[int], list[int]]:
-    """read_sensors for one robot: numpy for the rays, plain floats for the rest.
-
-    Eight values are too few for numpy's per-call overhead; this computes the
-    same formulas as response / _robot_lamp_gains / _quantise, so it agrees
-    with the batch path to the last bit or, in a rare rounding tie, 1 count.
-    """
-    c = _consts(p)
-    r = p.body_radius
-    dist, ang, _hit = world.cast_robot(x, y, phi, c.beam_bearings, p.sensor_range + r)
-    gain = p.ir_gain * power_term(power_pct, p)
+# --------------------------------------------------------------------------- #
+# Readings, one robot (plain floats: eight values are too few for numpy)
+# --------------------------------------------------------------------------- #
+def _reflected_one(c: _Consts, dist: list[float], ang: list[float], gain: float, r: float) -> list[float]:
+    """response() of every ray, from the ray lengths (from the centre) and incidence angles: the same formulas."""
     s0, s1, s2, s3, s4, s5 = c.coef_blend[:, 0].tolist()  # small dome
     d0, d1, d2_, d3, d4, d5 = c.coef_blend[:, 1].tolist()  # big - small
     lo, inv_blend = c.blend_lo, c.inv_blend
     rng_x, ln_k, inv_2ln_k, inv_xp, inv_xp2, inv_taper = c.range, c.ln_k, c.inv_2ln_k, c.inv_xp, c.inv_xp2, c.inv_taper
     log, exp = math.log, math.exp
     refl = []
-    for d, a in zip(dist.tolist(), ang.tolist()):
+    for d, a in zip(dist, ang):
         xd = d - r
         if not xd < rng_x or gain == 0.0:  # nothing within range (inf included)
             refl.append(0.0)
@@ -440,51 +457,79 @@ def _read_one(world: World, x: float, y: float, phi: float, power_pct: float, t:
                 u = 1.0
             va = vs + (u * u * (3.0 - 2.0 * u)) * vd
         refl.append(gain * (va if va > 0.0 else 0.0) * f)
-    if c.beam_n > 1:  # the beam: the weighted sum of each sensor's rays
-        n, w = c.beam_n, c.beam_w_list
-        refl = [sum(w[j] * refl[k * n + j] for j in range(n)) for k in range(N_SENSORS)]
+    return refl
+
+
+def _ambient_one(world: World, x: float, y: float, phi: float, t: float, p: RobotParams,
+                 c: _Consts) -> tuple[list[float], list[float]]:
+    """_ambient_batch for one robot: (off, on) per sensor."""
     base = p.ir_ambient if world.ambient is None else world.ambient
     amb_off = [base] * N_SENSORS
-    amb_on = amb_off
-    if world.lamps:
-        seen = world.lamps_visible(np.array([x, y])).tolist()
-        levels_off = np.asarray(world.lamp_levels(t)).tolist()
-        levels_on = np.asarray(world.lamp_levels(t + p.ir_on_delay)).tolist() if world.flickers else levels_off
-        amb_off = list(amb_off)
-        amb_on = list(amb_on) if world.flickers else amb_off
-        axes = [(math.cos(phi + b), math.sin(phi + b)) for b in BEARINGS]
-        dmin2 = LAMP_MIN_DISTANCE ** 2
-        for (lx_, ly_), vis, lev_off, lev_on in zip(world.lamp_xy.tolist(), seen, levels_off, levels_on):
-            if not vis:
+    if not world.lamps:
+        return amb_off, amb_off
+    seen = world.lamps_visible(np.array([x, y])).tolist()
+    levels_off = np.asarray(world.lamp_levels(t)).tolist()
+    levels_on = np.asarray(world.lamp_levels(t + p.ir_on_delay)).tolist() if world.flickers else levels_off
+    amb_on = list(amb_off) if world.flickers else amb_off
+    mounts = [(math.cos(phi + b), math.sin(phi + b)) for b in BEARINGS]
+    axes = [(math.cos(phi + a), math.sin(phi + a)) for a in c.axis_bearings] if c.misaligned else None
+    r, r_cos, dmin2 = p.body_radius, c.r_cos, LAMP_MIN_DISTANCE ** 2
+    for (lx, ly), vis, lev_off, lev_on in zip(world.lamp_xy.tolist(), seen, levels_off, levels_on):
+        if not vis:
+            continue
+        vx, vy = lx - x, ly - y
+        v2 = vx * vx + vy * vy
+        for k, (ux, uy) in enumerate(mounts):
+            dot = ux * vx + uy * vy
+            facing = (dot if axes is None else axes[k][0] * vx + axes[k][1] * vy) - r_cos[k]
+            if facing <= 0.0:
                 continue
-            vx, vy = lx_ - x, ly_ - y
-            v2 = vx * vx + vy * vy
-            for k, (ux, uy) in enumerate(axes):
-                dot = ux * vx + uy * vy
-                if dot <= r:
-                    continue
-                d2 = v2 - 2.0 * r * dot + r * r
-                g = (dot - r) / (math.sqrt(d2 if d2 > 1e-24 else 1e-24) * (d2 if d2 > dmin2 else dmin2))
-                amb_off[k] += lev_off * g
-                if amb_on is not amb_off:
-                    amb_on[k] += lev_on * g
+            d2 = v2 - 2.0 * r * dot + r * r
+            g = facing / (math.sqrt(d2 if d2 > 1e-24 else 1e-24) * (d2 if d2 > dmin2 else dmin2))
+            amb_off[k] += lev_off * g
+            if amb_on is not amb_off:
+                amb_on[k] += lev_on * g
+    return amb_off, amb_on
+
+
+def _counts_one(c: _Consts, amb_off: list[float], amb_on: list[float], refl: list[float],
+                rng: np.random.Generator | None, noise_sd: float) -> tuple[list[int], list[int]]:
+    """_read's last step for one robot: effects on the on-reading, noise, rounding, the ADC's range."""
+    on = [a + v for a, v in zip(amb_on, refl)]
+    if c.leakage is not None:
+        on = [v + k * a for v, k, a in zip(on, c.leakage, amb_on)]
+    if c.offset is not None:
+        on = [v + o for v, o in zip(on, c.offset)]
     top = c.adc_max
-    if rng is not None and p.ir_noise > 0:
-        noise = (rng.standard_normal(2 * N_SENSORS) * p.ir_noise).tolist()
+    if rng is not None and noise_sd > 0:
+        noise = (rng.standard_normal(2 * N_SENSORS) * noise_sd).tolist()
+        off_i = [round(a + e) for a, e in zip(amb_off, noise)]
+        on_i = [round(v + e) for v, e in zip(on, noise[N_SENSORS:])]
     else:
-        noise = [0.0] * (2 * N_SENSORS)
-    off = [round(amb_off[k] + noise[k]) for k in range(N_SENSORS)]
-    on = [round(amb_on[k] + refl[k] + noise[N_SENSORS + k]) for k in range(N_SENSORS)]
-    return ([v if 0 <= v <= top else (0 if v < 0 else top) for v in off],
-            [v if 0 <= v <= top else (0 if v < 0 else top) for v in on])
+        off_i = [round(a) for a in amb_off]
+        on_i = [round(v) for v in on]
+    return ([v if 0 <= v <= top else (0 if v < 0 else top) for v in off_i],
+            [v if 0 <= v <= top else (0 if v < 0 else top) for v in on_i])
 
 
 def read_sensors_lists(world: World, x: float, y: float, phi: float, power_pct: float, t: float, p: RobotParams,
                        rng: np.random.Generator | None) -> tuple[list[int], list[int]]:
-    """read_sensors as two lists of Python ints: the simulator's per-cycle hot path."""
-    return _read_one(world, x, y, phi, power_pct, t, p, rng)
+    """read_sensors as two lists of Python ints: the simulator's per-cycle hot path.
 
-
+    The same formulas as read_sensors_batch in plain floats after the ray
+    cast; the two agree to the last bit or, in a rare rounding tie of the
+    beam's sum, 1 count.
+    """
+    c = _consts(p)
+    dist, ang, _hit = world.cast_robot(x, y, phi, c.ray_bearings, c.reach, c.ray_origins)
+    refl = _reflected_one(c, dist.tolist(), ang.tolist(), p.ir_gain * power_term(power_pct, p), p.body_radius)
+    if c.beam_n > 1:  # the beam: the weighted sum of each sensor's rays
+        n, w = c.beam_n, c.beam_w_list
+        refl = [sum(w[j] * refl[k * n + j] for j in range(n)) for k in range(N_SENSORS)]
+    if c.gain_scale is not None:
+        refl = [v * g for v, g in zip(refl, c.gain_scale)]
+    amb_off, amb_on = _ambient_one(world, x, y, phi, t, p, c)
+    return _counts_one(c, amb_off, amb_on, refl, rng, p.ir_noise)
 
 
 def read_sensors(world: World, pose: Any, power_pct: float = 60.0, t: float = 0.0, p: RobotParams = DEFAULT,
@@ -494,20 +539,24 @@ def read_sensors(world: World, pose: Any, power_pct: float = 60.0, t: float = 0.
     off = ambient + noise; on = ambient (ir_on_delay later) + reflected +
     noise; each clipped to 0..adc_max and rounded (half to even).  rng: a
     numpy Generator for the noise (None = no noise); it draws 16 normals
-    per call, off then on, like read_sensors_batch for one robot.
+    per call, off then on, like read_sensors_batch for one robot.  The pose
+    is the one the readings describe (ir_latency is the caller's: see
+    PoseHistory and read_sensors_track).
     """
     if len(pose) != 3:
         raise ValueError(f"pose must be (x, y, phi), got {len(pose)} values")
     x, y, phi = (float(v) for v in pose)
-    off, on = _read_one(world, x, y, phi, float(power_pct), float(t), p, rng)
+    off, on = read_sensors_lists(world, x, y, phi, float(power_pct), float(t), p, rng)
     return np.array(off, dtype=np.int64), np.array(on, dtype=np.int64)
 
 
 def read_sensors_batch(world: World, poses: Any, power_pct: Any = 60.0, t: Any = 0.0, p: RobotParams = DEFAULT,
-                       rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
+                       rng: np.random.Generator | None = None, quantise: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """N robots at poses (N, 3): (adc_off (N, 8), adc_on (N, 8)).
 
     power_pct and t may be scalars or (N,) arrays, one per robot.
+    quantise=False: the light before the ADC rounds it (floats within its
+    range), smooth in the parameters: what a fit compares.
     """
     q = np.asarray(poses, dtype=float)
     if q.ndim != 2 or q.shape[1] != 3:
@@ -515,4 +564,70 @@ def read_sensors_batch(world: World, poses: Any, power_pct: Any = 60.0, t: Any =
     power = np.asarray(power_pct, dtype=float)
     if power.ndim:
         power = power[:, None]
-    return _read(world, q, power, t, p, rng)
+    return _read(world, q, power, t, p, rng, quantise)
+
+
+# --------------------------------------------------------------------------- #
+# Latency: the readings describe the pose of ir_latency ago
+# --------------------------------------------------------------------------- #
+def pose_at(times: Any, poses: Any, t: Any) -> np.ndarray:
+    """Poses at time(s) t, linear between the samples of a track: times (K,) increasing, poses (K, ..., 3).
+
+    Clamped to the first and last sample (a robot stood where it started);
+    the heading takes the short way round.  t scalar: poses[0].shape; t
+    (M,): (M, ...) + (3,).
+    """
+    ts = np.asarray(times, dtype=float)
+    q = np.asarray(poses, dtype=float)
+    tq = np.asarray(t, dtype=float)
+    if len(ts) == 1:
+        return np.broadcast_to(q[0], tq.shape + q.shape[1:]).copy()
+    i = np.clip(np.searchsorted(ts, tq, side="right") - 1, 0, len(ts) - 2)
+    span = ts[i + 1] - ts[i]
+    w = np.clip((tq - ts[i]) / np.where(span > 0, span, 1.0), 0.0, 1.0)
+    p0 = q[i]
+    d = q[i + 1] - p0
+    d[..., 2] -= 2 * math.pi * np.round(d[..., 2] / (2 * math.pi))
+    return p0 + w.reshape(w.shape + (1,) * (p0.ndim - w.ndim)) * d
+
+
+class PoseHistory:
+    """The poses of one robot (3,) or N robots (N, 3) at their last control instants, for ir_latency.
+
+    A simulator adds the pose at every reading; `at(t)` interpolates
+    (pose_at) between them, so every path - SimRobot.sense,
+    BatchSim.read_sensors, read_sensors_track on a recorded track - reads
+    the same past pose.  Keeps `keep` seconds of them.
+    """
+
+    def __init__(self, keep: float) -> None:
+        self.keep = float(keep)
+        self.t: list[float] = []
+        self.poses: list[np.ndarray] = []
+
+    def add(self, t: float, pose: Any) -> None:
+        if self.t and t <= self.t[-1]:  # the same instant read again: the newer pose
+            self.t.pop()
+            self.poses.pop()
+        self.t.append(float(t))
+        self.poses.append(np.array(pose, dtype=float))
+        while len(self.t) > 2 and self.t[1] <= t - self.keep:
+            del self.t[0], self.poses[0]
+
+    def at(self, t: float) -> np.ndarray:
+        return pose_at(self.t, self.poses, t)
+
+
+def read_sensors_track(world: World, t: Any, poses: Any, power_pct: Any = 60.0, p: RobotParams = DEFAULT,
+                       rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(adc_off, adc_on), each (K, 8), of one robot along a track: times t (K,), poses (K, 3).
+
+    Row j is read at time t[j] - ir_latency, at the track's pose then
+    (pose_at: linear between rows); without latency, at the row's own.
+    """
+    times = np.asarray(t, dtype=float)
+    q = np.asarray(poses, dtype=float)
+    if p.ir_latency > 0:
+        q = pose_at(times, q, times - p.ir_latency)
+        times = times - p.ir_latency
+    return read_sensors_batch(world, q, power_pct, times, p, rng)

@@ -29,6 +29,8 @@ CONTACT_HYSTERESIS = 0.002  # m: a contact ends when the rim is this far from ev
 
 
 class SimRobot:
+    _ir_history: ir_sensor.PoseHistory | None = None  # the poses at the last readings, for ir_latency
+
     def __init__(self, world: World, params: RobotParams, pose: tuple[float, float, float] | None = None,
                  seed: int | None = 0, noise: bool = True) -> None:
         self.world = world
@@ -62,13 +64,25 @@ class SimRobot:
     def sense(self) -> Sense:
         self.emitter_used = self.emitter_pct
         x, y, phi = self.pose
-        off, on = ir_sensor.read_sensors_lists(self.world, x, y, phi, float(self.emitter_pct), self.t, self.p,
+        t_read = self.t
+        if self.p.ir_latency > 0:  # the readings describe the pose of ir_latency ago
+            x, y, phi, t_read = self._past_pose(x, y, phi)
+        off, on = ir_sensor.read_sensors_lists(self.world, x, y, phi, float(self.emitter_pct), t_read, self.p,
                                                self.rng)
         enc_l, enc_r = self.encoder_ticks()
         s = Sense(int(round(self.t * 1000)) & TICK_MASK, off, on, enc_l, enc_r,
                   int(round(self.p.battery_voltage * 1000)))
         self.last_sense = s
         return s
+
+    def _past_pose(self, x: float, y: float, phi: float) -> tuple[float, float, float, float]:
+        """(x, y, phi, t) ir_latency ago: linear between the poses of the earlier readings (ir_sensor.PoseHistory)."""
+        if self._ir_history is None:
+            self._ir_history = ir_sensor.PoseHistory(self.p.ir_latency)
+        self._ir_history.add(self.t, (x, y, phi))
+        t = self.t - self.p.ir_latency
+        px, py, pphi = self._ir_history.at(t).tolist()
+        return px, py, pphi, t
 
     def actuate(self, a: Actuate) -> None:
         self.i_ref = (a.i_left_ma / 1000.0, a.i_right_ma / 1000.0)

@@ -24,8 +24,9 @@ of `World.segments`, shape (M, 4)):
 * `World.ray_cast(origins, directions, max_range)` -> (distance, incidence,
   hit) for rays of any batch shape;
 * `World.cast_robots(poses, bearings)` the same for rays leaving robot
-  centres at fixed bearings (the IR ring), with the front end folded into
-  one matrix product: the fast path of the sensor model;
+  centres (or points fixed in the robot's frame: `origins`) at fixed
+  bearings (the IR ring), with the front end folded into one matrix
+  product: the fast path of the sensor model;
 * `World.nearest_wall(points)` -> (signed distance, unit normal) to the
   nearest wall; `World.wall_distances(points)` the same to every wall at
   once (contact with several walls, host_sim/contact.py);
@@ -157,7 +158,7 @@ class World:
         w[0, 2], w[1, 2], w[5, 2] = -ay - 0.5 * ey, ax + 0.5 * ex, -1.0  # unum
         w[0, 3], w[1, 3] = ex, ey  # dot
         self._w = w.reshape(6, 4 * m)
-        self._robot_kernels: dict[tuple[float, ...], np.ndarray] = {}
+        self._robot_kernels: dict[tuple[object, ...], np.ndarray] = {}
         self._offsets: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._ws: dict[int, dict[str, np.ndarray]] = {}
         self._visibility: dict[tuple[float, ...], Any] = {}
@@ -334,39 +335,52 @@ class World:
             np.matmul(feats, blocks[:, b], out=terms[b])
         return terms
 
-    def robot_kernel(self, bearings: Sequence[float]) -> np.ndarray:
+    def robot_kernel(self, bearings: Sequence[float],
+                     origins: Sequence[tuple[float, float]] | None = None) -> np.ndarray:
         """(9, 4*R*M) matrix turning a pose into the ray terms of R fixed-bearing rays.
 
-        Ray k leaves the centre (x, y) in direction phi + bearing[k].  Its
-        features f are linear in h = [cos, sin, x cos, x sin, y cos, y sin, x,
-        y, 1] (of phi), so f @ W = h @ K with K = G @ W computed once.
+        Ray k leaves the centre (x, y) - or, with origins, the point
+        origins[k] = (forward, left) (m) from it in the robot's frame - in
+        direction phi + bearing[k].  Its features f are linear in h = [cos,
+        sin, x cos, x sin, y cos, y sin, x, y, 1] (of phi), so f @ W = h @ K
+        with K = G @ W computed once.
         """
-        key = tuple(float(b) for b in bearings)
+        # The sensor model passes tuples: used as they are, no key is built per call.
+        key = (bearings if type(bearings) is tuple else tuple(float(b) for b in bearings),
+               origins if origins is None or type(origins) is tuple else tuple(map(tuple, origins)))
         kern = self._robot_kernels.get(key)
         if kern is None:
-            b = np.asarray(key)
+            b = np.asarray(key[0])
             bx, by = np.cos(b), np.sin(b)
             n = len(b)
             g = np.zeros((n, 6, 9))
             # dx = c bx - s by ; dy = s bx + c by
             g[:, 0, 0], g[:, 0, 1] = bx, -by
             g[:, 1, 0], g[:, 1, 1] = by, bx
-            g[:, 2, 6] = 1.0  # ox = x
-            g[:, 3, 7] = 1.0  # oy = y
+            g[:, 2, 6] = 1.0  # ox = x (+ c fx - s fy)
+            g[:, 3, 7] = 1.0  # oy = y (+ s fx + c fy)
             g[:, 4, 8] = 1.0
             # x dy - y dx = x c by + x s bx - y c bx + y s by
             g[:, 5, 2], g[:, 5, 3], g[:, 5, 4], g[:, 5, 5] = by, bx, -bx, by
+            if origins is not None:  # the offset turns with the robot; o x d gains f x (bx, by), the same at any phi
+                fx, fy = np.asarray(key[1], dtype=float).reshape(n, 2).T
+                g[:, 2, 0], g[:, 2, 1] = fx, -fy
+                g[:, 3, 0], g[:, 3, 1] = fy, fx
+                g[:, 5, 8] = fx * by - fy * bx
             # K[k, block, ray, wall]: the terms come out block-major, as _solve wants them.
             kern = np.einsum("njk,jbm->kbnm", g, self._w.reshape(6, 4, -1)).reshape(9, -1)
             self._robot_kernels[key] = kern
         return kern
 
-    def cast_robots(self, poses: np.ndarray, bearings: Sequence[float],
-                    max_range: float = math.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def cast_robots(self, poses: np.ndarray, bearings: Sequence[float], max_range: float = math.inf,
+                    origins: Sequence[tuple[float, float]] | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Rays from robot centres at fixed bearings: poses (..., 3) -> arrays (..., R).
 
         Same results as ray_cast from (x, y) along phi + bearing, faster: one
-        matrix product does the whole front end.
+        matrix product does the whole front end.  origins: per ray, where it
+        starts in the robot's frame, (forward, left) m from the centre
+        (default the centre); the distance is then from that point.
         """
         q = np.asarray(poses, dtype=float)
         batch = q.shape[:-1]
@@ -376,15 +390,17 @@ class World:
         x, y = q[:, 0], q[:, 1]
         h = np.stack([c, s, x * c, x * s, y * c, y * s, x, y, np.ones(n_rob)], 1)
         n = len(bearings)
-        dist, inc, hit = self._solve(self._terms(h, self.robot_kernel(bearings), n_rob * n), n_rob * n, max_range)
+        kern = self.robot_kernel(bearings, origins)
+        dist, inc, hit = self._solve(self._terms(h, kern, n_rob * n), n_rob * n, max_range)
         return dist.reshape(batch + (n,)), inc.reshape(batch + (n,)), hit.reshape(batch + (n,))
 
-    def cast_robot(self, x: float, y: float, phi: float, bearings: Sequence[float],
-                   max_range: float = math.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def cast_robot(self, x: float, y: float, phi: float, bearings: Sequence[float], max_range: float = math.inf,
+                   origins: Sequence[tuple[float, float]] | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """One robot: arrays (R,).  The single-robot fast path of `cast_robots`."""
         c, s = math.cos(phi), math.sin(phi)
         h = np.array([c, s, x * c, x * s, y * c, y * s, x, y, 1.0])
-        return self._solve(h @ self.robot_kernel(bearings), len(bearings), max_range)
+        return self._solve(h @ self.robot_kernel(bearings, origins), len(bearings), max_range)
 
     def visible(self, points: np.ndarray, targets: Sequence[float] | np.ndarray) -> np.ndarray:
         """True where no wall properly crosses the straight line from a point to a target.

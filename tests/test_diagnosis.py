@@ -12,6 +12,7 @@ import json
 import numpy as np
 import pytest
 
+from host_sim import effects as E
 from host_sim.diagnosis import DiagnosisError, diagnose
 from host_sim.params import DEFAULT, load_params
 from host_sim.recording import RecordingWriter, load_recording
@@ -42,15 +43,22 @@ def test_the_twins_own_recording_is_a_match(nominal_run):
     assert d.fit_before["wheel_l"] > 90 and d.fit_before["heading_rate"] > 95
 
 
-@pytest.mark.parametrize("field,true_value,effect", [
-    ("half_axle", 0.052, "track_width"),
-    ("com_offset", 0.030, "com_offset"),
+@pytest.mark.parametrize("effect,site,true_value", [
+    ("track_width", "both", 0.052),  # half_axle
+    ("com_offset", "both", 0.030),
+    ("ir_gain", 0, 1.3),  # S1 30 % brighter
+    ("ir_offset", 2, 30.0),  # counts on S3's emitter-on reading
+    ("ir_misalignment", 1, 0.2),  # S2 turned 11 degrees counter-clockwise
+    ("ambient_leakage", 0, 0.2),  # S1's on-reading sees 20 % more of the ambient
+    ("ir_latency", "both", 0.08),  # the ring reads the pose of two periods ago
 ])
-def test_an_effect_injected_into_the_twin_is_named_measured_and_fitted(tmp_path, field, true_value, effect):
-    rec = record(tmp_path, DEFAULT.replace(**{field: true_value}))
+def test_an_effect_injected_into_the_twin_is_named_measured_and_fitted(tmp_path, effect, site, true_value):
+    rec = record(tmp_path, E.apply(DEFAULT, effect, site, [true_value]))
     d = diagnose(rec, DEFAULT, ROOM)
     assert d.verdict == "explained", d.summary()
-    assert [e["name"] for e in d.effects] == [effect]
+    assert [e["name"] for e in d.effects] == [effect], d.summary()
+    if isinstance(site, int):
+        assert d.effects[0]["sensor"] == site
     (param,) = d.effects[0]["params"].values()
     assert param["value"] == pytest.approx(true_value, rel=0.15)
     lo, hi = param["ci95"]

@@ -9,7 +9,9 @@ Jacobian comes from one batch run of the twin with every parameter nudged
 (the batch path: all windows and all nudges at once).
 
 Forward selection adds at most MAX_EFFECTS effects, one at a time, each the
-candidate with the lowest BIC on the training windows, accepted only if it
+candidate with the lowest BIC on the training windows (of candidates within
+TIE_BIC of it, which the data cannot tell apart, the first in the
+candidates' order: the plainer physics), accepted only if it
 is significant against the twin without it (F test) AND it improves the
 fit on the held-out windows by at least MIN_HELD_OUT_GAIN.  Candidates that
 explain the held-out data as well as the chosen one (within AMBIGUITY) are
@@ -35,11 +37,13 @@ MAX_EFFECTS = 3
 SHORTLIST = 4  # candidates fitted in full after screening
 P_MAX = 1e-4  # F test against the twin without the effect
 MIN_HELD_OUT_GAIN = 0.10  # relative drop of the held-out weighted sum of squares
+START_INSIDE = 0.01  # of a parameter's range: how far inside its bounds a fit starts
+TIE_BIC = 2.0  # a BIC difference below this is no evidence either way (Kass & Raftery 1995)
 AMBIGUITY = 0.02  # held-out costs within 2 % of the chosen one: "explains it equally well"
 DRIVE_EFFECTS = ("dry_friction", "viscous_friction", "wheel_radius", "torque_constant", "encoder_scale", "backlash",
                  "track_width", "actuator_delay", "current_limit", "battery_resistance", "traction_limit",
                  "caster_drag", "turning_resistance", "com_offset", "mass")
-SENSOR_EFFECTS = ("ir_gain", "ir_misalignment", "ir_offset", "ambient_leakage")
+SENSOR_EFFECTS = ("ir_offset", "ir_gain", "ambient_leakage", "ir_misalignment")  # plainest first: ties go to it
 
 
 @dataclass(frozen=True)
@@ -133,7 +137,10 @@ def fit_model(obj: Objective, base: RobotParams, effects: list[Candidate], start
     sizes = [len(E.LIBRARY[c.name].params) for c in effects]
     lo = np.concatenate([E.bounds(c.name)[0] for c in effects])
     hi = np.concatenate([E.bounds(c.name)[1] for c in effects])
-    x0 = np.clip(np.concatenate(start), lo, hi)
+    # Start a little inside the bounds: scipy's trust region starts with a radius in proportion to x0
+    # (scaled), so a start on a bound of 0 (an absent latency, backlash, drag...) would never leave it.
+    inside = START_INSIDE * (hi - lo)
+    x0 = np.clip(np.concatenate(start), lo + inside, hi - inside)
     step = 1e-3 * (hi - lo)
 
     def unpack(x: np.ndarray) -> list[list[float]]:
@@ -247,6 +254,15 @@ def _start_values(base: RobotParams, cand: Candidate) -> list[float]:
     return E.absent_values(base, cand.name)
 
 
+def _plainest(tried: list[Model], cands: list[Candidate]) -> Model:
+    """The model with the lowest BIC; but among those the data cannot tell from it (BIC within TIE_BIC),
+    the one whose newest effect comes first in the candidates' order (the plainer physics), not the one a
+    rounding error favours: an S3 offset and S3's ambient leakage are one constant when S3's ambient is."""
+    lowest = min(bic(m) for m in tried)
+    tied = [m for m in tried if bic(m) - lowest < TIE_BIC]
+    return min(tied, key=lambda m: (cands.index(m.effects[-1]), bic(m)))
+
+
 def select(obj: Objective, base: RobotParams, cands: list[Candidate],
            progress: Callable[[str], None] | None = None) -> list[Model]:
     """Forward selection: the chain of accepted models, nominal first."""
@@ -268,7 +284,7 @@ def select(obj: Objective, base: RobotParams, cands: list[Candidate],
         tried = [m for m in tried if not _pinned(base, m)]
         if not tried:
             break
-        best = min(tried, key=bic)
+        best = _plainest(tried, cands)
         k = sum(len(v) for v in best.values)
         best.p_value = f_test(current.cost_train, best.cost_train, k - sum(len(v) for v in current.values),
                               best.n_train, k)

@@ -128,14 +128,27 @@ def _ticks_per_rev(robots: list[RobotParams], n_win: int) -> np.ndarray:
 
 def sensors_on_track(rec: Recording, rows: np.ndarray, robots: list[RobotParams], world: World,
                      seed: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The twin's IR ring (on, ambient), each (N, *rows.shape, 8), read at the recorded poses of `rows`."""
+    """The twin's IR ring (on, ambient), each (N, *rows.shape, 8), read at the recorded poses of `rows`.
+
+    The readings are not rounded to counts (as the encoder counts of
+    run_windows): the residuals are then smooth in the parameters, so a fit
+    sees the effect of a small step (a latency of a fraction of a
+    millisecond moves a reading by a fraction of a count).  A twin with an
+    ir_latency reads, for row k, the recorded (tracker) pose at t_k -
+    ir_latency, linear between the rows (ir_sensor.pose_at), as the
+    simulator's robot does between its control instants.
+    """
     assert rec.pose is not None
     inputs = replay_inputs(rec)
     rng = np.random.default_rng(seed) if seed is not None else None
     flat = rows.reshape(-1)
-    on = np.empty((len(robots), flat.size, ir_sensor.N_SENSORS), dtype=np.int64)
+    on = np.empty((len(robots), flat.size, ir_sensor.N_SENSORS))
     amb = np.empty_like(on)
     for s, p in enumerate(robots):
-        amb[s], on[s] = ir_sensor.read_sensors_batch(world, rec.pose[flat], inputs.emitter[flat], rec.t[flat], p, rng)
+        poses, t = rec.pose[flat], rec.t[flat]
+        if p.ir_latency > 0:
+            t = t - p.ir_latency
+            poses = ir_sensor.pose_at(rec.t, rec.pose, t)
+        amb[s], on[s] = ir_sensor.read_sensors_batch(world, poses, inputs.emitter[flat], t, p, rng, quantise=False)
     shape = (len(robots), *rows.shape, ir_sensor.N_SENSORS)
     return on.reshape(shape), amb.reshape(shape)
