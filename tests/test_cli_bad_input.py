@@ -215,9 +215,13 @@ def make_case_folder(folder: Path) -> None:
     (folder / "taken.csv.json").mkdir()  # the sidecar's name is taken by a folder
 
 
+PRIVATE_TMP = Path(tempfile.mkdtemp(prefix="twinbot-bad-input-tmp-"))  # these runs' temporary directory alone
+
+
 def run(args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
-    # cwd is the row's folder (relative default outputs would land there); the checkout comes first on the path.
-    env = dict(os.environ, PYTHONPATH=str(REPO))
+    # cwd is the row's folder (relative default outputs would land there); the checkout comes first on the path;
+    # TMPDIR is private, so what the runs leave there is theirs, whatever else runs on the machine.
+    env = dict(os.environ, PYTHONPATH=str(REPO), TMPDIR=str(PRIVATE_TMP))
     return subprocess.run([sys.executable, "-m", "tools.cli", *args], cwd=cwd, env=env, capture_output=True,
                           text=True, timeout=60, check=False)
 
@@ -227,7 +231,7 @@ def tree(folder: Path) -> set[str]:
 
 
 def board_folders() -> set[str]:
-    return {p.name for p in Path(tempfile.gettempdir()).glob("twinbot-board-*")}
+    return {p.name for p in PRIVATE_TMP.glob("twinbot-board-*")}
 
 
 @pytest.fixture(scope="module")
