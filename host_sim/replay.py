@@ -106,7 +106,7 @@ def state_at(rec: Recording, k: int, p: RobotParams) -> tuple[tuple[float, ...],
     if starts_at_rest(rec, k):
         theta = [0.0, 0.0]  # the simulator starts every run at rest, the wheels at angle 0
     else:  # the middle of the recorded tick: the best guess, and never the tick below
-        theta = [motors.encoder_angle(int(rec.enc[k, i]), p) for i in range(2)]
+        theta = [motors.encoder_angle(int(rec.enc[k, i]), p, i) for i in range(2)]
     v = (0.0, 0.0) if starts_at_rest(rec, k) else wheel_speeds_at(rec, k, p)
     q = dynamics.q_from_axle_pose(x, y, phi, p, theta[0], theta[1])
     return q, (float(v[0]), float(v[1]))
@@ -119,9 +119,8 @@ def wheel_speeds_at(rec: Recording, k: int, p: RobotParams) -> tuple[float, floa
     dt = float(rec.t[hi] - rec.t[lo]) if n > 1 else 0.0
     if dt <= 0:
         return (0.0, 0.0)
-    per_tick = 2 * math.pi / p.ticks_per_rev
-    return (float(rec.enc[hi, 0] - rec.enc[lo, 0]) * per_tick / dt,
-            float(rec.enc[hi, 1] - rec.enc[lo, 1]) * per_tick / dt)
+    return (float(rec.enc[hi, 0] - rec.enc[lo, 0]) * (2 * math.pi / motors.ticks_per_rev(p, 0)) / dt,
+            float(rec.enc[hi, 1] - rec.enc[lo, 1]) * (2 * math.pi / motors.ticks_per_rev(p, 1)) / dt)
 
 
 def replay(rec: Recording, p: RobotParams, world: World, start: int = 0, stop: int | None = None,

@@ -80,7 +80,7 @@ def initial_states(rec: Recording, rows: np.ndarray, p: RobotParams) -> tuple[np
         if rec.pose is not None:
             qk, vk = state_at(rec, int(k), p)
         else:
-            theta = [motors.encoder_angle(int(rec.enc[k, w]), p) for w in range(2)]
+            theta = [motors.encoder_angle(int(rec.enc[k, w]), p, w) for w in range(2)]
             qk = dynamics.q_from_axle_pose(0.0, 0.0, 0.0, p, theta[0], theta[1])
             vk = (0.0, 0.0) if starts_at_rest(rec, int(k)) else wheel_speeds_at(rec, int(k), p)
         q[i], v[i] = qk, vk
