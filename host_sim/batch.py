@@ -105,7 +105,7 @@ class BatchResult:
     collisions: np.ndarray  # (N,) contacts started during the run
     substeps: int
     start: int = 0  # the recording row it started from (replay_batch)
-    theta: np.ndarray | None = None  # (T, N, 2) wheel angles (rad), unquantised: what the encoders count
+    theta: np.ndarray | None = None  # (T, N, 2) what the encoders count (rad at the wheel), unquantised
     vbat: np.ndarray | None = None  # (T, N) V, the battery voltage the robot senses (sags with battery_resistance)
 
     @property
@@ -278,6 +278,8 @@ class BatchSim:
         # The library's drive effects (host_sim/drive_effects.py): None while all are absent (the fast path).
         self._fx = drive_effects.Drive.of(batch) if drive_effects.active(batch) else None
         self._delay = batch.actuator_delay.copy() if np.any(batch.actuator_delay != 0.0) else None
+        # backlash: the gear's gap per wheel (motor angle / N - wheel angle), the play's middle at the start
+        self.gear_gap = np.zeros((self.n, 2)) if self._fx is not None and np.any(self._fx.play) else None
         self._per_wheel_ticks = bool(np.any(batch.ticks_per_rev_delta_l != 0) or np.any(batch.ticks_per_rev_delta_r != 0))
         # IR groups: (indices or None for all, RobotParams).
         if shared is not None:
@@ -310,9 +312,14 @@ class BatchSim:
 
     def encoder_ticks(self) -> np.ndarray:
         """(N, 2) int64 cumulative ticks (left, right)."""
-        if self._per_wheel_ticks:
-            return motors.encoder_ticks_batch(self.q[:, 3:5], self.params, wheels=True)
+        if self._per_wheel_ticks or self.gear_gap is not None:
+            return motors.encoder_ticks_batch(self.encoder_angles(), self.params, wheels=True)
         return motors.encoder_ticks_batch(self.q[:, 3:5], self._p)
+
+    def encoder_angles(self) -> np.ndarray:
+        """(N, 2) what the encoders count, in wheel radians: the motor's angle / N (the wheel's, but for
+        the backlash's gap)."""
+        return self.q[:, 3:5] if self.gear_gap is None else self.q[:, 3:5] + self.gear_gap
 
     def read_sensors(self, rng: np.random.Generator | None = None,
                      pose: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -349,6 +356,9 @@ class BatchSim:
         if self._delay is not None:
             i_ref = self._delayed(i_ref, dt)
         q0, v0 = self.q, self.v
+        if self.gear_gap is not None:
+            i_sent = i_ref
+            i_ref, w_m, engaged = drive_effects.backlash_reference(i_ref, v0, self.gear_gap, dt, self._fx)  # type: ignore[arg-type]
         if self._fx is None:
             q1, v1, tau, self.current = drive.drive_step_batch(q0, v0, i_ref, dt, self._p, self._p_motors)
             ok = contact.traction_ok_batch(v0, v1, tau, dt, self._p) & ~self.slipping
@@ -367,6 +377,9 @@ class BatchSim:
         if not ok.all():
             self._slip_step(q0, v0, q1, v1, ~ok, i_ref, dt, idx, gaps, normals, order)
         self._warm &= ~ok  # a rolling step ends the contact forces' history
+        if self.gear_gap is not None:
+            self.gear_gap = drive_effects.backlash_gap(self.gear_gap, i_sent, w_m, engaged, q1[:, 3:5] - q0[:, 3:5], dt,
+                                                   self._fx)  # type: ignore[arg-type]
         self.q, self.v = q1, v1
         self.t += dt
 
@@ -548,7 +561,7 @@ class BatchSim:
         for j in range(n_rows):
             t_out[j] = self.t
             enc[j] = self.encoder_ticks()
-            theta[j] = self.q[:, 3:5]
+            theta[j] = self.encoder_angles()
             pose[j] = here = self.pose
             vbat[j] = self.vbat
             if emitter is not None:

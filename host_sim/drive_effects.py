@@ -35,7 +35,8 @@ SUPPLY_NEWTON = 4  # Newton steps on the supply voltage (exact once the active l
 # RobotParams fields that switch this path on when any robot has them away from 0.
 FIELDS = ("coulomb_friction_delta_l", "coulomb_friction_delta_r", "viscous_friction_delta_l",
           "viscous_friction_delta_r", "wheel_radius_delta_l", "wheel_radius_delta_r", "torque_constant_delta_l",
-          "torque_constant_delta_r", "battery_resistance", "caster_drag", "turning_resistance")
+          "torque_constant_delta_r", "battery_resistance", "caster_drag", "turning_resistance", "backlash_l",
+          "backlash_r")
 
 
 def active(p: Any) -> bool:
@@ -69,6 +70,7 @@ class Drive:
     m: np.ndarray  # (N,) m_c + 2 m_w
     h: tuple[np.ndarray, np.ndarray, np.ndarray]  # H in (u, omega): A, B, C
     cap: np.ndarray  # (N,) mu N per wheel
+    play: np.ndarray  # (N, 2) rad, half the backlash: the gear's gap is in [-play, play]
 
     @classmethod
     def of(cls, p: Any) -> Drive:
@@ -92,7 +94,8 @@ class Drive:
                    scrub=np.asarray(p.turning_resistance, dtype=float), b=b,
                    g=np.asarray(p.body_mass * p.com_offset, dtype=float), iw=iw, m=np.asarray(m, dtype=float),
                    h=(np.asarray(h[0]), np.asarray(h[1]), np.asarray(h[2])),
-                   cap=np.asarray(p.wheel_friction * m * 9.81 / 2, dtype=float))
+                   cap=np.asarray(p.wheel_friction * m * 9.81 / 2, dtype=float),
+                   play=0.5 * _pair(p.backlash_l, p.backlash_r))
 
     def sub(self, s: np.ndarray) -> Drive:
         """Robots s only."""
@@ -262,3 +265,36 @@ def delayed_reference(hist_t: list[float], hist_i: list[np.ndarray], t: float, d
         w = np.clip(np.minimum(end, b) - np.maximum(tk, a), 0.0, None) / dt
         out += w[:, None] * ik
     return out
+
+
+# --------------------------------------------------------------------------- #
+# Backlash: the gear's gap between the motor (and its encoder) and the wheel
+# --------------------------------------------------------------------------- #
+def backlash_reference(i_ref: Any, w: np.ndarray, gap: np.ndarray, dt: Any, d: Drive
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(the reference that drives each wheel over the substep (N, 2), the motor side's speed in the gap,
+    engaged for the whole substep (N, 2) bool).
+
+    gap = motor angle / N - wheel angle, in [-play, play].  The motor side is taken as massless: in the
+    gap it turns at the no-load speed V_bat / (k N) towards the side its current pushes (no torque on the
+    wheel), with no current it keeps its place against the wheel.  A wheel is driven while the gap is
+    closed on the side the current pushes; in the substep where the gap closes, for the part of the
+    substep after it closed (continuous in the play)."""
+    c = np.minimum(np.maximum(np.broadcast_to(np.asarray(i_ref, dtype=float), w.shape), -d.lim), d.lim)
+    side = np.sign(c)
+    engaged = np.where(side > 0, gap >= d.play, gap <= -d.play) | (d.play == 0.0)
+    w_m = side * (d.v_bat[:, None] / (d.kt * d.gear))
+    closing = (w_m - w) * side
+    step = np.asarray(dt, dtype=float).reshape(-1, 1) if np.ndim(dt) else dt
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_close = np.where(closing > 0, (d.play - side * gap) / closing, np.inf)
+    frac = np.where(engaged, 1.0, np.clip(1.0 - t_close / step, 0.0, 1.0))
+    return c * frac, w_m, engaged
+
+
+def backlash_gap(gap: np.ndarray, i_ref: Any, w_m: np.ndarray, engaged: np.ndarray, turned: np.ndarray,
+                 dt: Any, d: Drive) -> np.ndarray:
+    """The gap after the substep in which the wheels turned by `turned` (N, 2) rad."""
+    step = np.asarray(dt, dtype=float).reshape(-1, 1) if np.ndim(dt) else dt
+    free = np.where(np.broadcast_to(np.asarray(i_ref, dtype=float), gap.shape) == 0.0, gap, gap + step * w_m - turned)
+    return np.where(engaged, gap, np.clip(free, -d.play, d.play))

@@ -67,7 +67,10 @@ class SimRobot:
         return x, y, self.q[2]
 
     def encoder_ticks(self) -> tuple[int, int]:
-        return motors.encoder_ticks(self.q[3], self.p, 0), motors.encoder_ticks(self.q[4], self.p, 1)
+        th_l, th_r = self.q[3], self.q[4]
+        if self._effects is not None and self._effects.gear_gap is not None:  # the encoders are on the motors
+            th_l, th_r = th_l + float(self._effects.gear_gap[0, 0]), th_r + float(self._effects.gear_gap[0, 1])
+        return motors.encoder_ticks(th_l, self.p, 0), motors.encoder_ticks(th_r, self.p, 1)
 
     def sense(self) -> Sense:
         self.emitter_used = self.emitter_pct

@@ -156,6 +156,46 @@ def test_a_delayed_run_starting_mid_stream_uses_the_commands_already_sent():
     assert res.theta[1, 0, 0] > 0  # the command sent 80 ms before the start arrives at once
 
 
+def test_backlash_the_wheel_waits_until_the_motor_has_turned_by_the_play():
+    play = 0.2  # rad; the gear starts in the middle of its play
+    p = P.replace(backlash_l=play, backlash_r=play)
+    sim = BatchSim(None, p, np.zeros((1, 3)))
+    no_load = P.battery_voltage / (P.torque_constant * P.gear_ratio)  # the massless motor side's speed in the gap
+    dt, wheel, motor = 2e-4, [], []
+    for _ in range(100):  # 20 ms forward
+        sim.substep([0.2, 0.2], dt)
+        wheel.append(sim.q[0, 3])
+        motor.append(sim.encoder_angles()[0, 0])
+    t = dt * np.arange(1, 101)
+    t_close = 0.5 * play / no_load  # 2.6 ms
+    before = t < t_close - dt
+    assert (np.array(wheel)[before] == 0.0).all()  # not driven while the gap closes
+    assert np.array(motor)[before] == pytest.approx(no_load * t[before], rel=1e-9)  # the encoder counts it
+    assert (np.array(wheel)[t > t_close + dt] > 0).all()
+    assert np.array(motor)[-1] - wheel[-1] == pytest.approx(0.5 * play)  # closed on the driving side
+    # reverse: the motor crosses the whole play before the wheel is braked by it
+    w_before = sim.v[0, 0]
+    for _ in range(10):  # 2 ms, less than play / (no_load + w) = 3.3 ms
+        sim.substep([-0.2, -0.2], dt)
+    free = balance_speed(0.0)  # only the axle's friction on the wheel: its deceleration is small
+    assert sim.v[0, 0] > 0.95 * w_before and free < 0
+    for _ in range(100):
+        sim.substep([-0.2, -0.2], dt)
+    assert sim.encoder_angles()[0, 0] - sim.q[0, 3] == pytest.approx(-0.5 * play)
+    assert sim.v[0, 0] < 0.5 * w_before
+
+
+def test_encoders_count_the_motor_side():
+    p = P.replace(backlash_l=0.3)
+    cmd = np.tile([0.2, 0.2], (10, 1))
+    sim = BatchSim(None, p, np.zeros((1, 3)))
+    res = sim.run_inputs(cmd, sensors=False)
+    motor = sim.encoder_angles()[0]
+    assert motor[0] - sim.q[0, 3] == pytest.approx(0.15) and motor[1] == sim.q[0, 4]  # left's motor 0.15 rad ahead
+    assert sim.encoder_ticks()[0].tolist() == [math.floor(m / (2 * math.pi) * P.ticks_per_rev) for m in motor]
+    assert res.theta[-1, 0, 0] > res.theta[-2, 0, 0] > 0
+
+
 def battery_steady_speed(r_int: float) -> tuple[float, float]:
     """Straight, both wheels battery-limited: eta N k i = c_v w + T_c, i = (V - k N w) / R,
     V = V_bat - 2 R_int i; returns (w, V)."""
@@ -230,6 +270,7 @@ EFFECTS = {
     "battery_resistance": {"battery_resistance": 3.0},
     "caster_drag": {"caster_drag": 0.1},
     "turning_resistance": {"turning_resistance": 0.004},
+    "backlash": {"backlash_r": 0.25},
 }
 
 
