@@ -316,6 +316,14 @@ class BatchSim:
             return motors.encoder_ticks_batch(self.encoder_angles(), self.params, wheels=True)
         return motors.encoder_ticks_batch(self.q[:, 3:5], self._p)
 
+    def engage_gears(self, side: Any) -> None:
+        """Backlash: close each gear's gap on `side` (N, 2) (+1 forward, -1 backward, 0 the middle), the
+        encoders reading as before (the wheels move instead): where a robot that had been driven sits."""
+        if self.gear_gap is not None:
+            gap = np.sign(np.asarray(side, dtype=float)) * self._fx.play  # type: ignore[union-attr]
+            self.q[:, 3:5] += self.gear_gap - gap
+            self.gear_gap = gap
+
     def encoder_angles(self) -> np.ndarray:
         """(N, 2) what the encoders count, in wheel radians: the motor's angle / N (the wheel's, but for
         the backlash's gap)."""

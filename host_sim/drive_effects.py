@@ -99,7 +99,7 @@ class Drive:
 
     def sub(self, s: np.ndarray) -> Drive:
         """Robots s only."""
-        return Drive(**{k: (tuple(x[s] for x in v) if isinstance(v, tuple) else v[s])
+        return Drive(**{k: (tuple(x[s] for x in v) if isinstance(v, tuple) else v[s])  # type: ignore[arg-type]
                         for k, v in self.__dict__.items()})
 
 
