@@ -213,6 +213,14 @@ class BatchSim:
         self._hist_t: list[float] = []
         self._hist_i: list[np.ndarray] = []
 
+    def set_world(self, world: World) -> None:
+        """The robots, where they stand, in an edited world (SimRobot.set_world for each)."""
+        self.world = world
+        self._gap[:] = -1.0  # the broad phase's gaps were measured against the old walls
+        self._warm[:] = False  # contact forces are kept by wall index, which the edit may have changed
+        self._wall_force = np.zeros((2, self.n, max(world.n_walls, 1)))
+        self._walls = world.n_walls > 0
+
     def seed_commands(self, times: Any, cmds: Any) -> None:
         """The commands issued before now (times ascending, s; cmds (K, N, 2) or (K, 2), A): what a delayed
         actuator still has on its way when the run starts.  Without it: no current before the first."""

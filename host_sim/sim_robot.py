@@ -143,6 +143,8 @@ class SimRobot:
         self.world = world
         self._gap_at_check = -1.0  # the broad phase's gap was measured against the old walls
         self._forces = None  # contact forces are kept by wall index, which the edit may have changed
+        if self._effects is not None:
+            self._effects.set_world(world)
 
     def _advance_effects(self, dt: float) -> None:
         """advance() through the BatchSim of one that carries the effects (state copied in and out, so a
