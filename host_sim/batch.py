@@ -482,9 +482,8 @@ class BatchSim:
         vs = v0[s]
         if self._fx is not None:
             fx = self._fx.sub(s)
-            tau, cur, slope = drive_effects.wheel_torque_slope(i_s, vs, fx)
+            tau, cur, slope, self.vbat[s] = drive_effects.wheel_torque_slope(i_s, vs, fx)
             body = np.where(rolling[:, None], drive_effects.body_velocity(vs, fx), body)
-            self.vbat[s] = drive_effects.supply(i_s, vs, fx)[0]
             self.current[s] = cur
             forces = drive_effects.body_forces(body[:, 0], body[:, 1], body[:, 2], fx)
             return tau, slope, body, {"radii": fx.radius, "body_force": forces}

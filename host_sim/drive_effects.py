@@ -125,6 +125,8 @@ def supply(i_ref: Any, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray]
         return volts.copy(), i
     for _ in range(SUPPLY_NEWTON):
         gv = volts - d.v_bat + d.r_int * np.abs(i).sum(1)
+        if not np.any(np.abs(gv) > 1e-12 * d.v_bat):  # the limits in force were found: exact
+            break
         slope = np.maximum(1.0 + d.r_int * (np.sign(i) * di).sum(1), 1.0)
         volts = np.clip(volts - gv / slope, 0.0, d.v_bat)
         i, di = _currents(c, emf, volts, d.res)
@@ -138,8 +140,10 @@ def wheel_torque(i_ref: Any, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.nd
     return tau, i, volts
 
 
-def wheel_torque_slope(i_ref: Any, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(torque, current, d torque / d w at fixed V) per wheel (N, 2): motors.wheel_torque_slope's."""
+def wheel_torque_slope(i_ref: Any, w: np.ndarray, d: Drive
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(torque, current, d torque / d w at fixed V) per wheel (N, 2), motors.wheel_torque_slope's, and
+    the supply V (N,)."""
     volts, i = supply(i_ref, w, d)
     c = np.minimum(np.maximum(np.asarray(i_ref, dtype=float), -d.lim), d.lim)
     n_kt = d.kt * d.gear
@@ -147,7 +151,7 @@ def wheel_torque_slope(i_ref: Any, w: np.ndarray, d: Drive) -> tuple[np.ndarray,
     th = np.tanh(w / COULOMB_EPS)
     tau = d.eta * n_kt * i - d.c_v * w - d.t_c * th
     slope = -d.c_v - np.where(limited, d.eta * n_kt * n_kt / d.res, 0.0) - d.t_c * (1.0 - th * th) / COULOMB_EPS
-    return tau, i, slope
+    return tau, i, slope, volts
 
 
 # --------------------------------------------------------------------------- #
