@@ -324,3 +324,16 @@ def test_a_parameter_file_with_an_impossible_effect_is_refused(tmp_path, entry, 
     path.write_text(json.dumps(entry))
     r = run_twinbot("sim", "--params", str(path), "--duration", "1", timeout=60)
     assert r.returncode == 2 and words in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_a_robot_with_effects_meets_a_wall_drawn_in_front_of_it():
+    """SimRobot.set_world (the gui's world edits) reaches the BatchSim that carries the effects."""
+    robot = SimRobot(World(name="e", size=(2.0, 2.0), walls=[]), P.replace(caster_drag=0.05), (0.5, 1.0, 0.0),
+                     noise=False)
+    robot.actuate(Actuate(150, 150, 0))
+    for _ in range(40):
+        robot.advance(0.005)
+    robot.set_world(World(name="wall", size=(2.0, 2.0), walls=[{"segment": [0.7, 0.0, 0.7, 2.0]}]))
+    for _ in range(600):
+        robot.advance(0.005)
+    assert robot.collisions == 1 and robot.pose[0] <= 0.7 - P.body_radius + 1e-9
