@@ -119,10 +119,10 @@ def supply(i_ref: Any, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray]
     Piecewise linear in V: Newton from V_bat, exact once the limits in force are found."""
     c = np.minimum(np.maximum(np.asarray(i_ref, dtype=float), -d.lim), d.lim)
     emf = d.kt * d.gear * w
-    volts = d.v_bat
+    volts = d.v_bat.copy()
     i, di = _currents(c, emf, volts, d.res)
     if not np.any(d.r_int):
-        return volts.copy(), i
+        return volts, i
     for _ in range(SUPPLY_NEWTON):
         gv = volts - d.v_bat + d.r_int * np.abs(i).sum(1)
         if not np.any(np.abs(gv) > 1e-12 * d.v_bat):  # the limits in force were found: exact

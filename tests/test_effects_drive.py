@@ -274,16 +274,23 @@ EFFECTS = {
 }
 
 
+# A corner 15 cm ahead and 15 cm to the left; 3.2 s of changing references drive the robot into it.
+CORNER = World(name="corner", size=(2.0, 2.0), walls=[{"segment": [0.8, -1.0, 0.8, 1.0]},
+                                                      {"segment": [-1.0, 0.2, 1.0, 0.2]}])
+CORNER_START = (0.5, 0.0, 0.3)
+CORNER_CMD = np.repeat([[0.3, 0.3], [0.45, 0.1], [-0.2, 0.25], [0.35, 0.35], [0.0, 0.0], [0.2, 0.5],
+                        [-0.3, -0.3], [0.5, 0.4]], 10, axis=0)
+
+
 @pytest.mark.parametrize("name", list(EFFECTS))
 def test_simrobot_and_batchsim_agree_with_the_effect(name):
-    """3 s of changing references in a small box: the robot drives into walls and slips."""
-    world = builtin_world("paper_room")
+    """3.2 s of changing references by a corner: the robot drives into both walls and slips."""
+    world, cmd = CORNER, CORNER_CMD
     p = P.replace(**EFFECTS[name])
-    rng = np.random.default_rng(7)
-    cmd = np.round(np.repeat(rng.uniform(-0.3, 0.5, (6, 2)), 12, axis=0), 3)
-    res = BatchSim(world, [p, P], np.tile(world.start, (2, 1))).run_inputs(np.repeat(cmd[:, None], 2, 1),
-                                                                            sensors=False)
-    robot = SimRobot(world, p, world.start, noise=False)
+    res = BatchSim(world, [p, P], np.tile(CORNER_START, (2, 1))).run_inputs(np.repeat(cmd[:, None], 2, 1),
+                                                                             sensors=False)
+    assert res.collisions.min() > 0
+    robot = SimRobot(world, p, CORNER_START, noise=False)
     pose, enc, vbat = [], [], []
     for row in cmd:
         pose.append(robot.pose)
@@ -337,3 +344,18 @@ def test_a_robot_with_effects_meets_a_wall_drawn_in_front_of_it():
     for _ in range(600):
         robot.advance(0.005)
     assert robot.collisions == 1 and robot.pose[0] <= 0.7 - P.body_radius + 1e-9
+
+
+TINY = {"coulomb_friction_delta_l": 1e-15, "viscous_friction_delta_r": 1e-15, "wheel_radius_delta_l": 1e-15,
+        "torque_constant_delta_r": 1e-15, "backlash_l": 1e-15, "actuator_delay": 1e-15, "battery_resistance": 1e-15,
+        "caster_drag": 1e-15, "turning_resistance": 1e-15}
+
+
+@pytest.mark.parametrize("field", list(TINY))
+def test_an_effect_enters_continuously_from_absent(field):
+    """The effects' path with an effect of 1e-15 is the nominal twin to rounding (walls and slip included):
+    the diagnosis's finite differences start from "absent" without a jump."""
+    res = BatchSim(CORNER, [P.replace(**{field: TINY[field]}), P], np.tile(CORNER_START, (2, 1))).run_inputs(
+        np.repeat(CORNER_CMD[:, None], 2, 1), sensors=False)
+    assert res.collisions[1] > 0  # the nominal robot meets a wall: contact is compared too
+    np.testing.assert_allclose(res.pose[:, 0], res.pose[:, 1], rtol=0, atol=1e-9)
