@@ -165,6 +165,9 @@ def replay(rec: Recording, p: RobotParams, world: World, start: int = 0, stop: i
     return ReplayResult(t, enc, pose, ir_on, ir_amb, start)
 
 
+SEED_ROWS = 6  # recorded commands before a start that a delayed actuator may still be carrying out (0.2 s)
+
+
 def replay_batch(rec: Recording, params_list: Any, start: int = 0, *, stop: int | None = None,
                  world: World | None = None, substeps: int = 8, sensors: bool = True,
                  seed: int | np.random.Generator | None = None, base: RobotParams | None = None,
@@ -186,6 +189,9 @@ def replay_batch(rec: Recording, params_list: Any, start: int = 0, *, stop: int 
     q = np.array([s[0] for s in states], dtype=float).reshape(-1, 5)
     v = np.array([s[1] for s in states], dtype=float).reshape(-1, 2)
     sim = BatchSim(world, params, q=q, v=v, t=inputs.t0, base=base, cycle_s=rec.sample_period, substeps=substeps)
+    if start > 0 and SEED_ROWS:  # actuator_delay: the recorded commands before `start` are still on their way
+        before = replay_inputs(rec, max(start - SEED_ROWS, 0), start, nominal_timing)
+        sim.seed_commands(inputs.t0 - np.cumsum(before.period[::-1])[::-1], before.cmd)
     result = sim.run_inputs(inputs.cmd, substeps=substeps, sensors=sensors, seed=seed, period=inputs.period,
                             emitter=inputs.emitter)
     result.start = start

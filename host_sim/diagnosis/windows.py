@@ -23,7 +23,7 @@ from host_sim import dynamics, ir_sensor, motors
 from host_sim.batch import BatchSim, robot_params
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
-from host_sim.replay import ReplayError, replay_inputs, starts_at_rest, state_at, wheel_speeds_at
+from host_sim.replay import SEED_ROWS, ReplayError, replay_inputs, starts_at_rest, state_at, wheel_speeds_at
 from host_sim.world import World
 
 DEFAULT_SECONDS = (1.0, 5.0)
@@ -129,9 +129,6 @@ def _last_push(cmd: np.ndarray, start: np.ndarray) -> np.ndarray:
     last = np.maximum.accumulate(np.where(cmd != 0.0, rows, -1), axis=0)  # (n, 2) last non-zero row so far
     before = np.where(start[:, None] > 0, last[np.maximum(start - 1, 0)], -1)
     return np.where(before >= 0, np.sign(cmd[np.maximum(before, 0), [0, 1]]), 0.0)
-
-
-SEED_ROWS = 6  # commands before a window that a delayed actuator may still be carrying out (0.2 s at 40 ms)
 
 
 def _seed_commands(sim: BatchSim, cmd: np.ndarray, start: np.ndarray, n_sets: int, period: float) -> None:
