@@ -47,6 +47,14 @@ that may reach a wall in the step (a conservative bound on how far C moved
 since their last test).  world=None means no walls: no wall contacts, and
 the IR sensors see only the ambient light.
 
+Effects (host_sim/effects.py, docs/effects.md): while every drive effect is absent the
+substep is the nominal one above; with any present, drive_effects.py computes the motors,
+supply, body forces, dynamics and traction (per-wheel radii, friction, torque constants, the
+battery's sag: `vbat`, the gears' backlash: `gear_gap`), `actuator_delay` delays the
+references through a command history (`seed_commands` for what was sent before the start),
+and per-wheel encoder scales count each wheel with its own ticks per turn.  BatchResult.vbat
+is the battery voltage the robots sense at each control instant.
+
 Agreement with SimRobot: the same physics in the same order, but the numpy
 paths group the floating-point operations differently from the pure-Python
 ones, so a batch robot and a SimRobot with the same inputs agree to

@@ -10,6 +10,9 @@ current limit, friction) to wheel torques, the reduced Lagrangian dynamics
 advance q and v, and contact with a wall is resolved (the robot is pushed
 back out and its wheels stall; the start of each contact is a collision).
 
+With any drive effect of the library present (host_sim/effects.py, docs/effects.md) the robot
+runs through a host_sim.batch.BatchSim of one, where the effects' physics is written once.
+
 `sense()` gives what a HW_SENSE frame carries (tick, IR ADC counts with
 the emitters off and on at the power of the last actuation, encoder ticks,
 battery), `actuate()` takes what HW_ACTUATE carries.
