@@ -47,6 +47,14 @@ that may reach a wall in the step (a conservative bound on how far C moved
 since their last test).  world=None means no walls: no wall contacts, and
 the IR sensors see only the ambient light.
 
+Effects (host_sim/effects.py, docs/effects.md): while every drive effect is absent the
+substep is the nominal one above; with any present, drive_effects.py computes the motors,
+supply, body forces, dynamics and traction (per-wheel radii, friction, torque constants, the
+battery's sag: `vbat`, the gears' backlash: `gear_gap`), `actuator_delay` delays the
+references through a command history (`seed_commands` for what was sent before the start),
+and per-wheel encoder scales count each wheel with its own ticks per turn.  BatchResult.vbat
+is the battery voltage the robots sense at each control instant.
+
 Agreement with SimRobot: the same physics in the same order, but the numpy
 paths group the floating-point operations differently from the pure-Python
 ones, so a batch robot and a SimRobot with the same inputs agree to
@@ -75,7 +83,7 @@ from typing import Any
 
 import numpy as np
 
-from host_sim import contact, drive, dynamics, ir_sensor, motors
+from host_sim import contact, drive, drive_effects, dynamics, ir_sensor, motors
 from host_sim.dynamics import ParamBatch
 from host_sim.interface import CYCLE_S
 from host_sim.params import RobotParams
@@ -105,7 +113,8 @@ class BatchResult:
     collisions: np.ndarray  # (N,) contacts started during the run
     substeps: int
     start: int = 0  # the recording row it started from (replay_batch)
-    theta: np.ndarray | None = None  # (T, N, 2) wheel angles (rad), unquantised: what the encoders count
+    theta: np.ndarray | None = None  # (T, N, 2) what the encoders count (rad at the wheel), unquantised
+    vbat: np.ndarray | None = None  # (T, N) V, the battery voltage the robot senses (sags with battery_resistance)
 
     @property
     def periods(self) -> int:
@@ -206,6 +215,26 @@ class BatchSim:
         self._wheel_force = np.zeros((2, 2, n))
         self._wall_force = np.zeros((2, n, max(self.world.n_walls, 1)))
         self._walls = self.world.n_walls > 0
+        self.current = np.zeros((n, 2))  # A, the motor currents of the last substep (mid-step)
+        self.vbat = np.array(self.params.battery_voltage, dtype=float)  # V, what the robot senses
+        # actuator_delay: the commands as issued (time, (N, 2)); the drivers see them late
+        self._hist_t: list[float] = []
+        self._hist_i: list[np.ndarray] = []
+
+    def set_world(self, world: World) -> None:
+        """The robots, where they stand, in an edited world (SimRobot.set_world for each)."""
+        self.world = world
+        self._gap[:] = -1.0  # the broad phase's gaps were measured against the old walls
+        self._warm[:] = False  # contact forces are kept by wall index, which the edit may have changed
+        self._wall_force = np.zeros((2, self.n, max(world.n_walls, 1)))
+        self._walls = world.n_walls > 0
+
+    def seed_commands(self, times: Any, cmds: Any) -> None:
+        """The commands issued before now (times ascending, s; cmds (K, N, 2) or (K, 2), A): what a delayed
+        actuator still has on its way when the run starts.  Without it: no current before the first."""
+        for t, c in zip(times, cmds):
+            self._hist_t.append(float(t))
+            self._hist_i.append(np.broadcast_to(np.asarray(c, dtype=float), (self.n, 2)).copy())
 
     # ------------------------------------------------------------------ set-up
     def _set_state(self, poses: Any, q: Any, v: Any) -> None:
@@ -262,6 +291,12 @@ class BatchSim:
         self._wheel_radius = shared.wheel_radius if shared is not None else batch.wheel_radius
         self._half_axle = shared.half_axle if shared is not None else batch.half_axle
         self._shared = shared is not None
+        # The library's drive effects (host_sim/drive_effects.py): None while all are absent (the fast path).
+        self._fx = drive_effects.Drive.of(batch) if drive_effects.active(batch) else None
+        self._delay = batch.actuator_delay.copy() if np.any(batch.actuator_delay != 0.0) else None
+        # backlash: the gear's gap per wheel (motor angle / N - wheel angle), the play's middle at the start
+        self.gear_gap = np.zeros((self.n, 2)) if self._fx is not None and np.any(self._fx.play) else None
+        self._per_wheel_ticks = bool(np.any(batch.ticks_per_rev_delta_l != 0) or np.any(batch.ticks_per_rev_delta_r != 0))
         # IR groups: (indices or None for all, RobotParams).
         if shared is not None:
             self._ir_groups: list[tuple[np.ndarray | None, RobotParams]] = [(None, shared)]
@@ -293,7 +328,22 @@ class BatchSim:
 
     def encoder_ticks(self) -> np.ndarray:
         """(N, 2) int64 cumulative ticks (left, right)."""
+        if self._per_wheel_ticks or self.gear_gap is not None:
+            return motors.encoder_ticks_batch(self.encoder_angles(), self.params, wheels=True)
         return motors.encoder_ticks_batch(self.q[:, 3:5], self._p)
+
+    def engage_gears(self, side: Any) -> None:
+        """Backlash: close each gear's gap on `side` (N, 2) (+1 forward, -1 backward, 0 the middle), the
+        encoders reading as before (the wheels move instead): where a robot that had been driven sits."""
+        if self.gear_gap is not None:
+            gap = np.sign(np.asarray(side, dtype=float)) * self._fx.play  # type: ignore[union-attr]
+            self.q[:, 3:5] += self.gear_gap - gap
+            self.gear_gap = gap
+
+    def encoder_angles(self) -> np.ndarray:
+        """(N, 2) what the encoders count, in wheel radians: the motor's angle / N (the wheel's, but for
+        the backlash's gap)."""
+        return self.q[:, 3:5] if self.gear_gap is None else self.q[:, 3:5] + self.gear_gap
 
     def read_sensors(self, rng: np.random.Generator | None = None,
                      pose: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -327,9 +377,18 @@ class BatchSim:
     def substep(self, i_ref: Any, dt: float) -> None:
         """All N robots by dt seconds with current references i_ref, (2,) or (N, 2) A: SimRobot.advance
         for each (rolling where the wheels hold and no wall is hit, else the contact step)."""
+        if self._delay is not None:
+            i_ref = self._delayed(i_ref, dt)
         q0, v0 = self.q, self.v
-        q1, v1, tau, _cur = drive.drive_step_batch(q0, v0, i_ref, dt, self._p, self._p_motors)
-        ok = contact.traction_ok_batch(v0, v1, tau, dt, self._p) & ~self.slipping
+        if self.gear_gap is not None:
+            i_sent = i_ref
+            i_ref, w_m, engaged = drive_effects.backlash_reference(i_ref, v0, self.gear_gap, dt, self._fx)  # type: ignore[arg-type]
+        if self._fx is None:
+            q1, v1, tau, self.current = drive.drive_step_batch(q0, v0, i_ref, dt, self._p, self._p_motors)
+            ok = contact.traction_ok_batch(v0, v1, tau, dt, self._p) & ~self.slipping
+        else:
+            q1, v1, tau, self.current, self.vbat = drive_effects.drive_step(q0, v0, i_ref, dt, self._fx, self._d)
+            ok = drive_effects.traction_ok(v0, v1, tau, dt, self._fx) & ~self.slipping
         idx, gaps, normals, order = self._walls_in_reach(q0, q1, ok, dt)
         if idx.size:
             # the rolling step is kept unless it takes the rim into a wall (SimRobot.advance)
@@ -342,6 +401,9 @@ class BatchSim:
         if not ok.all():
             self._slip_step(q0, v0, q1, v1, ~ok, i_ref, dt, idx, gaps, normals, order)
         self._warm &= ~ok  # a rolling step ends the contact forces' history
+        if self.gear_gap is not None:
+            self.gear_gap = drive_effects.backlash_gap(self.gear_gap, i_sent, w_m, engaged, q1[:, 3:5] - q0[:, 3:5], dt,
+                                                   self._fx)  # type: ignore[arg-type]
         self.q, self.v = q1, v1
         self.t += dt
 
@@ -352,15 +414,7 @@ class BatchSim:
         s = np.flatnonzero(bad)
         i_s = np.asarray(i_ref, dtype=float)
         i_s = i_s[s] if i_s.ndim == 2 else np.broadcast_to(i_s, (len(s), 2))
-        tau, _cur, slope = motors.wheel_torque_slope_batch(i_s, v0[s], _SubParams(self._p_motors, s))
-        body = self.body[s]
-        rolling = ~self.slipping[s]
-        if rolling.any():
-            r, b = _sub(self._wheel_radius, s), _sub(self._half_axle, s)
-            vs = v0[s]
-            body[:, 0] = np.where(rolling, 0.5 * r * (vs[:, 0] + vs[:, 1]), body[:, 0])
-            body[:, 1] = np.where(rolling, 0.0, body[:, 1])
-            body[:, 2] = np.where(rolling, 0.5 * r * (vs[:, 1] - vs[:, 0]) / b, body[:, 2])
+        tau, slope, body, extra = self._slip_inputs(s, i_s, v0)
         width = gaps.shape[1] if idx.size else 0
         g = np.full((len(s), width), np.inf)
         nrm = np.zeros((len(s), width, 2))
@@ -377,9 +431,9 @@ class BatchSim:
         wheel_f = np.where(warm[None, None], self._wheel_force[:, :, s], 0.0)
         wall_f = self._wall_force[:, s[:, None], walls].transpose(0, 2, 1)  # (2, W, K)
         wall_f = np.where((warm[:, None] & np.isfinite(g))[None].transpose(0, 2, 1), wall_f, 0.0)
-        if len(s) >= self.vector_contacts_from:
+        if extra or len(s) >= self.vector_contacts_from:  # the effects: batch only
             qn, vn, bn, rolled, pushed, wheel_f, wall_f = contact.slip_step_batch(
-                q0[s], v0[s], body, tau, slope, dt, self._p, g, nrm, None if self._shared else s, wheel_f, wall_f)
+                q0[s], v0[s], body, tau, slope, dt, self._p, g, nrm, None if self._shared else s, wheel_f, wall_f, **extra)
         else:
             qn, vn, bn, rolled, pushed, wheel_f, wall_f = self._slip_steps_one_by_one(
                 s, q0, v0, body, tau, slope, dt, g, nrm, walls, wheel_f, wall_f)
@@ -426,6 +480,40 @@ class BatchSim:
         if cached is None:
             cached = self._robots_cache[j] = self._p.robot(j, self.base)
         return cached
+
+    def _slip_inputs(self, s: np.ndarray, i_s: np.ndarray, v0: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """For the contact step of robots s: wheel torques and their slopes at v0, body velocities (the
+        rolling robots' from their wheels), and the effects' extra arguments of contact.slip_step_batch."""
+        body = self.body[s]
+        rolling = ~self.slipping[s]
+        vs = v0[s]
+        if self._fx is not None:
+            fx = self._fx.sub(s)
+            tau, cur, slope, self.vbat[s] = drive_effects.wheel_torque_slope(i_s, vs, fx)
+            body = np.where(rolling[:, None], drive_effects.body_velocity(vs, fx), body)
+            self.current[s] = cur
+            forces = drive_effects.body_forces(body[:, 0], body[:, 1], body[:, 2], fx)
+            return tau, slope, body, {"radii": fx.radius, "body_force": forces}
+        tau, _cur, slope = motors.wheel_torque_slope_batch(i_s, vs, _SubParams(self._p_motors, s))
+        if rolling.any():
+            r, b = _sub(self._wheel_radius, s), _sub(self._half_axle, s)
+            body[:, 0] = np.where(rolling, 0.5 * r * (vs[:, 0] + vs[:, 1]), body[:, 0])
+            body[:, 1] = np.where(rolling, 0.0, body[:, 1])
+            body[:, 2] = np.where(rolling, 0.5 * r * (vs[:, 1] - vs[:, 0]) / b, body[:, 2])
+        return tau, slope, body, {}
+
+    def _delayed(self, i_ref: Any, dt: float) -> np.ndarray:
+        """The current references the drivers see over this substep, actuator_delay after they were issued
+        (a command is issued when it differs from the last; drive_effects.delayed_reference)."""
+        i = np.broadcast_to(np.asarray(i_ref, dtype=float), (self.n, 2))
+        if not self._hist_i or not np.array_equal(i, self._hist_i[-1]):
+            self._hist_t.append(self.t)
+            self._hist_i.append(i.copy())
+        oldest = self.t - float(self._delay.max())  # type: ignore[union-attr]
+        while len(self._hist_t) > 1 and self._hist_t[1] <= oldest:
+            del self._hist_t[0], self._hist_i[0]
+        return drive_effects.delayed_reference(self._hist_t, self._hist_i, self.t, dt, self._delay)  # type: ignore[arg-type]
 
     def _walls_in_reach(self, q0: np.ndarray, q1: np.ndarray, ok: np.ndarray, dt: float
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -489,14 +577,16 @@ class BatchSim:
         enc = np.empty((n_rows, n, 2), dtype=np.int64)
         theta = np.empty((n_rows, n, 2))
         pose = np.empty((n_rows, n, 3))
+        vbat = np.empty((n_rows, n))
         ir_on = np.empty((n_rows, n, N_SENSORS), dtype=np.int64) if sensors else None
         ir_amb = np.empty((n_rows, n, N_SENSORS), dtype=np.int64) if sensors else None
         collisions0 = self.collisions.copy()
         for j in range(n_rows):
             t_out[j] = self.t
             enc[j] = self.encoder_ticks()
-            theta[j] = self.q[:, 3:5]
+            theta[j] = self.encoder_angles()
             pose[j] = here = self.pose
+            vbat[j] = self.vbat
             if emitter is not None:
                 self.emitter_now = float(emitter[j])
             if sensors:
@@ -506,7 +596,8 @@ class BatchSim:
             dt = float(periods[j]) / substeps
             for _ in range(substeps):
                 self.substep(i_ref, dt)
-        return BatchResult(t_out, enc, pose, ir_on, ir_amb, self.collisions - collisions0, substeps, theta=theta)
+        return BatchResult(t_out, enc, pose, ir_on, ir_amb, self.collisions - collisions0, substeps, theta=theta,
+                           vbat=vbat)
 
 
 # --------------------------------------------------------------------------- #

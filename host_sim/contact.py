@@ -155,20 +155,20 @@ def _free_body(u: Any, l: Any, om: Any, dt: Any, m: Any, k: Any, j: Any) -> tupl
             (m * (m * r3 - k * r2) + am * (am * r3 - ak * r2) + r1 * (am * k - m * ak)) / det)
 
 
-def _wheel_blocks(iwl: Any, iwr: Any, m: Any, k: Any, j: Any, r: Any, b: Any) -> list[tuple[Any, ...]]:
+def _wheel_blocks(iwl: Any, iwr: Any, m: Any, k: Any, j: Any, radii: tuple[Any, Any], b: Any) -> list[tuple[Any, ...]]:
     """Per wheel (left, right): (s b, the heading row's M^-1 J^T on l and omega, on the wheel, and the
-    inverse of the 2x2 block [heading, sideways] of J M^-1 J^T as a11, a12, a22).  iw*: the wheels'
-    inertias in this step.  Floats or arrays."""
+    inverse of the 2x2 block [heading, sideways] of J M^-1 J^T as a11, a12, a22, then W's entries and
+    the wheel's radius).  iw*: the wheels' inertias in this step; radii: each wheel's.  Floats or arrays."""
     ju, jd = 1.0 / m, 1.0 / (m * j - k * k)
     blocks = []
-    for side, iwi in ((1.0, iwl), (-1.0, iwr)):
+    for side, iwi, r in ((1.0, iwl, radii[0]), (-1.0, iwr, radii[1])):
         sb = side * b
         wee = ju + m * b * b * jd + r * r / iwi
         wen = sb * k * jd
         wnn = j * jd
         idet = 1.0 / (wee * wnn - wen * wen)
         blocks.append((sb, k * sb * jd, -m * sb * jd, -r / iwi, wnn * idet, -wen * idet, wee * idet, wee, wen, wnn,
-                       _eigen(wee, wen, wnn)))
+                       _eigen(wee, wen, wnn), r))
     return blocks
 
 
@@ -238,7 +238,7 @@ def slip_step(q: Any, v: Any, body: tuple[float, float, float] | None, tau: Any,
     # Wheels: I_w (w1 - w0) = dt (tau + slope (w1 - w0)) + impulse, linearly implicit.
     iwl, iwr = iw - dt * slope[0], iw - dt * slope[1]
     nu = [u, l, om, v[0] + dt * tau[0] / iwl, v[1] + dt * tau[1] / iwr]
-    wheels = _wheel_blocks(iwl, iwr, m, k, j, r, b)
+    wheels = _wheel_blocks(iwl, iwr, m, k, j, (r, r), b)
     contacts = []
     for gap, nx, ny, _index in walls:
         ne, nn = nx * c + ny * s, -nx * s + ny * c
@@ -288,8 +288,8 @@ def _solve(nu: list[float], wheels: list[tuple[Any, ...]], contacts: list[tuple[
     for _ in range(PGS_MAX_ITER):
         before = (nu[0], nu[1], nu[2], nu[3], nu[4])
         for i, w in enumerate(wheels):
-            sb, _el, _ew, _er, a11, a12, a22, wee, wen, wnn, eig = w
-            ve = nu[0] - sb * nu[2] - r * nu[3 + i]
+            sb, _el, _ew, _er, a11, a12, a22, wee, wen, wnn, eig, ri = w
+            ve = nu[0] - sb * nu[2] - ri * nu[3 + i]
             pe0, pn0 = pw[i]
             pe, pn = pe0 - (a11 * ve + a12 * nu[1]), pn0 - (a12 * ve + a22 * nu[1])
             if pe * pe + pn * pn > lim * lim:
@@ -319,23 +319,30 @@ def _solve(nu: list[float], wheels: list[tuple[Any, ...]], contacts: list[tuple[
 
 def slip_step_batch(q: np.ndarray, v: np.ndarray, body: np.ndarray, tau: np.ndarray, slope: np.ndarray, dt: Any,
                     p: Any, gaps: np.ndarray, normals: np.ndarray, idx: np.ndarray | None = None,
-                    warm_wheels: np.ndarray | None = None, warm_walls: np.ndarray | None = None
+                    warm_wheels: np.ndarray | None = None, warm_walls: np.ndarray | None = None,
+                    radii: np.ndarray | None = None, body_force: tuple[Any, Any, Any] | None = None
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """`slip_step` for K robots: q (K, 5), v (K, 2), body (K, 3) (u, l, omega; for rolling robots
     from v), tau, slope (K, 2), dt float or (K,), gaps (K, W) and normals (K, W, 2) as
     walls_in_reach_batch; p a RobotParams or a ParamBatch, of which robots idx are these K;
     warm_wheels (2, 2, K) and warm_walls (2, W, K): the previous step's forces, as slip_step's warm.
+    radii (K, 2): each wheel's radius (default wheel_radius); body_force: (F_e, F_n, M_C) (K,) each, forces
+    on the body other than the wheels' and the walls' (the caster's drag, the tyres' scrub; host_sim/
+    drive_effects.py), taken at the start of the step.
     Returns (q, v, body, rolling (K,), pushed (K,), wheel forces (2, 2, K), wall forces (2, W, K))."""
     cs = consts(p)
     if idx is not None:
         cs = tuple(x[idx] if isinstance(x, np.ndarray) else x for x in cs)
-    m, k, j, _dd, iw, r, b, d, rad, cap, _mu_w, _mg = cs
+    m, k, j, dd, iw, r, b, d, rad, cap, _mu_w, _mg = cs
     n, n_walls = len(q), gaps.shape[1]
     c, s = np.cos(q[:, 2]), np.sin(q[:, 2])
     u, l, om = _free_body(body[:, 0], body[:, 1], body[:, 2], dt, m, k, j)
+    if body_force is not None:  # M^-1 F: the heading row alone, (l, omega) coupled through k
+        fe, fn, mc = body_force
+        u, l, om = u + dt * fe / m, l + dt * (j * fn - k * mc) / dd, om + dt * (m * mc - k * fn) / dd
     iwl, iwr = iw - dt * slope[:, 0], iw - dt * slope[:, 1]
     nu = [u, l, om, v[:, 0] + dt * tau[:, 0] / iwl, v[:, 1] + dt * tau[:, 1] / iwr]
-    wheels = _wheel_blocks(iwl, iwr, m, k, j, r, b)
+    wheels = _wheel_blocks(iwl, iwr, m, k, j, (r, r) if radii is None else (radii[:, 0], radii[:, 1]), b)
     ne = (normals[..., 0] * c[:, None] + normals[..., 1] * s[:, None]).T  # (W, K)
     nn = (-normals[..., 0] * s[:, None] + normals[..., 1] * c[:, None]).T
     contacts = [(gaps[:, w] / dt, ne[w], nn[w]) + _wall_block(ne[w], nn[w], m, k, j, rad) for w in range(n_walls)]
@@ -377,8 +384,8 @@ def _solve_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: 
     active = np.ones(len(nu[0]), dtype=bool)
     for _ in range(PGS_MAX_ITER):
         before = [x.copy() for x in nu]
-        for i, (sb, el, ew, er, a11, a12, a22, wee, wen, wnn, eig) in enumerate(wheels):
-            ve = nu[0] - sb * nu[2] - r * nu[3 + i]
+        for i, (sb, el, ew, er, a11, a12, a22, wee, wen, wnn, eig, ri) in enumerate(wheels):
+            ve = nu[0] - sb * nu[2] - ri * nu[3 + i]
             pe0, pn0 = pw[i, 0].copy(), pw[i, 1].copy()
             pe, pn = pe0 - (a11 * ve + a12 * nu[1]), pn0 - (a12 * ve + a22 * nu[1])
             over = pe * pe + pn * pn > lim * lim

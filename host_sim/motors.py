@@ -176,23 +176,37 @@ def max_quiet_dt(p: RobotParams, coulomb_eps: float = COULOMB_EPS) -> float:
     return h_min / slope if slope > 0 else math.inf
 
 
-def encoder_ticks(theta: float, p: RobotParams) -> int:
-    """Cumulative encoder count for a wheel angle theta (rad): floor(theta / (2 pi) * ticks_per_rev)."""
-    return math.floor(theta / TWO_PI * p.ticks_per_rev)
+def ticks_per_rev(p: RobotParams, wheel: int | None = None) -> float:
+    """Encoder counts per wheel turn: the nominal, or wheel 0 (left) / 1 (right)'s own (the encoder_scale effect)."""
+    if wheel is None:
+        return p.ticks_per_rev
+    return p.ticks_per_rev + (p.ticks_per_rev_delta_l if wheel == 0 else p.ticks_per_rev_delta_r)
 
 
-def encoder_ticks_batch(theta: Any, p: Any) -> np.ndarray:
-    """encoder_ticks for an array of angles (N,) or (N, 2) -> int64 array of the same shape."""
+def encoder_ticks(theta: float, p: RobotParams, wheel: int | None = None) -> int:
+    """Cumulative encoder count for a wheel angle theta (rad): floor(theta / (2 pi) * ticks_per_rev),
+    with wheel 0 / 1 that wheel's own counts per turn."""
+    return math.floor(theta / TWO_PI * ticks_per_rev(p, wheel))
+
+
+def encoder_ticks_batch(theta: Any, p: Any, wheels: bool = False) -> np.ndarray:
+    """encoder_ticks for an array of angles (N,) or (N, 2) -> int64 array of the same shape.
+
+    wheels: theta is (N, 2) (left, right), each wheel counted with its own counts per turn."""
     theta = np.asarray(theta, dtype=float)
+    if wheels:
+        tpr = np.stack([np.asarray(p.ticks_per_rev + p.ticks_per_rev_delta_l, dtype=float),
+                        np.asarray(p.ticks_per_rev + p.ticks_per_rev_delta_r, dtype=float)], -1)
+        return np.floor(theta / TWO_PI * tpr).astype(np.int64)
     return np.floor(theta / TWO_PI * _axis0(p.ticks_per_rev, theta.ndim)).astype(np.int64)
 
 
-def encoder_angle(ticks: int, p: RobotParams) -> float:
+def encoder_angle(ticks: int, p: RobotParams, wheel: int | None = None) -> float:
     """The centre (rad) of tick `ticks`: encoder_ticks(encoder_angle(k)) == k for every k.
 
     The centre, not the lower edge: k * 2 pi / tpr, divided back by 2 pi / tpr,
     rounds to just below k for about one k in six, and floor then gives k - 1."""
-    return (ticks + 0.5) * TWO_PI / p.ticks_per_rev
+    return (ticks + 0.5) * TWO_PI / ticks_per_rev(p, wheel)
 
 
 def encoder_angle_batch(ticks: Any, p: Any) -> np.ndarray:

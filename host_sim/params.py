@@ -216,7 +216,26 @@ def params_from_dict(data: object, where: str = "parameters") -> RobotParams:
             raise ParamsError(f"{where}: '{name}' must be >= 0, got {getattr(params, name)}")
     if not 0 < params.gear_efficiency <= 1:
         raise ParamsError(f"{where}: 'gear_efficiency' must be in (0, 1], got {params.gear_efficiency}")
+    _check_effects(params, where)
     return params
+
+
+def _check_effects(p: RobotParams, where: str) -> None:
+    """The library's effects (host_sim/effects.py) must leave a robot that exists."""
+    for w in ("l", "r"):
+        for base, delta, lowest in (("wheel_radius", "wheel_radius_delta", 0.0),
+                                    ("torque_constant", "torque_constant_delta", 0.0),
+                                    ("ticks_per_rev", "ticks_per_rev_delta", 0.5),
+                                    ("coulomb_friction", "coulomb_friction_delta", -1e-300),
+                                    ("viscous_friction", "viscous_friction_delta", -1e-300)):
+            total = getattr(p, base) + getattr(p, f"{delta}_{w}")
+            if not total > lowest:
+                raise ParamsError(f"{where}: '{delta}_{w}' leaves {base} + {delta}_{w} = {total:g}, which must be "
+                                  f"{'positive' if lowest >= 0 else '>= 0'}")
+    for name in ("backlash_l", "backlash_r", "actuator_delay", "battery_resistance", "caster_drag",
+                 "turning_resistance"):
+        if getattr(p, name) < 0:
+            raise ParamsError(f"{where}: '{name}' must be >= 0, got {getattr(p, name)}")
 
 
 def _check_ranges(changes: dict[str, object], where: str) -> None:

@@ -106,7 +106,7 @@ def state_at(rec: Recording, k: int, p: RobotParams) -> tuple[tuple[float, ...],
     if starts_at_rest(rec, k):
         theta = [0.0, 0.0]  # the simulator starts every run at rest, the wheels at angle 0
     else:  # the middle of the recorded tick: the best guess, and never the tick below
-        theta = [motors.encoder_angle(int(rec.enc[k, i]), p) for i in range(2)]
+        theta = [motors.encoder_angle(int(rec.enc[k, i]), p, i) for i in range(2)]
     v = (0.0, 0.0) if starts_at_rest(rec, k) else wheel_speeds_at(rec, k, p)
     q = dynamics.q_from_axle_pose(x, y, phi, p, theta[0], theta[1])
     return q, (float(v[0]), float(v[1]))
@@ -119,9 +119,8 @@ def wheel_speeds_at(rec: Recording, k: int, p: RobotParams) -> tuple[float, floa
     dt = float(rec.t[hi] - rec.t[lo]) if n > 1 else 0.0
     if dt <= 0:
         return (0.0, 0.0)
-    per_tick = 2 * math.pi / p.ticks_per_rev
-    return (float(rec.enc[hi, 0] - rec.enc[lo, 0]) * per_tick / dt,
-            float(rec.enc[hi, 1] - rec.enc[lo, 1]) * per_tick / dt)
+    return (float(rec.enc[hi, 0] - rec.enc[lo, 0]) * (2 * math.pi / motors.ticks_per_rev(p, 0)) / dt,
+            float(rec.enc[hi, 1] - rec.enc[lo, 1]) * (2 * math.pi / motors.ticks_per_rev(p, 1)) / dt)
 
 
 def replay(rec: Recording, p: RobotParams, world: World, start: int = 0, stop: int | None = None,
@@ -166,6 +165,9 @@ def replay(rec: Recording, p: RobotParams, world: World, start: int = 0, stop: i
     return ReplayResult(t, enc, pose, ir_on, ir_amb, start)
 
 
+SEED_ROWS = 6  # recorded commands before a start that a delayed actuator may still be carrying out (0.2 s)
+
+
 def replay_batch(rec: Recording, params_list: Any, start: int = 0, *, stop: int | None = None,
                  world: World | None = None, substeps: int = 8, sensors: bool = True,
                  seed: int | np.random.Generator | None = None, base: RobotParams | None = None,
@@ -187,6 +189,9 @@ def replay_batch(rec: Recording, params_list: Any, start: int = 0, *, stop: int 
     q = np.array([s[0] for s in states], dtype=float).reshape(-1, 5)
     v = np.array([s[1] for s in states], dtype=float).reshape(-1, 2)
     sim = BatchSim(world, params, q=q, v=v, t=inputs.t0, base=base, cycle_s=rec.sample_period, substeps=substeps)
+    if start > 0 and SEED_ROWS:  # actuator_delay: the recorded commands before `start` are still on their way
+        before = replay_inputs(rec, max(start - SEED_ROWS, 0), start, nominal_timing)
+        sim.seed_commands(inputs.t0 - np.cumsum(before.period[::-1])[::-1], before.cmd)
     result = sim.run_inputs(inputs.cmd, substeps=substeps, sensors=sensors, seed=seed, period=inputs.period,
                             emitter=inputs.emitter)
     result.start = start

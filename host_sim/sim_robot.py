@@ -10,6 +10,9 @@ current limit, friction) to wheel torques, the reduced Lagrangian dynamics
 advance q and v, and contact with a wall is resolved (the robot is pushed
 back out and its wheels stall; the start of each contact is a collision).
 
+With any drive effect of the library present (host_sim/effects.py, docs/effects.md) the robot
+runs through a host_sim.batch.BatchSim of one, where the effects' physics is written once.
+
 `sense()` gives what a HW_SENSE frame carries (tick, IR ADC counts with
 the emitters off and on at the power of the last actuation, encoder ticks,
 battery), `actuate()` takes what HW_ACTUATE carries.
@@ -20,7 +23,7 @@ import math
 
 import numpy as np
 
-from host_sim import contact, drive, dynamics, ir_sensor, motors
+from host_sim import contact, drive, drive_effects, dynamics, ir_sensor, motors
 from host_sim.interface import TICK_MASK, Actuate, Sense
 from host_sim.params import RobotParams
 from host_sim.world import World
@@ -51,6 +54,14 @@ class SimRobot:
         self._gap_at_check = -1.0  # the smallest wall gap at the last wall test (broad phase)
         self._checked_at = (0.0, 0.0, 0.0)  # G and phi at the last wall test
         self.last_sense: Sense | None = None
+        self.vbat = float(params.battery_voltage)  # V at the battery's terminals (sags with battery_resistance)
+        # With any drive effect of the library present the robot runs as a BatchSim of one: the effects'
+        # physics is written once (host_sim/drive_effects.py), so this and the batch twin are the same code.
+        self._effects = None
+        if drive_effects.active(params) or params.actuator_delay != 0.0:
+            from host_sim.batch import BatchSim  # batch imports this module
+
+            self._effects = BatchSim(world, params, q=[self.q], v=[self.v], substeps=1)
 
     @property
     def pose(self) -> tuple[float, float, float]:
@@ -59,7 +70,10 @@ class SimRobot:
         return x, y, self.q[2]
 
     def encoder_ticks(self) -> tuple[int, int]:
-        return motors.encoder_ticks(self.q[3], self.p), motors.encoder_ticks(self.q[4], self.p)
+        th_l, th_r = self.q[3], self.q[4]
+        if self._effects is not None and self._effects.gear_gap is not None:  # the encoders are on the motors
+            th_l, th_r = th_l + float(self._effects.gear_gap[0, 0]), th_r + float(self._effects.gear_gap[0, 1])
+        return motors.encoder_ticks(th_l, self.p, 0), motors.encoder_ticks(th_r, self.p, 1)
 
     def sense(self) -> Sense:
         self.emitter_used = self.emitter_pct
@@ -71,7 +85,7 @@ class SimRobot:
                                                self.rng)
         enc_l, enc_r = self.encoder_ticks()
         s = Sense(int(round(self.t * 1000)) & TICK_MASK, off, on, enc_l, enc_r,
-                  int(round(self.p.battery_voltage * 1000)))
+                  int(round(self.vbat * 1000)))
         self.last_sense = s
         return s
 
@@ -91,6 +105,9 @@ class SimRobot:
     def advance(self, dt: float) -> None:
         """One substep of dt seconds: rolling (drive.drive_step) while the wheels hold and no wall is hit,
         else the contact step (contact.slip_step, docs/dynamics.md "Contact")."""
+        if self._effects is not None:
+            self._advance_effects(dt)
+            return
         p = self.p
         q0, v0 = self.q, self.v
         rolled = False
@@ -129,6 +146,25 @@ class SimRobot:
         self.world = world
         self._gap_at_check = -1.0  # the broad phase's gap was measured against the old walls
         self._forces = None  # contact forces are kept by wall index, which the edit may have changed
+        if self._effects is not None:
+            self._effects.set_world(world)
+
+    def _advance_effects(self, dt: float) -> None:
+        """advance() through the BatchSim of one that carries the effects (state copied in and out, so a
+        caller may set q and v as with the nominal robot)."""
+        twin = self._effects
+        assert twin is not None
+        twin.q[0], twin.v[0], twin.t = self.q, self.v, self.t
+        if self.slip is None:
+            twin.slipping[0] = False
+        twin.substep(self.i_ref, dt)
+        self.q = tuple(float(x) for x in twin.q[0])
+        self.v = (float(twin.v[0, 0]), float(twin.v[0, 1]))
+        self.current = (float(twin.current[0, 0]), float(twin.current[0, 1]))
+        self.vbat = float(twin.vbat[0])
+        self.collisions, self.in_contact = int(twin.collisions[0]), bool(twin.in_contact[0])
+        self.slip = tuple(float(x) for x in twin.body[0]) if twin.slipping[0] else None  # type: ignore[assignment]
+        self.t += dt
 
     def _walls_in_reach(self, q0: tuple[float, ...], q1: tuple[float, ...] | None,
                         dt: float) -> list[tuple[float, float, float, int]]:

@@ -51,6 +51,17 @@ def test_the_twins_own_recording_is_a_match(nominal_run):
     ("ir_misalignment", 1, 0.2),  # S2 turned 11 degrees counter-clockwise
     ("ambient_leakage", 0, 0.2),  # S1's on-reading sees 20 % more of the ambient
     ("ir_latency", "both", 0.08),  # the ring reads the pose of two periods ago
+    # the drive effects, physics in the twin (host_sim/drive_effects.py, docs/effects.md)
+    ("dry_friction", "left", 3e-3),  # coulomb_friction_delta_l
+    ("viscous_friction", "right", 4e-4),
+    ("wheel_radius", "left", 1.5e-3),
+    ("torque_constant", "right", -6e-4),
+    ("encoder_scale", "left", 60.0),  # ticks_per_rev_delta_l
+    ("backlash", "right", 0.15),
+    ("actuator_delay", "both", 0.06),
+    ("battery_resistance", "both", 3.0),
+    ("caster_drag", "both", 0.1),
+    ("turning_resistance", "both", 0.004),
 ])
 def test_an_effect_injected_into_the_twin_is_named_measured_and_fitted(tmp_path, effect, site, true_value):
     rec = record(tmp_path, E.apply(DEFAULT, effect, site, [true_value]))
@@ -59,6 +70,8 @@ def test_an_effect_injected_into_the_twin_is_named_measured_and_fitted(tmp_path,
     assert [e["name"] for e in d.effects] == [effect], d.summary()
     if isinstance(site, int):
         assert d.effects[0]["sensor"] == site
+    elif site in ("left", "right"):
+        assert d.effects[0]["wheel"] == site
     (param,) = d.effects[0]["params"].values()
     assert param["value"] == pytest.approx(true_value, rel=0.15)
     lo, hi = param["ci95"]

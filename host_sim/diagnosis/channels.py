@@ -78,8 +78,9 @@ def build_channels(rec: Recording, windows: Windows, run: WindowRun, robots: lis
         if world is not None and world.n_walls:
             chans += _sensor_channels(rec, idx[:, 1:], robots, world)
     vb = rec.vbat[idx[:, 1:]]
-    chans.append(Channel("vbat", "V", vb, np.repeat(np.full_like(vb, p.battery_voltage)[:, None], run.enc.shape[1], 1),
-                         0.005, relative=False))
+    vb_twin = (run.vbat[..., 1:] if run.vbat is not None
+               else np.repeat(np.full_like(vb, p.battery_voltage)[:, None], run.enc.shape[1], 1))
+    chans.append(Channel("vbat", "V", vb, vb_twin, 0.005, relative=False))
     return chans
 
 

@@ -15,7 +15,8 @@ candidates' order: the plainer physics), accepted only if it
 is significant against the twin without it (F test) AND it improves the
 fit on the held-out windows by at least MIN_HELD_OUT_GAIN.  Candidates that
 explain the held-out data as well as the chosen one (within AMBIGUITY) are
-reported beside it.
+reported beside it.  Backward elimination then drops an effect that a later one made redundant
+(the refitted twin without it is as good by the same two tests).
 """
 from __future__ import annotations
 
@@ -265,7 +266,7 @@ def _plainest(tried: list[Model], cands: list[Candidate]) -> Model:
 
 def select(obj: Objective, base: RobotParams, cands: list[Candidate],
            progress: Callable[[str], None] | None = None) -> list[Model]:
-    """Forward selection: the chain of accepted models, nominal first."""
+    """Forward selection, then backward elimination: the chain of accepted models, nominal first."""
     say = progress or (lambda _t: None)
     r_train, r_test = obj.residuals([base])
     chain = [Model([], [], base, float(r_train[0] @ r_train[0]), float(r_test[0] @ r_test[0]), int(r_train.size))]
@@ -294,4 +295,34 @@ def select(obj: Objective, base: RobotParams, cands: list[Candidate],
         best.alternatives = [m.effects[-1].label() for m in tried
                              if m is not best and m.cost_test <= best.cost_test * (1 + AMBIGUITY)]
         chain.append(best)
+    return backward(obj, base, chain, say)
+
+
+def _sizes(values: list[list[float]]) -> int:
+    return sum(len(v) for v in values)
+
+
+def backward(obj: Objective, base: RobotParams, chain: list[Model],
+             say: Callable[[str], None] = lambda _t: None) -> list[Model]:
+    """Backward elimination after the forward pass: an effect chosen early may be made redundant by one
+    chosen later (a stand-in taken first because its one-step screening promised more), and is dropped
+    if the others without it, refitted, are as good (F test or held-out gain, as for adding one).  The
+    chain is then rebuilt, each step refitted, so every effect keeps its evidence."""
+    final = chain[-1]
+    for i in range(len(final.effects) - 1):  # the last one was just judged against all the others
+        rest = [j for j in range(len(final.effects)) if j != i]
+        effects, values = [final.effects[j] for j in rest], [final.values[j] for j in rest]
+        say(f"checking that {final.effects[i].label()} is still needed")
+        reduced = fit_model(obj, base, effects, values)
+        p = f_test(reduced.cost_train, final.cost_train, len(final.values[i]), final.n_train, _sizes(final.values))
+        gain = 1.0 - final.cost_test / reduced.cost_test if reduced.cost_test > 0 else 0.0
+        if p <= P_MAX and gain >= MIN_HELD_OUT_GAIN:
+            continue
+        rebuilt = chain[:1]
+        for n in range(1, len(effects) + 1):
+            m = reduced if n == len(effects) else fit_model(obj, base, effects[:n], values[:n])
+            m.p_value = f_test(rebuilt[-1].cost_train, m.cost_train, len(values[n - 1]), m.n_train, _sizes(values[:n]))
+            m.alternatives = chain[rest[n - 1] + 1].alternatives
+            rebuilt.append(m)
+        return backward(obj, base, rebuilt, say)
     return chain

@@ -23,7 +23,7 @@ from host_sim import dynamics, ir_sensor, motors
 from host_sim.batch import BatchSim, robot_params
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
-from host_sim.replay import ReplayError, replay_inputs, starts_at_rest, state_at, wheel_speeds_at
+from host_sim.replay import SEED_ROWS, ReplayError, replay_inputs, starts_at_rest, state_at, wheel_speeds_at
 from host_sim.world import World
 
 DEFAULT_SECONDS = (1.0, 5.0)
@@ -70,6 +70,7 @@ class WindowRun:
 
     enc: np.ndarray  # (W, N, T, 2) encoder counts, unquantised (float): smooth in the parameters, for fitting
     pose: np.ndarray  # (W, N, T, 3) pose of C
+    vbat: np.ndarray | None = None  # (W, N, T) V, the battery voltage the twin senses
 
 
 def initial_states(rec: Recording, rows: np.ndarray, p: RobotParams) -> tuple[np.ndarray, np.ndarray]:
@@ -80,7 +81,7 @@ def initial_states(rec: Recording, rows: np.ndarray, p: RobotParams) -> tuple[np
         if rec.pose is not None:
             qk, vk = state_at(rec, int(k), p)
         else:
-            theta = [motors.encoder_angle(int(rec.enc[k, w]), p) for w in range(2)]
+            theta = [motors.encoder_angle(int(rec.enc[k, w]), p, w) for w in range(2)]
             qk = dynamics.q_from_axle_pose(0.0, 0.0, 0.0, p, theta[0], theta[1])
             vk = (0.0, 0.0) if starts_at_rest(rec, int(k)) else wheel_speeds_at(rec, int(k), p)
         q[i], v[i] = qk, vk
@@ -111,12 +112,30 @@ def run_windows(rec: Recording, windows: Windows, params: Any, world: World | No
     # One period per window row for all windows: the robot's clock ticks whole milliseconds, so a
     # recording's periods are equal but for overruns, which the median over the windows ignores.
     period = np.median(inputs.period[idx], axis=0)
+    _seed_commands(sim, inputs.cmd, windows.start, n_sets, float(np.median(period)))
+    sim.engage_gears(np.repeat(_last_push(inputs.cmd, windows.start), n_sets, axis=0))
     res = sim.run_inputs(cmd, substeps=substeps, sensors=False, period=period)
-    assert res.theta is not None
+    assert res.theta is not None and res.vbat is not None
     counts = res.theta * (_ticks_per_rev(robots, n_win) / (2 * np.pi))
     enc = counts.reshape(n_rows, n_win, n_sets, 2).transpose(1, 2, 0, 3)
     pose = res.pose.reshape(n_rows, n_win, n_sets, 3).transpose(1, 2, 0, 3)
-    return WindowRun(enc, pose)
+    return WindowRun(enc, pose, res.vbat.reshape(n_rows, n_win, n_sets).transpose(1, 2, 0))
+
+
+def _last_push(cmd: np.ndarray, start: np.ndarray) -> np.ndarray:
+    """(W, 2) the sign of each wheel's last non-zero recorded command before each window: the side its gear's
+    backlash is closed on (with no current the gear stays where it was), 0 if none."""
+    rows = np.arange(len(cmd))[:, None]
+    last = np.maximum.accumulate(np.where(cmd != 0.0, rows, -1), axis=0)  # (n, 2) last non-zero row so far
+    before = np.where(start[:, None] > 0, last[np.maximum(start - 1, 0)], -1)
+    return np.where(before >= 0, np.sign(cmd[np.maximum(before, 0), [0, 1]]), 0.0)
+
+
+def _seed_commands(sim: BatchSim, cmd: np.ndarray, start: np.ndarray, n_sets: int, period: float) -> None:
+    """The recorded commands of the rows before each window, as sent before the twin's start (actuator_delay)."""
+    rows = start[None, :] - np.arange(SEED_ROWS, 0, -1)[:, None]  # (K, W)
+    before = np.where(rows[..., None] >= 0, cmd[np.maximum(rows, 0)], 0.0)  # (K, W, 2)
+    sim.seed_commands(-period * np.arange(SEED_ROWS, 0, -1), np.repeat(before, n_sets, axis=1))
 
 
 def _ticks_per_rev(robots: list[RobotParams], n_win: int) -> np.ndarray:

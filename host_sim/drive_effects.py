@@ -1,0 +1,304 @@
+"""The drive with the library's effects switched on (host_sim/effects.py, docs/effects.md): N robots, numpy.
+
+The nominal twin's drive (host_sim/drive.py, motors.py, dynamics.py) is the
+fast path, and it stays exactly as it is while every drive effect holds its
+"absent" value.  When any of them is set, host_sim/batch.BatchSim takes this
+path instead, and host_sim/sim_robot.SimRobot runs its one robot through a
+BatchSim of one (so the single-robot and the batch twin are the same code
+and agree bit for bit).  The equations are the nominal ones, generalised:
+
+* per wheel i: radius r_i = r + dr_i, torque (= back-EMF) constant
+  k_i = k_t + dk_i, dry friction T_i = T_c + dT_i, viscous c_i = c_v + dc_i;
+* the supply V = V_bat - R_int (|i_l| + |i_r|), solved with the currents it
+  allows (Newton on a piecewise-linear equation, `supply`);
+* body forces: a caster at C - a e (a = CASTER_BEHIND) dragged against its
+  velocity, F = -F_c tanh(|v_c| / eps_v) v_c / |v_c|; a scrub torque
+  M = -T_s tanh(omega / eps_w); as generalised forces on (u, omega);
+* the reduced dynamics in (u, omega) with H no longer diagonal when the
+  radii differ (docs/effects.md, "wheel_radius"), the same linearly implicit
+  midpoint step as dynamics.step and the same midpoint torque as drive.drive_step.
+
+With every delta at 0 these are the nominal formulas (equal to the fast path
+to rounding error): an effect's value enters continuously from "absent".
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from host_sim.motors import COULOMB_EPS
+
+CASTER_BEHIND = 0.045  # m: the caster sits on the body's axis this far behind C (3/4 of the body radius)
+SUPPLY_NEWTON = 4  # Newton steps on the supply voltage (exact once the active limits are found)
+# RobotParams fields that switch this path on when any robot has them away from 0.
+FIELDS = ("coulomb_friction_delta_l", "coulomb_friction_delta_r", "viscous_friction_delta_l",
+          "viscous_friction_delta_r", "wheel_radius_delta_l", "wheel_radius_delta_r", "torque_constant_delta_l",
+          "torque_constant_delta_r", "battery_resistance", "caster_drag", "turning_resistance", "backlash_l",
+          "backlash_r")
+
+
+def active(p: Any) -> bool:
+    """True if any drive effect is present (p a RobotParams or a ParamBatch)."""
+    return any(np.any(np.asarray(getattr(p, f)) != 0.0) for f in FIELDS)
+
+
+def _pair(a: Any, b: Any) -> np.ndarray:
+    return np.stack([np.asarray(a, dtype=float), np.asarray(b, dtype=float)], axis=-1)
+
+
+@dataclass
+class Drive:
+    """Per-robot constants of the drive with effects: (N,) arrays, (N, 2) per wheel (left, right)."""
+
+    radius: np.ndarray  # (N, 2) m
+    kt: np.ndarray  # (N, 2) N m/A
+    t_c: np.ndarray  # (N, 2) N m
+    c_v: np.ndarray  # (N, 2) N m s/rad
+    lim: np.ndarray  # (N, 1) A
+    gear: np.ndarray  # (N, 1)
+    eta: np.ndarray  # (N, 1)
+    res: np.ndarray  # (N, 1) ohm, armature
+    v_bat: np.ndarray  # (N,) V
+    r_int: np.ndarray  # (N,) ohm
+    caster: np.ndarray  # (N,) N
+    scrub: np.ndarray  # (N,) N m
+    b: np.ndarray  # (N,) m
+    g: np.ndarray  # (N,) m_c d
+    iw: np.ndarray  # (N,)
+    m: np.ndarray  # (N,) m_c + 2 m_w
+    h: tuple[np.ndarray, np.ndarray, np.ndarray]  # H in (u, omega): A, B, C
+    cap: np.ndarray  # (N,) mu N per wheel
+    play: np.ndarray  # (N, 2) rad, half the backlash: the gear's gap is in [-play, play]
+
+    @classmethod
+    def of(cls, p: Any) -> Drive:
+        """From a ParamBatch (or anything with (N,) parameter arrays)."""
+        r = _pair(p.wheel_radius + p.wheel_radius_delta_l, p.wheel_radius + p.wheel_radius_delta_r)
+        col = (lambda a: np.asarray(a, dtype=float)[:, None])
+        b, iw = np.asarray(p.half_axle, dtype=float), np.asarray(p.wheel_inertia, dtype=float)
+        m = p.body_mass + 2 * p.wheel_mass
+        j_b = p.body_inertia + p.body_mass * p.com_offset ** 2 + 2 * p.wheel_mass * b * b + 2 * p.wheel_inertia_diam
+        il2, ir2 = 1.0 / r[:, 0] ** 2, 1.0 / r[:, 1] ** 2
+        h = (m + iw * (il2 + ir2), iw * b * (ir2 - il2), j_b + iw * b * b * (il2 + ir2))
+        return cls(radius=r,
+                   kt=_pair(p.torque_constant + p.torque_constant_delta_l, p.torque_constant + p.torque_constant_delta_r),
+                   t_c=_pair(p.coulomb_friction + p.coulomb_friction_delta_l,
+                             p.coulomb_friction + p.coulomb_friction_delta_r),
+                   c_v=_pair(p.viscous_friction + p.viscous_friction_delta_l,
+                             p.viscous_friction + p.viscous_friction_delta_r),
+                   lim=col(p.current_limit), gear=col(p.gear_ratio), eta=col(p.gear_efficiency),
+                   res=col(p.armature_resistance), v_bat=np.asarray(p.battery_voltage, dtype=float),
+                   r_int=np.asarray(p.battery_resistance, dtype=float), caster=np.asarray(p.caster_drag, dtype=float),
+                   scrub=np.asarray(p.turning_resistance, dtype=float), b=b,
+                   g=np.asarray(p.body_mass * p.com_offset, dtype=float), iw=iw, m=np.asarray(m, dtype=float),
+                   h=(np.asarray(h[0]), np.asarray(h[1]), np.asarray(h[2])),
+                   cap=np.asarray(p.wheel_friction * m * 9.81 / 2, dtype=float),
+                   play=0.5 * _pair(p.backlash_l, p.backlash_r))
+
+    def sub(self, s: np.ndarray) -> Drive:
+        """Robots s only."""
+        return Drive(**{k: (tuple(x[s] for x in v) if isinstance(v, tuple) else v[s])  # type: ignore[arg-type]
+                        for k, v in self.__dict__.items()})
+
+
+# --------------------------------------------------------------------------- #
+# Motors and supply
+# --------------------------------------------------------------------------- #
+def _currents(c: np.ndarray, emf: np.ndarray, volts: np.ndarray, res: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(current (N, 2), d current / d V (N, 2)): the driver's clipped reference c within what V allows."""
+    hi, lo = (volts[:, None] - emf) / res, (-volts[:, None] - emf) / res
+    i = np.minimum(np.maximum(c, lo), hi)
+    return i, np.where(c > hi, 1.0, np.where(c < lo, -1.0, 0.0)) / res
+
+
+def supply(i_ref: Any, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray]:
+    """(V (N,), currents (N, 2)): V = V_bat - R_int (|i_l| + |i_r|) with the currents V allows.
+
+    Piecewise linear in V: Newton from V_bat, exact once the limits in force are found."""
+    c = np.minimum(np.maximum(np.asarray(i_ref, dtype=float), -d.lim), d.lim)
+    emf = d.kt * d.gear * w
+    volts = d.v_bat.copy()
+    i, di = _currents(c, emf, volts, d.res)
+    if not np.any(d.r_int):
+        return volts, i
+    for _ in range(SUPPLY_NEWTON):
+        gv = volts - d.v_bat + d.r_int * np.abs(i).sum(1)
+        if not np.any(np.abs(gv) > 1e-12 * d.v_bat):  # the limits in force were found: exact
+            break
+        slope = np.maximum(1.0 + d.r_int * (np.sign(i) * di).sum(1), 1.0)
+        volts = np.clip(volts - gv / slope, 0.0, d.v_bat)
+        i, di = _currents(c, emf, volts, d.res)
+    return volts, i
+
+
+def wheel_torque(i_ref: Any, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(torque on each wheel (N, 2), current (N, 2), supply V (N,)): motors.wheel_torque per wheel."""
+    volts, i = supply(i_ref, w, d)
+    tau = d.eta * d.gear * d.kt * i - d.c_v * w - d.t_c * np.tanh(w / COULOMB_EPS)
+    return tau, i, volts
+
+
+def wheel_torque_slope(i_ref: Any, w: np.ndarray, d: Drive
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(torque, current, d torque / d w at fixed V) per wheel (N, 2), motors.wheel_torque_slope's, and
+    the supply V (N,)."""
+    volts, i = supply(i_ref, w, d)
+    c = np.minimum(np.maximum(np.asarray(i_ref, dtype=float), -d.lim), d.lim)
+    n_kt = d.kt * d.gear
+    limited = c != i
+    th = np.tanh(w / COULOMB_EPS)
+    tau = d.eta * n_kt * i - d.c_v * w - d.t_c * th
+    slope = -d.c_v - np.where(limited, d.eta * n_kt * n_kt / d.res, 0.0) - d.t_c * (1.0 - th * th) / COULOMB_EPS
+    return tau, i, slope, volts
+
+
+# --------------------------------------------------------------------------- #
+# Body forces and the reduced dynamics in (u, omega)
+# --------------------------------------------------------------------------- #
+def body_forces(u: np.ndarray, lat: np.ndarray, om: np.ndarray, d: Drive) -> tuple[np.ndarray, ...]:
+    """(F_e, F_n, M_C): caster drag and scrub torque on the body, along e, n and about C.
+
+    The caster at C - a e moves at (u, l - a omega); its drag opposes that, smoothed like the axles'
+    Coulomb friction (eps_v = r w_eps at the rim), the scrub torque opposes omega (eps_w = r w_eps / b)."""
+    r = d.radius.mean(1)
+    eps_v = r * COULOMB_EPS
+    ve, vn = u, lat - CASTER_BEHIND * om
+    speed = np.hypot(ve, vn)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        k = np.where(speed > 0.0, d.caster * np.tanh(speed / eps_v) / speed, 0.0)
+    f_e, f_n = -k * ve, -k * vn
+    m_c = -CASTER_BEHIND * f_n - d.scrub * np.tanh(om * d.b / eps_v)  # (-a e) x (F_n n) = -a F_n
+    return f_e, f_n, m_c
+
+
+def _uw(v: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray]:
+    rl, rr = d.radius[:, 0] * v[:, 0], d.radius[:, 1] * v[:, 1]
+    return 0.5 * (rl + rr), 0.5 * (rr - rl) / d.b
+
+
+def _gen_forces(tau: np.ndarray, u: np.ndarray, om: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray]:
+    """The generalised forces on (u, omega): wheel torques through the radii, plus the body forces."""
+    fl, fr = tau[:, 0] / d.radius[:, 0], tau[:, 1] / d.radius[:, 1]
+    f_e, _f_n, m_c = body_forces(u, 0.0 * u, om, d)
+    return fl + fr + f_e, d.b * (fr - fl) + m_c
+
+
+def accel(v: np.ndarray, tau: np.ndarray, d: Drive) -> np.ndarray:
+    """v' (N, 2): H (u', omega') = f + (g omega^2, -g u omega), then the wheels' (u' -+ b omega') / r_i."""
+    u, om = _uw(v, d)
+    fu, fw = _gen_forces(tau, u, om, d)
+    fu, fw = fu + d.g * om * om, fw - d.g * u * om
+    a, bb, c = d.h
+    det = a * c - bb * bb
+    ud, wd = (c * fu - bb * fw) / det, (a * fw - bb * fu) / det
+    return np.stack([(ud - d.b * wd) / d.radius[:, 0], (ud + d.b * wd) / d.radius[:, 1]], 1)
+
+
+def step(q: np.ndarray, v: np.ndarray, tau: np.ndarray, dt: Any, d: Drive, dc: Any) -> tuple[np.ndarray, np.ndarray]:
+    """dynamics.step_batch with unequal radii and body forces (tau held over the step; dc = com_offset)."""
+    a, bb, c = d.h
+    u, om = _uw(v, d)
+    fu, fw = _gen_forces(tau, u, om, d)
+    hdt = 0.5 * dt
+    wd = (a * (fw - d.g * u * om) - bb * (fu + d.g * om * om)) / (a * c - bb * bb)
+    al = hdt * d.g * (om + hdt * wd)
+    r1 = a * u + (bb + al) * om + dt * fu
+    r2 = (bb - al) * u + c * om + dt * fw
+    det = a * c - bb * bb + al * al
+    u1 = (c * r1 - (bb - al) * r2) / det
+    w1 = (a * r2 - (bb + al) * r1) / det
+    v1 = np.stack([(u1 - d.b * w1) / d.radius[:, 0], (u1 + d.b * w1) / d.radius[:, 1]], 1)
+    sb, wb = hdt * (u + u1), 0.5 * (om + w1)
+    ph = q[:, 2] + hdt * wb
+    cs, sn = np.cos(ph), np.sin(ph)
+    dwb = dt * dc * wb
+    qn = np.empty_like(q)
+    qn[:, 0] = q[:, 0] + (sb * cs - dwb * sn)
+    qn[:, 1] = q[:, 1] + (sb * sn + dwb * cs)
+    qn[:, 2] = q[:, 2] + dt * wb
+    qn[:, 3:5] = q[:, 3:5] + (hdt if np.ndim(dt) == 0 else hdt[:, None]) * (v + v1)
+    return qn, v1
+
+
+def drive_step(q: np.ndarray, v: np.ndarray, i_ref: Any, dt: Any, d: Drive, dc: Any
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """drive.drive_step_batch with the effects: (q_next, v_next, wheel torques, currents, supply V)."""
+    tau, _i, _v = wheel_torque(i_ref, v, d)
+    v_mid = v + (0.5 * dt if np.ndim(dt) == 0 else 0.5 * np.asarray(dt)[:, None]) * accel(v, tau, d)
+    tau, cur, volts = wheel_torque(i_ref, v_mid, d)
+    q1, v1 = step(q, v, tau, dt, d, dc)
+    return q1, v1, tau, cur, volts
+
+
+def traction_ok(v0: np.ndarray, v1: np.ndarray, tau: np.ndarray, dt: Any, d: Drive) -> np.ndarray:
+    """contact.traction_ok_batch with per-wheel radii; the caster carries its own sideways force."""
+    f = (tau - d.iw[:, None] * (v1 - v0) / (dt if np.ndim(dt) == 0 else np.asarray(dt)[:, None])) / d.radius
+    u0, w0 = _uw(v0, d)
+    u1, w1 = _uw(v1, d)
+    ub, wb = 0.5 * (u0 + u1), 0.5 * (w0 + w1)
+    _fe, f_cn, _m = body_forces(ub, 0.0 * ub, wb, d)
+    f_n = d.m * ub * wb + d.g * (w1 - w0) / dt - f_cn
+    cap2 = d.cap * d.cap
+    with np.errstate(invalid="ignore"):
+        room = np.sqrt(cap2 - f[:, 0] ** 2) + np.sqrt(cap2 - f[:, 1] ** 2)
+    return (np.abs(f[:, 0]) <= d.cap) & (np.abs(f[:, 1]) <= d.cap) & (np.abs(f_n) <= room)
+
+
+def body_velocity(v: np.ndarray, d: Drive) -> np.ndarray:
+    """(N, 3) (u, l, omega) of rolling robots."""
+    u, om = _uw(v, d)
+    return np.stack([u, 0.0 * u, om], 1)
+
+
+def ticks_per_rev(p: Any) -> np.ndarray:
+    """(N, 2) encoder counts per wheel turn, each wheel's own."""
+    return _pair(p.ticks_per_rev + p.ticks_per_rev_delta_l, p.ticks_per_rev + p.ticks_per_rev_delta_r)
+
+
+def delayed_reference(hist_t: list[float], hist_i: list[np.ndarray], t: float, dt: float,
+                      delay: np.ndarray) -> np.ndarray:
+    """(N, 2): the mean over [t, t + dt] of the commands as they reach the drivers `delay` (N,) late.
+
+    hist_t / hist_i: issue times (ascending) and commands (N, 2); before the first, no current."""
+    a, b = t - delay, t + dt - delay
+    out = np.zeros(hist_i[0].shape) if hist_i else np.zeros((len(delay), 2))
+    for k, (tk, ik) in enumerate(zip(hist_t, hist_i)):
+        end = hist_t[k + 1] if k + 1 < len(hist_t) else np.inf
+        w = np.clip(np.minimum(end, b) - np.maximum(tk, a), 0.0, None) / dt
+        out += w[:, None] * ik
+    return out
+
+
+# --------------------------------------------------------------------------- #
+# Backlash: the gear's gap between the motor (and its encoder) and the wheel
+# --------------------------------------------------------------------------- #
+def backlash_reference(i_ref: Any, w: np.ndarray, gap: np.ndarray, dt: Any, d: Drive
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(the reference that drives each wheel over the substep (N, 2), the motor side's speed in the gap,
+    engaged for the whole substep (N, 2) bool).
+
+    gap = motor angle / N - wheel angle, in [-play, play].  The motor side is taken as massless: in the
+    gap it turns at the no-load speed V_bat / (k N) towards the side its current pushes (no torque on the
+    wheel), with no current it keeps its place against the wheel.  A wheel is driven while the gap is
+    closed on the side the current pushes; in the substep where the gap closes, for the part of the
+    substep after it closed (continuous in the play)."""
+    c = np.minimum(np.maximum(np.broadcast_to(np.asarray(i_ref, dtype=float), w.shape), -d.lim), d.lim)
+    side = np.sign(c)
+    engaged = np.where(side > 0, gap >= d.play, gap <= -d.play) | (d.play == 0.0)
+    w_m = side * (d.v_bat[:, None] / (d.kt * d.gear))
+    closing = (w_m - w) * side
+    step = np.asarray(dt, dtype=float).reshape(-1, 1) if np.ndim(dt) else dt
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_close = np.where(closing > 0, (d.play - side * gap) / closing, np.inf)
+    frac = np.where(engaged, 1.0, np.clip(1.0 - t_close / step, 0.0, 1.0))
+    return c * frac, w_m, engaged
+
+
+def backlash_gap(gap: np.ndarray, i_ref: Any, w_m: np.ndarray, engaged: np.ndarray, turned: np.ndarray,
+                 dt: Any, d: Drive) -> np.ndarray:
+    """The gap after the substep in which the wheels turned by `turned` (N, 2) rad."""
+    step = np.asarray(dt, dtype=float).reshape(-1, 1) if np.ndim(dt) else dt
+    free = np.where(np.broadcast_to(np.asarray(i_ref, dtype=float), gap.shape) == 0.0, gap, gap + step * w_m - turned)
+    return np.where(engaged, gap, np.clip(free, -d.play, d.play))
