@@ -47,11 +47,13 @@ def test_two_real_time_runs_from_identical_conditions_differ():
         assert r.t[-1] > 20.0 - 0.04 - r.extra["max_pass"]
     n = min(len(a.pose), len(b.pose))
     assert not np.array_equal(a.pose[:n], b.pose[:n])
-    # ... while the physics is the same: early on, at the same times, they agree closely.
+    # ... while the physics is the same: early on, at the same times, they agree closely.  A control instant
+    # is late by up to one pass of the loop, which a loaded machine lengthens: the robot (at most 0.3 m/s)
+    # then drives on the old command that much longer.
     early = np.arange(0.0, 1.0, 0.02)
     gap = np.hypot(np.interp(early, a.t, a.pose[:, 0]) - np.interp(early, b.t, b.pose[:, 0]),
                    np.interp(early, a.t, a.pose[:, 1]) - np.interp(early, b.t, b.pose[:, 1]))
-    assert gap.max() < 0.01
+    assert gap.max() < 0.01 + 0.3 * max(a.extra["max_pass"], b.extra["max_pass"])
 
 
 def test_sil_and_pil_give_the_same_trajectory_bit_for_bit(tmp_path):
