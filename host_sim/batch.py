@@ -216,7 +216,9 @@ class BatchSim:
         self._wall_force = np.zeros((2, n, max(self.world.n_walls, 1)))
         self._walls = self.world.n_walls > 0
         self.current = np.zeros((n, 2))  # A, the motor currents of the last substep (mid-step)
-        self.vbat = np.array(self.params.battery_voltage, dtype=float)  # V, what the robot senses
+        # V, what the robot senses: at rest only the electronics draw
+        self.vbat = np.array(self.params.battery_voltage - self.params.battery_resistance
+                             * self.params.electronics_current, dtype=float)
         # actuator_delay: the commands as issued (time, (N, 2)); the drivers see them late
         self._hist_t: list[float] = []
         self._hist_i: list[np.ndarray] = []

@@ -62,6 +62,7 @@ class Drive:
     res: np.ndarray  # (N, 1) ohm, armature
     v_bat: np.ndarray  # (N,) V
     r_int: np.ndarray  # (N,) ohm
+    i_e: np.ndarray  # (N,) A the electronics draw
     caster: np.ndarray  # (N,) N
     scrub: np.ndarray  # (N,) N m
     b: np.ndarray  # (N,) m
@@ -90,7 +91,8 @@ class Drive:
                              p.viscous_friction + p.viscous_friction_delta_r),
                    lim=col(p.current_limit), gear=col(p.gear_ratio), eta=col(p.gear_efficiency),
                    res=col(p.armature_resistance), v_bat=np.asarray(p.battery_voltage, dtype=float),
-                   r_int=np.asarray(p.battery_resistance, dtype=float), caster=np.asarray(p.caster_drag, dtype=float),
+                   r_int=np.asarray(p.battery_resistance, dtype=float),
+                   i_e=np.asarray(p.electronics_current, dtype=float), caster=np.asarray(p.caster_drag, dtype=float),
                    scrub=np.asarray(p.turning_resistance, dtype=float), b=b,
                    g=np.asarray(p.body_mass * p.com_offset, dtype=float), iw=iw, m=np.asarray(m, dtype=float),
                    h=(np.asarray(h[0]), np.asarray(h[1]), np.asarray(h[2])),
@@ -114,7 +116,7 @@ def _currents(c: np.ndarray, emf: np.ndarray, volts: np.ndarray, res: np.ndarray
 
 
 def supply(i_ref: Any, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray]:
-    """(V (N,), currents (N, 2)): V = V_bat - R_int (|i_l| + |i_r|) with the currents V allows.
+    """(V (N,), currents (N, 2)): V = V_bat - R_int (|i_l| + |i_r| + i_e) with the currents V allows.
 
     Piecewise linear in V: Newton from V_bat, exact once the limits in force are found."""
     c = np.minimum(np.maximum(np.asarray(i_ref, dtype=float), -d.lim), d.lim)
@@ -124,7 +126,7 @@ def supply(i_ref: Any, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray]
     if not np.any(d.r_int):
         return volts, i
     for _ in range(SUPPLY_NEWTON):
-        gv = volts - d.v_bat + d.r_int * np.abs(i).sum(1)
+        gv = volts - d.v_bat + d.r_int * (np.abs(i).sum(1) + d.i_e)
         if not np.any(np.abs(gv) > 1e-12 * d.v_bat):  # the limits in force were found: exact
             break
         slope = np.maximum(1.0 + d.r_int * (np.sign(i) * di).sum(1), 1.0)

@@ -51,6 +51,8 @@ class RobotParams:
     viscous_friction: float = _p(2.0e-4, "N m s/rad", "viscous friction at each wheel axle")
     coulomb_friction: float = _p(1.5e-3, "N m", "dry friction torque at each wheel axle")
     battery_voltage: float = _p(7.4, "V", "battery voltage feeding the drivers")
+    electronics_current: float = _p(0.08, "A", "what the boards, sensors and emitters draw from the battery beside "
+                                               "the motors (matters only with battery_resistance)")
     # --- contact (host_sim/contact.py, docs/dynamics.md "Contact") ------------------
     wheel_friction: float = _p(0.8, "-", "Coulomb friction coefficient mu between a wheel and the floor; each "
                                          "wheel carries half the weight, (m_c + 2 m_w) g / 2")

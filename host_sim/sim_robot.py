@@ -54,7 +54,8 @@ class SimRobot:
         self._gap_at_check = -1.0  # the smallest wall gap at the last wall test (broad phase)
         self._checked_at = (0.0, 0.0, 0.0)  # G and phi at the last wall test
         self.last_sense: Sense | None = None
-        self.vbat = float(params.battery_voltage)  # V at the battery's terminals (sags with battery_resistance)
+        # V at the battery's terminals: at rest only the electronics draw (it sags with battery_resistance)
+        self.vbat = float(params.battery_voltage - params.battery_resistance * params.electronics_current)
         # With any drive effect of the library present the robot runs as a BatchSim of one: the effects'
         # physics is written once (host_sim/drive_effects.py), so this and the batch twin are the same code.
         self._effects = None

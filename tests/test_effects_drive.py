@@ -198,13 +198,14 @@ def test_encoders_count_the_motor_side():
 
 def battery_steady_speed(r_int: float) -> tuple[float, float]:
     """Straight, both wheels battery-limited: eta N k i = c_v w + T_c, i = (V - k N w) / R,
-    V = V_bat - 2 R_int i; returns (w, V)."""
+    V = V_bat - R_int (2 i + i_e); returns (w, V)."""
     kn = P.torque_constant * P.gear_ratio
     ekn = P.gear_efficiency * kn
     rr = P.armature_resistance + 2 * r_int
-    w = (P.battery_voltage - P.coulomb_friction * rr / ekn) / (kn + P.viscous_friction * rr / ekn)
+    v_open = P.battery_voltage - r_int * P.electronics_current  # what the motors find with no current of theirs
+    w = (v_open - P.coulomb_friction * rr / ekn) / (kn + P.viscous_friction * rr / ekn)
     i = (P.viscous_friction * w + P.coulomb_friction) / ekn
-    return w, P.battery_voltage - 2 * r_int * i
+    return w, v_open - 2 * r_int * i
 
 
 def test_battery_resistance_sags_the_supply_and_the_top_speed():
@@ -215,7 +216,8 @@ def test_battery_resistance_sags_the_supply_and_the_top_speed():
     w, volts = battery_steady_speed(r_int)
     assert sim.v[0] == pytest.approx([w, w], rel=2e-3)
     assert res.vbat[-1, 0] == pytest.approx(volts, rel=1e-3)
-    assert res.vbat[0, 0] == P.battery_voltage  # at rest, before the first command: no current
+    # at rest, before the first command: only the electronics draw
+    assert res.vbat[0, 0] == pytest.approx(P.battery_voltage - r_int * P.electronics_current)
     assert res.vbat[1, 0] < res.vbat[-1, 0] - 1.0  # accelerating draws more than cruising
     assert battery_steady_speed(0.0)[0] - w > 2.0  # rad/s lost to the sag
     robot = SimRobot(World(name="e", size=(10.0, 10.0), walls=[]), p, (5.0, 5.0, 0.0), noise=False)
