@@ -234,7 +234,10 @@ def _score_listed(effect: dict[str, Any], plant: dict[str, Any], diagnosis: dict
     if first["name"] != effect["name"]:
         out["outcome"] = "wrong name"
         return out
-    out["outcome"] = "right" if _site(first) == _site(effect) else "wrong side"
+    if _site(first) != _site(effect):
+        out["outcome"] = "wrong side"  # its value is another wheel's, or shared: no parameter error
+        return out
+    out["outcome"] = "right"
     fitted = float(first["params"][PARAMS[effect["name"]].library_param]["value"])
     out["param"] = parameter_error(effect, plant, nominal, fitted)
     return out
