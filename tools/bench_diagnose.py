@@ -47,13 +47,16 @@ REFERENCE_SECONDS = 90.0
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
     p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1],
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--cases", type=int, default=40, help="blind cases in the suite (default 40)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the first case (default 0)")
-    p.add_argument("--duration", type=float, default=90.0, help="seconds per recording (default 90)")
-    p.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
-    p.add_argument("--out", metavar="DIR", help="keep the recordings and answer keys here (default: a temporary "
-                                                "folder, removed)")
-    p.add_argument("--json", metavar="FILE", help="write every figure here")
+    from tools.arguments import float_range, int_range, output_file, output_folder
+
+    p.add_argument("--cases", type=int_range(1, 10_000), default=40, help="blind cases in the suite (default 40)")
+    p.add_argument("--seed", type=int_range(0, 10**9), default=0, help="seed of the first case (default 0)")
+    p.add_argument("--duration", type=float_range(10, 3600, unit="s"), default=90.0,
+                   help="seconds per recording (default 90; diagnosis needs at least 6 windows of 1 s)")
+    p.add_argument("--jobs", type=int_range(1, 256), default=2, help="worker processes (default 2)")
+    p.add_argument("--out", metavar="DIR", type=output_folder,
+                   help="keep the recordings and answer keys here (default: a temporary folder, removed)")
+    p.add_argument("--json", metavar="FILE", type=output_file, help="write every figure here")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -341,17 +344,8 @@ def print_report(report: dict[str, Any]) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from tools.bench_sim import _machine, pin_blas_threads
-    from tools.cli import CliError
 
     blas = pin_blas_threads()
-    if args.cases < 1 or args.jobs < 1:
-        raise CliError("--cases and --jobs must be >= 1")
-    if args.duration < 10:
-        raise CliError(f"--duration {args.duration:g}: at least 10 s (diagnosis needs 6 windows of 1 s and more)")
-    if args.out and Path(args.out).exists() and not Path(args.out).is_dir():
-        raise CliError(f"--out {args.out}: is a file, not a folder")
-    if args.json and not Path(args.json).resolve().parent.is_dir():
-        raise CliError(f"--json {args.json}: folder {Path(args.json).parent} does not exist")
     t_start = time.monotonic()
     seeds = compose_suite(args.seed, args.cases)
     with tempfile.TemporaryDirectory(prefix="twinbot-bench-diagnose-") as tmp:
