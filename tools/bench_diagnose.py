@@ -17,8 +17,9 @@
   4. Score: tools/proving_ground/scoring.py, the only reader of the keys.
 
 Generation and diagnosis run on --jobs worker processes (one core each).
-A case's seconds are the diagnosis's wall time in its worker, scaled to a
-90 s recording.  The scoreboard: a row per case, the totals, the targets of
+A case's seconds are the diagnosis's CPU time in its worker (one core,
+one BLAS thread), scaled to a 90 s recording; its wall time is kept too,
+but on a shared machine it measures the other load as much as diagnosis.  The scoreboard: a row per case, the totals, the targets of
 issue 9 (MET / MISSED), and with --json FILE every figure.
 """
 from __future__ import annotations
@@ -40,7 +41,7 @@ TARGET_WHEEL_FIT = 90.0  # held-out fit % after, on both wheels ...
 TARGET_WHEEL_SHARE = 0.95  # ... in this share of the cases (controls and in-library effects)
 TARGET_FALSE_ALARMS = 0.05  # share of controls whose verdict is not "match"
 TARGET_UNLISTED = 0.90  # share of out-of-library effects called unexplained / partly explained, rightly located
-TARGET_SECONDS = 30.0  # per 90 s recording (median)
+TARGET_SECONDS = 30.0  # CPU seconds per 90 s recording (median), one core per worker
 REFERENCE_SECONDS = 90.0
 
 
@@ -105,7 +106,7 @@ def diagnose_blind(rec_path: str) -> dict[str, Any]:
     from tools.proving_ground.sindy_baseline import sindy_case
 
     out: dict[str, Any] = {"recording": rec_path}
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     rec = load_recording(rec_path)
     params = params_from_dict(rec.meta["robot"], f"{rec_path} (sidecar robot)")
     world = world_from_dict(rec.meta["world"], f"{rec_path} (sidecar world)") if rec.meta.get("world") else None
@@ -117,6 +118,7 @@ def diagnose_blind(rec_path: str) -> dict[str, Any]:
         out["error"] = f"error: {type(exc).__name__}: {exc}"
         out["traceback"] = traceback.format_exc()
     out["seconds"] = time.perf_counter() - t0
+    out["cpu_seconds"] = time.process_time() - cpu0  # the worker's own core: apart from other load on the machine
     out["duration"] = float(rec.t[-1] - rec.t[0] + rec.sample_period)
     try:
         with warnings.catch_warnings():
@@ -129,7 +131,7 @@ def diagnose_blind(rec_path: str) -> dict[str, Any]:
 
 def run_suite(seeds: list[int], out_dir: Path, duration: float, jobs: int, quiet: bool) -> dict[int, dict[str, Any]]:
     """Generate and diagnose every case on `jobs` processes; each case is diagnosed once it is recorded."""
-    from tqdm import tqdm
+    from tqdm import tqdm  # type: ignore[import-untyped]
 
     rec_dir, key_dir = out_dir / "recordings", out_dir / "answer_keys"
     rec_dir.mkdir(parents=True, exist_ok=True)
@@ -169,6 +171,8 @@ def score_all(seeds: list[int], results: dict[int, dict[str, Any]], out_dir: Pat
         row["world"] = key["world"]
         row["seconds"] = res["seconds"]
         row["seconds_per_90s"] = res["seconds"] * REFERENCE_SECONDS / res["duration"]
+        row["cpu_seconds"] = res["cpu_seconds"]
+        row["cpu_seconds_per_90s"] = res["cpu_seconds"] * REFERENCE_SECONDS / res["duration"]
         sindy = res["sindy"]
         if "error" not in sindy:
             sindy = {**sindy, **{f"names_{k}": v for k, v in scoring.score_sindy(key, sindy["terms"]).items()}}
@@ -202,6 +206,7 @@ def totals(rows: list[dict[str, Any]]) -> dict[str, Any]:
         outcomes[r["outcome"]] = outcomes.get(r["outcome"], 0) + 1
     # Only diagnoses that ran to a verdict are timed: a crash or a refusal returns early.
     secs = [r["seconds_per_90s"] for r in rows if "fit_before" in r] or [float("nan")]
+    cpu = [r["cpu_seconds_per_90s"] for r in rows if "fit_before" in r] or [float("nan")]
     sindy_ok = [r for r in rows if "error" not in r["sindy"]]
     return {
         "cases": len(rows), "in_library": len(listed), "not_excited": len(listed) - len(excited),
@@ -215,6 +220,7 @@ def totals(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "wheel_fit_before_median": _median([r.get("fit_before") for r in judged]),
         "wheel_fit_after_median": _median([r.get("fit_after") for r in judged]),
         "seconds_median": statistics.median(secs), "seconds_max": max(secs),
+        "cpu_seconds_median": statistics.median(cpu), "cpu_seconds_max": max(cpu),
         "sindy": {
             "cases": len(sindy_ok),
             "wheel_fit_after_median": _median([r["sindy"]["wheel_fit_after"] for r in sindy_ok if r in judged]),
@@ -256,11 +262,12 @@ def targets(t: dict[str, Any]) -> list[dict[str, Any]]:
         {"name": "out_of_library", "met": met(t["flagged_share"], (t["flagged_share"] or 0) >= TARGET_UNLISTED),
          "text": f"out-of-library effect -> unexplained / partly explained on a drive channel, >= "
                  f"{TARGET_UNLISTED:.0%}: {t['flagged']}/{t['out_of_library']} ({_pct(t['flagged_share'])})"},
-        {"name": "seconds", "met": None if t["seconds_median"] != t["seconds_median"]
-            else t["seconds_median"] <= TARGET_SECONDS,
-         "text": f"<= {TARGET_SECONDS:.0f} s per {REFERENCE_SECONDS:.0f} s recording (median of the diagnoses that "
-                 f"reached a verdict, one core each): "
-                 f"{t['seconds_median']:.1f} s (max {t['seconds_max']:.1f} s)"},
+        {"name": "seconds", "met": None if t["cpu_seconds_median"] != t["cpu_seconds_median"]
+            else t["cpu_seconds_median"] <= TARGET_SECONDS,
+         "text": f"<= {TARGET_SECONDS:.0f} s per {REFERENCE_SECONDS:.0f} s recording (median over the diagnoses that "
+                 f"reached a verdict; CPU time of the worker's one core): {t['cpu_seconds_median']:.1f} s "
+                 f"(max {t['cpu_seconds_max']:.1f} s; wall {t['seconds_median']:.1f} s, max {t['seconds_max']:.1f} s, "
+                 f"on the machine's load)"},
     ]
 
 
@@ -272,7 +279,7 @@ def _pct(x: float | None) -> str:
 # The scoreboard
 # --------------------------------------------------------------------------- #
 HEADER = ("case", "concealed", "drive", "verdict", "diagnosis named", "outcome", "param err", "wheels fit",
-          "s/90s", "SINDy fit", "terms", "SINDy names")
+          "cpu s/90s", "SINDy fit", "terms", "SINDy names")
 
 
 def case_row(r: dict[str, Any]) -> tuple[str, ...]:
@@ -286,7 +293,7 @@ def case_row(r: dict[str, Any]) -> tuple[str, ...]:
         f"{_f(s['wheel_fit_after'])}", str(s["n_active"]), "yes" if s["names_named"] else "no")
     verdict = str(r["verdict"])
     return (r["case"].replace("case_", ""), r["truth"], r["excitation"], verdict[:40], _clip(r["named"], 44),
-            outcome, param, fit, f"{r['seconds_per_90s']:.1f}", *sindy)
+            outcome, param, fit, f"{r['cpu_seconds_per_90s']:.1f}", *sindy)
 
 
 def _f(x: float | None) -> str:
@@ -352,7 +359,7 @@ def run(args: argparse.Namespace) -> int:
         out_dir = Path(args.out) if args.out else Path(tmp)
         results = run_suite(seeds, out_dir, args.duration, args.jobs, args.quiet)
         rows = score_all(seeds, results, out_dir)
-    import pysindy
+    import pysindy  # type: ignore[import-untyped]
 
     report: dict[str, Any] = {
         "command": f"twinbot bench diagnose --cases {args.cases} --seed {args.seed} --duration {args.duration:g} "

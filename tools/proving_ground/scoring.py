@@ -216,8 +216,8 @@ def _kind(concealed: list[dict[str, Any]]) -> str:
 
 def _wheel_fit(fit: dict[str, float | None]) -> float | None:
     """The worse wheel's held-out fit %: the figure the wheel-speed target is judged on."""
-    vals = [fit.get(w) for w in ("wheel_l", "wheel_r")]
-    return None if any(v is None for v in vals) else float(min(vals))  # type: ignore[type-var]
+    vals = [v for w in ("wheel_l", "wheel_r") if (v := fit.get(w)) is not None]
+    return float(min(vals)) if len(vals) == 2 else None
 
 
 def _score_listed(effect: dict[str, Any], plant: dict[str, Any], diagnosis: dict[str, Any] | None,
