@@ -117,6 +117,7 @@ def test_controls_and_out_of_library(suite: dict[str, Any]) -> None:
     assert scoring.score_case(key([]), diag("explained", [("mass", {}, "mass", 0.5)]), rec, DEFAULT)["outcome"] \
         == "false alarm"
     assert scoring.score_case(key([]), None, rec, DEFAULT, "error: boom")["outcome"] == "false alarm"
+    assert scoring.score_case(key([DRY]), None, rec, DEFAULT, "refused: too still")["outcome"] == "refused"
     tilt = concealed("floor_tilt", "floor_tilt", 0.01, 0.0)
     for answer, outcome in ((diag("unexplained", located=("wheel_l",), unexplained=("wheel_l",)), "right"),
                             (diag("partly explained", [("mass", {}, "mass", 0.5)], unexplained=("heading_rate",)),

@@ -200,11 +200,13 @@ def score_case(key: dict[str, Any], diagnosis: dict[str, Any] | None, rec: Recor
     effect = concealed[0]
     if row["kind"] == "out of library":
         row.update(_score_unlisted(diagnosis))
-        return row
-    reason = not_excited(effect, key["plant"], rec)
-    if reason:
-        row["not_excited"] = reason
-    row.update(_score_listed(effect, key["plant"], diagnosis, nominal))
+    else:
+        reason = not_excited(effect, key["plant"], rec)
+        if reason:
+            row["not_excited"] = reason
+        row.update(_score_listed(effect, key["plant"], diagnosis, nominal))
+    if diagnosis is None and str(error).startswith("refused"):
+        row["outcome"] = "refused"  # diagnosis declined the recording (too short, too still): a miss all the same
     return row
 
 
