@@ -19,8 +19,9 @@
 Generation and diagnosis run on --jobs worker processes (one core each).
 A case's seconds are the diagnosis's CPU time in its worker (one core,
 one BLAS thread), scaled to a 90 s recording; its wall time is kept too,
-but on a shared machine it measures the other load as much as diagnosis.  The scoreboard: a row per case, the totals, the targets of
-issue 9 (MET / MISSED), and with --json FILE every figure.
+but on a shared machine it measures the other load as much as diagnosis.
+The scoreboard: a row per case, the totals, the targets of issue 9
+(MET / MISSED), and with --json FILE every figure.
 """
 from __future__ import annotations
 
@@ -336,7 +337,8 @@ def print_report(report: dict[str, Any]) -> None:
     print(f"median parameter error of those named: "
           + ("-" if t["param_error_median"] is None else f"{100 * t['param_error_median']:.0f} %"))
     print(f"median held-out wheel fit (controls + in-library): before {_f(t['wheel_fit_before_median'])} %, "
-          f"after diagnosis {_f(t['wheel_fit_after_median'])} %, with SINDy {_f(t['sindy']['wheel_fit_after_median'])} %")
+          f"after diagnosis {_f(t['wheel_fit_after_median'])} %, "
+          f"with SINDy {_f(t['sindy']['wheel_fit_after_median'])} %")
     s = t["sindy"]
     print(f"SINDy: median {_f(s['active_terms_median'])} active terms; a single term names the effect in "
           f"{s['named_excited']}/{s['excited']} excited in-library cases; silent on {s['silent_controls']}/"

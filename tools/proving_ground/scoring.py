@@ -172,7 +172,8 @@ def traction_demand(plant: dict[str, Any], rec: Recording) -> np.ndarray:
     ticks = np.asarray(plant["ticks_per_rev"], dtype=float)
     radius = np.asarray(plant["wheel_radius"], dtype=float)
     kt = np.asarray(plant["torque_constant"], dtype=float)
-    n_gear, volts, ohm = float(plant["gear_ratio"]), float(plant["battery_voltage"]), float(plant["armature_resistance"])
+    n_gear, volts = float(plant["gear_ratio"]), float(plant["battery_voltage"])
+    ohm = float(plant["armature_resistance"])
     dt = rec.sample_period
     omega = np.gradient(rec.enc.astype(float) * 2 * np.pi / ticks, dt, axis=0)
     alpha = np.gradient(omega, dt, axis=0)

@@ -10,10 +10,10 @@ sparse sum of library terms in
 - w_l, w_r: the twin's own wheel speeds in the period (rad/s), and
 - i_l, i_r: the recorded current references (A), the control inputs,
 
-the library being all polynomials of degree <= 2 in them plus tanh of each
-wheel speed (a smooth sign, so that dry friction has a term to land on).  Only what the
-open-loop twin has is used: never the recorded speed of the same or an
-earlier period, which would turn the model into a one-step predictor.
+the library being all polynomials of degree <= 2 in them plus tanh of
+each wheel speed (a smooth sign, so that dry friction has a term to land
+on).  Only what the open-loop twin has is used: never the recorded speed
+of the same or an earlier period, which would make it a one-step predictor.
 Features and residuals are scaled to unit RMS on the training windows.
 
 The sparsity threshold (STLSQ) is chosen on the training windows alone: the
