@@ -111,6 +111,18 @@ def test_the_parameter_table_converts_to_library_terms(effect: dict[str, Any], f
     assert got["error"] == pytest.approx(error, abs=2e-3)
 
 
+def test_the_parameter_table_covers_both_libraries() -> None:
+    """Every plant effect in the library has a row, naming the plant's parameter and the library's."""
+    from host_sim import effects as library
+    from tools.proving_ground import effects as plant
+
+    listed = {name for name, e in plant.EFFECTS.items() if e.in_library}
+    assert set(scoring.PARAMS) == listed == set(library.LIBRARY)
+    for name, row in scoring.PARAMS.items():
+        assert plant.EFFECTS[name].param == row.plant_param
+        assert library.LIBRARY[name].params[0].name == row.library_param
+
+
 def test_controls_and_out_of_library(suite: dict[str, Any]) -> None:
     rec = load_recording(next((suite["out"] / "recordings").glob("*.csv")))
     assert scoring.score_case(key([]), diag("match"), rec, DEFAULT)["outcome"] == "right"
