@@ -171,6 +171,11 @@ CASES: list[tuple[str, list[str], str]] = [
     ("bench-sim-json-folder", ["bench", "sim", "--json", "{case}/adir"], "adir"),
     ("bench-gui-frames-few", ["bench", "gui", "--frames", "5"], "'5'"),
     ("bench-gui-prerun-nan", ["bench", "gui", "--prerun", "nan"], "'nan'"),
+    ("bench-diagnose-cases-zero", ["bench", "diagnose", "--cases", "0"], "'0'"),
+    ("bench-diagnose-duration-short", ["bench", "diagnose", "--duration", "5"], "'5'"),
+    ("bench-diagnose-jobs-zero", ["bench", "diagnose", "--jobs", "0"], "'0'"),
+    ("bench-diagnose-out-in-a-file", ["bench", "diagnose", "--out", "{case}/afile/cases"], "afile"),
+    ("bench-diagnose-json-folder", ["bench", "diagnose", "--json", "{case}/adir"], "adir"),
 ]
 
 

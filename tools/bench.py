@@ -27,6 +27,10 @@ BENCHMARKS = (
      "batch robot-steps/s at N = 1000, and IR-SIM on the same room"),
     ("gui", "tools.bench_gui",
      "twinbot gui: frame time with the simulated, user and real (virtual board) robots, rays and coverage on"),
+    ("diagnose", "tools.bench_diagnose",
+     "diagnosis proven blind: a suite of MuJoCo recordings with concealed effects, diagnosed, scored against "
+     "the answer keys (names, sides, parameters, held-out fit, false alarms, out-of-library, seconds), with "
+     "PySINDy beside it"),
 )
 
 

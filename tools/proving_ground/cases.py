@@ -71,10 +71,20 @@ def draw_effect(rng: np.random.Generator) -> tuple[PlantSpec, list[dict[str, obj
     return spec, [entry]
 
 
+def case_rng(seed: int) -> np.random.Generator:
+    """The one random stream a case is drawn from."""
+    return np.random.default_rng([seed, 2024])
+
+
+def concealed_names(seed: int) -> list[str]:
+    """The effects case `seed` will conceal, without recording it (for composing a suite)."""
+    return [str(e["name"]) for e in draw_effect(case_rng(seed))[1]]
+
+
 def make_case(seed: int, out_dir: str | Path, duration: float = 90.0,
               key_dir: str | Path | None = None) -> tuple[Path, Path]:
     """Record one blind case; returns (recording path, answer key path)."""
-    rng = np.random.default_rng([seed, 2024])
+    rng = case_rng(seed)
     spec, concealed = draw_effect(rng)
     world = builtin_world(BUILTIN_NAMES[int(rng.integers(len(BUILTIN_NAMES)))])
     start = _start(world, rng)

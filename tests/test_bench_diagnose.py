@@ -1,0 +1,208 @@
+"""`twinbot bench diagnose`: the scorer on hand-made answers, and a three-case suite end to end.
+
+The scorer is proven on synthetic diagnoses (right, wrong side, wrong name,
+missed, wrong parameter) so that its logic does not depend on how good the
+diagnosis is today.  The suite run checks the scoreboard's structure, not
+its figures: benchmarks are not timed or scored tests.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from host_sim.params import DEFAULT
+from host_sim.recording import load_recording
+from tools import bench_diagnose, cli
+from tools.proving_ground import scoring
+from tools.proving_ground.robot_model import nominal_spec
+
+pytest.importorskip("pysindy")
+
+PLANT = {k: (list(v) if isinstance(v, tuple) else v) for k, v in nominal_spec().__dict__.items()}
+SEED = 18  # dry_friction on the left wheel; the suite of 3 adds a control and a floor_tilt case
+
+
+def key(effects: list[dict[str, Any]], plant: dict[str, Any] | None = None) -> dict[str, Any]:
+    return {"case": "case_9999", "effects": effects, "plant": plant or PLANT}
+
+
+def concealed(name: str, param: str, value: float, absent: float, **site: Any) -> dict[str, Any]:
+    return {"name": name, "in_library": name != "floor_tilt", "params": {param: {"value": value, "unit": "-",
+                                                                                "absent": absent}}, **site}
+
+
+def diag(verdict: str, effects: list[tuple[str, dict[str, Any], str, float]] = (),  # type: ignore[assignment]
+         located: tuple[str, ...] = (), unexplained: tuple[str, ...] = ()) -> dict[str, Any]:
+    return {"verdict": verdict,
+            "effects": [{"name": n, **site, "params": {p: {"value": v, "unit": "-", "ci95": None}}}
+                        for n, site, p, v in effects],
+            "located": [{"channel": c} for c in located], "unexplained": [{"channel": c} for c in unexplained],
+            "fit": {"before": {"wheel_l": 40.0, "wheel_r": 95.0}, "after": {"wheel_l": 96.0, "wheel_r": 97.0}}}
+
+
+DRY = concealed("dry_friction", "coulomb_friction", 0.0030, 0.0015, wheel="left")  # 1.5 mN m beyond nominal
+
+
+@pytest.fixture(scope="module")
+def suite(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    out = tmp_path_factory.mktemp("suite")
+    report = out / "report.json"
+    rc = cli.main(["bench", "diagnose", "--cases", "3", "--seed", str(SEED), "--duration", "30", "--jobs", "2",
+                   "--out", str(out / "cases"), "--json", str(report), "--quiet"])
+    assert rc == 0
+    return {"out": out / "cases", "report": json.loads(report.read_text())}
+
+
+# --------------------------------------------------------------------------- #
+# The scorer on hand-made answers
+# --------------------------------------------------------------------------- #
+def test_a_right_diagnosis_scores_right(suite: dict[str, Any]) -> None:
+    rec = load_recording(next((suite["out"] / "recordings").glob("*.csv")))
+    right = diag("explained", [("dry_friction", {"wheel": "left"}, "dry_friction", 0.0014)], located=("wheel_l",))
+    row = scoring.score_case(key([DRY]), right, rec, DEFAULT)
+    assert row["outcome"] == "right" and row["kind"] == "in library"
+    assert row["param"]["true"] == pytest.approx(0.0015)  # the library holds the delta from the nominal 1.5 mN m
+    assert row["param"]["error"] == pytest.approx(0.1 / 1.5)
+    assert row["fit_before"] == 40.0 and row["fit_after"] == 96.0  # the worse wheel
+
+
+@pytest.mark.parametrize("answer, outcome", [
+    (diag("explained", [("dry_friction", {"wheel": "right"}, "dry_friction", 0.0015)]), "wrong side"),
+    (diag("explained", [("dry_friction", {"wheel": "both"}, "dry_friction", 0.0015)]), "wrong side"),
+    (diag("explained", [("viscous_friction", {"wheel": "left"}, "viscous_friction", 1e-4),
+                        ("dry_friction", {"wheel": "left"}, "dry_friction", 0.0015)]), "wrong name"),
+    (diag("unexplained", located=("wheel_l",)), "unexplained"),
+    (diag("match"), "missed"),
+    (None, "error"),
+])
+def test_wrong_diagnoses_score_wrong(suite: dict[str, Any], answer: dict[str, Any] | None, outcome: str) -> None:
+    rec = load_recording(next((suite["out"] / "recordings").glob("*.csv")))
+    row = scoring.score_case(key([DRY]), answer, rec, DEFAULT, None if answer else "error: boom")
+    assert row["outcome"] == outcome
+    assert "param" not in row
+
+
+def test_a_total_read_as_a_delta_is_a_wrong_parameter(suite: dict[str, Any]) -> None:
+    rec = load_recording(next((suite["out"] / "recordings").glob("*.csv")))
+    row = scoring.score_case(key([DRY]), diag("explained", [("dry_friction", {"wheel": "left"}, "dry_friction",
+                                                             0.0030)]), rec, DEFAULT)
+    assert row["outcome"] == "right" and row["param"]["error"] == pytest.approx(1.0)
+    assert row["param"]["error"] > scoring.PARAM_TOLERANCE
+
+
+@pytest.mark.parametrize("effect, fitted, error", [
+    # caster: mu x the caster's load m g d / x_c = 0.46 * 9.81 * 0.015 / 0.045 = 1.5042 N
+    (concealed("caster_drag", "caster_friction", 0.02, 0.0), 0.02 * 1.5042, 0.0),
+    # scrub: torsional (m) x the tyres' load (0.46 + 0.05) 9.81 - 1.5042 = 3.4989 N
+    (concealed("turning_resistance", "torsional_friction", 5e-4, 0.0), 5e-4 * 3.4989 * 1.1, 0.1),
+    (concealed("wheel_radius", "wheel_radius", 0.0215, 0.021, wheel="right"), 0.00045, 0.1),
+    (concealed("encoder_scale", "ticks_per_rev", 1240.0, 1200.0, wheel="both"), 44.0, 0.1),
+    (concealed("current_limit", "current_limit", 0.04, 0.5), 0.036, 0.1),  # relative to the value, not 0.46 A
+    (concealed("track_width", "half_axle", 0.050, 0.048), 0.0502, 0.1),
+    (concealed("ir_offset", "ir_offset", 40.0, 0.0, sensor=3), 36.0, 0.1),
+])
+def test_the_parameter_table_converts_to_library_terms(effect: dict[str, Any], fitted: float, error: float) -> None:
+    got = scoring.parameter_error(effect, PLANT, DEFAULT, fitted)
+    assert got["error"] == pytest.approx(error, abs=2e-3)
+
+
+def test_the_parameter_table_covers_both_libraries() -> None:
+    """Every plant effect in the library has a row, naming the plant's parameter and the library's."""
+    from host_sim import effects as library
+    from tools.proving_ground import effects as plant
+
+    listed = {name for name, e in plant.EFFECTS.items() if e.in_library}
+    assert set(scoring.PARAMS) == listed == set(library.LIBRARY)
+    for name, row in scoring.PARAMS.items():
+        assert plant.EFFECTS[name].param == row.plant_param
+        assert library.LIBRARY[name].params[0].name == row.library_param
+
+
+def test_controls_and_out_of_library(suite: dict[str, Any]) -> None:
+    rec = load_recording(next((suite["out"] / "recordings").glob("*.csv")))
+    assert scoring.score_case(key([]), diag("match"), rec, DEFAULT)["outcome"] == "right"
+    assert scoring.score_case(key([]), diag("explained", [("mass", {}, "mass", 0.5)]), rec, DEFAULT)["outcome"] \
+        == "false alarm"
+    assert scoring.score_case(key([]), None, rec, DEFAULT, "error: boom")["outcome"] == "false alarm"
+    assert scoring.score_case(key([DRY]), None, rec, DEFAULT, "refused: too still")["outcome"] == "refused"
+    tilt = concealed("floor_tilt", "floor_tilt", 0.01, 0.0)
+    for answer, outcome in ((diag("unexplained", located=("wheel_l",), unexplained=("wheel_l",)), "right"),
+                            (diag("partly explained", [("mass", {}, "mass", 0.5)], unexplained=("heading_rate",)),
+                             "right"),
+                            (diag("unexplained", located=("ir_3",), unexplained=("ir_3",)), "wrong place"),
+                            (diag("explained", [("mass", {}, "mass", 0.5)], located=("wheel_l",)), "wrong name"),
+                            (diag("match"), "missed")):
+        assert scoring.score_case(key([tilt]), answer, rec, DEFAULT)["outcome"] == outcome
+
+
+def test_not_excited_is_read_from_the_recording(suite: dict[str, Any]) -> None:
+    rec = load_recording(next((suite["out"] / "recordings").glob("*.csv")))
+    top = float(np.abs(rec.cmd).max())
+    assert scoring.not_excited(concealed("current_limit", "current_limit", 1.01 * top, 0.5), PLANT, rec)
+    assert scoring.not_excited(concealed("current_limit", "current_limit", 0.2 * top, 0.5), PLANT, rec) is None
+    assert scoring.not_excited(concealed("traction_limit", "floor_friction", 1.0, 1.0), PLANT, rec)
+    assert scoring.not_excited(concealed("traction_limit", "floor_friction", 0.005, 1.0), PLANT, rec) is None
+    assert scoring.not_excited(DRY, PLANT, rec) is None
+    row = scoring.score_case(key([concealed("current_limit", "current_limit", 1.01 * top, 0.5)]), diag("match"),
+                             rec, DEFAULT)
+    assert "not_excited" in row and row["outcome"] == "missed"  # reported apart by the totals
+
+
+def test_sindy_naming_criterion() -> None:
+    one = [{"equation": "w_l", "term": "tanh(w_l)", "coef": -1.0}]
+    assert scoring.score_sindy(key([DRY]), one)["named"]
+    assert not scoring.score_sindy(key([DRY]), one + [{"equation": "w_r", "term": "w_l", "coef": 0.2}])["named"]
+    assert not scoring.score_sindy(key([DRY]), [{"equation": "w_l", "term": "w_l", "coef": -1.0}])["named"]
+    assert scoring.score_sindy(key([]), [])["named"]
+    assert not scoring.score_sindy(key([concealed("mass", "body_mass", 0.5, 0.46)]), one)["named"]
+
+
+# --------------------------------------------------------------------------- #
+# The suite end to end
+# --------------------------------------------------------------------------- #
+def test_the_suite_holds_a_control_and_an_out_of_library_case() -> None:
+    from tools.proving_ground.cases import concealed_names
+
+    seeds = bench_diagnose.compose_suite(SEED, 3)
+    kinds = [concealed_names(s) for s in seeds]
+    assert seeds[0] == SEED and [] in kinds and ["floor_tilt"] in kinds and ["dry_friction"] in kinds
+    assert bench_diagnose.compose_suite(SEED, 1) == [SEED]
+
+
+def test_scoreboard_structure(suite: dict[str, Any], capsys: pytest.CaptureFixture[str]) -> None:
+    report = suite["report"]
+    assert len(report["cases"]) == 3 and report["duration"] == 30
+    assert {r["kind"] for r in report["cases"]} == {"in library", "control", "out of library"}
+    assert sorted(p.name for p in (suite["out"] / "answer_keys").iterdir()) == \
+        sorted(f"case_{s:04d}.answer.json" for s in report["seeds"])
+    assert not list((suite["out"] / "recordings").glob("*.answer.json"))  # keys apart from the recordings
+    for r in report["cases"]:
+        assert r["seconds"] > 0 and "outcome" in r
+        s = r["sindy"]
+        assert "error" not in s, s
+        assert s["n_active"] == len(s["terms"]) and s["test_windows"] > 0
+        if "fit_before" in r:  # SINDy and diagnosis judge the same windows: the same nominal fit
+            assert min(s["fit_before"].values()) == pytest.approx(r["fit_before"], abs=0.01)
+    names = [t["name"] for t in report["targets"]]
+    assert names == ["named", "params", "wheel_fit", "false_alarms", "out_of_library", "seconds"]
+    bench_diagnose.print_report(report)
+    out = capsys.readouterr().out
+    assert "command:     twinbot bench diagnose --cases 3 --seed 18 --duration 30 --jobs 2" in out
+    header = next(ln for ln in out.splitlines() if ln.startswith("case "))
+    assert [c.strip() for c in header.split("|")] == list(bench_diagnose.HEADER)
+    assert out.count("[MET]") + out.count("[MISSED]") + out.count("[NOT RUN]") == len(report["targets"])
+
+
+def test_the_diagnosis_is_blind(suite: dict[str, Any], tmp_path: Path) -> None:
+    """Moved away from its answer key, a recording gets the same diagnosis."""
+    control = next(r for r in suite["report"]["cases"] if r["kind"] == "control")
+    src = suite["out"] / "recordings" / f"{control['case']}.csv"
+    shutil.copy(src, tmp_path / src.name)
+    shutil.copy(str(src) + ".json", tmp_path / (src.name + ".json"))
+    alone = bench_diagnose.diagnose_blind(str(tmp_path / src.name))
+    assert alone.get("diagnosis", {}).get("verdict", alone.get("error")) == control["verdict"]
