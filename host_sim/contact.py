@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from host_sim.params import RobotParams
+from host_sim.params import RobotParams, cached_per_params
 
 GRAVITY = 9.81  # m/s^2
 PGS_TOL = 1e-10  # m/s: a sweep that moves no velocity by more than this ends the solve
@@ -46,15 +46,10 @@ STICK_MARGIN = 1e-9  # a wheel impulse this far inside its cone (relative) is st
 NEWTON_STEPS = 6  # on a wheel's friction disc: the force within 1e-13 rad of opposite the slip
 REACH_MARGIN = 2e-3  # m: a wall closer than the step's travel + this is a contact candidate
 
-_last: tuple[Any, tuple[float, ...]] | None = None
 
-
+@cached_per_params
 def consts(p: Any) -> tuple[Any, ...]:
     """(m, k = m_c d, J_C, D = m J_C - k^2, I_w, r, b, d, R, mu N, mu_wall, m g): RobotParams or ParamBatch."""
-    global _last
-    last = _last
-    if last is not None and last[0] is p:
-        return last[1]
     m = p.body_mass + 2 * p.wheel_mass
     k = p.body_mass * p.com_offset
     j = (p.body_inertia + p.body_mass * p.com_offset ** 2 + 2 * p.wheel_mass * p.half_axle ** 2
@@ -63,7 +58,6 @@ def consts(p: Any) -> tuple[Any, ...]:
          p.wheel_friction * m * GRAVITY / 2, p.wall_friction, m * GRAVITY)
     if isinstance(p, RobotParams):
         c = tuple(float(x) for x in c)
-    _last = (p, c)
     return c
 
 

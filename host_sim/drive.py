@@ -29,21 +29,15 @@ from typing import Any
 import numpy as np
 
 from host_sim import dynamics, motors
-from host_sim.params import RobotParams
-
-_last: tuple[Any, tuple[float, ...]] | None = None
+from host_sim.params import RobotParams, cached_per_params
 
 
+@cached_per_params
 def _consts(p: RobotParams) -> tuple[float, ...]:
     """(I_lim, k_e N / R, eta k_t N, V_bat / R, c_v, T_c, 1 / w_eps, g/m_t, 1/J_t, r, b, 1/r, b/r), cached."""
-    global _last
-    last = _last
-    if last is not None and last[0] is p:
-        return last[1]
     lim, n_kt, eta_n_kt, v_r, inv_r, c_v, t_c = motors._consts(p)
     r, b, _d, g, _mt, _jt, imt, ijt = dynamics._coeffs(p)[:8]
     c = (lim, n_kt * inv_r, eta_n_kt, v_r, c_v, t_c, 1.0 / motors.COULOMB_EPS, g, imt, ijt, r, b, 1.0 / r, b / r)
-    _last = (p, c)
     return c
 
 

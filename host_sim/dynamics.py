@@ -61,15 +61,13 @@ from typing import Any, Union
 
 import numpy as np
 
-from host_sim.params import RobotParams
+from host_sim.params import RobotParams, cached_per_params
 
 Vec = Union[Sequence[float], np.ndarray]  # a state vector: tuple, list or numpy array
 
 # ----------------------------------------------------------------------------- #
 # Parameters: the combinations the closed form needs
 # ----------------------------------------------------------------------------- #
-_last: tuple[Any, tuple[float, ...]] | None = None
-
 
 def effective_inertias(p: Any) -> tuple[Any, Any]:
     """(m_t, J_t): the effective translational mass (kg) and yaw inertia about C (kg m^2).
@@ -85,14 +83,11 @@ def effective_inertias(p: Any) -> tuple[Any, Any]:
     return m_t, j_t
 
 
+@cached_per_params
 def _coeffs(p: Any) -> tuple[Any, ...]:
     """(r, b, d, g = m_c d, m_t, J_t, 1/m_t, 1/J_t, r/2, r/(2b), 1/r, b/r, m_t J_t).
 
     Cached for the last RobotParams seen (they are frozen); a ParamBatch keeps its own."""
-    global _last
-    last = _last
-    if last is not None and last[0] is p:
-        return last[1]
     if isinstance(p, ParamBatch):
         return p.dynamics_coeffs()
     m_t, j_t = effective_inertias(p)
@@ -100,7 +95,6 @@ def _coeffs(p: Any) -> tuple[Any, ...]:
     r, b = float(p.wheel_radius), float(p.half_axle)
     c = (r, b, float(p.com_offset), float(p.body_mass * p.com_offset), m_t, j_t, 1.0 / m_t, 1.0 / j_t,
          0.5 * r, 0.5 * r / b, 1.0 / r, b / r, m_t * j_t)
-    _last = (p, c)
     return c
 
 

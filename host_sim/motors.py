@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from host_sim.params import RobotParams
+from host_sim.params import RobotParams, cached_per_params
 
 COULOMB_EPS = 0.1  # rad/s, default smoothing speed of the Coulomb friction (not in RobotParams yet)
 TWO_PI = 2.0 * math.pi
@@ -67,20 +67,13 @@ def friction(w: float, p: RobotParams, coulomb_eps: float = COULOMB_EPS) -> floa
     return p.viscous_friction * w + p.coulomb_friction * math.tanh(w / coulomb_eps)
 
 
-_last: tuple[Any, tuple[float, ...]] | None = None
-
-
+@cached_per_params
 def _consts(p: RobotParams) -> tuple[float, ...]:
     """(I_lim, k_e N, eta k_t N, V_bat / R, 1 / R, c_v, T_c), cached for the last RobotParams (frozen)."""
-    global _last
-    last = _last
-    if last is not None and last[0] is p:
-        return last[1]
     n_kt = float(p.gear_ratio * p.torque_constant)
     c = (float(p.current_limit), n_kt, float(p.gear_efficiency) * n_kt,
          float(p.battery_voltage / p.armature_resistance), 1.0 / float(p.armature_resistance),
          float(p.viscous_friction), float(p.coulomb_friction))
-    _last = (p, c)
     return c
 
 
@@ -126,24 +119,14 @@ def _axis0(a: Any, ndim: int) -> Any:
 def wheel_torque_batch(i_ref: Any, w: Any, p: Any,
                        coulomb_eps: Any = COULOMB_EPS) -> tuple[np.ndarray, np.ndarray]:
     """(torque, current) for arrays i_ref, w of shape (N,) or (N, 2); p RobotParams or ParamBatch."""
-    i_ref = np.asarray(i_ref, dtype=float)
-    w = np.asarray(w, dtype=float)
-    nd = w.ndim
-    lim = _axis0(p.current_limit, nd)
-    n_kt = _axis0(p.gear_ratio * p.torque_constant, nd)
-    inv_r = _axis0(1.0 / p.armature_resistance, nd)
-    vb = _axis0(p.battery_voltage, nd)
-    emf = n_kt * w
-    i = np.minimum(np.maximum(i_ref, -lim), lim)
-    i = np.minimum(np.maximum(i, (-vb - emf) * inv_r), (vb - emf) * inv_r)
+    w, nd, n_kt, _inv_r, i, _limited = _driver_batch(i_ref, w, p)
     torque = (_axis0(p.gear_efficiency, nd) * n_kt * i - _axis0(p.viscous_friction, nd) * w
               - _axis0(p.coulomb_friction, nd) * np.tanh(w / _axis0(coulomb_eps, nd)))
     return torque, i
 
 
-def wheel_torque_slope_batch(i_ref: Any, w: Any, p: Any, coulomb_eps: Any = COULOMB_EPS
-                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """wheel_torque_slope for arrays i_ref, w of shape (N,) or (N, 2): (torque, current, slope)."""
+def _driver_batch(i_ref: Any, w: Any, p: Any) -> tuple[np.ndarray, int, Any, Any, np.ndarray, np.ndarray]:
+    """(w, its ndim, k_e N, 1 / R, the current the driver delivers, where the battery limits it): arrays."""
     i_ref = np.asarray(i_ref, dtype=float)
     w = np.asarray(w, dtype=float)
     nd = w.ndim
@@ -151,13 +134,19 @@ def wheel_torque_slope_batch(i_ref: Any, w: Any, p: Any, coulomb_eps: Any = COUL
     n_kt = _axis0(p.gear_ratio * p.torque_constant, nd)
     inv_r = _axis0(1.0 / p.armature_resistance, nd)
     vb = _axis0(p.battery_voltage, nd)
-    eta_n_kt = _axis0(p.gear_efficiency, nd) * n_kt
-    c_v, t_c, eps = _axis0(p.viscous_friction, nd), _axis0(p.coulomb_friction, nd), _axis0(coulomb_eps, nd)
     emf = n_kt * w
     i = np.minimum(np.maximum(i_ref, -lim), lim)
     hi, lo = (vb - emf) * inv_r, (-vb - emf) * inv_r
     limited = (i > hi) | (i < lo)
-    i = np.minimum(np.maximum(i, lo), hi)
+    return w, nd, n_kt, inv_r, np.minimum(np.maximum(i, lo), hi), limited
+
+
+def wheel_torque_slope_batch(i_ref: Any, w: Any, p: Any, coulomb_eps: Any = COULOMB_EPS
+                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """wheel_torque_slope for arrays i_ref, w of shape (N,) or (N, 2): (torque, current, slope)."""
+    w, nd, n_kt, inv_r, i, limited = _driver_batch(i_ref, w, p)
+    eta_n_kt = _axis0(p.gear_efficiency, nd) * n_kt
+    c_v, t_c, eps = _axis0(p.viscous_friction, nd), _axis0(p.coulomb_friction, nd), _axis0(coulomb_eps, nd)
     th = np.tanh(w / eps)
     torque = eta_n_kt * i - c_v * w - t_c * th
     slope = -c_v - np.where(limited, eta_n_kt * n_kt * inv_r, 0.0) - t_c * (1.0 - th * th) / eps

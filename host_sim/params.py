@@ -20,7 +20,9 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, TypeVar
+
+T = TypeVar("T")
 
 
 def _p(default: float, unit: str, doc: str) -> Any:
@@ -163,6 +165,24 @@ class RobotParams:
     def to_json(self) -> dict[str, object]:
         return {f.name: (list(v) if isinstance(v := getattr(self, f.name), tuple) else v)
                 for f in dataclasses.fields(self)}
+
+
+def cached_per_params(compute: Callable[[Any], T]) -> Callable[[Any], T]:
+    """compute(p), cached for the last parameter object seen.
+
+    Parameters are frozen (RobotParams) or never changed once built (ParamBatch), so the
+    object's identity is enough; the hot paths call these every step with the same robot."""
+    last: list[Any] = [None, None]
+
+    def cached(p: Any) -> T:
+        if last[0] is not p:
+            last[1] = compute(p)
+            last[0] = p
+        return last[1]  # type: ignore[no-any-return]
+
+    cached.__doc__ = compute.__doc__
+    cached.__name__ = compute.__name__
+    return cached
 
 
 class ParamsError(ValueError):

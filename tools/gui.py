@@ -75,15 +75,11 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
 
 
 def settings_from(args: argparse.Namespace):  # type: ignore[no-untyped-def]
-    from host_sim.params import DEFAULT, ParamsError, load_params
-    from host_sim.world import BUILTIN_NAMES, WorldError, world_by_name_or_path
+    from host_sim.world import BUILTIN_NAMES
     from tools.gui_app.app import Settings
+    from tools.sim import load_inputs
 
-    try:
-        params = load_params(args.params) if args.params else DEFAULT
-        world = world_by_name_or_path(args.world, params.body_radius)
-    except (ParamsError, WorldError) as exc:
-        raise CliError(str(exc)) from None
+    params, world = load_inputs(args)
     if args.screenshot and args.frames is None:
         raise CliError("--screenshot needs --frames N (headless run)")
     out = Path(args.out)
