@@ -8,8 +8,9 @@ draws, from `seed` alone:
   one of effects.EFFECTS, with its site (wheel or sensor) and a value from
   its realistic ranges (floor_tilt also draws the downhill direction);
 - the world (a built-in one) and a start pose clear of the walls;
-- the excitation: the firmware's own exploration in SIL (either rule set),
-  or a random current-reference program (excitation.program) with an IR guard;
+- the excitation: the firmware in SIL (either rule set) exploring on its own, or
+  driven through the identification manoeuvre in HOST mode
+  (host_sim/excitation.py, what `twinbot serial PORT --excite` does to a robot);
 
 runs the plant for `duration` seconds and writes the recording
 (out_dir/case_NNNN.csv, source "robot", plant "mujoco", the nominal robot
@@ -26,15 +27,15 @@ from pathlib import Path
 
 import numpy as np
 
+from host_sim.excitation import ExcitedController
 from host_sim.sil import SilController
 from host_sim.world import BUILTIN_NAMES, World, builtin_world
-from tools.proving_ground import effects, excitation
-from tools.proving_ground.recorder import ProgramController, record
+from tools.proving_ground import effects
+from tools.proving_ground.recorder import record
 from tools.proving_ground.robot_model import PlantSpec, nominal_spec
 
 CONTROL_SHARE = 0.15  # fraction of cases with no effect at all
 START_MARGIN = 0.15  # m from C to any wall at the start
-GUARD_COUNTS = 150  # reflected counts that pause an excitation program
 
 
 def _start(world: World, rng: np.random.Generator) -> tuple[float, float, float]:
@@ -92,9 +93,10 @@ def make_case(seed: int, out_dir: str | Path, duration: float = 90.0,
         rules = int(rng.integers(2))
         controller: object = SilController(rules)
         how = {"kind": "firmware", "rule_set": rules}
-    else:
-        controller = ProgramController(excitation.program(rng, duration), guard=GUARD_COUNTS)
-        how = {"kind": "program", "guard_counts": GUARD_COUNTS}
+    else:  # the identification manoeuvre (twinbot sim --excite / serial --excite) through the firmware
+        rules = int(rng.integers(2))
+        controller = ExcitedController(SilController(rules))
+        how = {"kind": "manoeuvre", "rule_set": rules}
     out_dir = Path(out_dir)
     key_dir = Path(key_dir) if key_dir is not None else out_dir / "answer_keys"
     out_dir.mkdir(parents=True, exist_ok=True)
