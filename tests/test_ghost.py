@@ -46,3 +46,8 @@ def test_prediction_follows_the_commands_sent_since_the_frame() -> None:
 def test_odometry_pose_units() -> None:
     x, y, phi = odometry_pose({"odo_x": 1_500_000, "odo_y": -250_000, "odo_heading": 3 << 28})
     assert (x, y) == (1.5, -0.25) and abs(phi - (-0.5 * np.pi)) < 1e-12
+
+
+def test_without_the_floor_the_latency_counts_from_the_fastest_frame() -> None:
+    run = run_late(0.200, 0.050, seed=4, duration=10.0, floor_s=0.0)
+    assert abs(np.mean(run.latency_est) - 0.050) < 0.020  # the jitter above the 150 ms floor

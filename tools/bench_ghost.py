@@ -17,7 +17,7 @@ import platform
 from pathlib import Path
 from typing import Any
 
-from tools.arguments import float_range, int_range
+from tools.arguments import float_range, image_file, int_range, output_file
 
 DELAYS_MS = (0, 50, 100, 200, 300)
 
@@ -30,8 +30,8 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
     p.add_argument("--jitter", type=float_range(0, 1000, unit="ms"), default=50.0,
                    help="jitter half-width, ms (default 50; never more than the mean)")
     p.add_argument("--seed", type=int_range(0, 2**31), default=0, help="seed of the link's delays")
-    p.add_argument("--plot", type=Path, default=None, help="write the error plot here (PNG)")
-    p.add_argument("--json", type=Path, default=None, help="keep every figure in this JSON file")
+    p.add_argument("--plot", metavar="FILE", type=image_file, default=None, help="write the error plot here (PNG)")
+    p.add_argument("--json", metavar="FILE", type=output_file, default=None, help="keep every figure in this JSON file")
     p.set_defaults(func=run)
 
 
@@ -95,9 +95,9 @@ def run(args: argparse.Namespace) -> int:
     worse = [r["delay_ms"] for r in rows if r["delay_ms"] > 0 and r["ghost_mean_mm"] >= r["raw_mean_mm"]]
     print(f"target: ghost error below the raw late pose's at every delay > 0: {'met' if not worse else 'NOT met'}")
     if args.plot is not None:
-        plot(rows, args.plot)
+        plot(rows, Path(args.plot))
         print(f"plot: {args.plot}")
     if args.json is not None:
-        args.json.write_text(json.dumps(rows, indent=1))
+        Path(args.json).write_text(json.dumps(rows, indent=1))
     return 0 if not worse else 1
 
