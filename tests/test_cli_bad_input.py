@@ -176,6 +176,9 @@ CASES: list[tuple[str, list[str], str]] = [
     ("bench-diagnose-jobs-zero", ["bench", "diagnose", "--jobs", "0"], "'0'"),
     ("bench-diagnose-out-in-a-file", ["bench", "diagnose", "--out", "{case}/afile/cases"], "afile"),
     ("bench-diagnose-json-folder", ["bench", "diagnose", "--json", "{case}/adir"], "adir"),
+    ("bench-ghost-duration-short", ["bench", "ghost", "--duration", "1"], "'1'"),
+    ("bench-ghost-plot-in-a-file", ["bench", "ghost", "--plot", "{case}/afile/x.png"], "afile"),
+    ("bench-ghost-json-folder", ["bench", "ghost", "--json", "{case}/adir"], "adir"),
 ]
 
 
