@@ -16,7 +16,7 @@ import logging
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -147,7 +147,7 @@ SUMMARY_COLUMNS = ("rules", "world", "runs", "coverage_mean", "coverage_std", "r
                    "exit_rate", "exit_time_median_s", "collisions_mean", "stuck_rate")
 
 
-def summarise(rows: Sequence[dict[str, object]]) -> list[dict[str, object]]:
+def summarise(rows: Sequence[dict[str, object]]) -> list[dict[str, Any]]:
     """A row per rule set x world: means, rates and medians over the seeds."""
     out = []
     for key in dict.fromkeys((r["rules"], r["world"]) for r in rows):
