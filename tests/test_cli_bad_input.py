@@ -161,6 +161,16 @@ CASES: list[tuple[str, list[str], str]] = [
     ("diagnose-write-params-folder", ["diagnose", "{in}/run.csv", "--write-params", "{case}/adir"], "adir"),
     ("diagnose-params-bad", ["diagnose", "{in}/run.csv", "--params", "{in}/adc64.json"], "adc_bits"),
     ("diagnose-world-huge", ["diagnose", "{in}/run.csv", "--world", "{in}/huge.json"], "limit"),
+    # sweep
+    ("sweep-out-missing", ["sweep", "--seeds", "1"], "--out"),
+    ("sweep-seeds-zero", ["sweep", "--seeds", "0", "--out", "{case}/o"], "'0'"),
+    ("sweep-rules-bogus", ["sweep", "--rules", "first,bogus", "--out", "{case}/o"], "bogus"),
+    ("sweep-world-bogus", ["sweep", "--world", "paper_room,nowhere", "--out", "{case}/o"], "nowhere"),
+    ("sweep-duration-nan", ["sweep", "--duration", "nan", "--out", "{case}/o"], "'nan'"),
+    ("sweep-out-is-a-file", ["sweep", "--out", "{case}/afile"], "afile"),
+    ("sweep-out-no-parent", ["sweep", "--out", "{case}/missing/o"], "missing"),
+    ("sweep-scheduler-not-an-address", ["sweep", "--scheduler", "localhost", "--out", "{case}/o"], "'localhost'"),
+    ("sweep-workers-zero", ["sweep", "--workers", "0", "--out", "{case}/o"], "'0'"),
     # bench
     ("bench-no-benchmark", ["bench"], "BENCHMARK"),
     ("bench-firmware-cycles-zero", ["bench", "firmware", "--cycles", "0"], "'0'"),

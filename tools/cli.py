@@ -22,6 +22,7 @@ SUBCOMMANDS = (
     ("gui", "the paper's application in a window: draw a room, watch three robots, drive one"),
     ("replay", "replay a recording open loop through the twin; how far the twin ends from it"),
     ("plot", "figures: a recording, the IR sensor model (the paper's Figs. 7-12), the built-in worlds"),
+    ("sweep", "many runs (rule sets x worlds x seeds) in parallel, locally or on a Dask cluster: a table, plots"),
     ("bench", "benchmarks that produce the README's figures"),
 )
 
@@ -36,6 +37,7 @@ _MODULES = {
     "gui": "tools.gui",
     "replay": "tools.replay",
     "plot": "tools.plot",
+    "sweep": "tools.sweep",
     "bench": "tools.bench",
 }
 
