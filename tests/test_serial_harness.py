@@ -243,3 +243,25 @@ def test_host_abandons_a_stale_partial_frame_on_a_pty(pty_pair):
         assert got[0].fields["tick_ms"] == 120
     finally:
         link.close()
+
+
+def test_predict_says_where_the_robot_is_now_from_late_reports(pty_pair):
+    """--predict: the ghost advances the last reported pose through the commands sent since."""
+    proc = subprocess.Popen(twinbot_cmd("serial", pty_pair.path, "--predict", "--command", "host", "200", "200",
+                                        "--rate", "20", "--duration", "2.5", "--quiet"),
+                            cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    enc = FrameEncoder()
+    fields = next(f for t, _n, f in M.LAYOUTS if t == M.TELEMETRY)
+    time.sleep(0.5)
+    for k in range(40):  # a robot reporting at 25 Hz, standing at the origin: its reports are stale
+        values = {name: ([0] * count if count > 1 else 0) for name, _code, count in fields}
+        values.update({"tick_ms": 40 * k, "mode": M.MODE_HOST, "vbat_mv": 7400, "ir_on": [5] * 8, "ir_amb": [5] * 8})
+        pty_pair.write(enc.encode(M.TELEMETRY, M.pack_payload(M.TELEMETRY, values)))
+        pty_pair.read_available(0.04)
+    out, err = proc.communicate(timeout=20)
+    assert proc.returncode == 0, err
+    lines = [line for line in out.splitlines() if line.startswith("predict:")]
+    assert len(lines) >= 2
+    assert "last report (+0.000, +0.000) m" in lines[-1]  # what the late reports say
+    now_x = float(lines[-1].split("now (")[1].split(",")[0])
+    assert now_x > 0.0  # the ghost drove on at the commanded 200 mm/s from the last report

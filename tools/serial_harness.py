@@ -7,6 +7,7 @@ messages given on the command line; records every frame to a log.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 
@@ -52,6 +53,10 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
                         "chirp, spins, arcs, reversals, bursts; it turns away from walls its IR sees and heads back "
                         "beyond 0.5 m of its start); with --record F.csv, a recording for twinbot diagnose "
                         "(default --duration 92 s: the manoeuvre twice)")
+    p.add_argument("--predict", action="store_true",
+                   help="the late-signal twin (host_sim/ghost.py): twice a second, where the robot was by its last "
+                        "TELEMETRY, where it is now by the ghost (advanced through the commands sent since), and "
+                        "the link's latency above its fastest frame")
     p.add_argument("--param-set", action="append", default=[], metavar="NAME=VALUE", help="send PARAM_SET (repeatable)")
     p.add_argument("--param-get", action="append", default=[], metavar="NAME", help="send PARAM_GET (repeatable)")
     p.add_argument("--record", metavar="FILE", type=record_target,
@@ -183,6 +188,40 @@ class Display:
         self.stream.flush()
 
 
+class Predictor:
+    """--predict: a ghost fed with what the link sees, printing where the robot is now (host_sim/ghost.py)."""
+
+    EVERY_S = 0.5
+
+    def __init__(self, stream=sys.stdout) -> None:
+        from host_sim.ghost import Ghost
+        from host_sim.interface import firmware_geometry
+        from host_sim.params import DEFAULT
+
+        diameter_um, base_um, ticks = firmware_geometry(DEFAULT)
+        self.ghost = Ghost(base_um / 1e6, diameter_um / 1e6, ticks)
+        self.stream = stream
+        self._printed = -1.0
+
+    def frame(self, frame: Frame) -> None:
+        f = frame.fields
+        if frame.direction == "rx" and frame.msg_type == M.TELEMETRY and "odo_heading" in f:
+            self.ghost.on_telemetry(f, frame.t)
+            if frame.t - self._printed >= self.EVERY_S:
+                self._printed = frame.t
+                self.stream.write(self.line(frame.t) + "\n")
+        elif frame.direction == "tx" and frame.msg_type == M.COMMAND and f["mode"] == M.MODE_HOST:
+            self.ghost.on_command(frame.t, float(f["left"]), float(f["right"]))  # type: ignore[arg-type]
+            self.ghost.forget_before(frame.t - 5.0)
+
+    def line(self, now: float) -> str:
+        raw, ghost, latency = self.ghost.raw_pose(), self.ghost.predict(now), self.ghost.latency_s
+        assert raw is not None and ghost is not None and latency is not None
+        return (f"predict: last report ({raw[0]:+.3f}, {raw[1]:+.3f}) m {math.degrees(raw[2]):+.1f} deg | "
+                f"now ({ghost[0]:+.3f}, {ghost[1]:+.3f}) m {math.degrees(ghost[2]):+.1f} deg | "
+                f"late by {1000 * latency:.0f} ms above the fastest frame")
+
+
 class ManoeuvreDriver:
     """--excite: each COMMAND from the manoeuvre, given the robot's latest TELEMETRY (its IR and odometry)."""
 
@@ -230,9 +269,13 @@ def run(args: argparse.Namespace) -> int:
     except (FrameLogError, ValueError) as exc:
         raise CliError(str(exc)) from None
 
+    predictor = Predictor() if args.predict else None
+
     def on_frame(frame: Frame) -> None:
         if log:
             log.frame(frame)
+        if predictor is not None:
+            predictor.frame(frame)
         if isinstance(command, ManoeuvreDriver):
             command.frame(frame)
         display.frame(frame)
