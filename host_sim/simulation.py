@@ -208,6 +208,9 @@ class Simulation:
         )
 
 
+TRUTH_KEPT = 64  # cycles whose TELEMETRY may still be on its way (PIL: a few at most)
+
+
 class _RecordingRows:
     """Rows of a recording, one per control cycle, written as the robot would write them.
 
@@ -231,6 +234,8 @@ class _RecordingRows:
                             s.adc_off, s.vbat_mv / 1000.0, pose, emitter_pct=emitter_pct)
             return
         self.truth[s.tick_ms] = (t, pose, emitter_pct)
+        if len(self.truth) > TRUTH_KEPT:  # a cycle the firmware never reported (it faulted): forget it
+            del self.truth[next(iter(self.truth))]
         self._write(self.telemetry())
 
     def finish(self) -> None:
