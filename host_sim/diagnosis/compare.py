@@ -53,7 +53,7 @@ def compare(rec: Recording, params: RobotParams, world: World | None, seconds: f
 def held_out_fit(chans: list[Channel], windows: Windows, contact: np.ndarray, s: int = 0) -> dict[str, float]:
     """Fit % of every channel on the held-out windows away from walls; "contact" on those touching one."""
     judged = windows.held_out & ~contact
-    fit = {c.name: fit_percent(c.y[judged], c.y_hat[judged, s]) for c in chans if judged.any()}
+    fit = {c.name: fit_percent(c.y[judged], c.y_hat[judged, s]) for c in chans} if judged.any() else {}
     touching = windows.held_out & contact
     if touching.any():
         wheels = [c for c in chans if c.name in WHEELS]
