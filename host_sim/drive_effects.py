@@ -31,7 +31,7 @@ import numpy as np
 from host_sim.motors import COULOMB_EPS
 
 CASTER_BEHIND = 0.045  # m: the caster sits on the body's axis this far behind C (3/4 of the body radius)
-SUPPLY_NEWTON = 4  # Newton steps on the supply voltage (exact once the active limits are found)
+SUPPLY_NEWTON = 8  # Newton steps on the supply voltage (converged to 1e-12 V_bat once the limits in force are found)
 # RobotParams fields that switch this path on when any robot has them away from 0.
 FIELDS = ("coulomb_friction_delta_l", "coulomb_friction_delta_r", "viscous_friction_delta_l",
           "viscous_friction_delta_r", "wheel_radius_delta_l", "wheel_radius_delta_r", "torque_constant_delta_l",
@@ -116,9 +116,12 @@ def _currents(c: np.ndarray, emf: np.ndarray, volts: np.ndarray, res: np.ndarray
 
 
 def supply(i_ref: Any, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray]:
-    """(V (N,), currents (N, 2)): V = V_bat - R_int (|i_l| + |i_r| + i_e) with the currents V allows.
+    """(V (N,), currents (N, 2)): V = V_bat - R_int (i_e + sum(u i) / V), with the currents V allows.
 
-    Piecewise linear in V: Newton from V_bat, exact once the limits in force are found."""
+    The drivers switch (PWM): each bridge passes the motor's power u i (u = R i + k_e N w, its
+    terminal voltage) to the battery side, so the battery delivers i_e + sum(u i) / V, not
+    i_e + |i_l| + |i_r| (the two agree only at full duty, u = V).  Newton on V from V_bat: the
+    currents are piecewise linear in V, so it is exact once the limits in force are found."""
     c = np.minimum(np.maximum(np.asarray(i_ref, dtype=float), -d.lim), d.lim)
     emf = d.kt * d.gear * w
     volts = d.v_bat.copy()
@@ -126,11 +129,14 @@ def supply(i_ref: Any, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray]
     if not np.any(d.r_int):
         return volts, i
     for _ in range(SUPPLY_NEWTON):
-        gv = volts - d.v_bat + d.r_int * (np.abs(i).sum(1) + d.i_e)
+        u = d.res * i + emf
+        power = (u * i).sum(1)
+        gv = volts - d.v_bat + d.r_int * (d.i_e + power / volts)
         if not np.any(np.abs(gv) > 1e-12 * d.v_bat):  # the limits in force were found: exact
             break
-        slope = np.maximum(1.0 + d.r_int * (np.sign(i) * di).sum(1), 1.0)
-        volts = np.clip(volts - gv / slope, 0.0, d.v_bat)
+        d_power = ((d.res * i + u) * di).sum(1)  # d(sum u i)/dV through the clipped currents
+        slope = np.maximum(1.0 + d.r_int * (d_power / volts - power / volts ** 2), 0.5)
+        volts = np.clip(volts - gv / slope, 0.05 * d.v_bat, d.v_bat)
         i, di = _currents(c, emf, volts, d.res)
     return volts, i
 

@@ -227,6 +227,21 @@ def test_battery_resistance_sags_the_supply_and_the_top_speed():
     assert robot.sense().vbat_mv == round(volts * 1000)
 
 
+def test_battery_gives_the_switching_drivers_power_not_their_current():
+    """Below full duty a PWM bridge draws u i / V from the battery (power balance), not i."""
+    r_int, i = 2.0, I_LOW
+    p = FLAT.replace(battery_resistance=r_int)
+    v, sim = steady_speeds(p, i, i)
+    w = float(v[0])
+    u = P.armature_resistance * i + P.torque_constant * P.gear_ratio * w  # each motor's terminal voltage
+    # V = V_bat - R_int (i_e + 2 u i / V), the positive root of V^2 - (V_bat - R_int i_e) V + 2 R_int u i = 0
+    b = P.battery_voltage - r_int * P.electronics_current
+    volts = (b + math.sqrt(b * b - 8 * r_int * u * i)) / 2
+    assert u < 0.5 * volts  # part duty: the two models differ here
+    assert sim.vbat[0] == pytest.approx(volts, rel=1e-9)
+    assert sim.vbat[0] > P.battery_voltage - r_int * (P.electronics_current + 2 * i) + 0.05
+
+
 def test_nominal_vbat_is_the_battery_voltage():
     res = BatchSim(None, P, np.zeros((2, 3))).run_inputs(np.tile([0.5, 0.5], (5, 1)), sensors=False)
     assert (res.vbat == P.battery_voltage).all() and res.vbat.shape == (5, 2)
