@@ -69,6 +69,7 @@ class Model:
     ci95: list[list[tuple[float, float]]] = field(default_factory=list)
     p_value: float = 1.0
     alternatives: list[str] = field(default_factory=list)
+    rivals: list[Model] = field(default_factory=list)  # the models of the alternatives (their newest effect swapped)
 
 
 def candidates_for(channels: list[str]) -> list[Candidate]:
@@ -292,8 +293,8 @@ def select(obj: Objective, base: RobotParams, cands: list[Candidate],
         gain = 1.0 - best.cost_test / current.cost_test if current.cost_test > 0 else 0.0
         if best.p_value > P_MAX or gain < MIN_HELD_OUT_GAIN:
             break
-        best.alternatives = [m.effects[-1].label() for m in tried
-                             if m is not best and m.cost_test <= best.cost_test * (1 + AMBIGUITY)]
+        best.rivals = [m for m in tried if m is not best and m.cost_test <= best.cost_test * (1 + AMBIGUITY)]
+        best.alternatives = [m.effects[-1].label() for m in best.rivals]
         chain.append(best)
     return backward(obj, base, chain, say)
 
@@ -323,6 +324,7 @@ def backward(obj: Objective, base: RobotParams, chain: list[Model],
             m = reduced if n == len(effects) else fit_model(obj, base, effects[:n], values[:n])
             m.p_value = f_test(rebuilt[-1].cost_train, m.cost_train, len(values[n - 1]), m.n_train, _sizes(values[:n]))
             m.alternatives = chain[rest[n - 1] + 1].alternatives
+            m.rivals = chain[rest[n - 1] + 1].rivals
             rebuilt.append(m)
         return backward(obj, base, rebuilt, say)
     return chain

@@ -14,6 +14,7 @@ from typing import Any, Callable
 import numpy as np
 
 from host_sim import effects as E
+from host_sim.diagnosis.apart import tell_apart
 from host_sim.diagnosis.compare import Comparison, compare_all
 from host_sim.diagnosis.fit import Model, Objective, candidates_for, objective_channels, select
 from host_sim.diagnosis.locate import Finding, noise_level
@@ -62,6 +63,7 @@ class Diagnosis:
                                for k, v in e["params"].items())
             alt = e["evidence"]["explains_equally_well"]
             lines.append(f"  effect: {e['name']}{where}: {values}" + (f"; as well: {', '.join(alt)}" if alt else ""))
+            lines += [f"    {text}" for text in e["evidence"].get("told_apart_by", [])]
         for item in self.unexplained:
             lines.append(f"  unexplained: {item['words']}")
         shown = [k for k in self.fit_before if not k.startswith("amb_")]
@@ -165,5 +167,7 @@ def _effect_entry(model: Model, i: int, chain: list[Model]) -> dict[str, Any]:
     before = chain[i]
     entry["evidence"] = {"doc": effect.doc, "p_value": step.p_value,
                          "held_out_cost_before": before.cost_test, "held_out_cost_after": step.cost_test,
-                         "explains_equally_well": step.alternatives}
+                         "explains_equally_well": step.alternatives,
+                         "told_apart_by": [tell_apart((cand.label(), step.params), (r.effects[-1].label(), r.params))
+                                           for r in step.rivals]}
     return entry
