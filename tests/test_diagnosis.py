@@ -123,3 +123,15 @@ def test_a_bad_recording_is_one_line_and_exit_2(tmp_path):
     r = run_twinbot("diagnose", str(bad))
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
     assert np.isfinite(1.0)
+
+
+def test_too_little_of_a_motion_away_from_the_walls_is_said(nominal_run):
+    from host_sim.diagnosis.compare import compare
+    from host_sim.diagnosis.report import excitation_notes
+
+    first = compare(nominal_run, DEFAULT, ROOM, locate=False)
+    assert not any("turned for" in n for n in excitation_notes(nominal_run, first, DEFAULT, ROOM))
+    straight = load_recording(nominal_run.path)
+    straight.enc[:, 1] = straight.enc[:, 0]  # the encoders now say the robot never turned
+    (note,) = excitation_notes(straight, first, DEFAULT, ROOM)
+    assert "turned for 0.0 s" in note and "track width" in note and "--excite" in note

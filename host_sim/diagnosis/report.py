@@ -17,7 +17,7 @@ from host_sim import effects as E
 from host_sim.diagnosis.apart import tell_apart
 from host_sim.diagnosis.compare import Comparison, compare_all
 from host_sim.diagnosis.fit import Model, Objective, candidates_for, objective_channels, select
-from host_sim.diagnosis.locate import Finding, noise_level
+from host_sim.diagnosis.locate import Finding, noise_level, regimes
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
 from host_sim.diagnosis.words import sentence
 from host_sim.params import RobotParams
@@ -77,6 +77,30 @@ def _finite(d: dict[str, float]) -> dict[str, float | None]:
     return {k: (round(v, 2) if math.isfinite(v) else None) for k, v in d.items()}
 
 
+# What each kind of motion, away from the walls, lets the diagnosis judge; with less than
+# MIN_REGIME_S of it those effects are said to be poorly judged (a "match" is then weak evidence).
+REGIME_EFFECTS = (("turning", (0, 2), "turned", "track width, turning resistance and the centre of mass"),
+                  ("direction", (1,), "drove backwards", "backlash and the wheels' asymmetries in reverse"),
+                  ("acceleration", (1,), "accelerated or braked", "mass, inertia and actuator delay"))
+MIN_REGIME_S = 4.0
+
+
+def excitation_notes(rec: Recording, first: Comparison, params: RobotParams, world: World | None) -> list[str]:
+    """A note on the kinds of motion the recording holds too little of, away from the walls ([] if none)."""
+    reg = regimes(rec, first.windows, params, world)
+    free = ~first.contact
+    did, effects = [], []
+    for name, values, doing, judged in REGIME_EFFECTS:
+        seconds = float(np.isin(reg.labels[name][0][free], values).sum()) * rec.sample_period
+        if seconds < MIN_REGIME_S:
+            did.append(f"{doing} for {seconds:.1f} s")
+            effects.append(judged)
+    if not did:
+        return []
+    return [f"away from the walls the robot {'; '.join(did)} only, so these are poorly judged: "
+            f"{'; '.join(effects)} (the identification manoeuvre has all of these: twinbot serial PORT --excite)"]
+
+
 def check_data(rec: Recording, world: World | None) -> list[str]:
     """Refuse what cannot be diagnosed; return notes on what this recording cannot show."""
     period = rec.sample_period
@@ -111,6 +135,7 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     if int(first.contact.sum()):
         result.notes.append(f"{int(first.contact.sum())} of {len(first.contact)} windows touch a wall: judged apart "
                             f"(channel 'contact')")
+    result.notes += excitation_notes(rec, first, params, world)
     if not result.located:
         result.fit_after = dict(first.fit)
         return result
