@@ -496,7 +496,7 @@ class BatchSim:
             body = np.where(rolling[:, None], drive_effects.body_velocity(vs, fx), body)
             self.current[s] = cur
             forces = drive_effects.body_forces(body[:, 0], body[:, 1], body[:, 2], fx)
-            return tau, slope, body, {"radii": fx.radius, "body_force": forces}
+            return tau, slope, body, {"radii": fx.radius, "body_force": forces, "axle_friction": fx.t_c}
         tau, _cur, slope = motors.wheel_torque_slope_batch(i_s, vs, _SubParams(self._p_motors, s))
         if rolling.any():
             r, b = _sub(self._wheel_radius, s), _sub(self._half_axle, s)

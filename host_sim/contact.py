@@ -213,13 +213,14 @@ def _wall_block(ne: Any, nn: Any, m: Any, k: Any, j: Any, rad: Any) -> tuple[Any
 
 def slip_step(q: Any, v: Any, body: tuple[float, float, float] | None, tau: Any, slope: Any, dt: float,
               p: RobotParams, walls: list[tuple[float, float, float, int]],
-              warm: tuple[list[list[float]], list[list[float]]] | None = None
+              warm: tuple[list[list[float]], list[list[float]]] | None = None, axle_friction: Any = None
               ) -> tuple[tuple[float, ...], tuple[float, float], tuple[float, float, float] | None, bool,
                          tuple[list[list[float]], list[list[float]]]]:
     """One step of the unconstrained robot with wheel friction and wall contacts.
 
     q, v: as dynamics; body: (u, l, omega) if slipping, None if rolling (then from v).
-    tau, slope: wheel torques (N m) and d tau / d w (N m s, <= 0) at v.  walls: (gap, nx, ny, index)
+    tau, slope: wheel torques (N m, the motor less the viscous friction) and d tau / d w (N m s, <= 0) at v;
+    axle_friction: (T_l, T_r) the axles' dry friction (default coulomb_friction).  walls: (gap, nx, ny, index)
     as walls_in_reach.  warm: the contact forces of the previous step (wheels [[F_e, F_n]] x 2,
     walls [[F_n, F_t]] in the order of `walls`), where the solve starts (warm start: in steady
     contact a few sweeps instead of a hundred; the solution is the same).  Returns (q, v, body or
@@ -239,7 +240,9 @@ def slip_step(q: Any, v: Any, body: tuple[float, float, float] | None, tau: Any,
         contacts.append((gap / dt, ne, nn) + _wall_block(ne, nn, m, k, j, rad))
     pw = [[f[0] * dt, f[1] * dt] for f in warm[0]] if warm else [[0.0, 0.0], [0.0, 0.0]]
     pc = [[f[0] * dt, f[1] * dt] for f in warm[1]] if warm else [[0.0, 0.0] for _ in contacts]
-    _solve(nu, wheels, contacts, pw, pc, p, dt, start=warm is not None)
+    t_l, t_r = (p.coulomb_friction,) * 2 if axle_friction is None else axle_friction
+    axles = [(1.0 / iwl, t_l * dt, [0.0]), (1.0 / iwr, t_r * dt, [0.0])]
+    _solve(nu, wheels, contacts, pw, pc, p, dt, start=warm is not None, axles=axles)
     u, l, om, wl, wr = nu
     # Pose with the new velocities (C moves as its constraints saw it: heading phi_n).
     cx = q[0] - d * c + dt * (u * c - l * s)
@@ -264,10 +267,13 @@ def _apply(nu: list[float], w: tuple[Any, ...], pe: float, pn: float, wheel: int
 
 
 def _solve(nu: list[float], wheels: list[tuple[Any, ...]], contacts: list[tuple[Any, ...]],
-           pw: list[list[float]], pc: list[list[float]], p: RobotParams, dt: float, start: bool) -> None:
+           pw: list[list[float]], pc: list[list[float]], p: RobotParams, dt: float, start: bool,
+           axles: list[tuple[float, float, list[float]]]) -> None:
     """Projected Gauss-Seidel on the contact impulses pw (wheels), pc (walls), updating nu in place.
 
-    start: pw, pc hold a warm start, whose velocity change is applied first."""
+    start: pw, pc hold a warm start, whose velocity change is applied first.  axles: per wheel (1 / its
+    inertia in the step, the dry friction's bound on its impulse T dt, [the impulse]): the axle's
+    stick-slip friction on the wheel's spin (host_sim/friction.py), a row of its own."""
     m, k, j, dd, _iw, r, _b, _d, rad, cap, mu_w, mg = consts(p)
     ju, lat_l, lat_w = 1.0 / m, j / dd, -k / dd  # M^-1 J^T of the sideways row (0, 1, 0)
     if start:
@@ -291,6 +297,11 @@ def _solve(nu: list[float], wheels: list[tuple[Any, ...]], contacts: list[tuple[
                     if lim > 0.0 else (0.0, 0.0)  # mu = 0: no grip at all
             pw[i] = [pe, pn]
             _apply(nu, w, pe - pe0, pn - pn0, i, ju, lat_l, lat_w)
+            inv_iw, bound, held = axles[i]
+            pa = held[0] - nu[3 + i] / inv_iw
+            pa = bound if pa > bound else (-bound if pa < -bound else pa)
+            nu[3 + i] += (pa - held[0]) * inv_iw
+            held[0] = pa
         for i, (gdt, ne, nn, nl, nw, tl, tw, inn, itt) in enumerate(contacts):
             pn0, pt0 = pc[i]
             pn = max(pn0 - (ne * nu[0] + nn * nu[1] + gdt) * inn, 0.0)
@@ -314,15 +325,16 @@ def _solve(nu: list[float], wheels: list[tuple[Any, ...]], contacts: list[tuple[
 def slip_step_batch(q: np.ndarray, v: np.ndarray, body: np.ndarray, tau: np.ndarray, slope: np.ndarray, dt: Any,
                     p: Any, gaps: np.ndarray, normals: np.ndarray, idx: np.ndarray | None = None,
                     warm_wheels: np.ndarray | None = None, warm_walls: np.ndarray | None = None,
-                    radii: np.ndarray | None = None, body_force: tuple[Any, Any, Any] | None = None
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                    radii: np.ndarray | None = None, body_force: tuple[Any, Any, Any] | None = None,
+                    axle_friction: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """`slip_step` for K robots: q (K, 5), v (K, 2), body (K, 3) (u, l, omega; for rolling robots
     from v), tau, slope (K, 2), dt float or (K,), gaps (K, W) and normals (K, W, 2) as
     walls_in_reach_batch; p a RobotParams or a ParamBatch, of which robots idx are these K;
     warm_wheels (2, 2, K) and warm_walls (2, W, K): the previous step's forces, as slip_step's warm.
     radii (K, 2): each wheel's radius (default wheel_radius); body_force: (F_e, F_n, M_C) (K,) each, forces
     on the body other than the wheels' and the walls' (the caster's drag, the tyres' scrub; host_sim/
-    drive_effects.py), taken at the start of the step.
+    drive_effects.py), taken at the start of the step.  axle_friction (K, 2): each axle's dry friction T
+    (default coulomb_friction), as slip_step's.
     Returns (q, v, body, rolling (K,), pushed (K,), wheel forces (2, 2, K), wall forces (2, W, K))."""
     cs = consts(p)
     if idx is not None:
@@ -343,7 +355,10 @@ def slip_step_batch(q: np.ndarray, v: np.ndarray, body: np.ndarray, tau: np.ndar
     pw = np.zeros((2, 2, n)) if warm_wheels is None else warm_wheels * dt
     pc = np.zeros((2, n_walls, n)) if warm_walls is None else warm_walls * dt
     with np.errstate(invalid="ignore"):  # walls padded with gap = inf
-        _solve_batch(nu, wheels, contacts, pw, pc, cs, dt, start=warm_wheels is not None)
+        t_c = axle_friction if axle_friction is not None else np.broadcast_to(
+            np.reshape(np.asarray(_sub_robots(p.coulomb_friction, idx), dtype=float), (-1, 1)), (n, 2))
+        axles = [(1.0 / iwl, t_c[:, 0] * dt, np.zeros(n)), (1.0 / iwr, t_c[:, 1] * dt, np.zeros(n))]
+        _solve_batch(nu, wheels, contacts, pw, pc, cs, dt, start=warm_wheels is not None, axles=axles)
     u, l, om, wl, wr = nu
     cx = q[:, 0] - d * c + dt * (u * c - l * s)
     cy = q[:, 1] - d * s + dt * (u * s + l * c)
@@ -356,23 +371,15 @@ def slip_step_batch(q: np.ndarray, v: np.ndarray, body: np.ndarray, tau: np.ndar
 
 
 def _solve_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: list[tuple[Any, ...]],
-                 pw: np.ndarray, pc: np.ndarray, cs: tuple[Any, ...], dt: Any, start: bool) -> None:
+                 pw: np.ndarray, pc: np.ndarray, cs: tuple[Any, ...], dt: Any, start: bool,
+                 axles: list[tuple[Any, Any, np.ndarray]]) -> None:
     """`_solve` for K robots (pw (2, 2, K), pc (2, W, K), nu five (K,) arrays, all updated in place):
-    each robot stops at the sweep where its own impulses settle, as the scalar solve does."""
+    each robot stops at the sweep where its own impulses settle, as the scalar solve does.  axles as
+    `_solve`'s, with (K,) arrays."""
     m, k, j, dd, _iw, r, _b, _d, rad, cap, mu_w, mg = cs
     ju, lat_l, lat_w = 1.0 / m, j / dd, -k / dd
     if start:
-        for i, (_sb, el, ew, er) in enumerate(w[:4] for w in wheels):
-            pe, pn = pw[i]
-            nu[0] += ju * pe
-            nu[1] += el * pe + lat_l * pn
-            nu[2] += ew * pe + lat_w * pn
-            nu[3 + i] += er * pe
-        for w, (_g, ne, nn, nl, nw, tl, tw, _inn, _itt) in enumerate(contacts):
-            pn, pt = pc[0, w], pc[1, w]
-            nu[0] += (ne * pn - nn * pt) * ju
-            nu[1] += nl * pn + tl * pt
-            nu[2] += nw * pn + tw * pt
+        _warm_start_batch(nu, wheels, contacts, pw, pc, (ju, lat_l, lat_w))
     lim = cap * dt
     b = np.abs(wheels[0][0])
     active = np.ones(len(nu[0]), dtype=bool)
@@ -395,6 +402,7 @@ def _solve_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: 
             nu[1] += el * de + lat_l * dn
             nu[2] += ew * de + lat_w * dn
             nu[3 + i] += er * de
+            _axle_row(nu, i, axles[i], active)
         for w, (gdt, ne, nn, nl, nw, tl, tw, inn, itt) in enumerate(contacts):
             pn0, pt0 = pc[0, w].copy(), pc[1, w].copy()
             pn = np.maximum(pn0 - (ne * nu[0] + nn * nu[1] + gdt) * inn, 0.0)
@@ -415,3 +423,35 @@ def _solve_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: 
         active &= change >= PGS_TOL
         if not active.any():
             break
+
+
+def _axle_row(nu: list[np.ndarray], i: int, axle: tuple[Any, Any, np.ndarray], active: np.ndarray) -> None:
+    """One sweep of wheel i's axle friction row (`_solve`'s, for K robots): the impulse that stops the
+    wheel's spin, clipped to the dry friction's bound."""
+    inv_iw, bound, held = axle
+    pa = np.clip(held - nu[3 + i] / inv_iw, -bound, bound)
+    da = np.where(active, pa - held, 0.0)
+    nu[3 + i] += da * inv_iw
+    held += da
+
+
+def _sub_robots(a: Any, idx: np.ndarray | None) -> Any:
+    """A parameter's values for robots idx (a shared float as it is)."""
+    return a[idx] if idx is not None and isinstance(a, np.ndarray) else a
+
+
+def _warm_start_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: list[tuple[Any, ...]],
+                      pw: np.ndarray, pc: np.ndarray, lat: tuple[Any, Any, Any]) -> None:
+    """`_solve_batch`'s warm start: the velocity change of the impulses pw, pc it starts from."""
+    ju, lat_l, lat_w = lat
+    for i, (_sb, el, ew, er) in enumerate(w[:4] for w in wheels):
+        pe, pn = pw[i]
+        nu[0] += ju * pe
+        nu[1] += el * pe + lat_l * pn
+        nu[2] += ew * pe + lat_w * pn
+        nu[3 + i] += er * pe
+    for w, (_g, ne, nn, nl, nw, tl, tw, _inn, _itt) in enumerate(contacts):
+        pn, pt = pc[0, w], pc[1, w]
+        nu[0] += (ne * pn - nn * pt) * ju
+        nu[1] += nl * pn + tl * pt
+        nu[2] += nw * pn + tw * pt

@@ -8,7 +8,8 @@ BatchSim of one (so the single-robot and the batch twin are the same code
 and agree bit for bit).  The equations are the nominal ones, generalised:
 
 * per wheel i: radius r_i = r + dr_i, torque (= back-EMF) constant
-  k_i = k_t + dk_i, dry friction T_i = T_c + dT_i, viscous c_i = c_v + dc_i;
+  k_i = k_t + dk_i, dry friction T_i = T_c + dT_i (stick-slip, solved in the step:
+  host_sim/friction.py, as drive.drive_step), viscous c_i = c_v + dc_i;
 * the supply V = V_bat - R_int (|i_l| + |i_r|), solved with the currents it
   allows (Newton on a piecewise-linear equation, `supply`);
 * body forces: a caster at C - a e (a = CASTER_BEHIND) dragged against its
@@ -16,7 +17,8 @@ and agree bit for bit).  The equations are the nominal ones, generalised:
   M = -T_s tanh(omega / eps_w); as generalised forces on (u, omega);
 * the reduced dynamics in (u, omega) with H no longer diagonal when the
   radii differ (docs/effects.md, "wheel_radius"), the same linearly implicit
-  midpoint step as dynamics.step and the same midpoint torque as drive.drive_step.
+  midpoint step as dynamics.step and the same midpoint torque and dry friction
+  solve as drive.drive_step.
 
 With every delta at 0 these are the nominal formulas (equal to the fast path
 to rounding error): an effect's value enters continuously from "absent".
@@ -28,8 +30,9 @@ from typing import Any
 
 import numpy as np
 
-from host_sim.motors import COULOMB_EPS
+from host_sim import friction
 
+SMOOTHING_SPEED = 0.1  # rad/s at the wheel: the caster's drag and the tyres' scrub are smoothed over it
 CASTER_BEHIND = 0.045  # m: the caster sits on the body's axis this far behind C (3/4 of the body radius)
 SUPPLY_NEWTON = 8  # Newton steps on the supply voltage (converged to 1e-12 V_bat once the limits in force are found)
 # RobotParams fields that switch this path on when any robot has them away from 0.
@@ -142,9 +145,10 @@ def supply(i_ref: Any, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray]
 
 
 def wheel_torque(i_ref: Any, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(torque on each wheel (N, 2), current (N, 2), supply V (N,)): motors.wheel_torque per wheel."""
+    """(torque on each wheel (N, 2), current (N, 2), supply V (N,)): motors.wheel_torque per wheel (the motor
+    less the viscous friction; the dry friction is the step's)."""
     volts, i = supply(i_ref, w, d)
-    tau = d.eta * d.gear * d.kt * i - d.c_v * w - d.t_c * np.tanh(w / COULOMB_EPS)
+    tau = d.eta * d.gear * d.kt * i - d.c_v * w
     return tau, i, volts
 
 
@@ -156,9 +160,8 @@ def wheel_torque_slope(i_ref: Any, w: np.ndarray, d: Drive
     c = np.minimum(np.maximum(np.asarray(i_ref, dtype=float), -d.lim), d.lim)
     n_kt = d.kt * d.gear
     limited = c != i
-    th = np.tanh(w / COULOMB_EPS)
-    tau = d.eta * n_kt * i - d.c_v * w - d.t_c * th
-    slope = -d.c_v - np.where(limited, d.eta * n_kt * n_kt / d.res, 0.0) - d.t_c * (1.0 - th * th) / COULOMB_EPS
+    tau = d.eta * n_kt * i - d.c_v * w
+    slope = -d.c_v - np.where(limited, d.eta * n_kt * n_kt / d.res, 0.0)
     return tau, i, slope, volts
 
 
@@ -171,7 +174,7 @@ def body_forces(u: np.ndarray, lat: np.ndarray, om: np.ndarray, d: Drive) -> tup
     The caster at C - a e moves at (u, l - a omega); its drag opposes that, smoothed like the axles'
     Coulomb friction (eps_v = r w_eps at the rim), the scrub torque opposes omega (eps_w = r w_eps / b)."""
     r = d.radius.mean(1)
-    eps_v = r * COULOMB_EPS
+    eps_v = r * SMOOTHING_SPEED
     ve, vn = u, lat - CASTER_BEHIND * om
     speed = np.hypot(ve, vn)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -193,31 +196,74 @@ def _gen_forces(tau: np.ndarray, u: np.ndarray, om: np.ndarray, d: Drive) -> tup
     return fl + fr + f_e, d.b * (fr - fl) + m_c
 
 
-def accel(v: np.ndarray, tau: np.ndarray, d: Drive) -> np.ndarray:
-    """v' (N, 2): H (u', omega') = f + (g omega^2, -g u omega), then the wheels' (u' -+ b omega') / r_i."""
+def _solve_x(v: np.ndarray, tau: np.ndarray, d: Drive) -> tuple[np.ndarray, ...]:
+    """(u, omega, and H^-1 (f + gyroscopic terms) in (u, omega)) at wheel speeds v under wheel torques tau."""
     u, om = _uw(v, d)
     fu, fw = _gen_forces(tau, u, om, d)
     fu, fw = fu + d.g * om * om, fw - d.g * u * om
     a, bb, c = d.h
     det = a * c - bb * bb
-    ud, wd = (c * fu - bb * fw) / det, (a * fw - bb * fu) / det
-    return np.stack([(ud - d.b * wd) / d.radius[:, 0], (ud + d.b * wd) / d.radius[:, 1]], 1)
+    return u, om, (c * fu - bb * fw) / det, (a * fw - bb * fu) / det
 
 
-def step(q: np.ndarray, v: np.ndarray, tau: np.ndarray, dt: Any, d: Drive, dc: Any) -> tuple[np.ndarray, np.ndarray]:
-    """dynamics.step_batch with unequal radii and body forces (tau held over the step; dc = com_offset)."""
+def _wheels(x_u: Any, x_w: Any, d: Drive) -> tuple[Any, Any]:
+    """Wheel speeds (left, right) of a motion (u, omega): (u -+ b omega) / r_i."""
+    return (x_u - d.b * x_w) / d.radius[:, 0], (x_u + d.b * x_w) / d.radius[:, 1]
+
+
+def _response(i11: Any, i12: Any, i21: Any, i22: Any, d: Drive) -> tuple[Any, Any, Any, Any]:
+    """W (w11, w12, w21, w22): the wheel speeds' response to wheel torques through the inverse (i..) of a
+    system matrix in (u, omega): a torque f_i gives the generalised forces (f_i / r_i)(1, -+ b)."""
+    el, er = 1.0 / d.radius[:, 0], 1.0 / d.radius[:, 1]
+    w11, w21 = _wheels(el * (i11 - d.b * i12), el * (i21 - d.b * i22), d)
+    w12, w22 = _wheels(er * (i11 + d.b * i12), er * (i21 + d.b * i22), d)
+    return w11, w12, w21, w22
+
+
+def accel(v: np.ndarray, tau: np.ndarray, d: Drive) -> np.ndarray:
+    """v' (N, 2): H (u', omega') = f + (g omega^2, -g u omega), then the wheels' (u' -+ b omega') / r_i."""
+    _u, _om, ud, wd = _solve_x(v, tau, d)
+    return np.stack(_wheels(ud, wd, d), 1)
+
+
+def drive_step(q: np.ndarray, v: np.ndarray, i_ref: Any, dt: Any, d: Drive, dc: Any
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """drive.drive_step_batch with the effects: (q_next, v_next, wheel torques (dry friction included),
+    currents, supply V).  The same predictor with the half step's dry friction, then the linearly implicit
+    midpoint step in (u, omega) and the step's dry friction (friction.solve_batch)."""
     a, bb, c = d.h
-    u, om = _uw(v, d)
+    hdt = 0.5 * dt if np.ndim(dt) == 0 else 0.5 * np.asarray(dt)
+    tau, _i, _v = wheel_torque(i_ref, v, d)
+    u, om, ud, wd = _solve_x(v, tau, d)
+    det = a * c - bb * bb
+    h = _response(hdt * c / det, -hdt * bb / det, -hdt * bb / det, hdt * a / det, d)
+    vl, vr = v[:, 0] + hdt * (ud - d.b * wd) / d.radius[:, 0], v[:, 1] + hdt * (ud + d.b * wd) / d.radius[:, 1]
+    fl, fr, sl, sr = friction.solve_batch(vl, vr, *h, d.t_c[:, 0], d.t_c[:, 1], v)
+    v_mid = np.stack(friction.end_speeds_batch(vl, vr, *h, fl, fr, sl, sr), 1)
+    tau, cur, volts = wheel_torque(i_ref, v_mid, d)
+    # the step without dry friction; its gyroscopic coefficient from the yaw rate the predictor reached
     fu, fw = _gen_forces(tau, u, om, d)
-    hdt = 0.5 * dt
-    wd = (a * (fw - d.g * u * om) - bb * (fu + d.g * om * om)) / (a * c - bb * bb)
+    fh_u, fh_w = fl / d.radius[:, 0] + fr / d.radius[:, 1], d.b * (fr / d.radius[:, 1] - fl / d.radius[:, 0])
+    wd = (a * (fw + fh_w - d.g * u * om) - bb * (fu + fh_u + d.g * om * om)) / det
     al = hdt * d.g * (om + hdt * wd)
     r1 = a * u + (bb + al) * om + dt * fu
     r2 = (bb - al) * u + c * om + dt * fw
-    det = a * c - bb * bb + al * al
-    u1 = (c * r1 - (bb - al) * r2) / det
-    w1 = (a * r2 - (bb + al) * r1) / det
-    v1 = np.stack([(u1 - d.b * w1) / d.radius[:, 0], (u1 + d.b * w1) / d.radius[:, 1]], 1)
+    idet = 1.0 / (det + al * al)
+    u1, w1 = (c * r1 - (bb - al) * r2) * idet, (a * r2 - (bb + al) * r1) * idet
+    vl, vr = _wheels(u1, w1, d)
+    k = dt * idet  # the inverse of [[a, bb - al], [bb + al, c]], times dt
+    w = _response(k * c, -k * (bb - al), -k * (bb + al), k * a, d)
+    fl, fr, sl, sr = friction.solve_batch(vl, vr, *w, d.t_c[:, 0], d.t_c[:, 1], v)
+    v1 = np.stack(friction.end_speeds_batch(vl, vr, *w, fl, fr, sl, sr), 1)
+    q1 = _advance(q, v, v1, u, om, dt, d, dc)
+    return q1, v1, tau + np.stack([fl, fr], 1), cur, volts
+
+
+def _advance(q: np.ndarray, v: np.ndarray, v1: np.ndarray, u: np.ndarray, om: np.ndarray, dt: Any, d: Drive,
+             dc: Any) -> np.ndarray:
+    """q_next from the end speeds v1: the pose at the mean velocities (dynamics.step_batch)."""
+    hdt = 0.5 * dt
+    u1, w1 = _uw(v1, d)
     sb, wb = hdt * (u + u1), 0.5 * (om + w1)
     ph = q[:, 2] + hdt * wb
     cs, sn = np.cos(ph), np.sin(ph)
@@ -227,17 +273,7 @@ def step(q: np.ndarray, v: np.ndarray, tau: np.ndarray, dt: Any, d: Drive, dc: A
     qn[:, 1] = q[:, 1] + (sb * sn + dwb * cs)
     qn[:, 2] = q[:, 2] + dt * wb
     qn[:, 3:5] = q[:, 3:5] + (hdt if np.ndim(dt) == 0 else hdt[:, None]) * (v + v1)
-    return qn, v1
-
-
-def drive_step(q: np.ndarray, v: np.ndarray, i_ref: Any, dt: Any, d: Drive, dc: Any
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """drive.drive_step_batch with the effects: (q_next, v_next, wheel torques, currents, supply V)."""
-    tau, _i, _v = wheel_torque(i_ref, v, d)
-    v_mid = v + (0.5 * dt if np.ndim(dt) == 0 else 0.5 * np.asarray(dt)[:, None]) * accel(v, tau, d)
-    tau, cur, volts = wheel_torque(i_ref, v_mid, d)
-    q1, v1 = step(q, v, tau, dt, d, dc)
-    return q1, v1, tau, cur, volts
+    return qn
 
 
 def traction_ok(v0: np.ndarray, v1: np.ndarray, tau: np.ndarray, dt: Any, d: Drive) -> np.ndarray:

@@ -11,19 +11,16 @@ first the driver's limit, then what the battery can push against the back-EMF
 two ranges do not overlap (the wheel is driven faster than V_bat allows), the
 bridge does its best, the nearest feasible current.  k_e = k_t (SI units).
 
-Torque on the wheel about its axle:
+Torque on the wheel about its axle from the motor and the viscous friction:
 
-    tau = eta N k_t i - c_v w - T_c tanh(w / w_eps)
+    tau = eta N k_t i - c_v w
 
 eta the gear efficiency (one value for both directions of power flow), c_v viscous
-and T_c Coulomb friction at the wheel axle.  The Coulomb term is smoothed over
-|w| ~ w_eps (`coulomb_eps`, rad/s): it is continuous, zero at rest (a wheel at rest
-with no current stays at rest, exactly), and with a fixed step dt it brings a
-coasting wheel to rest without chattering as long as
-dt < w_eps * H_min / T_c (H_min the smallest eigenvalue of the reduced inertia,
-see `max_quiet_dt`): 7.4 ms with the default parameters and w_eps = 0.1 rad/s.
-The price: a torque below T_c does not hold the wheel, it lets it creep at
-w = w_eps atanh(tau / T_c) (a few mm/s at the rim).
+friction at the wheel axle.  The dry friction T_c at the axle is not a function of
+the speed alone: a wheel at rest holds under any torque below T_c (stick) and turns
+against -T_c sign(w) above it (slip).  It is solved inside the step, at the velocity
+level, with the two wheels coupled through the robot's inertia (host_sim/friction.py,
+used by host_sim/drive.py and host_sim/contact.py).
 
 Encoders: cumulative ticks = floor(theta / (2 pi) * ticks_per_rev), floor toward
 -inf, so tick k covers [k, k+1) * 2 pi / ticks_per_rev whatever the sign of theta
@@ -45,7 +42,6 @@ import numpy as np
 
 from host_sim.params import RobotParams, cached_per_params
 
-COULOMB_EPS = 0.1  # rad/s, default smoothing speed of the Coulomb friction (not in RobotParams yet)
 TWO_PI = 2.0 * math.pi
 
 
@@ -62,11 +58,6 @@ def current(i_ref: float, w: float, p: RobotParams) -> float:
     return lo if i < lo else i
 
 
-def friction(w: float, p: RobotParams, coulomb_eps: float = COULOMB_EPS) -> float:
-    """Friction torque (N m) at the wheel axle, opposing w: c_v w + T_c tanh(w / w_eps)."""
-    return p.viscous_friction * w + p.coulomb_friction * math.tanh(w / coulomb_eps)
-
-
 @cached_per_params
 def _consts(p: RobotParams) -> tuple[float, ...]:
     """(I_lim, k_e N, eta k_t N, V_bat / R, 1 / R, c_v, T_c), cached for the last RobotParams (frozen)."""
@@ -77,24 +68,23 @@ def _consts(p: RobotParams) -> tuple[float, ...]:
     return c
 
 
-def wheel_torque(i_ref: float, w: float, p: RobotParams,
-                 coulomb_eps: float = COULOMB_EPS) -> tuple[float, float]:
-    """(torque on the wheel (N m), motor current (A)) for a current reference i_ref at wheel speed w."""
-    lim, n_kt, eta_n_kt, v_r, inv_r, c_v, t_c = _consts(p)
+def wheel_torque(i_ref: float, w: float, p: RobotParams) -> tuple[float, float]:
+    """(torque on the wheel (N m) from the motor less the viscous friction, motor current (A)) for a current
+    reference i_ref at wheel speed w.  The axle's dry friction is the step's (host_sim/friction.py)."""
+    lim, n_kt, eta_n_kt, v_r, inv_r, c_v, _t_c = _consts(p)
     i = lim if i_ref > lim else (-lim if i_ref < -lim else i_ref)
     emf_r = n_kt * w * inv_r
     if i > v_r - emf_r:
         i = v_r - emf_r
     elif i < -v_r - emf_r:
         i = -v_r - emf_r
-    return eta_n_kt * i - c_v * w - t_c * math.tanh(w / coulomb_eps), i
+    return eta_n_kt * i - c_v * w, i
 
 
-def wheel_torque_slope(i_ref: float, w: float, p: RobotParams,
-                       coulomb_eps: float = COULOMB_EPS) -> tuple[float, float, float]:
-    """(torque (N m), current (A), d torque / d w (N m s, <= 0)) at wheel speed w: the torque and its
+def wheel_torque_slope(i_ref: float, w: float, p: RobotParams) -> tuple[float, float, float]:
+    """(torque (N m), current (A), d torque / d w (N m s, <= 0)) at wheel speed w: wheel_torque and its
     slope, for a linearly implicit step of a wheel that spins freely (host_sim/contact.py)."""
-    lim, n_kt, eta_n_kt, v_r, inv_r, c_v, t_c = _consts(p)
+    lim, n_kt, eta_n_kt, v_r, inv_r, c_v, _t_c = _consts(p)
     i = lim if i_ref > lim else (-lim if i_ref < -lim else i_ref)
     emf_r = n_kt * w * inv_r
     slope = -c_v
@@ -104,9 +94,7 @@ def wheel_torque_slope(i_ref: float, w: float, p: RobotParams,
     elif i < -v_r - emf_r:
         i = -v_r - emf_r
         slope -= eta_n_kt * n_kt * inv_r
-    th = math.tanh(w / coulomb_eps)
-    slope -= t_c * (1.0 - th * th) / coulomb_eps
-    return eta_n_kt * i - c_v * w - t_c * th, i, slope
+    return eta_n_kt * i - c_v * w, i, slope
 
 
 def _axis0(a: Any, ndim: int) -> Any:
@@ -116,12 +104,10 @@ def _axis0(a: Any, ndim: int) -> Any:
     return a
 
 
-def wheel_torque_batch(i_ref: Any, w: Any, p: Any,
-                       coulomb_eps: Any = COULOMB_EPS) -> tuple[np.ndarray, np.ndarray]:
+def wheel_torque_batch(i_ref: Any, w: Any, p: Any) -> tuple[np.ndarray, np.ndarray]:
     """(torque, current) for arrays i_ref, w of shape (N,) or (N, 2); p RobotParams or ParamBatch."""
     w, nd, n_kt, _inv_r, i, _limited = _driver_batch(i_ref, w, p)
-    torque = (_axis0(p.gear_efficiency, nd) * n_kt * i - _axis0(p.viscous_friction, nd) * w
-              - _axis0(p.coulomb_friction, nd) * np.tanh(w / _axis0(coulomb_eps, nd)))
+    torque = _axis0(p.gear_efficiency, nd) * n_kt * i - _axis0(p.viscous_friction, nd) * w
     return torque, i
 
 
@@ -141,28 +127,14 @@ def _driver_batch(i_ref: Any, w: Any, p: Any) -> tuple[np.ndarray, int, Any, Any
     return w, nd, n_kt, inv_r, np.minimum(np.maximum(i, lo), hi), limited
 
 
-def wheel_torque_slope_batch(i_ref: Any, w: Any, p: Any, coulomb_eps: Any = COULOMB_EPS
-                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def wheel_torque_slope_batch(i_ref: Any, w: Any, p: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """wheel_torque_slope for arrays i_ref, w of shape (N,) or (N, 2): (torque, current, slope)."""
     w, nd, n_kt, inv_r, i, limited = _driver_batch(i_ref, w, p)
     eta_n_kt = _axis0(p.gear_efficiency, nd) * n_kt
-    c_v, t_c, eps = _axis0(p.viscous_friction, nd), _axis0(p.coulomb_friction, nd), _axis0(coulomb_eps, nd)
-    th = np.tanh(w / eps)
-    torque = eta_n_kt * i - c_v * w - t_c * th
-    slope = -c_v - np.where(limited, eta_n_kt * n_kt * inv_r, 0.0) - t_c * (1.0 - th * th) / eps
+    c_v = _axis0(p.viscous_friction, nd)
+    torque = eta_n_kt * i - c_v * w
+    slope = -c_v - np.where(limited, eta_n_kt * n_kt * inv_r, 0.0)
     return torque, i, slope
-
-
-def max_quiet_dt(p: RobotParams, coulomb_eps: float = COULOMB_EPS) -> float:
-    """Largest fixed step (s) at which the smoothed Coulomb friction stops a coasting robot without
-    overshooting zero speed: w_eps * H_min / (T_c + c_v w_eps), H = S^T M S (2x2, constant)."""
-    from host_sim.dynamics import effective_inertias
-
-    m_t, j_t = effective_inertias(p)
-    r, b = p.wheel_radius, p.half_axle
-    h_min = min(0.5 * m_t * r * r, 0.5 * j_t * r * r / (b * b))  # eigenvalues of H
-    slope = p.coulomb_friction / coulomb_eps + p.viscous_friction
-    return h_min / slope if slope > 0 else math.inf
 
 
 def ticks_per_rev(p: RobotParams, wheel: int | None = None) -> float:

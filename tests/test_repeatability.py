@@ -45,7 +45,11 @@ def test_the_scenario_forks_and_fixed_step_runs_repeat_bit_for_bit():
     heading = fork_heading(SHORT, iterations=12)
     half = (SHORT.headings[1] - SHORT.headings[0]) / 2 ** 13  # the final bracket: 2.4e-5 rad wide
     sides = {first_turn(fixed_run(SHORT, heading + d), SHORT.threshold) for d in (-half, half)}
-    assert sides == {-1, 1}  # a hair either side, the robot turns the other way at the wall
+    # a hair either side the robot does something else at the wall: one side turns right; the other
+    # stops square in front of it, the first rule set's commands there being below breakaway (9.3 mA):
+    # with stick-slip dry friction the wheels hold (with the former smoothed friction it crept, and
+    # turned left)
+    assert sides == {-1, 0}
     a, b = fixed_run(SHORT, heading), fixed_run(SHORT, heading)
     assert np.array_equal(a.pose, b.pose) and np.array_equal(a.cmd, b.cmd)
 
