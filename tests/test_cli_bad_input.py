@@ -43,6 +43,7 @@ CASES: list[tuple[str, list[str], str]] = [
     ("gui-out-missing", ["gui", "--frames", "1", "--out", "{case}/missing"], "missing"),
     ("gui-world-missing", ["gui", "--frames", "1", "--world", "{case}/nope.json"], "nope.json"),
     ("gui-port-missing", ["gui", "--frames", "1", "--port", "{case}/ttyNOPE"], "ttyNOPE"),
+    ("gui-link-floor-negative", ["gui", "--link-floor", "-5"], "'-5'"),
     ("gui-pil-port-missing", ["gui", "--frames", "1", "--pil", "--port", "{case}/ttyNOPE"], "ttyNOPE"),
     # sim
     ("sim-duration-nan", ["sim", "--duration", "nan"], "'nan'"),
@@ -88,6 +89,8 @@ CASES: list[tuple[str, list[str], str]] = [
     ("demo-out-under-a-file", ["demo", "--out", "{case}/afile/demo"], "afile"),
     ("demo-world-missing", ["demo", "--world", "nowhere", "--out", "{case}/demo"], "nowhere"),
     # board
+    ("board-late-negative", ["board", "--late", "-1"], "'-1'"),
+    ("board-jitter-nan", ["board", "--late", "100", "--jitter", "nan"], "'nan'"),
     ("board-hw-port-big", ["board", "--hw-port", "99999"], "'99999'"),
     ("board-hw-port-zero", ["board", "--hw-port", "0"], "'0'"),
     ("board-image-not-littlefs", ["board", "--image", "{in}/garbage.img"], "littlefs"),
