@@ -6,7 +6,9 @@ once: the simulated robot running the firmware in the loop (SIL), the user
 robot driven by the arrow keys or a joystick / gamepad, and, with --port,
 the real robot on a serial port (a Pico, or a virtual board's pty from
 `twinbot board`), its pose from its odometry and its IR readings as they
-arrive.  The user's orders can drive the simulated and the real robot too.
+arrive, and its ghost: where the late-signal twin says it is now, its
+signal being late (--link-floor; `twinbot board --late MS` to try it).
+The user's orders can drive the simulated and the real robot too.
 Press h in the window for every key.
 
 Headless: --frames N runs N frames of 1/60 s without a display

@@ -2,10 +2,11 @@
 
 The room: the grid, the coverage overlay of the simulated robot, walls (the
 selected one lit), the wall being drawn, each robot's trail, body, heading
-and eight IR rays (shaded by the reflected counts), collision marks and
-the exit flag.  The panel: per robot, its state line and the eight IR
-counts as bars; for the two robots with firmware, the wheel-speed
-set-points it decided (the fuzzy controller's outputs in AUTONOMOUS mode);
+and eight IR rays (shaded by the reflected counts), collision marks, the
+exit flag, and the real robot's ghost (where the late-signal twin says it
+is now) beside its raw late pose.  The panel: per robot, its state line
+and the eight IR counts as bars; for the two robots with firmware, the
+wheel-speed set-points it decided (the fuzzy controller's outputs in AUTONOMOUS mode);
 coverage over time with the time to 90 %; the buttons.
 """
 from __future__ import annotations
