@@ -5,16 +5,27 @@ its stdin/stdout relayed to a pseudo-terminal.
 this.  The board's hardware link connects to a TCP port on 127.0.0.1 where
 a simulator (or the stand-in of `twinbot board --standin`) serves
 HW_SENSE / HW_ACTUATE frames.
+
+A late link (`late_s`, `jitter_s`): what the board writes reaches the pty
+`late_s + U(-jitter_s, +jitter_s)` seconds later (seeded), in order as on a
+serial line (a chunk never overtakes the one before it), so a host sees
+its TELEMETRY late as over a slow radio link; what the host writes reaches
+the board at once.  This is the late-signal twin's test bench for a real
+host (docs/late-signal-twin.md; host_sim/late_link.py does the same inside
+one simulation).
 """
 from __future__ import annotations
 
 import errno
 import os
+import random
 import select
 import shutil
 import subprocess
 import threading
+import time
 import tty
+from collections import deque
 from pathlib import Path
 
 from firmware.manifest import BOARD_FILES, MAIN_PY
@@ -36,8 +47,13 @@ def factory_image(folder: Path) -> None:
 class VirtualBoard:
     """A running virtual board: the MicroPython process, its pty and its relay."""
 
-    def __init__(self, flash: str, hw_port: int, stderr_path: Path | None = None) -> None:
+    def __init__(self, flash: str, hw_port: int, stderr_path: Path | None = None, *, late_s: float = 0.0,
+                 jitter_s: float = 0.0, seed: int = 0) -> None:
         self.flash = flash
+        self.late_s, self.jitter_s = late_s, jitter_s
+        self._rng = random.Random(seed)
+        self._due: deque[tuple[float, bytes]] = deque()  # the board's output in flight on a late link
+        self._last_due = 0.0
         self.hw_port = hw_port
         self.master, self.slave = os.openpty()
         tty.setraw(self.slave)
@@ -61,18 +77,15 @@ class VirtualBoard:
         board_in = self.proc.stdin.fileno()
         # Until the board's stdout ends (not until it exits): its last words are read too.
         while not self._stop.is_set():
-            ready, _, _ = select.select([board_out, self.master], [], [], 0.1)
+            wait = 0.1 if not self._due else min(0.1, max(0.0, self._due[0][0] - time.monotonic()))
+            ready, _, _ = select.select([board_out, self.master], [], [], wait)
             if board_out in ready:
                 data = os.read(board_out, 4096)
                 if not data:
                     return
                 self._tail = (self._tail + data)[-TAIL_BYTES:]
-                try:
-                    os.write(self.master, data)
-                except OSError as exc:  # nobody reads the port and its buffer is full
-                    if exc.errno not in (errno.EAGAIN, errno.EIO):
-                        raise
-                    self.dropped += len(data)
+                self._to_port(data)
+            self._deliver_due()
             if self.master in ready:
                 try:
                     data = os.read(self.master, 4096)
@@ -83,6 +96,28 @@ class VirtualBoard:
                         os.write(board_in, data)
                     except BrokenPipeError:
                         return
+
+    def _to_port(self, data: bytes) -> None:
+        """The board's output to the pty: now, or when it is due on a late link."""
+        if self.late_s <= 0.0 and self.jitter_s <= 0.0:
+            self._write_port(data)
+            return
+        delay = max(0.0, self.late_s + self._rng.uniform(-self.jitter_s, self.jitter_s))
+        self._last_due = max(time.monotonic() + delay, self._last_due)  # in order, as on a serial line
+        self._due.append((self._last_due, data))
+
+    def _deliver_due(self) -> None:
+        now = time.monotonic()
+        while self._due and self._due[0][0] <= now:
+            self._write_port(self._due.popleft()[1])
+
+    def _write_port(self, data: bytes) -> None:
+        try:
+            os.write(self.master, data)
+        except OSError as exc:  # nobody reads the port and its buffer is full
+            if exc.errno not in (errno.EAGAIN, errno.EIO):
+                raise
+            self.dropped += len(data)
 
     def alive(self) -> bool:
         return self.proc.poll() is None

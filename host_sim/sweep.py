@@ -1,8 +1,13 @@
-"""Many fixed-step runs (rule sets x worlds x seeds), on local cores or a Dask cluster.
+"""Many fixed-step runs (rule sets x worlds x seeds x perturbations), on local cores or a Dask cluster.
 
 A case is one fixed-step SIL run; it is a pure function of (rules, world,
-seed, duration, substeps), bit-for-bit repeatable, so a row does not depend
-on where it ran.  `run_cases` hands the cases to Dask distributed: a
+seed, duration, substeps, start jitter, perturbations), bit-for-bit
+repeatable, so a row does not depend on where it ran.  The seed draws the
+sensor noise, and from streams of its own (`draw_start`, `draw_params`): a
+start within `start_radius` of the world's start pose and `start_heading_deg`
+of its heading, and each perturbed RobotParams field uniformly within
++-REL of nominal (the plant's; the firmware keeps the nominal geometry, as
+a real robot's firmware does not know its own wheels are worn).  `run_cases` hands the cases to Dask distributed: a
 LocalCluster of one single-threaded worker process per core by default, or
 an existing scheduler (`tcp://HOST:8786`) whose workers have twinbot
 installed.  `write_table` writes a row per run, `summarise` a row per
@@ -12,8 +17,11 @@ rule set x world, and `save_coverage_plot` coverage against time (mean and
 from __future__ import annotations
 
 import csv
+import dataclasses
 import logging
+import math
 import os
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -24,8 +32,13 @@ STUCK_WINDOW_S = 20.0  # "stuck": in the last 20 s of the run ...
 STUCK_DISTANCE_M = 0.05  # ... the centre never got 5 cm from where it was 20 s before the end
 CURVE_PERIOD_S = 1.0  # coverage curve kept for the plots: one sample a second
 
-COLUMNS = ("rules", "world", "seed", "duration_s", "coverage_end", "t90_s", "exit_found", "exit_time_s",
-           "collisions", "stuck", "moved_last_window_m")
+START_RADIUS_M = 0.05  # default start jitter: the centre anywhere within 5 cm of the world's start ...
+START_HEADING_DEG = 15.0  # ... and the heading within +-15 degrees of it
+START_TRIES = 100  # draws of a start clear of the walls before the world's own start is taken
+START_CLEARANCE_M = 0.005  # a drawn start keeps the body this far from every wall (no contact at t = 0)
+
+COLUMNS = ("rules", "world", "seed", "duration_s", "start_x_m", "start_y_m", "start_phi_rad", "coverage_end",
+           "t90_s", "exit_found", "exit_time_s", "collisions", "stuck", "moved_last_window_m")
 
 
 @dataclass(frozen=True)
@@ -35,6 +48,75 @@ class Case:
     seed: int
     duration: float
     substeps: int = 8
+    start_radius: float = 0.0  # m
+    start_heading_deg: float = 0.0
+    perturb: tuple[tuple[str, float], ...] = ()  # (RobotParams field, relative half-range)
+
+
+def columns(perturb: Sequence[tuple[str, float]] = ()) -> tuple[str, ...]:
+    """The table's columns: COLUMNS, then the value each run drew for each perturbed parameter."""
+    return COLUMNS + tuple(name for name, _rel in perturb)
+
+
+def check_perturb(name: str, rel: float) -> None:
+    """ValueError (one line) unless NAME is a RobotParams number a relative perturbation moves, 0 <= REL < 1."""
+    from host_sim.params import DEFAULT, INTEGER_PARAMS
+
+    fields = {f.name for f in dataclasses.fields(DEFAULT)}
+    if name not in fields:
+        import difflib
+
+        close = difflib.get_close_matches(name, sorted(fields), n=1, cutoff=0.75)
+        raise ValueError(f"unknown parameter '{name}'" + (f" (did you mean {close[0]}?)" if close else "")
+                         + ": the names are RobotParams' fields (host_sim/params.py)")
+    nominal = getattr(DEFAULT, name)
+    if isinstance(nominal, tuple) or name in INTEGER_PARAMS:
+        raise ValueError(f"'{name}' is {'a list' if isinstance(nominal, tuple) else 'a whole number'}: "
+                         f"perturb a scalar real parameter")
+    if nominal == 0:
+        raise ValueError(f"'{name}' is 0 by default: a relative perturbation leaves it 0")
+    if not (math.isfinite(rel) and 0.0 <= rel < 1.0):
+        raise ValueError(f"'{name}={rel:g}': REL must be a fraction in [0, 1), e.g. 0.02 for +-2 %")
+    from host_sim.params import ParamsError, params_from_dict
+
+    for end in (nominal * (1 - rel), nominal * (1 + rel)):  # the checks are ranges: both ends must pass
+        try:
+            params_from_dict({name: end}, f"'{name}={rel:g}'")
+        except ParamsError as exc:
+            raise ValueError(f"{exc} at the end of its range") from None
+
+
+def _stream(seed: int, purpose: str):  # type: ignore[no-untyped-def]
+    """A generator of the seed's own for one purpose: independent of the sensor noise and of the others."""
+    return np.random.default_rng([seed, zlib.crc32(purpose.encode())])
+
+
+def draw_start(case: Case, world, body_radius: float) -> tuple[float, float, float]:  # type: ignore[no-untyped-def]
+    """The run's start: uniform in the disc of start_radius about the world's start, clear of every wall."""
+    x0, y0, phi0 = world.start
+    if case.start_radius <= 0 and case.start_heading_deg <= 0:
+        return world.start
+    rng = _stream(case.seed, "start")
+    for _ in range(START_TRIES):
+        r, a = case.start_radius * math.sqrt(rng.uniform()), rng.uniform(0, 2 * math.pi)
+        dphi = math.radians(case.start_heading_deg) * rng.uniform(-1, 1)
+        x, y = x0 + r * math.cos(a), y0 + r * math.sin(a)
+        point = np.array([x, y])
+        clear = not world.n_walls or float(world.nearest_wall(point)[0]) >= body_radius + START_CLEARANCE_M  # type: ignore[index]
+        if clear and not world.outside(point):
+            return x, y, phi0 + dphi
+    return world.start
+
+
+def draw_params(case: Case):  # type: ignore[no-untyped-def]
+    """The plant's RobotParams: each perturbed field uniform within +-REL of nominal, a stream per name."""
+    from host_sim.params import DEFAULT
+
+    changes = {}
+    for name, rel in case.perturb:
+        nominal = float(getattr(DEFAULT, name))
+        changes[name] = nominal * (1.0 + rel * _stream(case.seed, f"param:{name}").uniform(-1, 1))
+    return dataclasses.replace(DEFAULT, **changes) if changes else DEFAULT
 
 
 @dataclass
@@ -44,10 +126,24 @@ class CaseResult:
     curve_coverage: list[float]
 
 
-def cases(rules: Sequence[str], worlds: Sequence[str], seeds: int, duration: float,
-          substeps: int = 8) -> list[Case]:
+def cases(rules: Sequence[str], worlds: Sequence[str], seeds: int, duration: float, substeps: int = 8, *,
+          start_radius: float = START_RADIUS_M, start_heading_deg: float = START_HEADING_DEG,
+          perturb: Sequence[tuple[str, float]] = ()) -> list[Case]:
     """Every combination, in table order: rules, then world, then seed 0..seeds-1."""
-    return [Case(r, w, s, duration, substeps) for r in rules for w in worlds for s in range(seeds)]
+    return [Case(r, w, s, duration, substeps, start_radius, start_heading_deg, tuple(perturb))
+            for r in rules for w in worlds for s in range(seeds)]
+
+
+def prepare(case: Case, world=None):  # type: ignore[no-untyped-def]
+    """(world with the run's start, the plant's params) of a case (world: overriding case.world)."""
+    from host_sim.params import DEFAULT
+    from host_sim.world import world_by_name_or_path
+
+    if world is None:
+        world = world_by_name_or_path(case.world, DEFAULT.body_radius)
+    params = draw_params(case)
+    start = draw_start(case, world, params.body_radius)
+    return (world if start == world.start else world.with_changes(start=start)), params
 
 
 def simulate(case: Case, world=None):  # type: ignore[no-untyped-def]
@@ -56,13 +152,11 @@ def simulate(case: Case, world=None):  # type: ignore[no-untyped-def]
     from host_sim.params import DEFAULT
     from host_sim.sil import SilController
     from host_sim.simulation import Simulation
-    from host_sim.world import world_by_name_or_path
 
-    if world is None:
-        world = world_by_name_or_path(case.world, DEFAULT.body_radius)
-    controller = SilController(RULE_SETS[case.rules], params=DEFAULT)
+    world, params = prepare(case, world)
+    controller = SilController(RULE_SETS[case.rules], params=DEFAULT)  # the firmware knows the nominal robot
     try:
-        return Simulation(world, DEFAULT, controller, seed=case.seed, substeps=case.substeps).run_fixed(case.duration)
+        return Simulation(world, params, controller, seed=case.seed, substeps=case.substeps).run_fixed(case.duration)
     finally:
         controller.close()
 
@@ -76,12 +170,15 @@ def moved_in_last(t: np.ndarray, pose: np.ndarray, window_s: float = STUCK_WINDO
     return float(np.max(np.hypot(*(xy - xy[0]).T)))
 
 
-def row_from_result(case: Case, result) -> dict[str, object]:  # type: ignore[no-untyped-def]
-    """The table row of one run."""
+def row_from_result(case: Case, result, world=None) -> dict[str, object]:  # type: ignore[no-untyped-def]
+    """The table row of one run (world: as given to simulate)."""
     t90 = result.time_to(0.9)
     moved = moved_in_last(result.t, result.pose)
+    world, params = prepare(case, world)
     return {
         "rules": case.rules, "world": case.world, "seed": case.seed, "duration_s": case.duration,
+        "start_x_m": round(world.start[0], 6), "start_y_m": round(world.start[1], 6),
+        "start_phi_rad": round(world.start[2], 6),
         "coverage_end": round(float(result.coverage[-1]), 6) if len(result.coverage) else 0.0,
         "t90_s": None if t90 is None else round(t90, 3),
         "exit_found": result.exit_time is not None,
@@ -90,6 +187,7 @@ def row_from_result(case: Case, result) -> dict[str, object]:  # type: ignore[no
         # a robot that left through the exit is off the map, not stuck
         "stuck": result.exit_time is None and moved < STUCK_DISTANCE_M,
         "moved_last_window_m": round(moved, 4),
+        **{name: float(f"{getattr(params, name):.6g}") for name, _rel in case.perturb},
     }
 
 

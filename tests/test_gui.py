@@ -342,3 +342,43 @@ def test_bench_gui_smoke() -> None:
     assert r.returncode == 0, r.stderr
     assert "simulated + user robot, speed 1" in r.stdout and "median ms" in r.stdout
     assert "[NOT RUN]" in r.stdout  # the three-robot target needs the virtual board
+
+
+def test_the_real_robots_ghost_is_drawn_ahead_of_its_late_pose(make_app: Any, tmp_path: Path) -> None:
+    """A virtual board whose TELEMETRY reaches the host 250 +- 150 ms late, driven ahead by the user: the ghost
+    (the late-signal twin) is drawn where the robot is now, ahead of the raw late pose along the motion."""
+    import time
+
+    from tools.bench_gui import start_board
+
+    proc, port = start_board("--world", "arena", "--late", "250", "--jitter", "150")
+    try:
+        app = make_app(port=port, link_floor_s=0.1)  # the link's fastest delivery: 250 - 150 ms
+        assert app.real is not None
+        post(pygame.KEYDOWN, key=pygame.K_UP, mod=0, unicode="", scancode=0)
+        key(pygame.K_i)  # the user drives the real robot: HOST orders at 10 Hz, each one told to the ghost
+        leads: list[float] = []
+        end = time.monotonic() + 4.0
+        while time.monotonic() < end:
+            loop.run(app, 1)
+            time.sleep(1 / 60)
+            raw, ghost = app.real.pose, app.renderer.ghost_drawn
+            if ghost is not None and app.real.last is not None and int(app.real.last["sp_l"]) == 200:
+                leads.append((ghost[0] - raw[0]) * math.cos(raw[2]) + (ghost[1] - raw[1]) * math.sin(raw[2]))
+        assert len(leads) > 60  # the robot drove at full speed, late, for over a second
+        assert float(np.median(leads)) > 0.025  # ~0.2 m/s x ~0.25 s late: the ghost is where the robot is now
+        latency = float(np.median(app.real.ghost.latencies[-40:]))
+        assert 0.18 < latency < 0.33  # measured from the frames' ticks against their arrival: ~250 ms
+        shot = pygame.image.load(str(app.screenshot(tmp_path / "ghost.png")))
+        ghost = app.renderer.ghost_drawn
+        assert ghost is not None
+        at = app.view.to_screen(ghost[0], ghost[1])
+        assert tuple(shot.get_at(at))[:3] == draw.GHOST  # its heading line starts at its centre
+        key(pygame.K_g)  # hide it
+        loop.run(app, 1)
+        assert app.renderer.ghost_drawn is None
+        shot = pygame.image.load(str(app.screenshot(tmp_path / "no-ghost.png")))
+        assert tuple(shot.get_at(at))[:3] != draw.GHOST
+    finally:
+        proc.terminate()
+        proc.wait(10)

@@ -20,7 +20,9 @@ from host_sim.simulation import RunResult
 from host_sim.world import builtin_world
 from tests.helpers import REPO
 
-TINY = ["sweep", "--rules", "first,refined", "--world", "paper_room", "--seeds", "2", "--duration", "5"]
+PERTURB = "wheel_radius=0.02,coulomb_friction=0.2"
+TINY = ["sweep", "--rules", "first,refined", "--world", "paper_room", "--seeds", "2", "--duration", "5",
+        "--perturb", PERTURB]
 
 
 def twinbot(args: list[str]) -> subprocess.CompletedProcess[str]:
@@ -52,12 +54,16 @@ def test_rows_do_not_depend_on_where_the_runs_went(local_and_cluster: tuple[Path
     # the two rule sets explore differently; the seed changes the noise, so the paths differ
     assert rows[0]["moved_last_window_m"] != rows[2]["moved_last_window_m"]
     assert rows[0]["moved_last_window_m"] != rows[1]["moved_last_window_m"]
+    # each seed its own start and robot, the same for both rule sets (a paired comparison)
+    drawn = ("start_x_m", "start_y_m", "start_phi_rad", "wheel_radius", "coulomb_friction")
+    assert [rows[0][k] for k in drawn] == [rows[2][k] for k in drawn]
+    assert all(rows[0][k] != rows[1][k] for k in drawn)
 
 
 def test_table_summary_and_plot_are_written(local_and_cluster: tuple[Path, Path]) -> None:
     local, _ = local_and_cluster
     with (local / "runs.csv").open() as f:
-        assert tuple(csv.DictReader(f).fieldnames or ()) == sweep.COLUMNS
+        assert tuple(csv.DictReader(f).fieldnames or ()) == sweep.COLUMNS + ("wheel_radius", "coulomb_friction")
     with (local / "summary.csv").open() as f:
         summary = list(csv.DictReader(f))
     assert tuple(summary[0]) == sweep.SUMMARY_COLUMNS
@@ -114,3 +120,43 @@ def test_summary_rates_and_medians() -> None:
     assert first["coverage_mean"] == pytest.approx(0.8) and first["reached_90_rate"] == pytest.approx(2 / 3, abs=1e-4)
     assert first["exit_rate"] == pytest.approx(2 / 3, abs=1e-4) and first["exit_time_median_s"] == 40.0
     assert first["stuck_rate"] == pytest.approx(1 / 3, abs=1e-4) and refined["stuck_rate"] == 0.0
+
+
+def test_each_seed_starts_near_the_worlds_start_clear_of_the_walls() -> None:
+    from host_sim.params import DEFAULT
+
+    maze = builtin_world("maze")  # its start is 15 cm from two walls: some draws must be refused
+    starts = [sweep.draw_start(sweep.Case("refined", "maze", seed, 1.0, start_radius=0.05, start_heading_deg=15.0),
+                               maze, DEFAULT.body_radius) for seed in range(300)]
+    xy = np.array([s[:2] for s in starts])
+    offset = np.hypot(*(xy - maze.start[:2]).T)
+    turn = np.degrees([s[2] - maze.start[2] for s in starts])
+    assert offset.max() <= 0.05 and offset.mean() > 0.025  # uniform over the disc: mean 2/3 of the radius
+    assert np.abs(turn).max() <= 15.0 and np.abs(turn).mean() > 5.0
+    assert maze.nearest_wall(xy)[0].min() >= DEFAULT.body_radius + sweep.START_CLEARANCE_M
+    assert len(set(starts)) == 300
+    fixed = sweep.Case("refined", "maze", 3, 1.0)  # no jitter: the world's own start
+    assert sweep.draw_start(fixed, maze, DEFAULT.body_radius) == maze.start
+
+
+def test_perturbed_parameters_are_drawn_within_their_range_and_drive_the_plant() -> None:
+    from host_sim.params import DEFAULT
+
+    both = [sweep.draw_params(sweep.Case("first", "arena", s, 1.0, perturb=(("wheel_radius", 0.1),
+                                                                           ("coulomb_friction", 0.5))))
+            for s in range(100)]
+    r = np.array([p.wheel_radius for p in both]) / DEFAULT.wheel_radius - 1
+    assert np.abs(r).max() <= 0.1 and r.std() > 0.04  # uniform on +-10 %: sd 5.8 %
+    assert len({p.coulomb_friction for p in both}) == 100
+    alone = sweep.draw_params(sweep.Case("first", "arena", 7, 1.0, perturb=(("wheel_radius", 0.1),)))
+    assert alone.wheel_radius == both[7].wheel_radius  # a stream per name: adding another changes nothing
+    assert alone.coulomb_friction == DEFAULT.coulomb_friction
+    # the plant gets them: bigger wheels at the same firmware set-points go farther
+    seeds = [s for s in range(20) if sweep.draw_params(sweep.Case("first", "arena", s, 1.0,
+                                                                  perturb=(("wheel_radius", 0.3),))).wheel_radius
+             > 1.2 * DEFAULT.wheel_radius]
+    big = sweep.Case("first", "arena", seeds[0], 2.0, perturb=(("wheel_radius", 0.3),))
+    small = sweep.Case("first", "arena", seeds[0], 2.0)
+    far = sweep.simulate(big).pose
+    near = sweep.simulate(small).pose
+    assert np.hypot(*(far[-1, :2] - far[0, :2])) > 1.1 * np.hypot(*(near[-1, :2] - near[0, :2]))

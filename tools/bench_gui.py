@@ -45,9 +45,9 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
     p.set_defaults(func=run)
 
 
-def start_board() -> tuple[subprocess.Popen[str], str]:
-    """A virtual board (`twinbot board`) as a child process; its pty's path."""
-    proc = subprocess.Popen([sys.executable, "-m", "tools.cli", "board"], cwd=REPO, stdout=subprocess.PIPE,
+def start_board(*options: str) -> tuple[subprocess.Popen[str], str]:
+    """A virtual board (`twinbot board OPTIONS`) as a child process; its pty's path."""
+    proc = subprocess.Popen([sys.executable, "-m", "tools.cli", "board", *options], cwd=REPO, stdout=subprocess.PIPE,
                             stderr=subprocess.DEVNULL, text=True)
     assert proc.stdout is not None
     line = proc.stdout.readline()

@@ -12,6 +12,10 @@ twin: the simulator, in real time, in the world of --world (the paper's
 room by default).  Drive the board as the real robot: `twinbot serial
 /dev/pts/N --command autonomous 0 0` and it explores.  --standin serves
 fixed readings instead (a wall in front, wheels that do not turn).
+--late MS [--jitter MS] makes the link late: what the board sends reaches
+the pty that much later (in order), as over a slow radio link, to try the
+late-signal twin (the ghost of `twinbot gui --port`, `twinbot serial
+--predict`) against a real host.
 """
 from __future__ import annotations
 
@@ -31,7 +35,7 @@ from host_sim.board_process import VirtualBoard, factory_image
 from host_sim.interface import TICK_MASK
 from protocol import messages as M
 from protocol.framing import FrameDecoder, FrameEncoder
-from tools.arguments import int_range, output_file, output_folder, tcp_port
+from tools.arguments import float_range, int_range, output_file, output_folder, tcp_port
 from tools.cli import CliError
 from tools.sim import plural
 
@@ -137,6 +141,10 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
     p.add_argument("--standin", action="store_true", help="fixed readings instead of the simulated twin")
     p.add_argument("--hw-port", type=tcp_port,
                    help="TCP port on 127.0.0.1 of another simulator serving the hardware link")
+    p.add_argument("--late", type=float_range(0, 10_000, unit="ms"), default=0.0, metavar="MS",
+                   help="the board's output (its TELEMETRY) reaches the pty MS ms late, in order (default 0)")
+    p.add_argument("--jitter", type=float_range(0, 10_000, unit="ms"), default=0.0, metavar="MS",
+                   help="with --late: each chunk's delay varies uniformly by +-MS ms (seeded; default 0)")
     p.add_argument("--log", metavar="FILE", type=output_file,
                    help="append the board's stderr here (tracebacks of the supervisor)")
     p.set_defaults(func=run)
@@ -215,7 +223,7 @@ def run_in(args: argparse.Namespace, scratch: Path) -> int:
     standin, twin, hw_port = start_hardware(args, world)
     stderr_path = Path(args.log) if args.log else scratch / "board-stderr.txt"
     offset = stderr_path.stat().st_size if stderr_path.exists() else 0
-    board = VirtualBoard(flash, hw_port, stderr_path)
+    board = VirtualBoard(flash, hw_port, stderr_path, late_s=args.late / 1000.0, jitter_s=args.jitter / 1000.0)
     try:
         deadline = time.monotonic() + STARTUP_S
         while board.alive() and time.monotonic() < deadline:
@@ -231,6 +239,8 @@ def run_in(args: argparse.Namespace, scratch: Path) -> int:
                   f"(start at x={world.start[0]:.2f} m, y={world.start[1]:.2f} m)")
         else:
             print(f"  hardware: simulator at 127.0.0.1:{hw_port}")
+        if args.late or args.jitter:
+            print(f"  link: LATE, the board's output reaches the pty {args.late:g} +- {args.jitter:g} ms later")
         print(f"  talk to it: twinbot serial {board.path}   |   flash it: twinbot flash --port {board.path}")
         print("  Ctrl-C stops the board.", flush=True)
         while board.alive():

@@ -6,7 +6,9 @@ once: the simulated robot running the firmware in the loop (SIL), the user
 robot driven by the arrow keys or a joystick / gamepad, and, with --port,
 the real robot on a serial port (a Pico, or a virtual board's pty from
 `twinbot board`), its pose from its odometry and its IR readings as they
-arrive.  The user's orders can drive the simulated and the real robot too.
+arrive, and its ghost: where the late-signal twin says it is now, its
+signal being late (--link-floor; `twinbot board --late MS` to try it).
+The user's orders can drive the simulated and the real robot too.
 Press h in the window for every key.
 
 Headless: --frames N runs N frames of 1/60 s without a display
@@ -54,6 +56,10 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
     p.add_argument("--world", default="paper_room", help="built-in world (paper_room, maze, arena) or a world file")
     p.add_argument("--rules", choices=("first", "refined"), default="refined", help="fuzzy rule set (default refined)")
     p.add_argument("--port", help="the real robot's serial port (or a virtual board's pty); absent without it")
+    p.add_argument("--link-floor", type=float_range(0, 10_000, unit="ms"), default=0.0, metavar="MS",
+                   help="the real robot's link: its fastest delivery in ms (a serial frame's transmit time, or half "
+                        "a round trip); the ghost adds it to the lateness it measures (default 0: lateness above "
+                        "the fastest frame)")
     p.add_argument("--pil", action="store_true",
                    help="the simulated robot's firmware on a virtual board under MicroPython (processor in the loop)")
     p.add_argument("--speed", type=float_range(0, MAX_SPEED, lo_open=True), default=1.0,
@@ -87,7 +93,7 @@ def settings_from(args: argparse.Namespace):  # type: ignore[no-untyped-def]
                                               else out / f"{world.name}.json")
     return Settings(world=world, params=params, rules=args.rules, port=args.port, pil=args.pil, speed=args.speed,
                     realtime=args.realtime, noise=not args.no_noise, emitter_pct=args.emitter, seed=args.seed,
-                    world_file=save, out_dir=out)
+                    world_file=save, out_dir=out, link_floor_s=args.link_floor / 1000.0)
 
 
 def run(args: argparse.Namespace) -> int:

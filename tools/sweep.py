@@ -1,17 +1,20 @@
-"""`twinbot sweep`: many exploration runs (rule sets x worlds x seeds) in parallel, one table.
+"""`twinbot sweep`: many exploration runs (rule sets x worlds x seeds x perturbations) in parallel, one table.
 
 Every combination is a fixed-step SIL run (exactly repeatable: the same
-seed gives the same row on any machine).  By default the runs go to a Dask
+seed gives the same row on any machine).  Each seed draws the sensor noise,
+a start near the world's (by default within 5 cm and +-15 degrees; see
+--start-radius, --start-heading, --fixed-start) and, with --perturb, the
+robot's parameters within +-REL of nominal.  By default the runs go to a Dask
 LocalCluster of one worker process per local core; --scheduler sends them
 to an existing Dask distributed cluster instead (its workers need twinbot
 installed: `pip install -e .` in a checkout of the same version).
 
 Writes in --out: runs.csv (a row per run: rules, world, seed, duration_s,
 coverage_end (fraction of the free area), t90_s (time to 90 % coverage,
-empty if never), exit_found, exit_time_s, collisions, stuck (the robot did
+empty if never), start_x_m, start_y_m, start_phi_rad (the start drawn), exit_found, exit_time_s, collisions, stuck (the robot did
 not find the exit and its centre stayed within 5 cm of where it was 20 s
 before the end; runs shorter than 20 s use the whole run),
-moved_last_window_m), summary.csv (a row per rule set x world: means,
+moved_last_window_m, then each --perturb parameter's drawn value), summary.csv (a row per rule set x world: means,
 rates, medians) and coverage.png (coverage against time, mean and 10-90 %
 band over the seeds, a panel per world).
 """
@@ -21,13 +24,15 @@ import argparse
 import sys
 from pathlib import Path
 
-from tools.arguments import int_range, sim_seconds
+from tools.arguments import float_range, int_range, sim_seconds
 from tools.cli import CliError
 
 EXAMPLES = """\
 examples:
   twinbot sweep --rules first,refined --world paper_room,maze --seeds 50 --duration 120 --out sweep
   twinbot sweep --seeds 4 --duration 30 --out /tmp/s --workers 2
+  twinbot sweep --seeds 50 --perturb wheel_radius=0.02,coulomb_friction=0.2 --out sweep
+  twinbot sweep --seeds 50 --fixed-start --out sweep    # only the sensor noise differs between seeds
   twinbot sweep --seeds 50 --out sweep --scheduler tcp://10.0.0.5:8786
 """
 
@@ -55,6 +60,30 @@ def out_folder(text: str) -> Path:
     return path
 
 
+def perturbations(text: str) -> list[tuple[str, float]]:
+    """--perturb NAME=REL,...: RobotParams fields, each drawn within +-REL (a fraction) of nominal."""
+    from host_sim.sweep import check_perturb
+
+    out: dict[str, float] = {}
+    for item in text.split(","):
+        name, sep, value = item.strip().partition("=")
+        name = name.strip()
+        if not sep or not name:
+            raise argparse.ArgumentTypeError(f"{item.strip()!r}: expected NAME=REL, e.g. wheel_radius=0.02")
+        try:
+            rel = float(value)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"'{item.strip()}': REL {value.strip()!r} is not a number") from None
+        if name in out:
+            raise argparse.ArgumentTypeError(f"'{name}' is given twice")
+        try:
+            check_perturb(name, rel)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+        out[name] = rel
+    return list(out.items())
+
+
 def scheduler_address(text: str) -> str:
     if not text.startswith(("tcp://", "tls://", "inproc://", "ucx://")) or ":" not in text.split("://", 1)[1]:
         raise argparse.ArgumentTypeError(f"{text!r}: expected a Dask scheduler address such as tcp://HOST:8786")
@@ -62,6 +91,7 @@ def scheduler_address(text: str) -> str:
 
 
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
+    from host_sim import sweep
     from host_sim.interface import RULE_SETS
     from host_sim.world import BUILTIN_NAMES
 
@@ -77,6 +107,16 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
                    help="simulated seconds per run, 1 to 86400 (default 120)")
     p.add_argument("--substeps", type=int_range(1, 1000), default=8,
                    help="physics substeps per 40 ms control period, 1..1000 (default 8)")
+    p.add_argument("--start-radius", type=float_range(0, 1, unit="m"), default=sweep.START_RADIUS_M, metavar="M",
+                   help=f"each seed starts within this distance of the world's start, 0..1 m "
+                        f"(default {sweep.START_RADIUS_M:g}; 0: at it)")
+    p.add_argument("--start-heading", type=float_range(0, 180, unit="degrees"), default=sweep.START_HEADING_DEG,
+                   metavar="DEG", help=f"... and within +-DEG of its heading, 0..180 (default {sweep.START_HEADING_DEG:g})")
+    p.add_argument("--fixed-start", action="store_true",
+                   help="every run at the world's start pose (same as --start-radius 0 --start-heading 0)")
+    p.add_argument("--perturb", type=perturbations, default=[], metavar="NAME=REL,...",
+                   help="robot parameters (RobotParams fields, host_sim/params.py) each run draws uniformly within "
+                        "+-REL of nominal from its seed, e.g. wheel_radius=0.02,coulomb_friction=0.2")
     p.add_argument("--out", type=out_folder, required=True, metavar="DIR",
                    help="folder for runs.csv, summary.csv and coverage.png (created if missing)")
     where = p.add_mutually_exclusive_group()
@@ -92,9 +132,12 @@ def run(args: argparse.Namespace) -> int:
 
     from host_sim import sweep
 
-    todo = sweep.cases(args.rules, args.world, args.seeds, args.duration, args.substeps)
+    radius, heading = (0.0, 0.0) if args.fixed_start else (args.start_radius, args.start_heading)
+    todo = sweep.cases(args.rules, args.world, args.seeds, args.duration, args.substeps, start_radius=radius,
+                       start_heading_deg=heading, perturb=args.perturb)
     where = args.scheduler or f"{args.workers or 'one per core'} local worker(s)"
-    print(f"{len(todo)} runs of {args.duration:g} sim s on {where}", file=sys.stderr)
+    varied = f"start within {radius:g} m, +-{heading:g} deg" + "".join(f", {n} +-{100 * r:g} %" for n, r in args.perturb)
+    print(f"{len(todo)} runs of {args.duration:g} sim s on {where}; per seed: {varied}", file=sys.stderr)
     bar = tqdm(total=len(todo), desc="sweep", unit="run", file=sys.stderr, disable=not sys.stderr.isatty())
     try:
         results = sweep.run_cases(todo, args.scheduler, args.workers, progress=bar.update)
@@ -104,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
         bar.close()
     rows = [r.row for r in results]
     args.out.mkdir(exist_ok=True)
-    table = sweep.write_table(args.out / "runs.csv", rows)
+    table = sweep.write_table(args.out / "runs.csv", rows, sweep.columns(args.perturb))
     summary = sweep.summarise(rows)
     sweep.write_table(args.out / "summary.csv", summary, sweep.SUMMARY_COLUMNS)
     plot = sweep.save_coverage_plot(args.out / "coverage.png", results)

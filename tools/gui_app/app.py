@@ -52,6 +52,7 @@ class Settings:
     world_file: Path = Path("world.json")  # where save and load go
     out_dir: Path = Path(".")  # recordings and screenshots
     grid: float = 0.05  # m, the snapping grid
+    link_floor_s: float = 0.0  # the real robot's link: its fastest delivery (the ghost's latency floor)
 
 
 @dataclass
@@ -86,6 +87,7 @@ class App:
         self.running = True
         self.show_help = False
         self.show_coverage = True
+        self.show_ghost = True  # the real robot's ghost (the late-signal twin) beside its raw late pose
         self.tool = "wall"  # what the mouse draws: "wall", "box" or "polygon"
         self.user_drives_sim = False
         self.user_drives_real = False
@@ -117,7 +119,7 @@ class App:
         from host_sim.serial_link import LinkError
 
         try:
-            self.real = RealBot.open(port, self.editor.world.start, self.s.params)
+            self.real = RealBot.open(port, self.editor.world.start, self.s.params, self.s.link_floor_s)
         except LinkError as exc:
             self.real_error = f"absent: {exc}"
             raise

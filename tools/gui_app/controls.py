@@ -59,6 +59,8 @@ def actions(app: App) -> list[Action]:
                lambda: app.user_drives_real),
         Action((k.K_v,), "v", "coverage", "coverage overlay on / off", app_toggle(app, "show_coverage"),
                lambda: app.show_coverage),
+        Action((k.K_g,), "g", "ghost", "the real robot's ghost (where it is now, its signal being late) on / off",
+               app_toggle(app, "show_ghost"), lambda: app.show_ghost),
         Action((k.K_o,), "o", "tool", "drawing tool: wall / box / convex polygon", app.next_tool,
                lambda: app.tool != "wall", lambda: f"tool: {app.tool}"),
         Action((k.K_s,), "s", "save", "save the world file", app.save_world),

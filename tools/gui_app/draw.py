@@ -28,6 +28,7 @@ TEXT = (30, 30, 35)
 DIM = (110, 110, 120)
 RED = (220, 40, 40)
 COLOURS = {"simulated": (40, 100, 230), "user": (20, 150, 60), "real": (235, 120, 20)}
+GHOST = (150, 40, 200)  # the real robot's ghost: where it is now, by the late-signal twin
 
 
 class Painter:
@@ -40,6 +41,7 @@ class Painter:
         self._cov_key: tuple[Any, ...] | None = None
         self._cov: pygame.Surface | None = None
         self._trails: dict[tuple[Any, ...], list[tuple[int, int]]] = {}
+        self._discs: dict[tuple[int, tuple[int, int, int]], pygame.Surface] = {}
 
     def text(self, s: str, pos: tuple[int, int], colour: tuple[int, int, int] = TEXT, size: int = 20,
              anchor: str = "topleft") -> pygame.Rect:
@@ -158,6 +160,23 @@ class Painter:
         pygame.draw.circle(self.surface, RED if contact else colour, centre, r, 3 if contact else 2)
         nose = view.to_screen(x + radius * math.cos(phi), y + radius * math.sin(phi))
         pygame.draw.line(self.surface, (20, 20, 20), centre, nose, 3)
+
+    def ghost(self, view: Viewport, raw: tuple[float, float, float], pose: tuple[float, float, float],
+              radius: float, label: str) -> None:
+        """The ghost: a translucent body outlined in GHOST, its heading, a line from the raw late pose, a label."""
+        x, y, phi = pose
+        centre = view.to_screen(x, y)
+        r = max(3, int(radius * view.scale))
+        disc = self._discs.get((r, GHOST))
+        if disc is None:  # one translucent disc per size, drawn once
+            disc = self._discs[(r, GHOST)] = pygame.Surface((2 * r + 1, 2 * r + 1), pygame.SRCALPHA)
+            pygame.draw.circle(disc, (*GHOST, 70), (r, r), r)
+        self.surface.blit(disc, (centre[0] - r, centre[1] - r))
+        pygame.draw.line(self.surface, GHOST, view.to_screen(raw[0], raw[1]), centre, 1)
+        pygame.draw.circle(self.surface, GHOST, centre, r, 2)
+        nose = view.to_screen(x + radius * math.cos(phi), y + radius * math.sin(phi))
+        pygame.draw.line(self.surface, GHOST, centre, nose, 3)
+        self.text(label, (centre[0] + r + 3, centre[1] - r - 2), GHOST, 16, "bottomleft")
 
     def rays(self, view: Viewport, rays: np.ndarray, counts: Sequence[int], colour: tuple[int, int, int],
              full_scale: float) -> None:

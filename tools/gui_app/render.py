@@ -2,10 +2,11 @@
 
 The room: the grid, the coverage overlay of the simulated robot, walls (the
 selected one lit), the wall being drawn, each robot's trail, body, heading
-and eight IR rays (shaded by the reflected counts), collision marks and
-the exit flag.  The panel: per robot, its state line and the eight IR
-counts as bars; for the two robots with firmware, the wheel-speed
-set-points it decided (the fuzzy controller's outputs in AUTONOMOUS mode);
+and eight IR rays (shaded by the reflected counts), collision marks, the
+exit flag, and the real robot's ghost (where the late-signal twin says it
+is now) beside its raw late pose.  The panel: per robot, its state line
+and the eight IR counts as bars; for the two robots with firmware, the
+wheel-speed set-points it decided (the fuzzy controller's outputs in AUTONOMOUS mode);
 coverage over time with the time to 90 %; the buttons.
 """
 from __future__ import annotations
@@ -32,6 +33,7 @@ class Renderer:
         self.p = draw.Painter(app.surface)
         self._exit: tuple[object, tuple[float, float]] = (None, (0.0, 0.0))
         self._t90: tuple[object, int, float | None] = (None, 0, None)
+        self.ghost_drawn: tuple[float, float, float] | None = None  # where the last frame drew the ghost
 
     def draw(self) -> None:
         surf = self.app.surface
@@ -64,6 +66,9 @@ class Renderer:
             bots.insert(0, (app.real, "real"))
         for bot, name in bots:
             self.robot(bot, name)
+        self.ghost_drawn = None
+        if app.real is not None and app.show_ghost:
+            self.ghost(app.real)
         if app.sim.sim.exit_time is not None:
             x, y = self.exit_point()
             p.flag(view, x, y)
@@ -101,6 +106,16 @@ class Renderer:
         p.robot(app.view, pose, app.s.params.body_radius, colour, contact)
         if isinstance(bot, SimBot):
             p.marks(app.view, bot.collision_marks, draw.RED)
+
+    def ghost(self, real: RealBot) -> None:
+        """The real robot's ghost over everything in the room, labelled with the link's lateness."""
+        pose = real.ghost_pose()
+        latency = real.ghost.latency_s
+        if pose is None or latency is None:
+            return
+        label = f"ghost: now, {10 * round(100 * latency)} ms later"
+        self.p.ghost(self.app.view, real.pose, pose, self.app.s.params.body_radius, label)
+        self.ghost_drawn = pose
 
     # -- the panel ---------------------------------------------------------------
     def panel(self) -> None:
@@ -144,6 +159,11 @@ class Renderer:
         else:
             p.text(bot.source, (x + 212, y + 24), draw.DIM, 16)
             p.text(f"{bot.frames} TELEMETRY frames", (x + 212, y + 40), draw.DIM, 16)
+            latency = bot.ghost.latency_s
+            if latency is not None:
+                p.text(f"link late {1000 * latency:.0f} ms", (x + 212, y + 56), draw.GHOST, 16)
+                p.text("(above its fastest frame)" if bot.ghost.floor_s == 0 else
+                       f"(floor {1000 * bot.ghost.floor_s:.0f} ms)", (x + 212, y + 70), draw.DIM, 16)
 
     def robot_line(self, bot: SimBot | RealBot, name: str) -> str:
         x, y, phi = bot.pose

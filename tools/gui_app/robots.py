@@ -25,6 +25,8 @@ from typing import Any
 import numpy as np
 
 from firmware.odometry import EXACT, HEADING_TURN, Odometry
+from host_sim.ghost import Ghost
+from host_sim.interface import firmware_geometry
 from host_sim.ir_sensor import BEARINGS
 from host_sim.live import LiveStepper
 from host_sim.params import RobotParams
@@ -186,11 +188,16 @@ def relative(base: Pose, pose: Pose) -> Pose:
     return (c * dx + s * dy, -s * dx + c * dy, pose[2] - base[2])
 
 
-class RealBot:
-    """A robot on a serial port: pose from its TELEMETRY odometry, IR readings as they arrive."""
+GHOST_HORIZON_S = 2.0  # the ghost runs on at most this long past the last frame: beyond, the signal is lost
 
-    def __init__(self, link: SerialLink, start: Pose, params: RobotParams) -> None:
+
+class RealBot:
+    """A robot on a serial port: pose from its TELEMETRY odometry, IR readings as they arrive, and its ghost."""
+
+    def __init__(self, link: SerialLink, start: Pose, params: RobotParams, floor_s: float = 0.0) -> None:
         self.link = link
+        diameter_um, base_um, ticks = firmware_geometry(params)
+        self.ghost = Ghost(base_um / 1e6, diameter_um / 1e6, ticks, floor_s=floor_s)
         self.start = start
         self.odometry = Odometry(int(round(2e6 * params.wheel_radius)), int(round(2e6 * params.half_axle)),
                                  int(round(params.ticks_per_rev)), EXACT)
@@ -207,12 +214,19 @@ class RealBot:
         self.recorder: RecordingWriter | None = None
 
     @classmethod
-    def open(cls, port: str, start: Pose, params: RobotParams) -> RealBot:
-        return cls(SerialLink.open(port), start, params)
+    def open(cls, port: str, start: Pose, params: RobotParams, floor_s: float = 0.0) -> RealBot:
+        return cls(SerialLink.open(port), start, params, floor_s)
 
     @property
     def pose(self) -> Pose:
+        """The raw pose: where the robot was when it sent its last frame."""
         return compose(self.start, relative(self.anchor, self.odo))
+
+    def ghost_pose(self) -> Pose | None:
+        """Where the ghost says the robot is now (placed like `pose`); None before the first frame."""
+        now = min(self.link.now(), self.last_rx + GHOST_HORIZON_S)
+        odo = self.ghost.predict(now)
+        return None if odo is None else compose(self.start, relative(self.anchor, odo))
 
     def reset(self, start: Pose) -> None:
         """Show the robot at `start` from here on (its odometry goes on counting)."""
@@ -227,6 +241,7 @@ class RealBot:
             if frame.msg_type == M.TELEMETRY:
                 self.telemetry(frame.fields)
                 self.last_rx = frame.t
+                self.ghost.on_telemetry(self._ghost_frame(frame.fields), frame.t)
                 n += 1
         self._send_orders()
         return n
@@ -249,17 +264,32 @@ class RealBot:
         if self.recorder is not None:
             self.recorder.telemetry(f)
 
+    def _ghost_frame(self, f: dict[str, object]) -> dict[str, object]:
+        """The frame as the ghost needs it: the odometry shown (the host's when the firmware sends none)."""
+        if "odo_heading" in f and "sp_l" in f:
+            return f
+        g = dict(f)
+        g.setdefault("sp_l", 0)
+        g.setdefault("sp_r", 0)
+        if "odo_heading" not in g:
+            o = self.odometry
+            g.update(odo_x=o.x_um, odo_y=o.y_um, odo_heading=o.heading)
+        return g
+
     def _send_orders(self) -> None:
         """HOST-mode orders at 10 Hz while the user drives it (its watchdog stops it 200 ms after they end)."""
         now = self.link.now()
         if self.orders is not None and now - self._last_order >= 0.1:
-            self.link.send(M.COMMAND, {"mode": M.MODE_HOST, "left": self.orders[0], "right": self.orders[1]})
+            sent = self.link.send(M.COMMAND, {"mode": M.MODE_HOST, "left": self.orders[0], "right": self.orders[1]})
+            self.ghost.on_command(sent.t, *self.orders)
+            self.ghost.forget_before(sent.t - 5.0)
             self._last_order = now
 
     def release(self) -> None:
         """The user lets go: stop the robot now rather than at its watchdog."""
         self.orders = None
-        self.link.send(M.COMMAND, {"mode": M.MODE_STOP, "left": 0, "right": 0})
+        sent = self.link.send(M.COMMAND, {"mode": M.MODE_STOP, "left": 0, "right": 0})
+        self.ghost.on_command(sent.t, 0, 0)  # STOP: the wheels' set-points are zero from now on
 
     def set_param(self, name: str, value: int) -> None:
         self.link.send(M.PARAM_SET, {"param": M.param_by_name(name)[0], "value": int(value)})
