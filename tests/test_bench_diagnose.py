@@ -153,6 +153,15 @@ def test_not_excited_is_read_from_the_recording(suite: dict[str, Any]) -> None:
     assert "not_excited" in row and row["outcome"] == "missed"  # reported apart by the totals
 
 
+def test_ambient_leakage_under_a_steady_light_is_not_excited(suite: dict[str, Any]) -> None:
+    rec = load_recording(next((suite["out"] / "recordings").glob("*.csv")))
+    leak = concealed("ambient_leakage", "ambient_leakage", 0.1, 0.0, sensor=2)
+    rec.ir_amb[:, 2] = 150 + np.random.default_rng(0).normal(0, 3, len(rec)).round()  # steady light, noisy readings
+    assert "same as an ir_offset" in scoring.not_excited(leak, PLANT, rec)
+    rec.ir_amb[len(rec) // 2:, 2] += 200  # a lamp switched on halfway: the leak now moves by 20 counts
+    assert scoring.not_excited(leak, PLANT, rec) is None
+
+
 def test_sindy_naming_criterion() -> None:
     one = [{"equation": "w_l", "term": "tanh(w_l)", "coef": -1.0}]
     assert scoring.score_sindy(key([DRY]), one)["named"]

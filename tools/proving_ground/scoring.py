@@ -16,7 +16,8 @@ puts a diagnosis (its JSON document, docs/diagnosis.md) beside the key:
   motion), is right; a name is wrong;
 - effects the recording cannot show (a current limit the references never
   exceed, a floor the tyres can never slip on, an IR pair that never sees
-  a wall) are "not excited": judged from the recording itself
+  a wall, an ambient leakage under a steady light, which is then one
+  constant with an offset) are "not excited": judged from the recording itself
   (`not_excited`), reported apart, not counted as misses.
 
 `score_sindy` judges the SINDy baseline (sindy_baseline.py) on the same
@@ -43,6 +44,8 @@ PARAM_TOLERANCE = 0.15  # relative parameter error counted as right (issue 9's t
 MIN_EXCITED_SHARE = 0.01  # an effect shown in fewer than 1 % of the periods is "not excited"
 TRACTION_MARGIN = 0.8  # demand within 80 % of mu N may already slip: weight shifts as the robot accelerates
 WALL_SEEN_COUNTS = 50  # reflected counts (on - off) from which an IR pair "sees a wall"
+LEAK_SEEN_COUNTS = 3.0  # counts (one reading's noise) the leaked ambient must vary by to differ from an offset
+AMBIENT_SMOOTH_S = 0.5  # the ambient light is judged on a running mean: the readings' own noise is not light
 
 
 @dataclass(frozen=True)
@@ -153,6 +156,14 @@ def not_excited(effect: dict[str, Any], plant: dict[str, Any], rec: Recording) -
         if seen.mean() < MIN_EXCITED_SHARE:
             which = f"sensor {sensors[0]}" if len(sensors) == 1 else "no sensor"
             return f"{which} sees a wall (> {WALL_SEEN_COUNTS} counts) in {100 * seen.mean():.1f} % of the periods"
+    elif name == "ambient_leakage":
+        k = int(effect["sensor"])
+        width = max(1, int(round(AMBIENT_SMOOTH_S / rec.sample_period)))
+        light = np.convolve(rec.ir_amb[:, k].astype(float), np.ones(width) / width, mode="valid")
+        swing = abs(value) * float(np.percentile(light, 95) - np.percentile(light, 5))
+        if swing < LEAK_SEEN_COUNTS:
+            return (f"sensor {k}'s ambient light varies so little that the leak varies by {swing:.1f} counts "
+                    f"(< {LEAK_SEEN_COUNTS:.0f}): a constant, the same as an ir_offset")
     return None
 
 
