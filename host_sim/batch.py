@@ -50,7 +50,8 @@ the IR sensors see only the ambient light.
 Effects (host_sim/effects.py, docs/effects.md): while every drive effect is absent the
 substep is the nominal one above; with any present, drive_effects.py computes the motors,
 supply, body forces, dynamics and traction (per-wheel radii, friction, torque constants, the
-battery's sag: `vbat`, the gears' backlash: `gear_gap`), `actuator_delay` delays the
+battery's sag: `vbat`), the gears' backlash (host_sim/gear_play.py: a motor side of its own beyond the play,
+`gear_gap`, `rotor_speed`), `actuator_delay` delays the
 references through a command history (`seed_commands` for what was sent before the start),
 and per-wheel encoder scales count each wheel with its own ticks per turn.  BatchResult.vbat
 is the battery voltage the robots sense at each control instant.
@@ -83,7 +84,7 @@ from typing import Any
 
 import numpy as np
 
-from host_sim import contact, drive, drive_effects, dynamics, ir_sensor, motors
+from host_sim import contact, drive, drive_effects, dynamics, gear_play, ir_sensor, motors
 from host_sim.dynamics import ParamBatch
 from host_sim.interface import CYCLE_S
 from host_sim.params import RobotParams
@@ -196,6 +197,8 @@ class BatchSim:
                 n_hint = a.shape[0]
         self._set_params(params, n_hint)
         self._set_state(poses, q, v)
+        # backlash: the motor sides' speeds (rad/s at the wheel), each turning with its wheel at the start
+        self.rotor_speed = self.v.copy() if self.gear_gap is not None else None
         n = self.n
         self.t = float(t)
         self.emitter_now = float(emitter_pct if initial_emitter_pct is None else initial_emitter_pct)
@@ -298,6 +301,7 @@ class BatchSim:
         self._delay = batch.actuator_delay.copy() if np.any(batch.actuator_delay != 0.0) else None
         # backlash: the gear's gap per wheel (motor angle / N - wheel angle), the play's middle at the start
         self.gear_gap = np.zeros((self.n, 2)) if self._fx is not None and np.any(self._fx.play) else None
+        self._gear_engaged = np.ones((self.n, 2), dtype=bool)  # at the end of the rolling substep under way
         self._per_wheel_ticks = bool(np.any(batch.ticks_per_rev_delta_l != 0) or np.any(batch.ticks_per_rev_delta_r != 0))
         # IR groups: (indices or None for all, RobotParams).
         if shared is not None:
@@ -341,6 +345,7 @@ class BatchSim:
             gap = np.sign(np.asarray(side, dtype=float)) * self._fx.play  # type: ignore[union-attr]
             self.q[:, 3:5] += self.gear_gap - gap
             self.gear_gap = gap
+            self.rotor_speed = self.v.copy()  # the motor sides turn with their wheels
 
     def encoder_angles(self) -> np.ndarray:
         """(N, 2) what the encoders count, in wheel radians: the motor's angle / N (the wheel's, but for
@@ -383,9 +388,8 @@ class BatchSim:
             i_ref = self._delayed(i_ref, dt)
         q0, v0 = self.q, self.v
         if self.gear_gap is not None:
-            i_sent = i_ref
-            i_ref, w_m, engaged = drive_effects.backlash_reference(i_ref, v0, self.gear_gap, dt, self._fx)  # type: ignore[arg-type]
-        if self._fx is None:
+            q1, v1, ok, i_ref, gear = self._gear_step(q0, v0, i_ref, dt)
+        elif self._fx is None:
             q1, v1, tau, self.current = drive.drive_step_batch(q0, v0, i_ref, dt, self._p, self._p_motors)
             ok = contact.traction_ok_batch(v0, v1, tau, dt, self._p) & ~self.slipping
         else:
@@ -404,10 +408,30 @@ class BatchSim:
             self._slip_step(q0, v0, q1, v1, ~ok, i_ref, dt, idx, gaps, normals, order)
         self._warm &= ~ok  # a rolling step ends the contact forces' history
         if self.gear_gap is not None:
-            self.gear_gap = drive_effects.backlash_gap(self.gear_gap, i_sent, w_m, engaged, q1[:, 3:5] - q0[:, 3:5], dt,
-                                                   self._fx)  # type: ignore[arg-type]
+            rolled, wm1, gap1 = gear
+            if not ok.all():
+                bad = np.flatnonzero(~ok)
+                v1[bad], wm1[bad], gap1[bad] = gear_play.after_contact(
+                    rolled[bad] - q1[bad, 3:5], v1[bad], wm1[bad], gap1[bad],
+                    self._fx.sub(bad))  # type: ignore[union-attr]
+            self.gear_gap, self.rotor_speed = gap1, wm1
         self.q, self.v = q1, v1
         self.t += dt
+
+    def _gear_step(self, q0: np.ndarray, v0: np.ndarray, i_ref: Any, dt: float
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
+        """The rolling step with the gears' play (gear_play.substep): (q1, v1, traction holds, the references a
+        contact step takes, (wheel angles, motor-side speeds and gaps at the end of the rolling step))."""
+        fx = self._fx
+        assert fx is not None and self.rotor_speed is not None and self.gear_gap is not None
+        q1, v1, wm1, gap1, tau, self.current, self.vbat, jump = gear_play.substep(
+            q0, v0, self.rotor_speed, self.gear_gap, i_ref, dt, fx, self._d)
+        # tau: the gears' torques on the wheels, which turn with their own inertia; the impacts aside
+        ok = drive_effects.traction_ok(v0 + jump, v1, tau, dt, fx, fx.iw[:, None] - fx.i_r) & ~self.slipping
+        # a contact step drives the wheels whose gear is engaged at the end (docs/effects.md)
+        self._gear_engaged = gear_play.engaged_at(gap1, fx)
+        i_contact = np.where(self._gear_engaged, i_ref, 0.0)
+        return q1, v1, ok, i_contact, (q1[:, 3:5].copy(), wm1, gap1)
 
     def _slip_step(self, q0: np.ndarray, v0: np.ndarray, q1: np.ndarray, v1: np.ndarray, bad: np.ndarray,
                    i_ref: Any, dt: float, idx: np.ndarray, gaps: np.ndarray, normals: np.ndarray,
@@ -496,7 +520,8 @@ class BatchSim:
             body = np.where(rolling[:, None], drive_effects.body_velocity(vs, fx), body)
             self.current[s] = cur
             forces = drive_effects.body_forces(body[:, 0], body[:, 1], body[:, 2], fx)
-            return tau, slope, body, {"radii": fx.radius, "body_force": forces, "axle_friction": fx.t_c}
+            t_c = fx.t_c if self.gear_gap is None else np.where(self._gear_engaged[s], fx.t_c, 0.0)
+            return tau, slope, body, {"radii": fx.radius, "body_force": forces, "axle_friction": t_c}
         tau, _cur, slope = motors.wheel_torque_slope_batch(i_s, vs, _SubParams(self._p_motors, s))
         if rolling.any():
             r, b = _sub(self._wheel_radius, s), _sub(self._half_axle, s)

@@ -34,6 +34,7 @@ from host_sim import friction
 
 SMOOTHING_SPEED = 0.1  # rad/s at the wheel: the caster's drag and the tyres' scrub are smoothed over it
 CASTER_BEHIND = 0.045  # m: the caster sits on the body's axis this far behind C (3/4 of the body radius)
+MIN_ROTOR_SHARE = 0.05  # the motor side's inertia is at least this share of wheel_inertia (backlash)
 SUPPLY_NEWTON = 8  # Newton steps on the supply voltage (converged to 1e-12 V_bat once the limits in force are found)
 # RobotParams fields that switch this path on when any robot has them away from 0.
 FIELDS = ("coulomb_friction_delta_l", "coulomb_friction_delta_r", "viscous_friction_delta_l",
@@ -75,6 +76,8 @@ class Drive:
     h: tuple[np.ndarray, np.ndarray, np.ndarray]  # H in (u, omega): A, B, C
     cap: np.ndarray  # (N,) mu N per wheel
     play: np.ndarray  # (N, 2) rad, half the backlash: the gear's gap is in [-play, play]
+    j_b: np.ndarray  # (N,) kg m^2, the body's yaw inertia about C without the wheels' spin (H's C = j_b + ...)
+    i_r: np.ndarray  # (N, 1) kg m^2, the motor side (rotor through the gear) at the wheel: gear_play.py
 
     @classmethod
     def of(cls, p: Any) -> Drive:
@@ -86,6 +89,9 @@ class Drive:
         j_b = p.body_inertia + p.body_mass * p.com_offset ** 2 + 2 * p.wheel_mass * b * b + 2 * p.wheel_inertia_diam
         il2, ir2 = 1.0 / r[:, 0] ** 2, 1.0 / r[:, 1] ** 2
         h = (m + iw * (il2 + ir2), iw * b * (ir2 - il2), j_b + iw * b * b * (il2 + ir2))
+        # the rotor's share of wheel_inertia: all of it but the wheel's own spin inertia (2 I_m, a thin
+        # wheel's), at least MIN_ROTOR_SHARE of it (docs/effects.md, "backlash")
+        i_r = np.maximum(iw - 2.0 * np.asarray(p.wheel_inertia_diam, dtype=float), MIN_ROTOR_SHARE * iw)
         return cls(radius=r,
                    kt=_pair(p.torque_constant + p.torque_constant_delta_l, p.torque_constant + p.torque_constant_delta_r),
                    t_c=_pair(p.coulomb_friction + p.coulomb_friction_delta_l,
@@ -100,7 +106,8 @@ class Drive:
                    g=np.asarray(p.body_mass * p.com_offset, dtype=float), iw=iw, m=np.asarray(m, dtype=float),
                    h=(np.asarray(h[0]), np.asarray(h[1]), np.asarray(h[2])),
                    cap=np.asarray(p.wheel_friction * m * 9.81 / 2, dtype=float),
-                   play=0.5 * _pair(p.backlash_l, p.backlash_r))
+                   play=0.5 * _pair(p.backlash_l, p.backlash_r), j_b=np.asarray(j_b, dtype=float),
+                   i_r=col(i_r))
 
     def sub(self, s: np.ndarray) -> Drive:
         """Robots s only."""
@@ -196,12 +203,13 @@ def _gen_forces(tau: np.ndarray, u: np.ndarray, om: np.ndarray, d: Drive) -> tup
     return fl + fr + f_e, d.b * (fr - fl) + m_c
 
 
-def _solve_x(v: np.ndarray, tau: np.ndarray, d: Drive) -> tuple[np.ndarray, ...]:
+def _solve_x(v: np.ndarray, tau: np.ndarray, d: Drive, h: tuple[np.ndarray, ...] | None = None
+             ) -> tuple[np.ndarray, ...]:
     """(u, omega, and H^-1 (f + gyroscopic terms) in (u, omega)) at wheel speeds v under wheel torques tau."""
     u, om = _uw(v, d)
     fu, fw = _gen_forces(tau, u, om, d)
     fu, fw = fu + d.g * om * om, fw - d.g * u * om
-    a, bb, c = d.h
+    a, bb, c = d.h if h is None else h
     det = a * c - bb * bb
     return u, om, (c * fu - bb * fw) / det, (a * fw - bb * fu) / det
 
@@ -226,21 +234,34 @@ def accel(v: np.ndarray, tau: np.ndarray, d: Drive) -> np.ndarray:
     return np.stack(_wheels(ud, wd, d), 1)
 
 
-def drive_step(q: np.ndarray, v: np.ndarray, i_ref: Any, dt: Any, d: Drive, dc: Any
+def inertia(d: Drive, iw: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """H in (u, omega), (A, B, C), with each wheel's own spin inertia iw (N, 2) (Drive.h has d.iw for both)."""
+    kl, kr = iw[:, 0] / d.radius[:, 0] ** 2, iw[:, 1] / d.radius[:, 1] ** 2
+    return d.m + kl + kr, d.b * (kr - kl), d.j_b + d.b * d.b * (kl + kr)
+
+
+def drive_step(q: np.ndarray, v: np.ndarray, i_ref: Any, dt: Any, d: Drive, dc: Any, torque: Any = None,
+               h: tuple[np.ndarray, ...] | None = None, t_c: np.ndarray | None = None
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """drive.drive_step_batch with the effects: (q_next, v_next, wheel torques (dry friction included),
     currents, supply V).  The same predictor with the half step's dry friction, then the linearly implicit
-    midpoint step in (u, omega) and the step's dry friction (friction.solve_batch)."""
-    a, bb, c = d.h
+    midpoint step in (u, omega) and the step's dry friction (friction.solve_batch).
+
+    torque(w) -> (wheel torques, currents, V) at wheel speeds w (default wheel_torque), h the inertia in
+    (u, omega) (default d.h) and t_c (N, 2) the dry friction on the wheels (default d.t_c): the backlash's
+    open gear (gear_play.py) drives a wheel with none of them."""
+    torque = torque or (lambda w: wheel_torque(i_ref, w, d))
+    a, bb, c = d.h if h is None else h
+    t_c = d.t_c if t_c is None else t_c
     hdt = 0.5 * dt if np.ndim(dt) == 0 else 0.5 * np.asarray(dt)
-    tau, _i, _v = wheel_torque(i_ref, v, d)
-    u, om, ud, wd = _solve_x(v, tau, d)
+    tau, _i, _v = torque(v)
+    u, om, ud, wd = _solve_x(v, tau, d, (a, bb, c))
     det = a * c - bb * bb
-    h = _response(hdt * c / det, -hdt * bb / det, -hdt * bb / det, hdt * a / det, d)
+    hr = _response(hdt * c / det, -hdt * bb / det, -hdt * bb / det, hdt * a / det, d)
     vl, vr = v[:, 0] + hdt * (ud - d.b * wd) / d.radius[:, 0], v[:, 1] + hdt * (ud + d.b * wd) / d.radius[:, 1]
-    fl, fr, sl, sr = friction.solve_batch(vl, vr, *h, d.t_c[:, 0], d.t_c[:, 1], v)
-    v_mid = np.stack(friction.end_speeds_batch(vl, vr, *h, fl, fr, sl, sr), 1)
-    tau, cur, volts = wheel_torque(i_ref, v_mid, d)
+    fl, fr, sl, sr = friction.solve_batch(vl, vr, *hr, t_c[:, 0], t_c[:, 1], v)
+    v_mid = np.stack(friction.end_speeds_batch(vl, vr, *hr, fl, fr, sl, sr), 1)
+    tau, cur, volts = torque(v_mid)
     # the step without dry friction; its gyroscopic coefficient from the yaw rate the predictor reached
     fu, fw = _gen_forces(tau, u, om, d)
     fh_u, fh_w = fl / d.radius[:, 0] + fr / d.radius[:, 1], d.b * (fr / d.radius[:, 1] - fl / d.radius[:, 0])
@@ -253,7 +274,7 @@ def drive_step(q: np.ndarray, v: np.ndarray, i_ref: Any, dt: Any, d: Drive, dc: 
     vl, vr = _wheels(u1, w1, d)
     k = dt * idet  # the inverse of [[a, bb - al], [bb + al, c]], times dt
     w = _response(k * c, -k * (bb - al), -k * (bb + al), k * a, d)
-    fl, fr, sl, sr = friction.solve_batch(vl, vr, *w, d.t_c[:, 0], d.t_c[:, 1], v)
+    fl, fr, sl, sr = friction.solve_batch(vl, vr, *w, t_c[:, 0], t_c[:, 1], v)
     v1 = np.stack(friction.end_speeds_batch(vl, vr, *w, fl, fr, sl, sr), 1)
     q1 = _advance(q, v, v1, u, om, dt, d, dc)
     return q1, v1, tau + np.stack([fl, fr], 1), cur, volts
@@ -276,9 +297,11 @@ def _advance(q: np.ndarray, v: np.ndarray, v1: np.ndarray, u: np.ndarray, om: np
     return qn
 
 
-def traction_ok(v0: np.ndarray, v1: np.ndarray, tau: np.ndarray, dt: Any, d: Drive) -> np.ndarray:
-    """contact.traction_ok_batch with per-wheel radii; the caster carries its own sideways force."""
-    f = (tau - d.iw[:, None] * (v1 - v0) / (dt if np.ndim(dt) == 0 else np.asarray(dt)[:, None])) / d.radius
+def traction_ok(v0: np.ndarray, v1: np.ndarray, tau: np.ndarray, dt: Any, d: Drive, iw: Any = None) -> np.ndarray:
+    """contact.traction_ok_batch with per-wheel radii; the caster carries its own sideways force.  tau: the
+    torques on the wheels as iw (default d.iw, both) turn with them (gear_play.py: the gear's, on the wheel's own)."""
+    iw = d.iw[:, None] if iw is None else iw
+    f = (tau - iw * (v1 - v0) / (dt if np.ndim(dt) == 0 else np.asarray(dt)[:, None])) / d.radius
     u0, w0 = _uw(v0, d)
     u1, w1 = _uw(v1, d)
     ub, wb = 0.5 * (u0 + u1), 0.5 * (w0 + w1)
@@ -313,36 +336,3 @@ def delayed_reference(hist_t: list[float], hist_i: list[np.ndarray], t: float, d
         w = np.clip(np.minimum(end, b) - np.maximum(tk, a), 0.0, None) / dt
         out += w[:, None] * ik
     return out
-
-
-# --------------------------------------------------------------------------- #
-# Backlash: the gear's gap between the motor (and its encoder) and the wheel
-# --------------------------------------------------------------------------- #
-def backlash_reference(i_ref: Any, w: np.ndarray, gap: np.ndarray, dt: Any, d: Drive
-                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(the reference that drives each wheel over the substep (N, 2), the motor side's speed in the gap,
-    engaged for the whole substep (N, 2) bool).
-
-    gap = motor angle / N - wheel angle, in [-play, play].  The motor side is taken as massless: in the
-    gap it turns at the no-load speed V_bat / (k N) towards the side its current pushes (no torque on the
-    wheel), with no current it keeps its place against the wheel.  A wheel is driven while the gap is
-    closed on the side the current pushes; in the substep where the gap closes, for the part of the
-    substep after it closed (continuous in the play)."""
-    c = np.minimum(np.maximum(np.broadcast_to(np.asarray(i_ref, dtype=float), w.shape), -d.lim), d.lim)
-    side = np.sign(c)
-    engaged = np.where(side > 0, gap >= d.play, gap <= -d.play) | (d.play == 0.0)
-    w_m = side * (d.v_bat[:, None] / (d.kt * d.gear))
-    closing = (w_m - w) * side
-    step = np.asarray(dt, dtype=float).reshape(-1, 1) if np.ndim(dt) else dt
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t_close = np.where(closing > 0, (d.play - side * gap) / closing, np.inf)
-    frac = np.where(engaged, 1.0, np.clip(1.0 - t_close / step, 0.0, 1.0))
-    return c * frac, w_m, engaged
-
-
-def backlash_gap(gap: np.ndarray, i_ref: Any, w_m: np.ndarray, engaged: np.ndarray, turned: np.ndarray,
-                 dt: Any, d: Drive) -> np.ndarray:
-    """The gap after the substep in which the wheels turned by `turned` (N, 2) rad."""
-    step = np.asarray(dt, dtype=float).reshape(-1, 1) if np.ndim(dt) else dt
-    free = np.where(np.broadcast_to(np.asarray(i_ref, dtype=float), gap.shape) == 0.0, gap, gap + step * w_m - turned)
-    return np.where(engaged, gap, np.clip(free, -d.play, d.play))

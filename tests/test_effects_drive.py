@@ -156,33 +156,80 @@ def test_a_delayed_run_starting_mid_stream_uses_the_commands_already_sent():
     assert res.theta[1, 0, 0] > 0  # the command sent 80 ms before the start arrives at once
 
 
-def test_backlash_the_wheel_waits_until_the_motor_has_turned_by_the_play():
-    play = 0.2  # rad; the gear starts in the middle of its play
-    p = P.replace(backlash_l=play, backlash_r=play)
+ROTOR_INERTIA = P.wheel_inertia - 2 * P.wheel_inertia_diam  # the motor side, at the wheel: all but the wheel's own
+NO_AXLE_FRICTION = P.replace(coulomb_friction=0.0, viscous_friction=0.0)
+
+
+def test_backlash_the_rotor_crosses_the_play_in_the_time_its_inertia_and_torque_give():
+    """From rest at a small current the rotor (the motor side) alone accelerates across half the play under the
+    motor torque less the dry friction; the wheel stays exactly at rest until the gap closes."""
+    play, i = 0.1, 0.05
+    p = P.replace(viscous_friction=0.0, backlash_l=play, backlash_r=play)
     sim = BatchSim(None, p, np.zeros((1, 3)))
-    no_load = P.battery_voltage / (P.torque_constant * P.gear_ratio)  # the massless motor side's speed in the gap
-    dt, wheel, motor = 2e-4, [], []
-    for _ in range(100):  # 20 ms forward
-        sim.substep([0.2, 0.2], dt)
+    tau_net = ETA_N_KT * i - P.coulomb_friction
+    alpha = tau_net / ROTOR_INERTIA
+    t_close = math.sqrt(2 * (0.5 * play) * ROTOR_INERTIA / tau_net)  # 12.1 ms (the massless model: 2.6 ms)
+    dt, wheel, motor = 1e-4, [], []
+    for _ in range(200):  # 20 ms
+        sim.substep([i, i], dt)
         wheel.append(sim.q[0, 3])
         motor.append(sim.encoder_angles()[0, 0])
-    t = dt * np.arange(1, 101)
-    t_close = 0.5 * play / no_load  # 2.6 ms
-    before = t < t_close - dt
-    assert (np.array(wheel)[before] == 0.0).all()  # not driven while the gap closes
-    assert np.array(motor)[before] == pytest.approx(no_load * t[before], rel=1e-9)  # the encoder counts it
-    assert (np.array(wheel)[t > t_close + dt] > 0).all()
-    assert np.array(motor)[-1] - wheel[-1] == pytest.approx(0.5 * play)  # closed on the driving side
-    # reverse: the motor crosses the whole play before the wheel is braked by it
+    t = dt * np.arange(1, 201)
+    before = t < t_close - 1e-9
+    assert (np.array(wheel)[before] == 0.0).all()  # not driven while the gap is open
+    assert np.array(motor)[before] == pytest.approx(0.5 * alpha * t[before] ** 2, rel=1e-9)  # the encoder counts it
+    assert (np.array(wheel)[~before] > 0).all()  # moving from the step in which the gap closed
+    assert np.array(motor)[-1] - wheel[-1] == pytest.approx(0.5 * play, abs=1e-12)  # closed on the driving side
+
+
+def test_backlash_on_a_reversal_the_wheel_coasts_while_the_rotor_crosses_the_play():
+    """No motor torque and no axle friction reach the wheel while the gap is open (FLAT, no caster: nothing
+    else acts on a robot going straight), then the rotor brakes it."""
+    play = 0.2
+    sim = BatchSim(None, FLAT.replace(backlash_l=play, backlash_r=play), np.zeros((1, 3)))
+    sim.run_inputs(np.tile([0.2, 0.2], (10, 1)), sensors=False)
     w_before = sim.v[0, 0]
-    for _ in range(10):  # 2 ms, less than play / (no_load + w) = 3.3 ms
+    assert sim.gear_gap[0, 0] == 0.5 * play and w_before > 5
+    dt, coasting = 1e-4, 0
+    while sim.gear_gap[0, 0] > -0.5 * play:
         sim.substep([-0.2, -0.2], dt)
-    free = balance_speed(0.0)  # only the axle's friction on the wheel: its deceleration is small
-    assert sim.v[0, 0] > 0.95 * w_before and free < 0
+        if sim.gear_gap[0, 0] > -0.5 * play:
+            assert sim.v[0] == pytest.approx([w_before, w_before], rel=1e-12)
+            coasting += 1
+    # the rotor went from the wheel's speed to past it the other way, I_r over (eta N k i + friction)
+    assert coasting > 0.5 * ROTOR_INERTIA * w_before / (ETA_N_KT * 0.2) / dt
     for _ in range(100):
         sim.substep([-0.2, -0.2], dt)
-    assert sim.encoder_angles()[0, 0] - sim.q[0, 3] == pytest.approx(-0.5 * play)
-    assert sim.v[0, 0] < 0.5 * w_before
+    assert sim.gear_gap[0, 0] == -0.5 * play and sim.v[0, 0] < w_before - 0.3
+
+
+def test_backlash_the_impact_at_engagement_conserves_momentum():
+    """Left gear with play, right rigid, no friction, no body forces, G on the axle (no gyroscopic terms):
+    with the current off, the generalised momentum in (u, omega) of the wheels' side plus the free rotor's
+    stays what it was, across the impact that closes the gap; the impact leaves rotor and wheel together."""
+    p = NO_AXLE_FRICTION.replace(com_offset=0.0, backlash_l=0.1)
+    sim = BatchSim(None, p, np.zeros((1, 3)))
+    sim.run_inputs(np.tile([0.2, 0.2], (5, 1)), sensors=False)
+    for _ in range(10):
+        sim.substep([-0.3, 0.0], 2e-4)  # the left rotor falls back from its wheel: the gear opens
+    assert abs(sim.gear_gap[0, 0]) < 0.05 and sim.rotor_speed[0, 0] < sim.v[0, 0]
+    r, b, i_r = P.wheel_radius, P.half_axle, ROTOR_INERTIA
+    m = P.body_mass + 2 * P.wheel_mass
+    j = P.body_inertia + 2 * P.wheel_mass * b * b + 2 * P.wheel_inertia_diam
+    own_l, own_r = (P.wheel_inertia - i_r) / r ** 2, P.wheel_inertia / r ** 2  # the left wheel without its rotor
+
+    def momentum() -> np.ndarray:
+        u, om = 0.5 * r * (sim.v[0, 0] + sim.v[0, 1]), 0.5 * r * (sim.v[0, 1] - sim.v[0, 0]) / b
+        h = np.array([[m + own_l + own_r, b * (own_r - own_l)], [b * (own_r - own_l), j + b * b * (own_l + own_r)]])
+        return h @ [u, om] + i_r * sim.rotor_speed[0, 0] / r * np.array([1.0, -b])
+
+    before, closed = momentum(), False
+    for _ in range(400):
+        sim.substep([0.0, 0.0], 2e-4)
+        closed |= sim.gear_gap[0, 0] == -0.05
+        np.testing.assert_allclose(momentum(), before, rtol=1e-12, atol=1e-15)
+    assert closed and sim.rotor_speed[0, 0] == sim.v[0, 0]
+    assert sim.v[0, 0] < sim.v[0, 1]  # the slower rotor braked the left wheel
 
 
 def test_encoders_count_the_motor_side():
