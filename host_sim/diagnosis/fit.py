@@ -15,7 +15,12 @@ candidates' order: the plainer physics), accepted only if it
 is significant against the twin without it (F test) AND it improves the
 fit on the held-out windows by at least MIN_HELD_OUT_GAIN.  Candidates that
 explain the held-out data as well as the chosen one (within AMBIGUITY) are
-reported beside it.  Backward elimination then drops an effect that a later one made redundant
+reported beside it.  Selection stops once the twin matches the held-out
+windows to within their noise (mean weighted squared residual below
+WITHIN_NOISE): a further effect would fit the noise.  Screening tries each
+candidate's one linear step from absent and, for one-parameter effects, a few
+values across its range outright (SCREEN_TRIALS: threshold effects such as a
+gear's play barely move the residuals near absent).  Backward elimination then drops an effect that a later one made redundant
 (the refitted twin without it is as good by the same two tests).
 """
 from __future__ import annotations
@@ -36,6 +41,8 @@ from host_sim.world import World
 
 MAX_EFFECTS = 3
 SHORTLIST = 4  # candidates fitted in full after screening
+WITHIN_NOISE = 1.0  # held-out cost per weighted residual below which no further effect is sought
+SCREEN_TRIALS = (0.15, 0.5)  # of a one-parameter effect's range: values the screening also tries outright
 P_MAX = 1e-4  # F test against the twin without the effect
 MIN_HELD_OUT_GAIN = 0.10  # relative drop of the held-out weighted sum of squares
 START_INSIDE = 0.01  # of a parameter's range: how far inside its bounds a fit starts
@@ -208,9 +215,12 @@ def bic(model: Model) -> float:
 
 
 def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candidate], keep: int) -> list[Candidate]:
-    """The `keep` candidates whose one Gauss-Newton step from absent promises the lowest training cost.
+    """The `keep` candidates that promise the lowest training cost.
 
-    One batch run: the current model plus each candidate at its absent value, and nudged.
+    One batch run: the current model plus each candidate at its absent value, nudged, and at a few
+    trial values across its range (SCREEN_TRIALS).  A candidate's promise is the best of one
+    Gauss-Newton step from absent and its trials: effects with a threshold (a gear's play, a delay)
+    barely change the residuals near absent, so the linear step alone would screen them out.
     """
     robots = [current.params]
     slots = []
@@ -222,16 +232,19 @@ def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candid
         robots.append(E.apply(current.params, cand.name, cand.site, list(x0)))
         robots += [E.apply(current.params, cand.name, cand.site, list(x0 + np.eye(len(x0))[i] * h[i]))
                    for i in range(len(x0))]
-        slots.append((first, h, lo - x0, hi - x0))
+        trials = [lo + f * (hi - lo) for f in SCREEN_TRIALS] if len(x0) == 1 else []
+        robots += [E.apply(current.params, cand.name, cand.site, list(x)) for x in trials]
+        slots.append((first, h, lo - x0, hi - x0, len(trials)))
     train, _test = obj.residuals(robots)
     predicted = []
-    for first, h, dlo, dhi in slots:
+    for first, h, dlo, dhi, n_trials in slots:
         r0 = train[first]
         jac = ((train[first + 1:first + 1 + len(h)] - r0) / h[:, None]).T
         step, *_ = np.linalg.lstsq(jac, -r0, rcond=None)
         step = np.clip(step, dlo, dhi)
         resid = r0 + jac @ step
-        predicted.append(float(resid @ resid))
+        tried = train[first + 1 + len(h):first + 1 + len(h) + n_trials]
+        predicted.append(min([float(resid @ resid)] + [float(r @ r) for r in tried]))
     order = np.argsort(predicted)
     return [cands[i] for i in order[:keep]]
 
@@ -271,8 +284,11 @@ def select(obj: Objective, base: RobotParams, cands: list[Candidate],
     say = progress or (lambda _t: None)
     r_train, r_test = obj.residuals([base])
     chain = [Model([], [], base, float(r_train[0] @ r_train[0]), float(r_test[0] @ r_test[0]), int(r_train.size))]
+    n_test = int(r_test.size)
     for step in range(MAX_EFFECTS):
         current = chain[-1]
+        if current.effects and current.cost_test < WITHIN_NOISE * n_test:
+            break  # the twin already matches the held-out data to within its noise: more would fit the noise
         pool = [c for c in cands if c not in current.effects]
         if not pool:
             break
