@@ -215,7 +215,7 @@ class BatchSim:
         # Fewer robots than this in a contact step: contact.slip_step one by one, else slip_step_batch.
         self.vector_contacts_from = VECTOR_CONTACTS_FROM
         self._robots_cache: dict[int, RobotParams] = {}
-        self._wheel_force = np.zeros((2, 2, n))
+        self._wheel_force = np.zeros((2, 3, n))  # per wheel: F_e, F_n at the tyre, the axle's friction torque
         self._wall_force = np.zeros((2, n, max(self.world.n_walls, 1)))
         self._walls = self.world.n_walls > 0
         self.current = np.zeros((n, 2))  # A, the motor currents of the last substep (mid-step)
@@ -483,7 +483,7 @@ class BatchSim:
         k, width = len(s), g.shape[1]
         qn, vn, bn = np.empty((k, 5)), np.empty((k, 2)), np.empty((k, 3))
         rolled, pushed = np.zeros(k, dtype=bool), np.zeros(k, dtype=bool)
-        wheel_out, wall_out = np.zeros((2, 2, k)), np.zeros((2, width, k))
+        wheel_out, wall_out = np.zeros((2, 3, k)), np.zeros((2, width, k))
         for n, j in enumerate(s):
             near = [w for w in range(width) if np.isfinite(g[n, w])]
             in_reach = [(float(g[n, w]), float(nrm[n, w, 0]), float(nrm[n, w, 1]), int(walls[n, w])) for w in near]

@@ -222,7 +222,8 @@ def slip_step(q: Any, v: Any, body: tuple[float, float, float] | None, tau: Any,
     tau, slope: wheel torques (N m, the motor less the viscous friction) and d tau / d w (N m s, <= 0) at v;
     axle_friction: (T_l, T_r) the axles' dry friction (default coulomb_friction).  walls: (gap, nx, ny, index)
     as walls_in_reach.  warm: the contact forces of the previous step (wheels [[F_e, F_n]] x 2,
-    walls [[F_n, F_t]] in the order of `walls`), where the solve starts (warm start: in steady
+    walls [[F_n, F_t]] in the order of `walls`; a wheel's entry may carry its axle's friction torque
+    third, as the returned forces do), where the solve starts (warm start: in steady
     contact a few sweeps instead of a hundred; the solution is the same).  Returns (q, v, body or
     None if both wheels stick, a wall pushed, the contact forces for the next warm start).
     """
@@ -241,7 +242,11 @@ def slip_step(q: Any, v: Any, body: tuple[float, float, float] | None, tau: Any,
     pw = [[f[0] * dt, f[1] * dt] for f in warm[0]] if warm else [[0.0, 0.0], [0.0, 0.0]]
     pc = [[f[0] * dt, f[1] * dt] for f in warm[1]] if warm else [[0.0, 0.0] for _ in contacts]
     t_l, t_r = (p.coulomb_friction,) * 2 if axle_friction is None else axle_friction
-    axles = [(1.0 / iwl, t_l * dt, [0.0]), (1.0 / iwr, t_r * dt, [0.0])]
+    # the axles' friction torques are warm-started with the rest: without them a wheel pressed still against
+    # a wall takes tens of sweeps to find again the torque that holds it
+    held = [min(max(f[2] * dt, -t * dt), t * dt) if len(f) > 2 else 0.0 for f, t in zip(warm[0], (t_l, t_r))] \
+        if warm else [0.0, 0.0]
+    axles = [(1.0 / iwl, t_l * dt, [held[0]]), (1.0 / iwr, t_r * dt, [held[1]])]
     _solve(nu, wheels, contacts, pw, pc, p, dt, start=warm is not None, axles=axles)
     u, l, om, wl, wr = nu
     # Pose with the new velocities (C moves as its constraints saw it: heading phi_n).
@@ -252,7 +257,8 @@ def slip_step(q: Any, v: Any, body: tuple[float, float, float] | None, tau: Any,
     stick = cap * dt * (1.0 - STICK_MARGIN)
     rolling = math.hypot(*pw[0]) < stick and math.hypot(*pw[1]) < stick
     pushed = any(pn > 0.0 for pn, _pt in pc)
-    forces = ([[pe / dt, pn / dt] for pe, pn in pw], [[pn / dt, pt / dt] for pn, pt in pc])
+    forces = ([[pe / dt, pn / dt, a[2][0] / dt] for (pe, pn), a in zip(pw, axles)],
+              [[pn / dt, pt / dt] for pn, pt in pc])
     return q1, (wl, wr), None if rolling else (u, l, om), pushed, forces
 
 
@@ -279,6 +285,7 @@ def _solve(nu: list[float], wheels: list[tuple[Any, ...]], contacts: list[tuple[
     if start:
         for i, w in enumerate(wheels):
             _apply(nu, w, pw[i][0], pw[i][1], i, ju, lat_l, lat_w)
+            nu[3 + i] += axles[i][2][0] * axles[i][0]
         for (_g, ne, nn, nl, nw, tl, tw, _inn, _itt), (pn, pt) in zip(contacts, pc):
             nu[0] += (ne * pn - nn * pt) * ju
             nu[1] += nl * pn + tl * pt
@@ -330,7 +337,7 @@ def slip_step_batch(q: np.ndarray, v: np.ndarray, body: np.ndarray, tau: np.ndar
     """`slip_step` for K robots: q (K, 5), v (K, 2), body (K, 3) (u, l, omega; for rolling robots
     from v), tau, slope (K, 2), dt float or (K,), gaps (K, W) and normals (K, W, 2) as
     walls_in_reach_batch; p a RobotParams or a ParamBatch, of which robots idx are these K;
-    warm_wheels (2, 2, K) and warm_walls (2, W, K): the previous step's forces, as slip_step's warm.
+    warm_wheels (2, 3, K: F_e, F_n, the axle torque) and warm_walls (2, W, K): the previous step's forces, as slip_step's warm.
     radii (K, 2): each wheel's radius (default wheel_radius); body_force: (F_e, F_n, M_C) (K,) each, forces
     on the body other than the wheels' and the walls' (the caster's drag, the tyres' scrub; host_sim/
     drive_effects.py), taken at the start of the step.  axle_friction (K, 2): each axle's dry friction T
@@ -352,12 +359,14 @@ def slip_step_batch(q: np.ndarray, v: np.ndarray, body: np.ndarray, tau: np.ndar
     ne = (normals[..., 0] * c[:, None] + normals[..., 1] * s[:, None]).T  # (W, K)
     nn = (-normals[..., 0] * s[:, None] + normals[..., 1] * c[:, None]).T
     contacts = [(gaps[:, w] / dt, ne[w], nn[w]) + _wall_block(ne[w], nn[w], m, k, j, rad) for w in range(n_walls)]
-    pw = np.zeros((2, 2, n)) if warm_wheels is None else warm_wheels * dt
+    pw = np.zeros((2, 2, n)) if warm_wheels is None else warm_wheels[:, :2] * dt
     pc = np.zeros((2, n_walls, n)) if warm_walls is None else warm_walls * dt
     with np.errstate(invalid="ignore"):  # walls padded with gap = inf
         t_c = axle_friction if axle_friction is not None else np.broadcast_to(
             np.reshape(np.asarray(_sub_robots(p.coulomb_friction, idx), dtype=float), (-1, 1)), (n, 2))
-        axles = [(1.0 / iwl, t_c[:, 0] * dt, np.zeros(n)), (1.0 / iwr, t_c[:, 1] * dt, np.zeros(n))]
+        held = (np.zeros((2, n)) if warm_wheels is None or warm_wheels.shape[1] < 3
+                else np.clip(warm_wheels[:, 2] * dt, -t_c.T * dt, t_c.T * dt))
+        axles = [(1.0 / iwl, t_c[:, 0] * dt, held[0].copy()), (1.0 / iwr, t_c[:, 1] * dt, held[1].copy())]
         _solve_batch(nu, wheels, contacts, pw, pc, cs, dt, start=warm_wheels is not None, axles=axles)
     u, l, om, wl, wr = nu
     cx = q[:, 0] - d * c + dt * (u * c - l * s)
@@ -367,7 +376,8 @@ def slip_step_batch(q: np.ndarray, v: np.ndarray, body: np.ndarray, tau: np.ndar
     stick = cap * dt * (1.0 - STICK_MARGIN)
     rolling = (np.hypot(pw[0, 0], pw[0, 1]) < stick) & (np.hypot(pw[1, 0], pw[1, 1]) < stick)
     pushed = (pc[0] > 0.0).any(0) if n_walls else np.zeros(n, dtype=bool)
-    return q1, np.stack([wl, wr], 1), np.stack([u, l, om], 1), rolling, pushed, pw / dt, pc / dt
+    wheel_forces = np.concatenate([pw, np.stack([axles[0][2], axles[1][2]])[:, None]], axis=1) / dt
+    return q1, np.stack([wl, wr], 1), np.stack([u, l, om], 1), rolling, pushed, wheel_forces, pc / dt
 
 
 def _solve_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: list[tuple[Any, ...]],
@@ -380,6 +390,8 @@ def _solve_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: 
     ju, lat_l, lat_w = 1.0 / m, j / dd, -k / dd
     if start:
         _warm_start_batch(nu, wheels, contacts, pw, pc, (ju, lat_l, lat_w))
+        for i, (inv_iw, _bound, held) in enumerate(axles):
+            nu[3 + i] = nu[3 + i] + held * inv_iw
     lim = cap * dt
     b = np.abs(wheels[0][0])
     active = np.ones(len(nu[0]), dtype=bool)

@@ -195,6 +195,8 @@ def test_slip_step_scalar_and_batch_agree_function_by_function():
             gaps[i, w] = rng.uniform(-1e-4, 3e-3)
             normals[i, w] = (math.cos(a), math.sin(a))
     warm_wheels = rng.uniform(-1, 1, (2, 2, n)) * np.array([p.wheel_friction for p in params]) * 0.7
+    axle_torques = rng.uniform(-1.5, 1.5, (2, 1, n)) * DEFAULT.coulomb_friction  # some beyond the bound: clipped
+    warm_wheels = np.concatenate([warm_wheels, axle_torques], axis=1)
     warm_walls = np.stack([rng.uniform(0, 3, (2, n)), rng.uniform(-0.1, 0.1, (2, n))])
     warm_walls[:, ~np.isfinite(gaps.T)] = 0.0
     tau, _c, slope = motors.wheel_torque_slope_batch(i_ref, v, pb)
@@ -215,7 +217,8 @@ def test_slip_step_scalar_and_batch_agree_function_by_function():
             assert (bs is None) == bool(out[3][i]) and pushed == bool(out[4][i])
             if bs is not None:
                 assert np.allclose(out[2][i], bs, rtol=1e-9, atol=1e-9)
-            assert np.allclose(out[5][:, :, i], forces[0], rtol=1e-8, atol=1e-8)
+            assert np.allclose(out[5][:, :, i], forces[0], rtol=1e-8, atol=1e-8)  # with the axles' torques
+            assert all(abs(f[2]) <= params[i].coulomb_friction * (1 + 1e-12) for f in forces[0])
     assert out[3].sum() > 0 and (~out[3]).sum() > 0 and out[4].sum() > 0  # gripping, slipping and pushed
 
 

@@ -226,3 +226,20 @@ def test_the_result_converges_with_the_step():
 if __name__ == "__main__":  # print the table for docs/dynamics.md
     for dt_ms, row in convergence_table().items():
         print(f"{dt_ms:g} ms", row)
+
+
+def test_a_warm_start_with_the_axle_torques_gives_the_same_step():
+    """The contact solve starts from the last step's impulses, the axles' friction torques among them: the
+    step is the same (to the solve's tolerance) as from a cold start, and the held torque stays in its bound."""
+    from host_sim import contact, motors
+
+    q, v, dt = (0.5, 0.5, 0.0, 0.0, 0.0), (0.0, 0.0), 0.005
+    walls = [(-1e-5, -1.0, 0.0, 0)]  # a wall just ahead, touched
+    tl, _il, sl = motors.wheel_torque_slope(0.006, 0.0, P)
+    tr, _ir, sr = motors.wheel_torque_slope(0.006, 0.0, P)
+    step = None, (tl, tr), (sl, sr), dt, P, walls
+    cold = contact.slip_step(q, v, *step)
+    warm = contact.slip_step(q, v, *step, (cold[4][0], cold[4][1]))
+    assert all(len(f) == 3 and abs(f[2]) <= P.coulomb_friction for f in cold[4][0])
+    assert any(abs(f[2]) > 0.1 * P.coulomb_friction for f in cold[4][0])  # the axles hold the wheels
+    assert np.allclose(warm[0], cold[0], atol=1e-9) and np.allclose(warm[1], cold[1], atol=1e-7)
