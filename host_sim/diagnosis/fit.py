@@ -20,8 +20,9 @@ windows to within their noise (mean weighted squared residual below
 WITHIN_NOISE): a further effect would fit the noise.  Screening tries each
 candidate's one linear step from absent and, for one-parameter effects, a few
 values across its range outright (SCREEN_TRIALS: threshold effects such as a
-gear's play barely move the residuals near absent).  Backward elimination then drops an effect that a later one made redundant
-(the refitted twin without it is as good by the same two tests).
+gear's play barely move the residuals near absent).  Backward elimination
+then drops an effect that a later one made redundant (the refitted twin
+without it is as good by the same two tests).
 """
 from __future__ import annotations
 
