@@ -89,8 +89,11 @@ def test_a_board_that_cannot_start_says_why(tmp_path):
 @pytest.mark.parametrize("stop,status", [(signal.SIGINT, 0), (signal.SIGTERM, 128 + signal.SIGTERM)])
 def test_a_board_run_leaves_no_temporary_folder(stop, status):
     before = _board_folders()
+    # A suite started in the background (`nohup ... &`) hands its children SIGINT ignored, and Python then
+    # keeps it ignored; a terminal's Ctrl-C is what this test means, so the board gets SIGINT's default.
     proc = subprocess.Popen(twinbot_cmd("board", "--standin"), cwd=REPO, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         assert proc.stdout is not None
         first = proc.stdout.readline()
