@@ -63,3 +63,12 @@ def register(subparsers: Any, name: str, summary: str) -> None:
         return help_and_error(parser, "BENCHMARK", [b[0] for b in BENCHMARKS])
 
     parser.set_defaults(func=no_benchmark)
+
+
+def print_targets(targets: list[dict[str, Any]]) -> None:
+    """The targets block every benchmark ends with: a blank line, 'targets:', one marked line each."""
+    print()
+    print("targets:")
+    for target in targets:
+        mark = "[NOT RUN]" if target["met"] is None else ("[MET]   " if target["met"] else "[MISSED]")
+        print(f"  {mark} {target['text']}")

@@ -36,6 +36,8 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from pathlib import Path
 from typing import Any
 
+from tools.bench import print_targets
+
 TARGET_NAMED = 0.95  # share of concealed (excited, in-library) effects named with the right side
 TARGET_PARAMS = 0.95  # share of the rightly named effects whose parameter is within scoring.PARAM_TOLERANCE
 TARGET_WHEEL_FIT = 90.0  # held-out fit % after, on both wheels ...
@@ -343,11 +345,7 @@ def print_report(report: dict[str, Any]) -> None:
     print(f"SINDy: median {_f(s['active_terms_median'])} active terms; a single term names the effect in "
           f"{s['named_excited']}/{s['excited']} excited in-library cases; silent on {s['silent_controls']}/"
           f"{t['controls']} controls; {s['seconds_median'] or 0:.2f} s per case")
-    print()
-    print("targets:")
-    for tg in report["targets"]:
-        mark = "[NOT RUN]" if tg["met"] is None else ("[MET]   " if tg["met"] else "[MISSED]")
-        print(f"  {mark} {tg['text']}")
+    print_targets(report["targets"])
     print(f"\nelapsed: {report['elapsed_s']:.1f} s")
 
 

@@ -51,6 +51,8 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+from tools.bench import print_targets
+
 TARGET_REPLAY_RTF = 1000.0
 TARGET_SIL_RTF = 200.0
 TARGET_BATCH_STEPS = 1_000_000.0
@@ -547,11 +549,7 @@ def print_report(report: dict[str, Any]) -> None:
                      f"{1000 * d['end_distance_from_ours_m']:.1f} mm from ours (kinematic, open loop).  (a) is "
                      f"the comparable workload: one robot + a ring of 8 ranges every 40 ms (ours also runs the "
                      f"dynamics 8 times per period and the IR response model).")
-    print()
-    print("targets:")
-    for t in report["targets"]:
-        mark = "[NOT RUN]" if t["met"] is None else ("[MET]   " if t["met"] else "[MISSED]")
-        print(f"  {mark} {t['text']}")
+    print_targets(report["targets"])
     for name, prof in report.get("profiles", {}).items():
         print()
         print(format_profile(name, prof))
