@@ -89,7 +89,7 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
     _robot("caster_drag", "force", "caster_drag", "N", 0.0, 0.5, "the caster's drag, against the motion"),
     _robot("turning_resistance", "torque", "turning_resistance", "N m", 0.0, 0.01,
            "the tyres' scrub torque, against turning"),
-    _robot("com_offset", "d", "com_offset", "m", 0.0, 0.05, "the centre of mass ahead of the axle centre",
+    _robot("com_offset", "d", "com_offset", "m", -0.03, 0.05, "the centre of mass ahead of the axle centre (behind it: negative)",
            absent=None),
     _robot("mass", "mass", "body_mass", "kg", 0.2, 1.2, "the body's mass (its yaw inertia in proportion)",
            absent=None),

@@ -35,7 +35,7 @@ class RobotParams:
     wheel_radius: float = _p(0.021, "m", "wheel radius r")
     half_axle: float = _p(0.048, "m", "half the distance between the wheels, b")
     com_offset: float = _p(0.015, "m", "distance d from the wheel-axle centre C forward to G, the centre of mass "
-                                       "of the body without its wheels (the point q's x, y describe)")
+                                       "of the body without its wheels (the point q's x, y describe; negative: behind C)")
     body_radius: float = _p(0.060, "m", "radius of the round body (collisions, sensor ring)")
     # --- masses and inertias ------------------------------------------------------
     body_mass: float = _p(0.46, "kg", "mass of the body without the wheels, m_c")
@@ -231,8 +231,9 @@ def params_from_dict(data: object, where: str = "parameters") -> RobotParams:
                  "battery_voltage", "sensor_range", "adc_bits"):
         if getattr(params, name) <= 0:
             raise ParamsError(f"{where}: '{name}' must be positive, got {getattr(params, name)}")
-    if params.com_offset < 0:
-        raise ParamsError(f"{where}: 'com_offset' must be >= 0 (G ahead of C), got {params.com_offset}")
+    if not -params.body_radius < params.com_offset < params.body_radius:
+        raise ParamsError(f"{where}: 'com_offset' must lie inside the body, between -body_radius and body_radius "
+                          f"(G ahead of C, or behind it if negative), got {params.com_offset}")
     for name in ("wheel_friction", "wall_friction"):
         if getattr(params, name) < 0:
             raise ParamsError(f"{where}: '{name}' must be >= 0, got {getattr(params, name)}")

@@ -113,14 +113,35 @@ def state_at(rec: Recording, k: int, p: RobotParams) -> tuple[tuple[float, ...],
 
 
 def wheel_speeds_at(rec: Recording, k: int, p: RobotParams) -> tuple[float, float]:
-    """Wheel speeds (rad/s) at row k from the encoder counts around it (central differences inside)."""
+    """Wheel speeds (rad/s) at row k from the encoder counts around it: second-order differences, central
+    inside and one-sided (three rows) at the ends.
+
+    A two-row difference at the first row is the mean speed over the first period, not the speed at its
+    start: a robot starting from rest would start the twin already moving (and, with the drive's long time
+    constant, keep it ahead for seconds).  The one-sided quadratic is exact for a constant acceleration.
+    """
     n = len(rec)
-    lo, hi = (k - 1, k + 1) if 0 < k < n - 1 else ((k, k + 1) if k == 0 else (k - 1, k))
-    dt = float(rec.t[hi] - rec.t[lo]) if n > 1 else 0.0
-    if dt <= 0:
+    if n < 2:
         return (0.0, 0.0)
-    return (float(rec.enc[hi, 0] - rec.enc[lo, 0]) * (2 * math.pi / motors.ticks_per_rev(p, 0)) / dt,
-            float(rec.enc[hi, 1] - rec.enc[lo, 1]) * (2 * math.pi / motors.ticks_per_rev(p, 1)) / dt)
+    if 0 < k < n - 1 or n == 2:
+        lo, hi = (k - 1, k + 1) if 0 < k < n - 1 else (0, 1)
+        dt = float(rec.t[hi] - rec.t[lo])
+        coef = {lo: -1.0 / dt, hi: 1.0 / dt} if dt > 0 else {}
+    else:
+        rows = (k, k + 1, k + 2) if k == 0 else (k, k - 1, k - 2)
+        coef = _one_sided(*(float(rec.t[j]) for j in rows), rows)
+    if not coef:
+        return (0.0, 0.0)
+    return tuple(sum(c * float(rec.enc[j, w]) for j, c in coef.items()) * (2 * math.pi / motors.ticks_per_rev(p, w))
+                 for w in range(2))  # type: ignore[return-value]
+
+
+def _one_sided(t0: float, t1: float, t2: float, rows: tuple[int, int, int]) -> dict[int, float]:
+    """Weights of rows (k, k +- 1, k +- 2) for the slope at t0 of the parabola through the three ({} if times repeat)."""
+    h1, h2 = t1 - t0, t2 - t0
+    if h1 == 0 or h2 == 0 or h1 == h2:
+        return {}
+    return {rows[0]: -(h1 + h2) / (h1 * h2), rows[1]: h2 / (h1 * (h2 - h1)), rows[2]: -h1 / (h2 * (h2 - h1))}
 
 
 def replay(rec: Recording, p: RobotParams, world: World, start: int = 0, stop: int | None = None,

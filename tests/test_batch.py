@@ -222,3 +222,27 @@ def test_replay_batch_follows_a_robots_own_timing(tmp_path):
     for i in range(2):
         np.testing.assert_allclose(res.pose[:, i], ref.pose, rtol=0, atol=1e-9)
         assert (np.abs(res.enc[:, i] - ref.enc) <= 1).all()
+
+
+def test_a_robot_recording_that_starts_from_rest_starts_the_twin_near_rest(tmp_path):
+    """The wheel speed at a recording's first row is the slope there (a three-row one-sided difference), not
+    the first period's mean: a robot accelerating from rest must not start its twin already moving."""
+    from host_sim.replay import wheel_speeds_at
+
+    sim = _simulator_recording(tmp_path / "sim.csv", seed=None, noise=False, duration=1.0)
+    path = tmp_path / "robot.csv"
+    with RecordingWriter(path, source="robot", sample_period=0.04, world=ROOM.to_dict()) as out:
+        for k in range(len(sim)):
+            out.row(sim.t[k], sim.cmd[k], sim.enc[k], sim.ir_on[k], sim.ir_amb[k], sim.vbat[k], sim.pose[k])
+    rec = load_recording(path)
+    tick = 2 * np.pi / DEFAULT.ticks_per_rev
+    first_period = (rec.enc[1] - rec.enc[0]) * tick / (rec.t[1] - rec.t[0])  # rad/s, its mean over the period
+    assert (np.abs(first_period) > 0.5).all()  # the robot sets off at once
+    start = np.array(wheel_speeds_at(rec, 0, DEFAULT))
+    assert (np.abs(start) < 0.3 * np.abs(first_period)).all(), (start, first_period)  # it was at rest at row 0
+    # Inside, central differences; at the last row, the mirror of the first.
+    inside = np.array(wheel_speeds_at(rec, 5, DEFAULT))
+    np.testing.assert_allclose(inside, (rec.enc[6] - rec.enc[4]) * tick / (rec.t[6] - rec.t[4]))
+    last = len(rec) - 1
+    steady = (rec.enc[last] - rec.enc[last - 1]) * tick / (rec.t[last] - rec.t[last - 1])
+    np.testing.assert_allclose(wheel_speeds_at(rec, last, DEFAULT), steady, rtol=0.15)

@@ -187,7 +187,8 @@ def test_worlds_too_big_for_their_grid_are_refused():
 @pytest.mark.parametrize("changes,name", [({"adc_bits": 64}, "adc_bits"), ({"adc_bits": 12.5}, "adc_bits"),
                                           ({"ticks_per_rev": 1.5}, "ticks_per_rev"),
                                           ({"ir_saturation": 2}, "ir_saturation"),
-                                          ({"body_mass": 1e300}, "body_mass")])
+                                          ({"body_mass": 1e300}, "body_mass"),
+                                          ({"com_offset": -0.07}, "com_offset"), ({"com_offset": 0.06}, "com_offset")])
 def test_parameter_files_out_of_range_are_refused(changes, name):
     from host_sim.params import ParamsError, params_from_dict
 
@@ -200,5 +201,7 @@ def test_parameter_files_in_range_are_accepted():
 
     p = params_from_dict({"adc_bits": 10, "ticks_per_rev": 2048})
     assert p.adc_max == 1023 and p.ticks_per_rev == 2048
+    # A centre of mass behind the axle (a battery at the back) is a robot, not an error: diagnose may fit one.
+    assert params_from_dict({"com_offset": -0.01}).com_offset == -0.01
 
 
