@@ -13,6 +13,8 @@ happens instead of accumulating along the window:
 
 Pose channels (x, y, phi at the window's end) give the fit of the whole
 trajectory; they are compared, not located (their residuals accumulate).
+"travel" and "turn" are forward and heading_rate summed over each window:
+they are judged (fit %) and located (a proportional error), never per period.
 """
 from __future__ import annotations
 
@@ -31,6 +33,8 @@ WHEELS = ("wheel_l", "wheel_r")
 MOTION = ("forward", "lateral", "heading_rate")
 IR = tuple(f"ir_{k}" for k in range(8))
 AMBIENT = tuple(f"amb_{k}" for k in range(8))
+# The motion accumulated over each window (locate.locate_scale), where an odometry-sized error shows.
+ACCUMULATED = {"forward": "travel", "heading_rate": "turn", "wheel_l": "count_l", "wheel_r": "count_r"}
 
 
 @dataclass
@@ -63,8 +67,11 @@ def _motion(pose: np.ndarray) -> np.ndarray:
 
 
 def build_channels(rec: Recording, windows: Windows, run: WindowRun, robots: list[RobotParams],
-                   world: World | None) -> list[Channel]:
-    """Every channel the recording supports: recorded vs the twin's run (and its sensors on the track)."""
+                   world: World | None, unjudged: np.ndarray | None = None) -> list[Channel]:
+    """Every channel the recording supports: recorded vs the twin's run (and its sensors on the track).
+
+    unjudged: (W, T - 1, 8) IR readings that are not judged (windows.unjudged_readings): there the twin is
+    given the recorded value, so they weigh nothing in a fit, a location or a fit %."""
     p = robots[0]
     idx = windows.index
     chans: list[Channel] = []
@@ -76,7 +83,7 @@ def build_channels(rec: Recording, windows: Windows, run: WindowRun, robots: lis
     if rec.pose is not None:
         chans += _motion_channels(rec, idx, run, p)
         if world is not None and world.n_walls:
-            chans += _sensor_channels(rec, idx[:, 1:], robots, world)
+            chans += _sensor_channels(rec, idx[:, 1:], robots, world, unjudged)
     vb = rec.vbat[idx[:, 1:]]
     vb_twin = (run.vbat[..., 1:] if run.vbat is not None
                else np.repeat(np.full_like(vb, p.battery_voltage)[:, None], run.enc.shape[1], 1))
@@ -99,11 +106,14 @@ def _motion_channels(rec: Recording, idx: np.ndarray, run: WindowRun, p: RobotPa
     return chans
 
 
-def _sensor_channels(rec: Recording, rows: np.ndarray, robots: list[RobotParams], world: World) -> list[Channel]:
+def _sensor_channels(rec: Recording, rows: np.ndarray, robots: list[RobotParams], world: World,
+                     unjudged: np.ndarray | None) -> list[Channel]:
     on, amb = sensors_on_track(rec, rows, robots, world)  # (N, W, T - 1, 8)
     p = robots[0]
     refl_rec = (rec.ir_on - rec.ir_amb)[rows].astype(float)
     refl_twin = (on - amb).astype(float).transpose(1, 0, 2, 3)
+    if unjudged is not None:
+        refl_twin = np.where(unjudged[:, None], refl_rec[:, None], refl_twin)
     amb_twin = amb.astype(float).transpose(1, 0, 2, 3)
     chans = []
     for k in range(8):

@@ -14,9 +14,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from host_sim.diagnosis.channels import WHEELS, Channel, build_channels, fit_percent
-from host_sim.diagnosis.locate import Finding, contact_windows, input_lag, ljung_box, locate_channel, regimes
-from host_sim.diagnosis.windows import DEFAULT_SECONDS, Windows, make_windows, run_windows
+from host_sim.diagnosis.channels import ACCUMULATED, WHEELS, Channel, build_channels, fit_percent
+from host_sim.diagnosis.locate import (Finding, contact_windows, input_lag, ljung_box, locate_channel,
+                                      locate_scale, regimes)
+from host_sim.diagnosis.windows import DEFAULT_SECONDS, Windows, make_windows, run_windows, unjudged_readings
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
 from host_sim.world import World
@@ -33,6 +34,7 @@ class Comparison:
     lag: dict[str, tuple[int, float]] = field(default_factory=dict)  # wheel channels: (lag, correlation)
     findings: list[Finding] = field(default_factory=list)
     pose: np.ndarray | None = None  # (W, T, 3) the twin's pose in every window (for pictures)
+    unjudged: np.ndarray | None = None  # (W, T - 1, 8) IR readings too sensitive to the tracker's noise to judge
 
     def channel(self, name: str) -> Channel:
         return next(c for c in self.channels if c.name == name)
@@ -42,9 +44,12 @@ def compare(rec: Recording, params: RobotParams, world: World | None, seconds: f
             *, locate: bool = True) -> Comparison:
     windows = make_windows(rec, seconds)
     run = run_windows(rec, windows, params, world)
-    chans = build_channels(rec, windows, run, [params], world)
+    unjudged = (unjudged_readings(rec, windows.index[:, 1:], params, world)
+                if rec.pose is not None and world is not None and world.n_walls else None)
+    chans = build_channels(rec, windows, run, [params], world, unjudged)
     contact = contact_windows(rec, windows, params, world)
-    cmp = Comparison(seconds, windows, chans, contact, held_out_fit(chans, windows, contact), pose=run.pose[:, 0])
+    cmp = Comparison(seconds, windows, chans, contact, held_out_fit(chans, windows, contact), pose=run.pose[:, 0],
+                     unjudged=unjudged)
     if locate:
         _locate(cmp, rec, params, world)
     return cmp
@@ -54,6 +59,9 @@ def held_out_fit(chans: list[Channel], windows: Windows, contact: np.ndarray, s:
     """Fit % of every channel on the held-out windows away from walls; "contact" on those touching one."""
     judged = windows.held_out & ~contact
     fit = {c.name: fit_percent(c.y[judged], c.y_hat[judged, s]) for c in chans} if judged.any() else {}
+    for c in chans:  # the motion accumulated over each window: "travel" and "turn"
+        if c.name in ACCUMULATED and judged.any():
+            fit[ACCUMULATED[c.name]] = fit_percent(c.y[judged].sum(axis=1), c.y_hat[judged, s].sum(axis=1))
     touching = windows.held_out & contact
     if touching.any():
         wheels = [c for c in chans if c.name in WHEELS]
@@ -71,6 +79,10 @@ def _locate(cmp: Comparison, rec: Recording, p: RobotParams, world: World | None
             continue
         resid = ch.residual()
         found = locate_channel(ch, resid, keep, reg, t)
+        if ch.name in ACCUMULATED:
+            scale = locate_scale(ch, keep, t)
+            if scale is not None:
+                cmp.findings.append(scale)
         if found is None:
             continue
         cmp.findings.append(found)

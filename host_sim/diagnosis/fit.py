@@ -4,8 +4,9 @@ Candidates are the library's effects at the sites the located channels point
 to (a wheel channel: the drive's effects; sensor k: that sensor's effects
 and the ring's latency; the battery: its resistance).  Each is fitted by
 bounded nonlinear least squares (scipy.optimize.least_squares) on the
-training windows, the residuals weighted by each channel's noise; the
-Jacobian comes from one batch run of the twin with every parameter nudged
+training windows, the residuals weighted by each channel's noise (the
+travel and the turn also by window: their totals are where an odometry-sized
+error shows); the Jacobian comes from one batch run of the twin with every parameter nudged
 (the batch path: all windows and all nudges at once).
 
 Forward selection adds at most MAX_EFFECTS effects, one at a time, each the
@@ -34,7 +35,8 @@ import numpy as np
 from scipy import optimize, stats
 
 from host_sim import effects as E
-from host_sim.diagnosis.channels import AMBIENT, IR, MOTION, WHEELS, Channel, build_channels
+from host_sim.diagnosis.channels import ACCUMULATED, AMBIENT, IR, MOTION, WHEELS, Channel, build_channels
+from host_sim.diagnosis.locate import TOTAL_NOISE
 from host_sim.diagnosis.windows import Windows, run_windows
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
@@ -80,9 +82,13 @@ class Model:
     rivals: list[Model] = field(default_factory=list)  # the models of the alternatives (their newest effect swapped)
 
 
+def _drive_channel(c: str) -> bool:
+    return c in WHEELS or c in MOTION or c in ACCUMULATED.values() or c == "vbat"
+
+
 def candidates_for(channels: list[str]) -> list[Candidate]:
     out: list[Candidate] = []
-    if any(c in WHEELS or c in MOTION or c == "vbat" for c in channels):
+    if any(_drive_channel(c) for c in channels):
         for name in DRIVE_EFFECTS:
             out += [Candidate(name, s) for s in E.LIBRARY[name].sites()]
     sensors = sorted({int(c.split("_")[1]) for c in channels if c.startswith(("ir_", "amb_"))})
@@ -97,7 +103,7 @@ def objective_channels(channels: list[str], available: list[str]) -> list[str]:
     """The channels a fit is judged on: the located ones and their family."""
     wanted: set[str] = set()
     for c in channels:
-        if c in WHEELS or c in MOTION or c == "vbat":
+        if _drive_channel(c):
             wanted |= set(WHEELS) | set(MOTION) | {"vbat"}
         elif c.startswith(("ir_", "amb_")):
             k = int(c.split("_")[1])
@@ -109,8 +115,9 @@ class Objective:
     """Weighted residuals of the chosen channels, on the training and the held-out windows, for many twins."""
 
     def __init__(self, rec: Recording, windows: Windows, world: World | None, names: list[str],
-                 sigma: dict[str, float], keep: np.ndarray) -> None:
+                 sigma: dict[str, float], keep: np.ndarray, unjudged: np.ndarray | None = None) -> None:
         self.rec, self.world = rec, world
+        self.unjudged = unjudged[keep] if unjudged is not None else None
         # Only the windows judged are simulated: those touching a wall are not fitted on.
         self.windows = Windows(windows.start[keep], windows.rows, windows.held_out[keep])
         self.names = names
@@ -125,11 +132,17 @@ class Objective:
         self.evaluations += len(robots)
         run = run_windows(self.rec, self.windows, robots, self.world)
         chans = {c.name: c for c in build_channels(self.rec, self.windows, run, robots,
-                                                    self.world if self.sensors else None)}
+                                                    self.world if self.sensors else None, self.unjudged)}
         train, test = [], []
         for name in self.names:
             c: Channel = chans[name]
             r = (c.y[:, None, :] - c.y_hat) / self.sigma[name]  # (W, N, T')
+            if name in MOTION and name in ACCUMULATED:
+                # Each window's travel and turn too: a radius or a track a few % off is below the tracker's
+                # noise in any one period and above it over a window (locate.locate_scale).  Not the wheels'
+                # counts: a window's count carries its start's speed error, and the periods judge them well.
+                total = (c.y.sum(axis=-1)[:, None] - c.y_hat.sum(axis=-1)) / (self.sigma[name] * TOTAL_NOISE)
+                r = np.concatenate([r, total[..., None]], axis=-1)
             train.append(r[self.train].transpose(1, 0, 2).reshape(len(robots), -1))
             test.append(r[self.test].transpose(1, 0, 2).reshape(len(robots), -1))
         return np.concatenate(train, axis=1), np.concatenate(test, axis=1)

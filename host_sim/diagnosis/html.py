@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from host_sim.diagnosis.channels import ACCUMULATED
 from host_sim.diagnosis.compare import Comparison
 from host_sim.diagnosis.report import Diagnosis
 from host_sim.recording import Recording
@@ -51,6 +52,26 @@ def residual_figure(rec: Recording, before: Comparison, after: Comparison | None
     ax.set_xlabel("t (s)")
     ax.set_ylabel(f"{channel} ({before.channel(channel).unit})")
     ax.legend(loc="upper right", fontsize=8, markerscale=4)
+    return _png(fig)
+
+
+def scale_figure(before: Comparison, after: Comparison | None, name: str) -> str:
+    """A proportional error over whole windows: each window's residual total against its recorded total."""
+    channel = next(c for c, acc in ACCUMULATED.items() if acc == name)
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6, 3.2))
+    for cmp, colour, label in ((before, "tab:red", "before: recorded − twin"), (after, "tab:blue", "after the fit")):
+        if cmp is None:
+            continue
+        keep = ~cmp.contact
+        ch = cmp.channel(channel)
+        y = ch.y[keep].sum(axis=1)
+        ax.plot(y, y - ch.y_hat[keep, 0].sum(axis=1), "o", ms=3, color=colour, label=label)
+    ax.axhline(0, color="k", lw=0.5)
+    unit = before.channel(channel).unit.replace("/period", "")
+    ax.set_xlabel(f"{name} in a window, recorded ({unit})")
+    ax.set_ylabel(f"recorded − twin ({unit})")
+    ax.legend(fontsize=8)
     return _png(fig)
 
 
@@ -97,6 +118,9 @@ def render(rec: Recording, d: Diagnosis) -> str:
         ch = item["channel"]
         finding = next(f for f in before.findings if f.channel == ch)
         parts.append(f"<h2>{html.escape(ch)}</h2><p>{html.escape(item['words'])}</p>")
+        if ch in ACCUMULATED.values():
+            parts.append(f'<img src="{scale_figure(before, d.after, ch)}">')
+            continue
         parts.append(f'<img src="{residual_figure(rec, before, d.after, ch)}">')
         if len(finding.bins) > 1:
             parts.append(f'<img src="{regime_figure(finding.bins, ch, before.channel(ch).unit)}">')

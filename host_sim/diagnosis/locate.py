@@ -12,6 +12,14 @@ long recording makes a tiny bias significant, and a tiny bias is no finding.  Sp
 stretches of time where the residual, smoothed over half a second, stays
 beyond the same size.
 
+Per-period bins cannot see an odometry-sized error: a path 3 % longer than
+the twin's is a fraction of the tracker's noise in one period.  Over whole
+windows it is not, so the wheels and the motion are also judged accumulated
+(`locate_scale`): "count_l", "count_r" (each encoder's count), "travel" (the
+distance along the path) and "turn" (the angle turned), each window's
+recorded total against the twin's, as a proportional error (recorded =
+(1 + a) twin) significant at |z| >= Z_MIN and at least SCALE_MIN.
+
 Whiteness (Ljung-Box) and the cross-correlation of the residual with the
 command (a peak at a lag k > 0 means the robot answers k periods late) are
 reported as evidence.
@@ -23,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from host_sim.diagnosis.channels import SENSOR_NAMES, Channel
+from host_sim.diagnosis.channels import ACCUMULATED, SENSOR_NAMES, Channel
 from host_sim.diagnosis.windows import Windows
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
@@ -36,6 +44,13 @@ SPAN_MIN_S = 0.4
 SMOOTH_S = 0.5
 REGIME_SHARE_MIN = 0.05  # a regime variable must explain this share of the residual's variation to be named
 CONTACT_MARGIN = 0.005  # m beyond the body's radius: within it, a window touches a wall
+SCALE_MIN = 0.02  # a count, path or turn 2 % off the twin's: an odometry error worth naming
+# A window total's noise in per-period noise levels: its two ends (first differences of differenced white
+# noise put the per-period level at sqrt(3) of the noise, a total's two ends at sqrt(2)).
+TOTAL_NOISE = float(np.sqrt(2.0 / 3.0))
+SCALE_WINDOWS_MIN = 6  # windows away from the walls a proportional error is judged on
+SCALE_SIGNAL_MIN = 10.0  # window totals (RMS) must be this many times their noise for a proportion to mean much
+SCALE_REGIME = "window by window"  # a proportional error of the totals: "turns 3 % less than the twin, window by window"
 
 
 @dataclass
@@ -188,6 +203,38 @@ def locate_channel(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regime
     assert chosen is not None
     return Finding(ch.name, str(chosen["regime"]), str(chosen["key"]), spans(resid, keep, t, sigma),
                    float(chosen["mean"]), float(chosen["z"]), sigma, bins)  # type: ignore[arg-type]
+
+
+def locate_scale(ch: Channel, keep: np.ndarray, t: np.ndarray) -> Finding | None:
+    """A proportional error of a channel summed over whole windows (channels.ACCUMULATED), or None.
+
+    Each kept window's total, recorded y against the twin's: the residual r = y - y_hat regressed on y
+    through the origin, a = (r . y) / (y . y).  Its standard error counts the larger of the scatter about
+    that line and the noise of a window's total (TOTAL_NOISE).
+    """
+    name, regime = ACCUMULATED[ch.name], SCALE_REGIME
+    y = ch.y[keep].sum(axis=1)
+    r = y - ch.y_hat[keep, 0].sum(axis=1)
+    n = y.size
+    syy = float(y @ y)
+    sigma = noise_level(ch, (ch.y - ch.y_hat[:, 0])[keep])
+    if n < SCALE_WINDOWS_MIN or np.sqrt(syy / max(n, 1)) < SCALE_SIGNAL_MIN * TOTAL_NOISE * sigma:
+        return None  # too few windows, or a robot that hardly turned (travelled): a proportion of noise
+    a = float(r @ y) / syy
+    scatter = float(((r - a * y) ** 2).sum()) / (n - 1)
+    z = a / np.sqrt(max(scatter, (TOTAL_NOISE * sigma) ** 2) / syy)
+    if abs(z) < Z_MIN or abs(a) < SCALE_MIN:
+        return None
+    off = np.abs(r) > 2.0 * np.sqrt(max(scatter, sigma ** 2))  # the windows where it shows beyond the noise
+    found: list[tuple[float, float]] = []
+    for w in np.flatnonzero(keep)[off]:
+        a0, b0 = round(float(t[w, 0]), 2), round(float(t[w, -1]), 2)
+        if found and a0 - found[-1][1] <= 2.5 * (t[w, 1] - t[w, 0]):  # back-to-back windows: one span
+            found[-1] = (found[-1][0], b0)
+        else:
+            found.append((a0, b0))
+    return Finding(name, regime, "scale", found, a, float(z), sigma,
+                   [{"regime": regime, "key": "scale", "mean": a, "z": float(z), "n": float(n)}])
 
 
 def _bin_stats(r: np.ndarray, sigma: float, y: np.ndarray) -> dict[str, float] | None:

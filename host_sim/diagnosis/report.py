@@ -171,7 +171,7 @@ def _fit(rec: Recording, params: RobotParams, world: World | None, first: Compar
     names = objective_channels(located, [c.name for c in first.channels])
     keep = ~first.contact
     sigma = {c.name: noise_level(c, c.residual()[keep]) for c in first.channels if c.name in names}
-    obj = Objective(rec, first.windows, world, names, sigma, keep)
+    obj = Objective(rec, first.windows, world, names, sigma, keep, first.unjudged)
     return select(obj, params, candidates_for(located), progress=say)
 
 

@@ -27,6 +27,14 @@ from host_sim.replay import SEED_ROWS, ReplayError, replay_inputs, starts_at_res
 from host_sim.world import World
 
 DEFAULT_SECONDS = (1.0, 5.0)
+# The windows start this far into the recording, so that none starts on a whole second.  The identification
+# manoeuvre changes its set-points on whole seconds (and on multiples of 0.6 s), and a window that starts
+# on a step starts its twin at a wheel speed (a central difference of the encoders) that already holds the
+# step's acceleration: the twin ran ahead, and fits read a robot 4 % heavier where none was.
+OFFSET_S = 0.5
+POSE_DOUBT_RAD = 0.02  # a tracker's heading is good to a few tenths of a degree; its position, at the
+# sensors' range (~0.1 m), to about as much: a reading that changes this much within 1.1 degrees is not judged
+POSE_DOUBT_COUNTS = 50.0
 
 
 @dataclass
@@ -47,17 +55,19 @@ class Windows:
 
 
 def make_windows(rec: Recording, seconds: float, hold_out_every: int = 3) -> Windows:
-    """Back-to-back windows of `seconds` over the whole recording; every `hold_out_every`-th is held out.
+    """Back-to-back windows of `seconds` over the recording from OFFSET_S on; every `hold_out_every`-th is
+    held out.
 
     Held-out windows are interleaved in time (windows 2, 5, 8, ...), so the
     fit is judged on every part of the run, not only on its end.
     """
     rows = max(2, int(round(seconds / rec.sample_period)))
+    offset = int(OFFSET_S / rec.sample_period)  # rounded down: 12 rows of 40 ms, never a multiple of 0.6 s
     n = len(rec)
-    if n < rows + 1:
+    if n < offset + rows + 1:
         raise ReplayError(f"the recording has {n} rows, too short for one window of {seconds:g} s "
-                          f"({rows} rows at {rec.sample_period * 1000:g} ms)")
-    start = np.arange(0, n - rows, rows)  # the last row of each window has a row after it: its period is known
+                          f"({rows} rows at {rec.sample_period * 1000:g} ms, from {offset * rec.sample_period:g} s)")
+    start = np.arange(offset, n - rows, rows)  # the last row of each window has a row after it: its period is known
     held_out = (np.arange(len(start)) % hold_out_every) == hold_out_every - 1
     return Windows(start, rows, held_out)
 
@@ -171,3 +181,26 @@ def sensors_on_track(rec: Recording, rows: np.ndarray, robots: list[RobotParams]
         amb[s], on[s] = ir_sensor.read_sensors_batch(world, poses, inputs.emitter[flat], t, p, rng, quantise=False)
     shape = (len(robots), *rows.shape, ir_sensor.N_SENSORS)
     return on.reshape(shape), amb.reshape(shape)
+
+
+def unjudged_readings(rec: Recording, rows: np.ndarray, p: RobotParams, world: World) -> np.ndarray:
+    """(*rows.shape, 8) bool: the twin's reflected light at the recorded pose is ill-conditioned there.
+
+    A sensor's ray that grazes a wall's end (or a corner) hits or misses it as the pose moves by the
+    tracker's noise: the twin would read 500 counts or nothing from the same recorded pose.  Such a reading
+    says nothing about the robot, and a fit would turn the sensor to explain it.  Judged instead: readings
+    that change by less than POSE_DOUBT_COUNTS (or half of themselves) with the heading turned by
+    +-POSE_DOUBT_RAD.
+    """
+    assert rec.pose is not None
+    inputs = replay_inputs(rec)
+    flat = rows.reshape(-1)
+    refl = []
+    for turn in (0.0, -POSE_DOUBT_RAD, POSE_DOUBT_RAD):
+        poses = rec.pose[flat] + np.array([0.0, 0.0, turn])
+        amb, on = ir_sensor.read_sensors_batch(world, poses, inputs.emitter[flat], rec.t[flat], p, None,
+                                               quantise=False)
+        refl.append(on - amb)
+    spread = np.ptp(np.stack(refl), axis=0)
+    doubt = spread > np.maximum(POSE_DOUBT_COUNTS, 0.5 * np.abs(refl[0]))
+    return doubt.reshape(*rows.shape, ir_sensor.N_SENSORS)

@@ -13,6 +13,13 @@ def what(channel: str, mean: float) -> str:
         return f"the {side} wheel turns {'faster' if more else 'slower'} than the twin's"
     if channel == "forward":
         return f"the robot advances {'more' if more else 'less'} per period than the twin"
+    if channel == "travel":
+        return f"the robot travels {100 * abs(mean):.1f} % {'farther' if more else 'less far'} than the twin"
+    if channel == "turn":
+        return f"the robot turns {100 * abs(mean):.1f} % {'more' if more else 'less'} than the twin"
+    if channel in ("count_l", "count_r"):
+        side = "left" if channel == "count_l" else "right"
+        return f"the {side} encoder counts {100 * abs(mean):.1f} % {'more' if more else 'less'} than the twin's"
     if channel == "lateral":
         return f"the robot drifts to its {'left' if more else 'right'} where the twin does not"
     if channel == "heading_rate":

@@ -39,7 +39,7 @@ from host_sim.recording import Recording
 from tools.proving_ground.robot_model import CASTER_X
 
 G = 9.81
-DRIVE_CHANNELS = ("wheel_l", "wheel_r", "forward", "lateral", "heading_rate")
+DRIVE_CHANNELS = ("wheel_l", "wheel_r", "forward", "lateral", "heading_rate", "travel", "turn")
 PARAM_TOLERANCE = 0.15  # relative parameter error counted as right (issue 9's target)
 MIN_EXCITED_SHARE = 0.01  # an effect shown in fewer than 1 % of the periods is "not excited"
 TRACTION_MARGIN = 0.8  # demand within 80 % of mu N may already slip: weight shifts as the robot accelerates
