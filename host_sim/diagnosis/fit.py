@@ -36,7 +36,6 @@ from scipy import optimize, stats
 
 from host_sim import effects as E
 from host_sim.diagnosis.channels import ACCUMULATED, AMBIENT, IR, MOTION, WHEELS, Channel, build_channels
-from host_sim.diagnosis.locate import TOTAL_NOISE
 from host_sim.diagnosis.windows import Windows, run_windows
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
@@ -141,7 +140,7 @@ class Objective:
                 # Each window's travel and turn too: a radius or a track a few % off is below the tracker's
                 # noise in any one period and above it over a window (locate.locate_scale).  Not the wheels'
                 # counts: a window's count carries its start's speed error, and the periods judge them well.
-                total = (c.y.sum(axis=-1)[:, None] - c.y_hat.sum(axis=-1)) / (self.sigma[name] * TOTAL_NOISE)
+                total = (c.y.sum(axis=-1)[:, None] - c.y_hat.sum(axis=-1)) / self.sigma[ACCUMULATED[name]]
                 r = np.concatenate([r, total[..., None]], axis=-1)
             train.append(r[self.train].transpose(1, 0, 2).reshape(len(robots), -1))
             test.append(r[self.test].transpose(1, 0, 2).reshape(len(robots), -1))

@@ -205,27 +205,40 @@ def locate_channel(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regime
                    float(chosen["mean"]), float(chosen["z"]), sigma, bins)  # type: ignore[arg-type]
 
 
+def _scale_fit(ch: Channel, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """(y, r, a, noise): the kept windows' recorded totals y and residual totals r, the proportional error
+    a = (r . y) / (y . y) and the totals' noise: the larger of the scatter about r = a y and the noise of a
+    window's two ends (TOTAL_NOISE per-period noise levels)."""
+    y = ch.y[keep].sum(axis=1)
+    r = y - ch.y_hat[keep, 0].sum(axis=1)
+    syy = float(y @ y)
+    a = float(r @ y) / syy if syy > 0 else 0.0
+    floor = TOTAL_NOISE * noise_level(ch, (ch.y - ch.y_hat[:, 0])[keep])
+    scatter = float(((r - a * y) ** 2).sum()) / max(y.size - 1, 1)
+    return y, r, a, float(np.sqrt(max(scatter, floor ** 2)))
+
+
+def total_noise(ch: Channel, keep: np.ndarray) -> float:
+    """How far a window's total may stray from a proportional error: what the fit weighs totals by.  The
+    scatter counts what a window's start cannot say (a gear's play, a speed from rounded counts)."""
+    return _scale_fit(ch, keep)[3]
+
+
 def locate_scale(ch: Channel, keep: np.ndarray, t: np.ndarray) -> Finding | None:
     """A proportional error of a channel summed over whole windows (channels.ACCUMULATED), or None.
 
     Each kept window's total, recorded y against the twin's: the residual r = y - y_hat regressed on y
-    through the origin, a = (r . y) / (y . y).  Its standard error counts the larger of the scatter about
-    that line and the noise of a window's total (TOTAL_NOISE).
+    through the origin (_scale_fit), with a standard error from the totals' noise.
     """
     name, regime = ACCUMULATED[ch.name], SCALE_REGIME
-    y = ch.y[keep].sum(axis=1)
-    r = y - ch.y_hat[keep, 0].sum(axis=1)
-    n = y.size
-    syy = float(y @ y)
-    sigma = noise_level(ch, (ch.y - ch.y_hat[:, 0])[keep])
-    if n < SCALE_WINDOWS_MIN or np.sqrt(syy / max(n, 1)) < SCALE_SIGNAL_MIN * TOTAL_NOISE * sigma:
+    y, r, a, noise = _scale_fit(ch, keep)
+    n, syy = y.size, float(y @ y)
+    if n < SCALE_WINDOWS_MIN or np.sqrt(syy / max(n, 1)) < SCALE_SIGNAL_MIN * noise:
         return None  # too few windows, or a robot that hardly turned (travelled): a proportion of noise
-    a = float(r @ y) / syy
-    scatter = float(((r - a * y) ** 2).sum()) / (n - 1)
-    z = a / np.sqrt(max(scatter, (TOTAL_NOISE * sigma) ** 2) / syy)
+    z = a / (noise / np.sqrt(syy))
     if abs(z) < Z_MIN or abs(a) < SCALE_MIN:
         return None
-    off = np.abs(r) > 2.0 * np.sqrt(max(scatter, sigma ** 2))  # the windows where it shows beyond the noise
+    off = np.abs(r) > 2.0 * noise  # the windows where it shows beyond the noise
     found: list[tuple[float, float]] = []
     for w in np.flatnonzero(keep)[off]:
         a0, b0 = round(float(t[w, 0]), 2), round(float(t[w, -1]), 2)
@@ -233,7 +246,7 @@ def locate_scale(ch: Channel, keep: np.ndarray, t: np.ndarray) -> Finding | None
             found[-1] = (found[-1][0], b0)
         else:
             found.append((a0, b0))
-    return Finding(name, regime, "scale", found, a, float(z), sigma,
+    return Finding(name, regime, "scale", found, a, float(z), noise,
                    [{"regime": regime, "key": "scale", "mean": a, "z": float(z), "n": float(n)}])
 
 
