@@ -13,8 +13,9 @@ happens instead of accumulating along the window:
 
 Pose channels (x, y, phi at the window's end) give the fit of the whole
 trajectory; they are compared, not located (their residuals accumulate).
-"travel" and "turn" are forward and heading_rate summed over each window:
-they are judged (fit %) and located (a proportional error), never per period.
+"count_l", "count_r", "travel" and "turn" are wheel_l, wheel_r, forward and
+heading_rate summed over each window: they are judged (fit %) and located
+(a proportional error, locate.locate_scale), never per period.
 """
 from __future__ import annotations
 
@@ -33,7 +34,7 @@ WHEELS = ("wheel_l", "wheel_r")
 MOTION = ("forward", "lateral", "heading_rate")
 IR = tuple(f"ir_{k}" for k in range(8))
 AMBIENT = tuple(f"amb_{k}" for k in range(8))
-# The motion accumulated over each window (locate.locate_scale), where an odometry-sized error shows.
+# Each window's totals (locate.locate_scale), where an odometry-sized error shows: channel -> its total.
 ACCUMULATED = {"forward": "travel", "heading_rate": "turn", "wheel_l": "count_l", "wheel_r": "count_r"}
 
 

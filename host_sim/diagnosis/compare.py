@@ -59,7 +59,7 @@ def held_out_fit(chans: list[Channel], windows: Windows, contact: np.ndarray, s:
     """Fit % of every channel on the held-out windows away from walls; "contact" on those touching one."""
     judged = windows.held_out & ~contact
     fit = {c.name: fit_percent(c.y[judged], c.y_hat[judged, s]) for c in chans} if judged.any() else {}
-    for c in chans:  # the motion accumulated over each window: "travel" and "turn"
+    for c in chans:  # each window's totals: count_l, count_r, travel, turn
         if c.name in ACCUMULATED and judged.any():
             fit[ACCUMULATED[c.name]] = fit_percent(c.y[judged].sum(axis=1), c.y_hat[judged, s].sum(axis=1))
     touching = windows.held_out & contact

@@ -5,9 +5,10 @@ to (a wheel channel: the drive's effects; sensor k: that sensor's effects
 and the ring's latency; the battery: its resistance).  Each is fitted by
 bounded nonlinear least squares (scipy.optimize.least_squares) on the
 training windows, the residuals weighted by each channel's noise (the
-travel and the turn also by window: their totals are where an odometry-sized
-error shows); the Jacobian comes from one batch run of the twin with every parameter nudged
-(the batch path: all windows and all nudges at once).
+travel and the turn also by window: their totals are where an
+odometry-sized error shows); the Jacobian comes from one batch run of the
+twin with every parameter nudged (the batch path: all windows and all
+nudges at once).
 
 Forward selection adds at most MAX_EFFECTS effects, one at a time, each the
 candidate with the lowest BIC on the training windows (of candidates within

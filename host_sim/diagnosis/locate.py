@@ -50,7 +50,7 @@ SCALE_MIN = 0.02  # a count, path or turn 2 % off the twin's: an odometry error 
 TOTAL_NOISE = float(np.sqrt(2.0 / 3.0))
 SCALE_WINDOWS_MIN = 6  # windows away from the walls a proportional error is judged on
 SCALE_SIGNAL_MIN = 10.0  # window totals (RMS) must be this many times their noise for a proportion to mean much
-SCALE_REGIME = "window by window"  # a proportional error of the totals: "turns 3 % less than the twin, window by window"
+SCALE_REGIME = "window by window"  # "the robot turns 3 % less than the twin, window by window"
 
 
 @dataclass
