@@ -43,6 +43,9 @@ from host_sim.recording import Recording
 from host_sim.world import World
 
 MAX_EFFECTS = 3
+# The channels whose window totals the fit adds (travel, turn).  Not the wheels' counts: a window's count
+# carries its start's speed error, and the periods judge an encoder well.
+FITTED_TOTALS = ("forward", "heading_rate")
 SHORTLIST = 4  # candidates fitted in full after screening
 WITHIN_NOISE = 1.0  # held-out cost per weighted residual below which no further effect is sought
 SCREEN_TRIALS = (0.15, 0.5)  # of a one-parameter effect's range: values the screening also tries outright
@@ -137,10 +140,9 @@ class Objective:
         for name in self.names:
             c: Channel = chans[name]
             r = (c.y[:, None, :] - c.y_hat) / self.sigma[name]  # (W, N, T')
-            if name in MOTION and name in ACCUMULATED:
+            if name in FITTED_TOTALS:
                 # Each window's travel and turn too: a radius or a track a few % off is below the tracker's
-                # noise in any one period and above it over a window (locate.locate_scale).  Not the wheels'
-                # counts: a window's count carries its start's speed error, and the periods judge them well.
+                # noise in any one period and above it over a window (locate.locate_scale).
                 total = (c.y.sum(axis=-1)[:, None] - c.y_hat.sum(axis=-1)) / self.sigma[ACCUMULATED[name]]
                 r = np.concatenate([r, total[..., None]], axis=-1)
             train.append(r[self.train].transpose(1, 0, 2).reshape(len(robots), -1))

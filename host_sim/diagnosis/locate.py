@@ -213,7 +213,7 @@ def _scale_fit(ch: Channel, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray, f
     r = y - ch.y_hat[keep, 0].sum(axis=1)
     syy = float(y @ y)
     a = float(r @ y) / syy if syy > 0 else 0.0
-    floor = TOTAL_NOISE * noise_level(ch, (ch.y - ch.y_hat[:, 0])[keep])
+    floor = TOTAL_NOISE * noise_level(ch, ch.residual()[keep])
     scatter = float(((r - a * y) ** 2).sum()) / max(y.size - 1, 1)
     return y, r, a, float(np.sqrt(max(scatter, floor ** 2)))
 

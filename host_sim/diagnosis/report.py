@@ -16,8 +16,8 @@ import numpy as np
 from host_sim import effects as E
 from host_sim.diagnosis.apart import tell_apart
 from host_sim.diagnosis.compare import Comparison, compare_all
-from host_sim.diagnosis.fit import Model, Objective, candidates_for, objective_channels, select
-from host_sim.diagnosis.channels import ACCUMULATED, MOTION
+from host_sim.diagnosis.fit import FITTED_TOTALS, Model, Objective, candidates_for, objective_channels, select
+from host_sim.diagnosis.channels import ACCUMULATED
 from host_sim.diagnosis.locate import Finding, noise_level, regimes, total_noise
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
 from host_sim.diagnosis.words import sentence
@@ -174,7 +174,7 @@ def _fit(rec: Recording, params: RobotParams, world: World | None, first: Compar
     sigma = {c.name: noise_level(c, c.residual()[keep]) for c in first.channels if c.name in names}
     # The travel and turn totals the fit adds (fit.Objective), weighed by how far they stray from a proportion.
     sigma |= {ACCUMULATED[c.name]: total_noise(c, keep) for c in first.channels
-              if c.name in names and c.name in MOTION and c.name in ACCUMULATED}
+              if c.name in names and c.name in FITTED_TOTALS}
     obj = Objective(rec, first.windows, world, names, sigma, keep, first.unjudged)
     return select(obj, params, candidates_for(located), progress=say)
 
