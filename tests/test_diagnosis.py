@@ -192,3 +192,39 @@ def test_no_window_starts_on_a_step_of_the_identification_manoeuvre(nominal_run)
         assert w.start[0] == 12 and (np.diff(w.start) == w.rows).all()
         for step in (1.0, 0.6):
             assert (np.abs(t / step - np.round(t / step)) * step > 0.03).all(), (seconds, step)
+
+
+def test_an_effect_seen_in_one_channel_is_judged_on_that_channels_held_out_residuals(tmp_path, nominal_run):
+    """A track 4 % narrow shows in each window's turn, a few dozen held-out residuals among thousands of
+    noise: the fit is judged on the located channel's part too.  Its columns are the held-out windows' turn
+    totals; an effect that removes most of them earns its place even when all the held-out residuals drop by
+    less than MIN_HELD_OUT_GAIN, and not on a channel that was not located."""
+    from host_sim.diagnosis.compare import compare
+    from host_sim.diagnosis.fit import MIN_HELD_OUT_GAIN, Model, _earns_its_place
+    from host_sim.diagnosis.report import fit_objective
+
+    narrow = DEFAULT.replace(half_axle=0.046)
+    rec = record(tmp_path, narrow)
+    first = compare(rec, DEFAULT, ROOM)
+    assert "turn" in [f.channel for f in first.findings]
+    obj = fit_objective(rec, ROOM, first)
+    _train, test = obj.residuals([DEFAULT, narrow])
+    turn = obj.test_columns["turn"]
+    chans = {c.name: c for c in first.channels}
+    held = obj.windows.held_out
+    rate = chans["heading_rate"]
+    keep = ~first.contact
+    totals = (rate.y.sum(-1) - rate.y_hat[:, 0].sum(-1))[keep][held] / obj.sigma["turn"]
+    assert np.allclose(test[0, turn], totals)
+    assert np.abs(test[1, turn]).mean() < 0.5 * np.abs(test[0, turn]).mean()  # the true track explains them
+
+    noise = np.ones(test.shape[1])
+    without = Model([], [], DEFAULT, 0.0, 0.0, 0, r_test=noise.copy())
+    without.r_test[turn] = 3.0
+    without.cost_test = float(without.r_test @ without.r_test)
+    with_it = Model([], [], narrow, 0.0, float(noise @ noise), 0, p_value=1e-9, r_test=noise)
+    assert 1 - with_it.cost_test / without.cost_test < MIN_HELD_OUT_GAIN
+    assert _earns_its_place(obj, without, with_it, ["turn"]) and with_it.located_gain > 0.8
+    assert not _earns_its_place(obj, without, with_it, ["heading_rate"])
+    with_it.p_value = 0.5  # and the training windows must still find it significant
+    assert not _earns_its_place(obj, without, with_it, ["turn"])

@@ -15,7 +15,10 @@ candidate with the lowest BIC on the training windows (of candidates within
 TIE_BIC of it, which the data cannot tell apart, the first in the
 candidates' order: the plainer physics), accepted only if it
 is significant against the twin without it (F test) AND it improves the
-fit on the held-out windows by at least MIN_HELD_OUT_GAIN.  Candidates that
+fit on the held-out windows by at least MIN_HELD_OUT_GAIN, or the located
+channels' part of it by MIN_LOCATED_GAIN (an effect that shows in one
+channel, such as a track's in the turn of each window, is a small part of
+all the held-out residuals, most of which are noise).  Candidates that
 explain the held-out data as well as the chosen one (within AMBIGUITY) are
 reported beside it.  Selection stops once the twin matches the held-out
 windows to within their noise (mean weighted squared residual below
@@ -51,6 +54,7 @@ WITHIN_NOISE = 1.0  # held-out cost per weighted residual below which no further
 SCREEN_TRIALS = (0.15, 0.5)  # of a one-parameter effect's range: values the screening also tries outright
 P_MAX = 1e-4  # F test against the twin without the effect
 MIN_HELD_OUT_GAIN = 0.10  # relative drop of the held-out weighted sum of squares
+MIN_LOCATED_GAIN = 0.30  # or of the located channels' part of it alone
 START_INSIDE = 0.01  # of a parameter's range: how far inside its bounds a fit starts
 TIE_BIC = 2.0  # a BIC difference below this is no evidence either way (Kass & Raftery 1995)
 AMBIGUITY = 0.02  # held-out costs within 2 % of the chosen one: "explains it equally well"
@@ -83,6 +87,8 @@ class Model:
     p_value: float = 1.0
     alternatives: list[str] = field(default_factory=list)
     rivals: list[Model] = field(default_factory=list)  # the models of the alternatives (their newest effect swapped)
+    r_test: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the held-out weighted residuals
+    located_gain: float = 0.0  # its newest effect's held-out gain on the located channels (_earns_its_place)
 
 
 def _drive_channel(c: str) -> bool:
@@ -129,6 +135,7 @@ class Objective:
         self.test = self.windows.held_out
         self.sensors = any(n.startswith(("ir_", "amb_")) for n in names)
         self.evaluations = 0
+        self.test_columns: dict[str, np.ndarray] = {}  # channel (or window total) -> its held-out residuals' columns
 
     def residuals(self, robots: list[RobotParams]) -> tuple[np.ndarray, np.ndarray]:
         """(train (N, n), test (N, m)) weighted residuals of N twins."""
@@ -137,9 +144,11 @@ class Objective:
         chans = {c.name: c for c in build_channels(self.rec, self.windows, run, robots,
                                                     self.world if self.sensors else None, self.unjudged)}
         train, test = [], []
+        at = 0
         for name in self.names:
             c: Channel = chans[name]
             r = (c.y[:, None, :] - c.y_hat) / self.sigma[name]  # (W, N, T')
+            periods = r.shape[-1]
             if name in FITTED_TOTALS:
                 # Each window's travel and turn too: a radius or a track a few % off is below the tracker's
                 # noise in any one period and above it over a window (locate.locate_scale).
@@ -147,7 +156,21 @@ class Objective:
                 r = np.concatenate([r, total[..., None]], axis=-1)
             train.append(r[self.train].transpose(1, 0, 2).reshape(len(robots), -1))
             test.append(r[self.test].transpose(1, 0, 2).reshape(len(robots), -1))
+            cols = at + np.arange(test[-1].shape[1]).reshape(-1, r.shape[-1])  # (held-out windows, T' [+ 1])
+            self.test_columns[name] = cols[:, :periods].ravel()
+            if name in FITTED_TOTALS:
+                self.test_columns[ACCUMULATED[name]] = cols[:, periods]
+            at += test[-1].shape[1]
         return np.concatenate(train, axis=1), np.concatenate(test, axis=1)
+
+    def located_gain(self, before: np.ndarray, after: np.ndarray, located: list[str]) -> float:
+        """1 - the held-out sum of squares after / before, on the located channels' columns alone."""
+        cols = [self.test_columns[c] for c in located if c in self.test_columns]
+        if not cols:
+            return 0.0
+        pick = np.concatenate(cols)
+        ss0 = float(before[pick] @ before[pick])
+        return 1.0 - float(after[pick] @ after[pick]) / ss0 if ss0 > 0 else 0.0
 
 
 def _apply_all(base: RobotParams, effects: list[Candidate], values: list[list[float]]) -> RobotParams:
@@ -193,7 +216,7 @@ def fit_model(obj: Objective, base: RobotParams, effects: list[Candidate], start
                                  x_scale=hi - lo, max_nfev=30)
     r_train, jac, r_test = evaluate(sol.x)
     model = Model(list(effects), unpack(sol.x), _apply_all(base, effects, unpack(sol.x)),
-                  float(r_train @ r_train), float(r_test @ r_test), int(r_train.size))
+                  float(r_train @ r_train), float(r_test @ r_test), int(r_train.size), r_test=r_test)
     model.ci95 = _intervals(sol.x, jac, r_train, sizes, lo, hi)
     return model
 
@@ -295,11 +318,12 @@ def _plainest(tried: list[Model], cands: list[Candidate]) -> Model:
 
 
 def select(obj: Objective, base: RobotParams, cands: list[Candidate],
-           progress: Callable[[str], None] | None = None) -> list[Model]:
+           progress: Callable[[str], None] | None = None, located: list[str] | None = None) -> list[Model]:
     """Forward selection, then backward elimination: the chain of accepted models, nominal first."""
     say = progress or (lambda _t: None)
     r_train, r_test = obj.residuals([base])
-    chain = [Model([], [], base, float(r_train[0] @ r_train[0]), float(r_test[0] @ r_test[0]), int(r_train.size))]
+    chain = [Model([], [], base, float(r_train[0] @ r_train[0]), float(r_test[0] @ r_test[0]), int(r_train.size),
+                   r_test=r_test[0])]
     n_test = int(r_test.size)
     for step in range(MAX_EFFECTS):
         current = chain[-1]
@@ -322,13 +346,22 @@ def select(obj: Objective, base: RobotParams, cands: list[Candidate],
         k = sum(len(v) for v in best.values)
         best.p_value = f_test(current.cost_train, best.cost_train, k - sum(len(v) for v in current.values),
                               best.n_train, k)
-        gain = 1.0 - best.cost_test / current.cost_test if current.cost_test > 0 else 0.0
-        if best.p_value > P_MAX or gain < MIN_HELD_OUT_GAIN:
+        if not _earns_its_place(obj, current, best, located or []):
             break
         best.rivals = [m for m in tried if m is not best and m.cost_test <= best.cost_test * (1 + AMBIGUITY)]
         best.alternatives = [m.effects[-1].label() for m in best.rivals]
         chain.append(best)
-    return backward(obj, base, chain, say)
+    return backward(obj, base, chain, say, located or [])
+
+
+def _earns_its_place(obj: Objective, without: Model, with_it: Model, located: list[str]) -> bool:
+    """An effect stays if it is significant on the training windows (F test, with_it.p_value) and it
+    improves the held-out windows: all their weighted residuals by MIN_HELD_OUT_GAIN, or the located
+    channels' own by MIN_LOCATED_GAIN (a track 3 % off shows in the turn of each window, a few hundred
+    residuals among thousands that are noise).  Sets with_it.located_gain."""
+    gain = 1.0 - with_it.cost_test / without.cost_test if without.cost_test > 0 else 0.0
+    with_it.located_gain = obj.located_gain(without.r_test, with_it.r_test, located)
+    return with_it.p_value <= P_MAX and (gain >= MIN_HELD_OUT_GAIN or with_it.located_gain >= MIN_LOCATED_GAIN)
 
 
 def _sizes(values: list[list[float]]) -> int:
@@ -336,7 +369,7 @@ def _sizes(values: list[list[float]]) -> int:
 
 
 def backward(obj: Objective, base: RobotParams, chain: list[Model],
-             say: Callable[[str], None] = lambda _t: None) -> list[Model]:
+             say: Callable[[str], None] = lambda _t: None, located: list[str] | None = None) -> list[Model]:
     """Backward elimination after the forward pass: an effect chosen early may be made redundant by one
     chosen later (a stand-in taken first because its one-step screening promised more), and is dropped
     if the others without it, refitted, are as good (F test or held-out gain, as for adding one).  The
@@ -347,9 +380,10 @@ def backward(obj: Objective, base: RobotParams, chain: list[Model],
         effects, values = [final.effects[j] for j in rest], [final.values[j] for j in rest]
         say(f"checking that {final.effects[i].label()} is still needed")
         reduced = fit_model(obj, base, effects, values)
-        p = f_test(reduced.cost_train, final.cost_train, len(final.values[i]), final.n_train, _sizes(final.values))
-        gain = 1.0 - final.cost_test / reduced.cost_test if reduced.cost_test > 0 else 0.0
-        if p <= P_MAX and gain >= MIN_HELD_OUT_GAIN:
+        judged = Model(final.effects, final.values, final.params, final.cost_train, final.cost_test, final.n_train,
+                       p_value=f_test(reduced.cost_train, final.cost_train, len(final.values[i]), final.n_train,
+                                      _sizes(final.values)), r_test=final.r_test)
+        if _earns_its_place(obj, reduced, judged, located or []):
             continue
         rebuilt = chain[:1]
         for n in range(1, len(effects) + 1):
@@ -358,5 +392,7 @@ def backward(obj: Objective, base: RobotParams, chain: list[Model],
             m.alternatives = chain[rest[n - 1] + 1].alternatives
             m.rivals = chain[rest[n - 1] + 1].rivals
             rebuilt.append(m)
-        return backward(obj, base, rebuilt, say)
+        for prev, m in zip(rebuilt, rebuilt[1:]):
+            _earns_its_place(obj, prev, m, located or [])  # each step's located gain, for its evidence
+        return backward(obj, base, rebuilt, say, located)
     return chain

@@ -169,14 +169,18 @@ def _located(cmp: Comparison, f: Finding) -> dict[str, Any]:
 def _fit(rec: Recording, params: RobotParams, world: World | None, first: Comparison,
          say: Callable[[str], None]) -> list[Model]:
     located = [f.channel for f in first.findings]
-    names = objective_channels(located, [c.name for c in first.channels])
+    return select(fit_objective(rec, world, first), params, candidates_for(located), progress=say, located=located)
+
+
+def fit_objective(rec: Recording, world: World | None, first: Comparison) -> Objective:
+    """What a fit minimises: the located channels and their family, on the windows away from the walls."""
+    names = objective_channels([f.channel for f in first.findings], [c.name for c in first.channels])
     keep = ~first.contact
     sigma = {c.name: noise_level(c, c.residual()[keep]) for c in first.channels if c.name in names}
     # The travel and turn totals the fit adds (fit.Objective), weighed by how far they stray from a proportion.
     sigma |= {ACCUMULATED[c.name]: total_noise(c, keep) for c in first.channels
               if c.name in names and c.name in FITTED_TOTALS}
-    obj = Objective(rec, first.windows, world, names, sigma, keep, first.unjudged)
-    return select(obj, params, candidates_for(located), progress=say)
+    return Objective(rec, first.windows, world, names, sigma, keep, first.unjudged)
 
 
 def _effect_entry(model: Model, i: int, chain: list[Model]) -> dict[str, Any]:
@@ -196,6 +200,7 @@ def _effect_entry(model: Model, i: int, chain: list[Model]) -> dict[str, Any]:
     before = chain[i]
     entry["evidence"] = {"doc": effect.doc, "p_value": step.p_value,
                          "held_out_cost_before": before.cost_test, "held_out_cost_after": step.cost_test,
+                         "held_out_gain_located": step.located_gain,
                          "explains_equally_well": step.alternatives,
                          "told_apart_by": [tell_apart((cand.label(), step.params), (r.effects[-1].label(), r.params))
                                            for r in step.rivals]}
