@@ -222,9 +222,9 @@ def test_an_effect_seen_in_one_channel_is_judged_on_that_channels_held_out_resid
     without = Model([], [], DEFAULT, 0.0, 0.0, 0, r_test=noise.copy())
     without.r_test[turn] = 3.0
     without.cost_test = float(without.r_test @ without.r_test)
-    with_it = Model([], [], narrow, 0.0, float(noise @ noise), 0, p_value=1e-9, r_test=noise)
+    with_it = Model([], [], narrow, 0.0, float(noise @ noise), 0, r_test=noise)
     assert 1 - with_it.cost_test / without.cost_test < MIN_HELD_OUT_GAIN
-    assert _earns_its_place(obj, without, with_it, ["turn"]) and with_it.located_gain > 0.8
-    assert not _earns_its_place(obj, without, with_it, ["heading_rate"])
-    with_it.p_value = 0.5  # and the training windows must still find it significant
-    assert not _earns_its_place(obj, without, with_it, ["turn"])
+    accepted, gain = _earns_its_place(obj, without, with_it, 1e-9, ["turn"])
+    assert accepted and gain > 0.8
+    assert not _earns_its_place(obj, without, with_it, 1e-9, ["heading_rate"])[0]
+    assert not _earns_its_place(obj, without, with_it, 0.5, ["turn"])[0]  # the training windows must still find it

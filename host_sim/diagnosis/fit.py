@@ -88,7 +88,7 @@ class Model:
     alternatives: list[str] = field(default_factory=list)
     rivals: list[Model] = field(default_factory=list)  # the models of the alternatives (their newest effect swapped)
     r_test: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the held-out weighted residuals
-    located_gain: float = 0.0  # its newest effect's held-out gain on the located channels (_earns_its_place)
+    located_gain: float = 0.0  # what its newest effect removed of the located channels' held-out residuals
 
 
 def _drive_channel(c: str) -> bool:
@@ -346,7 +346,8 @@ def select(obj: Objective, base: RobotParams, cands: list[Candidate],
         k = sum(len(v) for v in best.values)
         best.p_value = f_test(current.cost_train, best.cost_train, k - sum(len(v) for v in current.values),
                               best.n_train, k)
-        if not _earns_its_place(obj, current, best, located or []):
+        accepted, best.located_gain = _earns_its_place(obj, current, best, best.p_value, located or [])
+        if not accepted:
             break
         best.rivals = [m for m in tried if m is not best and m.cost_test <= best.cost_test * (1 + AMBIGUITY)]
         best.alternatives = [m.effects[-1].label() for m in best.rivals]
@@ -354,14 +355,15 @@ def select(obj: Objective, base: RobotParams, cands: list[Candidate],
     return backward(obj, base, chain, say, located or [])
 
 
-def _earns_its_place(obj: Objective, without: Model, with_it: Model, located: list[str]) -> bool:
-    """An effect stays if it is significant on the training windows (F test, with_it.p_value) and it
-    improves the held-out windows: all their weighted residuals by MIN_HELD_OUT_GAIN, or the located
-    channels' own by MIN_LOCATED_GAIN (a track 3 % off shows in the turn of each window, a few hundred
-    residuals among thousands that are noise).  Sets with_it.located_gain."""
+def _earns_its_place(obj: Objective, without: Model, with_it: Model, p_value: float,
+                     located: list[str]) -> tuple[bool, float]:
+    """(whether an effect stays, its located gain).  It stays if it is significant on the training windows
+    (p_value of the F test) and it improves the held-out windows: all their weighted residuals by
+    MIN_HELD_OUT_GAIN, or the located channels' own by MIN_LOCATED_GAIN (a track 3 % off shows in the
+    turn of each window, a few dozen residuals among thousands that are noise)."""
     gain = 1.0 - with_it.cost_test / without.cost_test if without.cost_test > 0 else 0.0
-    with_it.located_gain = obj.located_gain(without.r_test, with_it.r_test, located)
-    return with_it.p_value <= P_MAX and (gain >= MIN_HELD_OUT_GAIN or with_it.located_gain >= MIN_LOCATED_GAIN)
+    located_gain = obj.located_gain(without.r_test, with_it.r_test, located)
+    return p_value <= P_MAX and (gain >= MIN_HELD_OUT_GAIN or located_gain >= MIN_LOCATED_GAIN), located_gain
 
 
 def _sizes(values: list[list[float]]) -> int:
@@ -380,10 +382,8 @@ def backward(obj: Objective, base: RobotParams, chain: list[Model],
         effects, values = [final.effects[j] for j in rest], [final.values[j] for j in rest]
         say(f"checking that {final.effects[i].label()} is still needed")
         reduced = fit_model(obj, base, effects, values)
-        judged = Model(final.effects, final.values, final.params, final.cost_train, final.cost_test, final.n_train,
-                       p_value=f_test(reduced.cost_train, final.cost_train, len(final.values[i]), final.n_train,
-                                      _sizes(final.values)), r_test=final.r_test)
-        if _earns_its_place(obj, reduced, judged, located or []):
+        p = f_test(reduced.cost_train, final.cost_train, len(final.values[i]), final.n_train, _sizes(final.values))
+        if _earns_its_place(obj, reduced, final, p, located or [])[0]:
             continue
         rebuilt = chain[:1]
         for n in range(1, len(effects) + 1):
@@ -392,7 +392,7 @@ def backward(obj: Objective, base: RobotParams, chain: list[Model],
             m.alternatives = chain[rest[n - 1] + 1].alternatives
             m.rivals = chain[rest[n - 1] + 1].rivals
             rebuilt.append(m)
-        for prev, m in zip(rebuilt, rebuilt[1:]):
-            _earns_its_place(obj, prev, m, located or [])  # each step's located gain, for its evidence
+        for prev, m in zip(rebuilt, rebuilt[1:]):  # each step's located gain, for its evidence
+            m.located_gain = _earns_its_place(obj, prev, m, m.p_value, located or [])[1]
         return backward(obj, base, rebuilt, say, located)
     return chain
