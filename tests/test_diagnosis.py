@@ -58,6 +58,7 @@ def test_the_twins_own_recording_is_a_match(nominal_run):
     ("wheel_radius", "left", 1.5e-3),
     ("torque_constant", "right", -6e-4),
     ("encoder_scale", "left", 60.0),  # ticks_per_rev_delta_l
+    ("encoder_scale", "both", 40.0),  # 3.3 %: the firmware's loop leaves 1.6 % more counts a window
     ("backlash", "right", 0.15),
     ("actuator_delay", "both", 0.06),
     ("battery_resistance", "both", 3.0),
@@ -228,3 +229,28 @@ def test_an_effect_seen_in_one_channel_is_judged_on_that_channels_held_out_resid
     assert accepted and gain > 0.8
     assert not _earns_its_place(obj, without, with_it, 1e-9, ["heading_rate"])[0]
     assert not _earns_its_place(obj, without, with_it, 0.5, ["turn"])[0]  # the training windows must still find it
+
+
+def test_the_chosen_effect_is_the_best_of_those_that_pass_held_out(tmp_path, nominal_run):
+    """One candidate fits the training windows best (lowest BIC) but makes the held-out windows worse;
+    another fits them a little less well and removes the held-out mismatch: the second is chosen, and
+    none when no candidate passes.  A located wheel count adds its window totals to the fit."""
+    from host_sim.diagnosis.compare import compare
+    from host_sim.diagnosis.fit import Candidate, Model, choose, fit_totals
+    from host_sim.diagnosis.report import fit_objective
+
+    assert fit_totals(["count_r", "turn"]) == ("forward", "heading_rate", "wheel_r")
+    first = compare(nominal_run, DEFAULT, ROOM)
+    first.findings = [f for f in compare(record(tmp_path, DEFAULT.replace(half_axle=0.046)), DEFAULT,
+                                         ROOM).findings if f.channel == "turn"]
+    obj = fit_objective(nominal_run, ROOM, first)
+    _train, test = obj.residuals([DEFAULT])
+    n = test.shape[1]
+    current = Model([], [], DEFAULT, 5000.0, 4.0 * n, 4000, r_test=np.full(n, 2.0))
+    overfit, right = Candidate("viscous_friction", "both"), Candidate("track_width", "both")
+    worse = Model([overfit], [[1e-5]], DEFAULT, 3000.0, 4.4 * n, 4000, r_test=np.full(n, 2.1))
+    better = Model([right], [[0.046]], DEFAULT, 3100.0, 1.0 * n, 4000, r_test=np.ones(n))
+    cands = [overfit, right]
+    assert choose(obj, current, [worse, better], cands, ["turn"]) is better
+    assert better.p_value < 1e-4 and better.located_gain == pytest.approx(0.75)
+    assert choose(obj, current, [worse], cands, ["turn"]) is None

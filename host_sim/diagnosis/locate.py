@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from host_sim.diagnosis.channels import ACCUMULATED, SENSOR_NAMES, Channel
+from host_sim.diagnosis.channels import ACCUMULATED, SENSOR_NAMES, WHEELS, Channel
 from host_sim.diagnosis.windows import Windows
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
@@ -44,7 +44,8 @@ SPAN_MIN_S = 0.4
 SMOOTH_S = 0.5
 REGIME_SHARE_MIN = 0.05  # a regime variable must explain this share of the residual's variation to be named
 CONTACT_MARGIN = 0.005  # m beyond the body's radius: within it, a window touches a wall
-SCALE_MIN = 0.02  # a count, path or turn 2 % off the twin's: an odometry error worth naming
+SCALE_MIN = 0.02  # a path or turn 2 % off the twin's: an odometry error worth naming
+SCALE_MIN_COUNTS = 0.01  # a count, 1 %: the firmware's speed loop takes back most of an encoder's error
 # A window total's noise in per-period noise levels: its two ends (first differences of differenced white
 # noise put the per-period level at sqrt(3) of the noise, a total's two ends at sqrt(2)).
 TOTAL_NOISE = float(np.sqrt(2.0 / 3.0))
@@ -236,7 +237,7 @@ def locate_scale(ch: Channel, keep: np.ndarray, t: np.ndarray) -> Finding | None
     if n < SCALE_WINDOWS_MIN or np.sqrt(syy / max(n, 1)) < SCALE_SIGNAL_MIN * noise:
         return None  # too few windows, or a robot that hardly turned (travelled): a proportion of noise
     z = a / (noise / np.sqrt(syy))
-    if abs(z) < Z_MIN or abs(a) < SCALE_MIN:
+    if abs(z) < Z_MIN or abs(a) < (SCALE_MIN_COUNTS if ch.name in WHEELS else SCALE_MIN):
         return None
     off = np.abs(r) > 2.0 * noise  # the windows where it shows beyond the noise
     found: list[tuple[float, float]] = []
