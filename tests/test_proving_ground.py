@@ -20,7 +20,7 @@ from host_sim.params import DEFAULT
 from host_sim.recording import load_recording
 from host_sim.sil import SilController
 from host_sim.world import builtin_world
-from tools.proving_ground import effects, excitation
+from tools.proving_ground import effects, excitation, ir_law
 from tools.proving_ground.agreement import compare
 from tools.proving_ground.cases import make_case
 from tools.proving_ground.plant import Plant
@@ -285,3 +285,17 @@ def test_make_case_writes_a_recording_and_a_separate_answer_key(tmp_path):
     # The sidecar does not give it away: it describes the nominal robot the user believes in.
     assert rec.meta["robot"] == DEFAULT.to_json() and "effects" not in rec.meta
     assert make_case(7, tmp_path / "again", duration=3.0)[0].read_text() == rec_path.read_text()
+
+
+def test_a_misaligned_pair_is_turned_on_its_mount():
+    """Sensor 2 faces the arena's top wall 9 cm from its mount; turned by 0.3 rad on the mount it sees the
+    wall 9 / cos 0.3 cm away at 0.3 rad of incidence (the plant's own IR law), and the other sensors read
+    what they did.  Turned about C instead (sliding along the rim too) it would see the wall 2.8 mm farther."""
+    quiet = EXACT.replace(ir={**EXACT.ir, "noise": 0.0})
+    base = drive(quiet, [(0, 0)] * 3, NEAR_WALL).refl[-1]
+    turned = drive(with_effect("ir_misalignment", 0.3, 2, base=quiet), [(0, 0)] * 3, NEAR_WALL).refl[-1]
+    c = quiet.ir
+    gap = 2.0 - NEAR_WALL[1] - quiet.body_radius
+    assert base[2] == pytest.approx(ir_law.reflected(gap, 0.0, 60, float(c["gain"]), c), abs=1)
+    assert turned[2] == pytest.approx(ir_law.reflected(gap / math.cos(0.3), 0.3, 60, float(c["gain"]), c), abs=1)
+    assert np.array_equal(np.delete(turned, 2), np.delete(base, 2))

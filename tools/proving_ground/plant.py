@@ -19,8 +19,9 @@ current references) drives the plant as it drives the twin's SimRobot:
 
 - encoders: floor(theta * ticks_per_rev / 2 pi) of the drive joint's angle
   (on the motor shaft: behind any gear play);
-- IR: a ray per sensor from C along its axis (plus its misalignment),
-  mujoco.mj_ray against the walls' IR surfaces, the hit's face normal for the
+- IR: a ray per sensor along its axis, mujoco.mj_ray against the walls' IR
+  surfaces; a misalignment turns the pair about its mount on the rim (the
+  ray starts one body radius behind the mount, at C when it is aligned), the hit's face normal for the
   incidence angle; ir_law for the light; ambient (global + visible lamps,
   flicker) at t for the emitter-off and t + on_delay for the emitter-on
   reading; per-sensor gain, offset, ambient leakage; Gaussian noise; the
@@ -198,11 +199,14 @@ class Plant:
         amb_on = self._ambient(x, y, phi, self.t + float(c["on_delay"]))
         adc_max = float(c["adc_max"])
         off, on = [], []
+        r = s.body_radius
         for i in range(N_SENSORS):
-            bearing = phi + i * math.pi / 4 + s.ir_misalignment[i]
+            mount = phi + i * math.pi / 4  # where the pair sits on the rim; a misaligned one looks elsewhere
+            bearing = mount + s.ir_misalignment[i]
             direction = np.array([math.cos(bearing), math.sin(bearing), 0.0])
-            dist, cos = self._ray(origin, direction)
-            gap = max(0.0, dist - s.body_radius)
+            behind = origin + r * np.array([math.cos(mount) - direction[0], math.sin(mount) - direction[1], 0.0])
+            dist, cos = self._ray(behind, direction)
+            gap = max(0.0, dist - r)  # from the mount, along the turned axis
             angle = math.acos(min(1.0, cos))
             light = ir_law.reflected(gap, angle, self.emitter_pct, float(c["gain"]) * s.ir_gain_scale[i], c)
             if self.emitter_pct > 0:
@@ -231,7 +235,9 @@ class Plant:
                 if hit < d_lamp:
                     continue  # a wall hides it
             for i in range(N_SENSORS):
-                b = phi + i * math.pi / 4 + self.spec.ir_misalignment[i]
+                mount = phi + i * math.pi / 4
+                b = mount + self.spec.ir_misalignment[i]
                 axis = (math.cos(b), math.sin(b))
-                levels[i] += ir_law.lamp_light(level, (x + r * axis[0], y + r * axis[1]), axis, (lamp.x, lamp.y))
+                at = (x + r * math.cos(mount), y + r * math.sin(mount))
+                levels[i] += ir_law.lamp_light(level, at, axis, (lamp.x, lamp.y))
         return levels
