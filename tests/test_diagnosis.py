@@ -254,3 +254,32 @@ def test_the_chosen_effect_is_the_best_of_those_that_pass_held_out(tmp_path, nom
     assert choose(obj, current, [worse, better], cands, ["turn"]) is better
     assert better.p_value < 1e-4 and better.located_gain == pytest.approx(0.75)
     assert choose(obj, current, [worse], cands, ["turn"]) is None
+
+
+def test_readings_that_run_behind_the_pose_are_located_on_the_ring(nominal_run):
+    """Every sensor's readings two periods late: below the twin's while a sensor closes on a wall, above it
+    while it draws away, on the ring's sensors that see walls.  One sensor alone late is not a latency
+    (a blind control showed that much on one sensor), and the twin's own run shows none."""
+    import dataclasses
+
+    from host_sim.diagnosis.compare import compare
+    from host_sim.diagnosis.locate import TIMING_SENSORS_MIN, regimes, timing_findings
+
+    def late(rec, sensors):
+        on, amb = rec.ir_on.copy(), rec.ir_amb.copy()
+        on[2:, sensors], amb[2:, sensors] = rec.ir_on[:-2, sensors], rec.ir_amb[:-2, sensors]
+        return dataclasses.replace(rec, ir_on=on, ir_amb=amb)
+
+    def timing(rec):
+        cmp = compare(rec, DEFAULT, ROOM, locate=False)
+        resids = {c.name: c.residual() for c in cmp.channels}
+        t = rec.t[cmp.windows.index[:, :-1]]
+        return timing_findings(cmp.channels, resids, ~cmp.contact, regimes(rec, cmp.windows, DEFAULT, ROOM), t)
+
+    found = timing(late(nominal_run, list(range(8))))
+    assert len(found) >= TIMING_SENSORS_MIN
+    for f in found:
+        closing, receding = (b["mean"] for b in f.bins)
+        assert closing < 0 < receding and f.regime_key.startswith("timing_")
+    assert timing(late(nominal_run, [int(found[0].channel[3:])])) == []
+    assert timing(nominal_run) == []

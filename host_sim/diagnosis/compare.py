@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from host_sim.diagnosis.channels import ACCUMULATED, WHEELS, Channel, build_channels, fit_percent
-from host_sim.diagnosis.locate import (Finding, contact_windows, input_lag, ljung_box, locate_channel,
-                                      locate_scale, regimes)
+from host_sim.diagnosis.locate import (Finding, contact_windows, input_lag, ljung_box, locate_channel, locate_scale,
+                                      regimes, timing_findings)
 from host_sim.diagnosis.windows import DEFAULT_SECONDS, Windows, make_windows, run_windows, unjudged_readings
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
@@ -74,11 +74,14 @@ def _locate(cmp: Comparison, rec: Recording, p: RobotParams, world: World | None
     reg = regimes(rec, cmp.windows, p, world)
     keep = ~cmp.contact
     t = rec.t[cmp.windows.index[:, :-1]]
+    resids = {ch.name: ch.residual() for ch in cmp.channels if ch.locate}
+    # a reading that runs behind the pose, on several sensors: where no other mismatch locates them
+    timing = {f.channel: f for f in timing_findings(cmp.channels, resids, keep, reg, t)}
     for ch in cmp.channels:
         if not ch.locate:
             continue
-        resid = ch.residual()
-        found = locate_channel(ch, resid, keep, reg, t)
+        resid = resids[ch.name]
+        found = locate_channel(ch, resid, keep, reg, t) or timing.get(ch.name)
         if ch.name in ACCUMULATED:
             scale = locate_scale(ch, keep, t)
             if scale is not None:

@@ -42,6 +42,9 @@ EFFECT_MIN = 1.0  # noise levels: a smaller mean mismatch is within the noise of
 RELATIVE_MIN = 0.05  # of the recorded signal's mean size in the bin: smaller does not matter to the robot
 SPAN_MIN_S = 0.4
 SMOOTH_S = 0.5
+TIMING = "timing_"  # regime of sensor k: "timing_k", closing on its wall (0), steady (1), drawing away (2)
+TIMING_RATE = 0.05  # m/s along a sensor's axis: slower is steady
+TIMING_SENSORS_MIN = 3  # sensors that must show a reading running behind before it is located
 REGIME_SHARE_MIN = 0.05  # a regime variable must explain this share of the residual's variation to be named
 CONTACT_MARGIN = 0.005  # m beyond the body's radius: within it, a window touches a wall
 SCALE_MIN = 0.02  # a path or turn 2 % off the twin's: an odometry error worth naming
@@ -103,15 +106,47 @@ def regimes(rec: Recording, windows: Windows, p: RobotParams, world: World | Non
 
 
 def _wall_regimes(out: Regimes, rec: Recording, rows: np.ndarray, world: World) -> None:
-    """Per sensor: how far the wall it looks at is (along its axis, from the body's rim)."""
+    """Per sensor: how far the wall it looks at is (along its axis, from the body's rim), and whether it
+    closes on that wall or draws away from it over the period (`timing_findings`)."""
     assert rec.pose is not None
     bearings = [k * np.pi / 4 for k in range(8)]
     dist, _angle, hit = world.cast_robots(rec.pose[rows], bearings, 1.0)
+    after, _angle, hit_after = world.cast_robots(rec.pose[rows + 1], bearings, 1.0)
     for k in range(8):
         d = np.where(hit[..., k], dist[..., k], np.inf)
         out.add(f"wall_{k}", np.digitize(d, [0.09, 0.18]),
                 {0: f"with a wall within 3 cm of {SENSOR_NAMES[k]}", 1: f"with a wall 3-12 cm from {SENSOR_NAMES[k]}",
                  2: f"with no wall near {SENSOR_NAMES[k]}"})
+        seen = hit[..., k] & hit_after[..., k] & (d < 0.18)
+        rate = np.subtract(after[..., k], dist[..., k], out=np.zeros(seen.shape), where=seen) / rec.sample_period
+        out.add(f"{TIMING}{k}", np.digitize(rate, [-TIMING_RATE, TIMING_RATE]),
+                {0: f"while {SENSOR_NAMES[k]} closes on a wall", 1: "",
+                 2: f"while {SENSOR_NAMES[k]} draws away from a wall"})
+
+
+def timing_findings(chans: list[Channel], resids: dict[str, np.ndarray], keep: np.ndarray, reg: Regimes,
+                    t: np.ndarray) -> list[Finding]:
+    """IR sensors whose readings run behind (or ahead of) the pose: below the twin's while closing on a
+    wall and above it while drawing away (or the reverse), both significant.  A latency is the whole
+    ring's, so this is located only when TIMING_SENSORS_MIN sensors show it: one sensor alone showed it
+    on a blind control.  One finding per sensor, in its larger bin."""
+    found = []
+    for ch in chans:
+        if not ch.name.startswith("ir_") or f"{TIMING}{ch.name[3:]}" not in reg.labels:
+            continue
+        labels, words = reg.labels[f"{TIMING}{ch.name[3:]}"]
+        r, lab = resids[ch.name][keep], labels[keep]
+        sigma = noise_level(ch, r)
+        y = ch.y[keep]
+        closing, receding = (_bin_stats(r[lab == v], sigma, y[lab == v]) for v in (0, 2))
+        if closing is None or receding is None or closing["mean"] * receding["mean"] >= 0:
+            continue
+        v, stat = max(((0, closing), (2, receding)), key=lambda b: abs(b[1]["mean"]))
+        bins = [{"regime": words[0], "key": f"{TIMING}{ch.name[3:]}=0", **closing},
+                {"regime": words[2], "key": f"{TIMING}{ch.name[3:]}=2", **receding}]
+        found.append(Finding(ch.name, words[v], f"{TIMING}{ch.name[3:]}={v}", spans(resids[ch.name], keep, t, sigma),
+                             stat["mean"], stat["z"], sigma, bins))
+    return found if len(found) >= TIMING_SENSORS_MIN else []
 
 
 def contact_windows(rec: Recording, windows: Windows, p: RobotParams, world: World | None) -> np.ndarray:
