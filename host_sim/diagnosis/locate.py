@@ -132,20 +132,20 @@ def timing_findings(chans: list[Channel], resids: dict[str, np.ndarray], keep: n
     on a blind control.  One finding per sensor, in its larger bin."""
     found = []
     for ch in chans:
-        if not ch.name.startswith("ir_") or f"{TIMING}{ch.name[3:]}" not in reg.labels:
+        regime = f"{TIMING}{ch.name[3:]}"
+        if not ch.name.startswith("ir_") or regime not in reg.labels:
             continue
-        labels, words = reg.labels[f"{TIMING}{ch.name[3:]}"]
-        r, lab = resids[ch.name][keep], labels[keep]
+        labels, words = reg.labels[regime]
+        r, lab, y = resids[ch.name][keep], labels[keep], ch.y[keep]
         sigma = noise_level(ch, r)
-        y = ch.y[keep]
         closing, receding = (_bin_stats(r[lab == v], sigma, y[lab == v]) for v in (0, 2))
         if closing is None or receding is None or closing["mean"] * receding["mean"] >= 0:
             continue
-        v, stat = max(((0, closing), (2, receding)), key=lambda b: abs(b[1]["mean"]))
-        bins = [{"regime": words[0], "key": f"{TIMING}{ch.name[3:]}=0", **closing},
-                {"regime": words[2], "key": f"{TIMING}{ch.name[3:]}=2", **receding}]
-        found.append(Finding(ch.name, words[v], f"{TIMING}{ch.name[3:]}={v}", spans(resids[ch.name], keep, t, sigma),
-                             stat["mean"], stat["z"], sigma, bins))
+        bins = [{"regime": words[0], "key": f"{regime}=0", **closing},
+                {"regime": words[2], "key": f"{regime}=2", **receding}]
+        larger = max(bins, key=lambda b: abs(float(b["mean"])))  # type: ignore[arg-type]
+        found.append(Finding(ch.name, str(larger["regime"]), str(larger["key"]), spans(resids[ch.name], keep, t, sigma),
+                             float(larger["mean"]), float(larger["z"]), sigma, bins))  # type: ignore[arg-type]
     return found if len(found) >= TIMING_SENSORS_MIN else []
 
 
