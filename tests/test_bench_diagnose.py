@@ -100,6 +100,8 @@ def test_a_total_read_as_a_delta_is_a_wrong_parameter(suite: dict[str, Any]) -> 
     (concealed("caster_drag", "caster_friction", 0.02, 0.0), 0.02 * 1.5042, 0.0),
     # scrub: torsional (m) x the tyres' load (0.46 + 0.05) 9.81 - 1.5042 = 3.4989 N
     (concealed("turning_resistance", "torsional_friction", 5e-4, 0.0), 5e-4 * 3.4989 * 1.1, 0.1),
+    # grip: the twin's mu holds with the whole weight 5.0031 N, the plant's tyres carry 3.4989 N of it
+    (concealed("traction_limit", "floor_friction", 0.15, 1.0), 0.15 * 3.4989 / 5.0031, 0.0),
     (concealed("wheel_radius", "wheel_radius", 0.0215, 0.021, wheel="right"), 0.00045, 0.1),
     (concealed("encoder_scale", "ticks_per_rev", 1240.0, 1200.0, wheel="both"), 44.0, 0.1),
     (concealed("current_limit", "current_limit", 0.04, 0.5), 0.036, 0.1),  # relative to the value, not 0.46 A

@@ -283,3 +283,54 @@ def test_readings_that_run_behind_the_pose_are_located_on_the_ring(nominal_run):
         assert closing < 0 < receding and f.regime_key.startswith("timing_")
     assert timing(late(nominal_run, [int(found[0].channel[3:])])) == []
     assert timing(nominal_run) == []
+
+
+def test_pressed_against_walls_nearly_the_whole_time_is_refused(tmp_path):
+    """Driven into a wall and held there: 2 of 19 windows are away from it, too few to judge anything on (a
+    held-out window or none): a plain refusal, not a `match`."""
+    from host_sim.world import builtin_world
+    from tools.proving_ground.recorder import ProgramController
+
+    arena, path = builtin_world("arena"), tmp_path / "pressed.csv"
+    with RecordingWriter(path, source="simulator", sample_period=0.04, robot=DEFAULT.to_json(),
+                         world=arena.to_dict(), extra={"mode": "fixed"}) as w:
+        Simulation(arena, DEFAULT, ProgramController([(0.06, 0.065)] * 75 + [(0.45, 0.4)] * 425), seed=4, recorder=w,
+                   pose=(1.4, 1.4, 5 * np.pi / 4)).run_fixed(20.0)
+    with pytest.raises(DiagnosisError, match="touches a wall in 17 of 19 windows"):
+        diagnose(load_recording(path), DEFAULT, arena)
+
+
+def test_a_value_near_a_small_bound_is_a_measurement_not_a_pin():
+    """A driver limiting at 36 mA sits 26 mA above current_limit's bound of 10 mA, under 1 % of its range
+    (10 mA..3 A): a measurement.  At 10.5 mA it is on the bound: a stand-in for something else."""
+    from host_sim.diagnosis.fit import Candidate, Model, _pinned
+
+    def fitted(value):
+        return Model([Candidate("current_limit", "both")], [[value]], DEFAULT, 0.0, 0.0, 0)
+
+    assert not _pinned(DEFAULT, fitted(0.036))
+    assert _pinned(DEFAULT, fitted(0.0105)) and _pinned(DEFAULT, fitted(2.999))
+
+
+def test_the_speed_rising_and_falling_are_regimes_apart(tmp_path):
+    """A slipping wheel runs ahead of the twin's while the speed rises and behind it while it falls (a heavy
+    robot the other way round): pooled, the halves cancel, so they are two regimes.  Steps of current on
+    an open floor, every half second."""
+    from host_sim.diagnosis.locate import _wheel_speeds, regimes
+    from host_sim.diagnosis.windows import make_windows
+    from host_sim.world import World
+    from tools.proving_ground.recorder import ProgramController
+
+    floor, path = World(name="floor", size=(20.0, 20.0), walls=[]), tmp_path / "steps.csv"
+    with RecordingWriter(path, source="simulator", sample_period=0.04, robot=DEFAULT.to_json(),
+                         world=floor.to_dict(), extra={"mode": "fixed"}) as w:
+        Simulation(floor, DEFAULT, ProgramController(([(0.15, 0.15)] * 12 + [(0.0, 0.0)] * 13) * 12), seed=4,
+                   recorder=w, pose=(10.0, 10.0, 0.0)).run_fixed(12.0)
+    rec = load_recording(path)
+    w = make_windows(rec, 1.0)
+    labels, words = regimes(rec, w, DEFAULT, floor).labels["acceleration"]
+    mean = _wheel_speeds(rec, w.index, DEFAULT).mean(-1)
+    change = np.diff(np.concatenate([mean[:, :1], mean], axis=1), axis=1)
+    assert (labels == 1).any() and (labels == 2).any()
+    assert (change[labels == 1] > 0).all() and (change[labels == 2] < 0).all()
+    assert words[1] == "when the speed rises" and words[2] == "when the speed falls"

@@ -51,7 +51,8 @@ MAX_EFFECTS = 3
 FITTED_TOTALS = ("forward", "heading_rate")
 SHORTLIST = 4  # candidates fitted in full after screening
 WITHIN_NOISE = 1.0  # held-out cost per weighted residual below which no further effect is sought
-SCREEN_TRIALS = (0.15, 0.5)  # of a one-parameter effect's range: values the screening also tries outright
+SCREEN_TRIALS = (0.02, 0.15, 0.5)  # of a one-parameter effect's range: values the screening also tries outright
+# (0.02: a limit far below nominal, such as a driver limiting at 36 mA, binds at the low end of 0.01-3 A)
 P_MAX = 1e-4  # F test against the twin without the effect
 MIN_HELD_OUT_GAIN = 0.10  # relative drop of the held-out weighted sum of squares
 MIN_LOCATED_GAIN = 0.30  # or of the located channels' part of it alone
@@ -262,13 +263,16 @@ def bic(model: Model) -> float:
     return n * math.log(max(model.cost_train, 1e-300) / n) + k * math.log(n)
 
 
-def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candidate], keep: int) -> list[Candidate]:
-    """The `keep` candidates that promise the lowest training cost.
+def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candidate],
+           keep: int) -> list[tuple[Candidate, list[float]]]:
+    """The `keep` candidates that promise the lowest training cost, each with where its fit should start.
 
     One batch run: the current model plus each candidate at its absent value, nudged, and at a few
     trial values across its range (SCREEN_TRIALS).  A candidate's promise is the best of one
     Gauss-Newton step from absent and its trials: effects with a threshold (a gear's play, a delay)
-    barely change the residuals near absent, so the linear step alone would screen them out.
+    barely change the residuals near absent, so the linear step alone would screen them out.  The fit
+    starts where that best was, not at absent: a grip (traction_limit) at its nominal value never
+    slips, so a fit started there sees no gradient and stays.
     """
     robots = [current.params]
     slots = []
@@ -284,17 +288,22 @@ def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candid
         robots += [E.apply(current.params, cand.name, cand.site, list(x)) for x in trials]
         slots.append((first, h, lo - x0, hi - x0, len(trials)))
     train, _test = obj.residuals(robots)
-    predicted = []
-    for first, h, dlo, dhi, n_trials in slots:
+    predicted, starts = [], []
+    for cand, (first, h, dlo, dhi, n_trials) in zip(cands, slots):
         r0 = train[first]
         jac = ((train[first + 1:first + 1 + len(h)] - r0) / h[:, None]).T
         step, *_ = np.linalg.lstsq(jac, -r0, rcond=None)
         step = np.clip(step, dlo, dhi)
         resid = r0 + jac @ step
         tried = train[first + 1 + len(h):first + 1 + len(h) + n_trials]
-        predicted.append(min([float(resid @ resid)] + [float(r @ r) for r in tried]))
+        costs = [float(resid @ resid)] + [float(r @ r) for r in tried]
+        best = int(np.argmin(costs))
+        x0 = np.array(_start_values(base, cand))
+        lo, hi = E.bounds(cand.name)
+        starts.append(list(x0 + step) if best == 0 else [lo[0] + SCREEN_TRIALS[best - 1] * (hi[0] - lo[0])])
+        predicted.append(costs[best])
     order = np.argsort(predicted)
-    return [cands[i] for i in order[:keep]]
+    return [(cands[i], starts[i]) for i in order[:keep]]
 
 
 def _pinned(base: RobotParams, model: Model) -> bool:
@@ -303,8 +312,10 @@ def _pinned(base: RobotParams, model: Model) -> bool:
     lo, hi = E.bounds(cand.name)
     absent = E.absent_values(base, cand.name)
     for v, a, b, off in zip(values, lo, hi, absent):
-        margin = 0.01 * (b - a)
-        if (v - a < margin and abs(off - a) > margin) or (b - v < margin and abs(b - off) > margin):
+        # 1 % of the range, or a tenth of a bound that is small against it: a driver's 36 mA limit is 26 mA
+        # above the bound 10 mA, under 1 % of the range 10 mA..3 A, and no stand-in
+        near_a, near_b = min(0.01 * (b - a), 0.1 * abs(a) or math.inf), min(0.01 * (b - a), 0.1 * abs(b) or math.inf)
+        if (v - a < near_a and abs(off - a) > near_a) or (b - v < near_b and abs(b - off) > near_b):
             return True
     return False
 
@@ -344,9 +355,9 @@ def select(obj: Objective, base: RobotParams, cands: list[Candidate],
         say(f"effect {step + 1}: screening {len(pool)} candidates")
         shortlist = screen(obj, base, current, pool, SHORTLIST)
         tried = []
-        for cand in shortlist:
+        for cand, start in shortlist:
             say(f"effect {step + 1}: fitting {cand.label()}")
-            tried.append(fit_model(obj, base, current.effects + [cand], current.values + [_start_values(base, cand)]))
+            tried.append(fit_model(obj, base, current.effects + [cand], current.values + [start]))
         # A value pinned at a fitting bound is a stand-in for something else, not a measurement.
         tried = [m for m in tried if not _pinned(base, m)]
         best = choose(obj, current, tried, cands, located or [])

@@ -87,8 +87,11 @@ def regimes(rec: Recording, windows: Windows, p: RobotParams, world: World | Non
         out.add(f"command_{side[0]}", np.sign(cmd).astype(int) + 1,
                 {0: f"with a negative {side} command", 1: f"with no {side} command", 2: f"with a positive {side} command"})
     mean = v.mean(axis=-1)
-    accel = np.abs(np.diff(np.concatenate([mean[:, :1], mean], axis=1), axis=1)) / rec.sample_period
-    out.add("acceleration", (accel > 0.3).astype(int), {0: "when cruising", 1: "when accelerating or braking"})
+    accel = np.diff(np.concatenate([mean[:, :1], mean], axis=1), axis=1) / rec.sample_period
+    # signed, not pooled: a slipping wheel runs ahead of the twin's when the speed rises and behind it when
+    # the speed falls, and a heavy robot the other way round; pooled, the two halves cancel
+    out.add("acceleration", (accel > 0.3).astype(int) + 2 * (accel < -0.3),
+            {0: "when cruising", 1: "when the speed rises", 2: "when the speed falls"})
     yaw = (v[..., 1] - v[..., 0]) / (2 * p.half_axle)
     out.add("turning", np.digitize(yaw, [-0.5, 0.5]), {0: "when turning right", 1: "when going straight",
                                                         2: "when turning left"})

@@ -26,6 +26,7 @@ from host_sim.recording import Recording
 from host_sim.world import World
 
 MIN_WINDOWS = 6  # 1 s windows: fewer and the held-out judgement rests on one or two windows
+MIN_FREE_WINDOWS = MIN_WINDOWS  # of them away from the walls: the contact windows are judged apart
 MIN_MOVING = 0.2  # share of periods in which a wheel turns: less and the recording says little of the physics
 
 
@@ -82,7 +83,7 @@ def _finite(d: dict[str, float]) -> dict[str, float | None]:
 # MIN_REGIME_S of it those effects are said to be poorly judged (a "match" is then weak evidence).
 REGIME_EFFECTS = (("turning", (0, 2), "turned", "track width, turning resistance and the centre of mass"),
                   ("direction", (1,), "drove backwards", "backlash and the wheels' asymmetries in reverse"),
-                  ("acceleration", (1,), "accelerated or braked", "mass, inertia and actuator delay"))
+                  ("acceleration", (1, 2), "accelerated or braked", "mass, inertia and actuator delay"))
 MIN_REGIME_S = 4.0
 
 
@@ -128,9 +129,10 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     say("comparing the twin with the recording")
     comparisons = compare_all(rec, params, world, seconds)
     first = comparisons[0]
-    if first.contact.all():
-        raise DiagnosisError("the robot touches a wall in every window: stuck against a wall the whole time, "
-                             "nothing else can be judged")
+    if int((~first.contact).sum()) < MIN_FREE_WINDOWS:
+        raise DiagnosisError(f"the robot touches a wall in {int(first.contact.sum())} of {len(first.contact)} windows: "
+                             f"pressed against walls nearly the whole time, too little else to judge (at least "
+                             f"{MIN_FREE_WINDOWS} windows of {first.seconds:g} s away from the walls)")
     result = Diagnosis(str(rec.path or "recording"), "match", comparisons, [_located(first, f) for f in first.findings],
                        fit_before=dict(first.fit), notes=notes)
     if int(first.contact.sum()):

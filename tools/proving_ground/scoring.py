@@ -65,6 +65,8 @@ class ParamMap:
 #                  N_c = m_body g d / CASTER_X (moments about the axle, level floor; d = com_offset)
 #   scrub load:    the library holds the scrub TORQUE (N m): the plant's torsional friction (m) x the
 #                  tyres' normal load, (m_body + 2 m_wheel) g - N_c (MuJoCo: torque = mu_torsional N per contact)
+#   wheel load:    the library's mu grips with the whole weight (the twin's wheels carry it all): the
+#                  plant's tyre friction x the tyres' share of the weight, ((m_body + 2 m_wheel) g - N_c) / that
 # The error is |fitted - true| / denominator:
 #   change: |true - absent|, the size of the effect (a fit that stays at nominal scores 100 %)
 #   value:  |true|, for limits whose absent value is "no limit in practice" (0.5 A, mu = 1)
@@ -79,7 +81,7 @@ PARAMS: dict[str, ParamMap] = {
     "actuator_delay": ParamMap("actuator_delay", "delay", "same", "change"),
     "current_limit": ParamMap("current_limit", "limit", "same", "value"),
     "battery_resistance": ParamMap("battery_resistance", "resistance", "same", "change"),
-    "traction_limit": ParamMap("floor_friction", "mu", "same", "value"),
+    "traction_limit": ParamMap("floor_friction", "mu", "wheel load", "value"),
     "caster_drag": ParamMap("caster_friction", "force", "caster load", "change"),
     "turning_resistance": ParamMap("torsional_friction", "torque", "scrub load", "change"),
     "com_offset": ParamMap("com_offset", "d", "same", "change"),
@@ -117,8 +119,9 @@ def true_value(effect: dict[str, Any], plant: dict[str, Any], nominal: RobotPara
         v -= _nominal_field(nominal, name)
     elif row.conversion == "caster load":
         v *= caster_load(plant)
-    elif row.conversion == "scrub load":
-        v *= (float(plant["body_mass"]) + 2 * float(plant["wheel_mass"])) * G - caster_load(plant)
+    elif row.conversion in ("scrub load", "wheel load"):
+        weight = (float(plant["body_mass"]) + 2 * float(plant["wheel_mass"])) * G
+        v *= (weight - caster_load(plant)) / (weight if row.conversion == "wheel load" else 1.0)
     return v, absent
 
 
