@@ -178,7 +178,7 @@ class Objective:
 
 def fit_totals(located: list[str]) -> tuple[str, ...]:
     """The channels whose window totals a fit adds: the travel and the turn, and a wheel's count once
-    located (an encoder 4 % fine shows as 1.4 % more counts a window, the firmware's loop taking back
+    located (an encoder 3.7 % fine showed as 1.4 % more counts a window, the firmware's loop taking back
     the rest, well below any one period's quantisation)."""
     return FITTED_TOTALS + tuple(w for w in WHEELS if ACCUMULATED[w] in located)
 
