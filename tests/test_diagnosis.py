@@ -82,6 +82,28 @@ def test_an_effect_injected_into_the_twin_is_named_measured_and_fitted(tmp_path,
     assert located and all(d.fit_after[c] > d.fit_before[c] for c in located)
 
 
+@pytest.mark.parametrize("effect,true_value", [
+    ("traction_limit", 0.1),  # ice: the wheels spin in the steps
+    ("current_limit", 0.05),  # the speed loop asks for up to 0.12 A
+    ("mass", 0.7),
+])
+def test_an_effect_only_the_identification_manoeuvre_excites_is_named(tmp_path, effect, true_value):
+    """Effects of pushing hard, which the exploration never does: the manoeuvre's first 30 s (creep, steps,
+    chirp, spins) in the arena, as `twinbot sim --excite` records them.  A grip's cost has a narrow valley:
+    screened on three trials across 0.02-2 the ice was named a current limit (fit.screen_trials)."""
+    from host_sim.excitation import ExcitedController
+
+    arena, path = builtin_world("arena"), tmp_path / "excited.csv"
+    with RecordingWriter(path, source="simulator", sample_period=0.04, robot=DEFAULT.to_json(),
+                         world=arena.to_dict(), extra={"mode": "fixed"}) as w:
+        Simulation(arena, E.apply(DEFAULT, effect, "both", [true_value]), ExcitedController(SilController(1)),
+                   seed=4, recorder=w).run_fixed(30.0)
+    d = diagnose(load_recording(path), DEFAULT, arena)
+    assert d.verdict == "explained" and [e["name"] for e in d.effects] == [effect], d.summary()
+    (param,) = d.effects[0]["params"].values()
+    assert param["value"] == pytest.approx(true_value, rel=0.05)
+
+
 @pytest.mark.parametrize("change,channel,sign,not_there", [
     ({"half_axle": 0.0499}, "turn", -1, "travel"), ({"half_axle": 0.046}, "turn", 1, "travel"),
     ({"wheel_radius": 0.0216}, "travel", 1, "count_l"),  # (it turns more too: r (w_r - w_l) / 2b)

@@ -25,8 +25,9 @@ windows to within their noise (mean weighted squared residual below
 WITHIN_NOISE): a further effect would fit the noise.  Screening tries each
 candidate's one linear step from absent and, for one-parameter effects, a few
 values across its range outright (SCREEN_TRIALS: threshold effects such as a
-gear's play barely move the residuals near absent).  Backward elimination
-then drops an effect that a later one made redundant (the refitted twin
+gear's play barely move the residuals near absent; a range that spans orders
+of magnitude, a grip's or a current limit's, in even ratios, LOG_TRIALS).
+Backward elimination then drops an effect that a later one made redundant (the refitted twin
 without it is as good by the same two tests).
 """
 from __future__ import annotations
@@ -52,7 +53,9 @@ FITTED_TOTALS = ("forward", "heading_rate")
 SHORTLIST = 4  # candidates fitted in full after screening
 WITHIN_NOISE = 1.0  # held-out cost per weighted residual below which no further effect is sought
 SCREEN_TRIALS = (0.02, 0.15, 0.5)  # of a one-parameter effect's range: values the screening also tries outright
-# (0.02: a limit far below nominal, such as a driver limiting at 36 mA, binds at the low end of 0.01-3 A)
+# (0.02: a small play or delay)
+LOG_TRIALS = 8  # a range with 0 < lower <= upper / 10 is tried at lower * (upper / lower) ** (k / 8), k = 1..7: a
+# grip's cost has a narrow valley (ice at mu 0.1: 20 % off costs 6-17 times more), so the trials must not step over it
 P_MAX = 1e-4  # F test against the twin without the effect
 MIN_HELD_OUT_GAIN = 0.10  # relative drop of the held-out weighted sum of squares
 MIN_LOCATED_GAIN = 0.30  # or of the located channels' part of it alone
@@ -268,7 +271,7 @@ def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candid
     """The `keep` candidates that promise the lowest training cost, each with where its fit should start.
 
     One batch run: the current model plus each candidate at its absent value, nudged, and at a few
-    trial values across its range (SCREEN_TRIALS).  A candidate's promise is the best of one
+    trial values across its range (screen_trials).  A candidate's promise is the best of one
     Gauss-Newton step from absent and its trials: effects with a threshold (a gear's play, a delay)
     barely change the residuals near absent, so the linear step alone would screen them out.  The fit
     starts where that best was, not at absent: a grip (traction_limit) at its nominal value never
@@ -284,26 +287,35 @@ def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candid
         robots.append(E.apply(current.params, cand.name, cand.site, list(x0)))
         robots += [E.apply(current.params, cand.name, cand.site, list(x0 + np.eye(len(x0))[i] * h[i]))
                    for i in range(len(x0))]
-        trials = [lo + f * (hi - lo) for f in SCREEN_TRIALS] if len(x0) == 1 else []
-        robots += [E.apply(current.params, cand.name, cand.site, list(x)) for x in trials]
-        slots.append((first, h, lo - x0, hi - x0, len(trials)))
+        trials = screen_trials(cand.name)
+        robots += [E.apply(current.params, cand.name, cand.site, [x]) for x in trials]
+        slots.append((first, h, lo - x0, hi - x0, trials))
     train, _test = obj.residuals(robots)
     predicted, starts = [], []
-    for cand, (first, h, dlo, dhi, n_trials) in zip(cands, slots):
+    for cand, (first, h, dlo, dhi, trials) in zip(cands, slots):
         r0 = train[first]
         jac = ((train[first + 1:first + 1 + len(h)] - r0) / h[:, None]).T
         step, *_ = np.linalg.lstsq(jac, -r0, rcond=None)
         step = np.clip(step, dlo, dhi)
         resid = r0 + jac @ step
-        tried = train[first + 1 + len(h):first + 1 + len(h) + n_trials]
+        tried = train[first + 1 + len(h):first + 1 + len(h) + len(trials)]
         costs = [float(resid @ resid)] + [float(r @ r) for r in tried]
         best = int(np.argmin(costs))
         x0 = np.array(_start_values(base, cand))
-        lo, hi = E.bounds(cand.name)
-        starts.append(list(x0 + step) if best == 0 else [lo[0] + SCREEN_TRIALS[best - 1] * (hi[0] - lo[0])])
+        starts.append(list(x0 + step) if best == 0 else [trials[best - 1]])
         predicted.append(costs[best])
     order = np.argsort(predicted)
     return [(cands[i], starts[i]) for i in order[:keep]]
+
+
+def screen_trials(name: str) -> list[float]:
+    """The values of a one-parameter effect the screening tries outright (none for more parameters)."""
+    (lo, *more), (hi, *_) = E.bounds(name)
+    if more:
+        return []
+    if 0 < lo <= hi / 10:
+        return [lo * (hi / lo) ** (k / LOG_TRIALS) for k in range(1, LOG_TRIALS)]
+    return [lo + f * (hi - lo) for f in SCREEN_TRIALS]
 
 
 def _pinned(base: RobotParams, model: Model) -> bool:
