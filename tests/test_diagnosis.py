@@ -22,6 +22,7 @@ from host_sim.world import builtin_world
 from tests.helpers import run_twinbot
 
 ROOM = builtin_world("paper_room")
+ARENA = builtin_world("arena")
 
 
 def record(tmp_path, params=DEFAULT, duration=30.0, name="run.csv", rules=1, seed=4):
@@ -82,26 +83,43 @@ def test_an_effect_injected_into_the_twin_is_named_measured_and_fitted(tmp_path,
     assert located and all(d.fit_after[c] > d.fit_before[c] for c in located)
 
 
+def record_manoeuvre(tmp_path, params, duration=30.0):
+    """The identification manoeuvre's first 30 s (creep, steps, chirp, spins) in the arena, as
+    `twinbot sim --excite` records it."""
+    from host_sim.excitation import ExcitedController
+
+    path = tmp_path / f"excited_{len(list(tmp_path.iterdir()))}.csv"
+    with RecordingWriter(path, source="simulator", sample_period=0.04, robot=DEFAULT.to_json(),
+                         world=ARENA.to_dict(), extra={"mode": "fixed"}) as w:
+        Simulation(ARENA, params, ExcitedController(SilController(1)), seed=4, recorder=w).run_fixed(duration)
+    return load_recording(path)
+
+
 @pytest.mark.parametrize("effect,true_value", [
     ("traction_limit", 0.1),  # ice: the wheels spin in the steps
     ("current_limit", 0.05),  # the speed loop asks for up to 0.12 A
     ("mass", 0.7),
 ])
 def test_an_effect_only_the_identification_manoeuvre_excites_is_named(tmp_path, effect, true_value):
-    """Effects of pushing hard, which the exploration never does: the manoeuvre's first 30 s (creep, steps,
-    chirp, spins) in the arena, as `twinbot sim --excite` records them.  A grip's cost has a narrow valley:
-    screened on three trials across 0.02-2 the ice was named a current limit (fit.screen_trials)."""
-    from host_sim.excitation import ExcitedController
-
-    arena, path = builtin_world("arena"), tmp_path / "excited.csv"
-    with RecordingWriter(path, source="simulator", sample_period=0.04, robot=DEFAULT.to_json(),
-                         world=arena.to_dict(), extra={"mode": "fixed"}) as w:
-        Simulation(arena, E.apply(DEFAULT, effect, "both", [true_value]), ExcitedController(SilController(1)),
-                   seed=4, recorder=w).run_fixed(30.0)
-    d = diagnose(load_recording(path), DEFAULT, arena)
+    """Effects of pushing hard, which the exploration never does (record_manoeuvre).  A grip's cost has a
+    narrow valley: screened on three trials across 0.02-2 the ice was named a current limit
+    (fit.screen_trials)."""
+    d = diagnose(record_manoeuvre(tmp_path, E.apply(DEFAULT, effect, "both", [true_value])), DEFAULT, ARENA)
     assert d.verdict == "explained" and [e["name"] for e in d.effects] == [effect], d.summary()
     (param,) = d.effects[0]["params"].values()
     assert param["value"] == pytest.approx(true_value, rel=0.05)
+
+
+def test_a_wheel_that_slips_burst_by_burst_is_located_without_a_bias(tmp_path):
+    """A grip of 0.2: the wheels spin ahead of the twin's and fall back, a residual that averages out in
+    every regime bin, many times the wheels' noise.  The nominal twin's own manoeuvre scatters within it."""
+    assert diagnose(record_manoeuvre(tmp_path, DEFAULT), DEFAULT, ARENA).verdict == "match"
+    d = diagnose(record_manoeuvre(tmp_path, E.apply(DEFAULT, "traction_limit", "both", [0.2])), DEFAULT, ARENA)
+    wheels = [item for item in d.located if item["channel"] in ("wheel_l", "wheel_r")]
+    assert len(wheels) == 2 and all("scatters" in item["words"] and item["rms_residual"] > 0 for item in wheels)
+    assert [e["name"] for e in d.effects] == ["traction_limit"], d.summary()
+    assert d.effects[0]["params"]["mu"]["value"] == pytest.approx(0.2, rel=0.05)
+    assert all(d.fit_after[item["channel"]] > d.fit_before[item["channel"]] for item in wheels)
 
 
 @pytest.mark.parametrize("change,channel,sign,not_there", [

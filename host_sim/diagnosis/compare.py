@@ -16,7 +16,7 @@ import numpy as np
 
 from host_sim.diagnosis.channels import ACCUMULATED, WHEELS, Channel, build_channels, fit_percent
 from host_sim.diagnosis.locate import (Finding, contact_windows, input_lag, ljung_box, locate_channel, locate_scale,
-                                      regimes, timing_findings)
+                                      regimes, scatter_finding, timing_findings)
 from host_sim.diagnosis.windows import DEFAULT_SECONDS, Windows, make_windows, run_windows, unjudged_readings
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
@@ -81,7 +81,8 @@ def _locate(cmp: Comparison, rec: Recording, p: RobotParams, world: World | None
         if not ch.locate:
             continue
         resid = resids[ch.name]
-        found = locate_channel(ch, resid, keep, reg, t) or timing.get(ch.name)
+        found = (locate_channel(ch, resid, keep, reg, t) or timing.get(ch.name)
+                 or scatter_finding(ch, resid, keep, reg, t))
         if ch.name in ACCUMULATED:
             scale = locate_scale(ch, keep, t)
             if scale is not None:

@@ -20,6 +20,11 @@ distance along the path) and "turn" (the angle turned), each window's
 recorded total against the twin's, as a proportional error (recorded =
 (1 + a) twin) significant at |z| >= Z_MIN and at least SCALE_MIN.
 
+A wheel can also disagree without a bias: a slipping wheel spins ahead of the
+twin's and falls back, burst by burst, so its residual averages out in every
+regime bin while its RMS is many times its noise (`scatter_finding`,
+SCATTER_MIN noise levels; the blind controls reach 2.9).
+
 Whiteness (Ljung-Box) and the cross-correlation of the residual with the
 command (a peak at a lag k > 0 means the robot answers k periods late) are
 reported as evidence.
@@ -55,6 +60,8 @@ TOTAL_NOISE = float(np.sqrt(2.0 / 3.0))
 SCALE_WINDOWS_MIN = 6  # windows away from the walls a proportional error is judged on
 SCALE_SIGNAL_MIN = 10.0  # window totals (RMS) must be this many times their noise for a proportion to mean much
 SCALE_REGIME = "window by window"  # "the robot turns 3 % less than the twin, window by window"
+SCATTER_MIN = 5.0  # a wheel's residual RMS in noise levels beyond which it is a mismatch with or without a bias
+SCATTER_REGIME = 2.0  # a bin whose mean square is this many times the wheel's is where it scatters most
 
 
 @dataclass
@@ -174,6 +181,7 @@ class Finding:
     z: float
     noise: float
     bins: list[dict[str, object]]  # every significant bin: {regime, key, mean, z, n}
+    rms: float | None = None  # a scatter without a bias (scatter_finding): the RMS residual in that regime
 
 
 def noise_level(ch: Channel, resid: np.ndarray) -> float:
@@ -244,6 +252,30 @@ def locate_channel(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regime
                    float(chosen["mean"]), float(chosen["z"]), sigma, bins)  # type: ignore[arg-type]
 
 
+def scatter_finding(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regimes, t: np.ndarray) -> Finding | None:
+    """A wheel whose residual is unbiased in every regime and still SCATTER_MIN noise levels RMS (and
+    RELATIVE_MIN of the wheel's speed), or None.  The regime named is the bin with the largest mean square,
+    if it has SCATTER_REGIME times the whole's: a wheel that slips scatters most when the speed changes."""
+    r = resid[keep]
+    if ch.name not in WHEELS or r.size == 0:
+        return None
+    sigma = noise_level(ch, r)
+    square = float((r * r).mean())
+    if square < (SCATTER_MIN * sigma) ** 2 or square < (RELATIVE_MIN * float(np.abs(ch.y[keep]).mean())) ** 2:
+        return None
+    best = {"regime": "", "key": "all", "mean": float(r.mean()), "square": square, "n": float(r.size)}
+    for name, (labels, words) in reg.labels.items():
+        if name.startswith(relevant_regimes(ch.name)):
+            for value, text in words.items():
+                part = r[labels[keep] == value]
+                if part.size >= 10 and float((part * part).mean()) > max(best["square"], SCATTER_REGIME * square):
+                    best = {"regime": text, "key": f"{name}={value}", "mean": float(part.mean()),
+                            "square": float((part * part).mean()), "n": float(part.size)}
+    rms = float(np.sqrt(best.pop("square")))
+    return Finding(ch.name, str(best["regime"]), str(best["key"]), spans(resid, keep, t, sigma, scatter=True),
+                   float(best["mean"]), rms / sigma, sigma, [{**best, "z": rms / sigma}], rms=rms)
+
+
 def _scale_fit(ch: Channel, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
     """(y, r, a, noise): the kept windows' recorded totals y and residual totals r, the proportional error
     a = (r . y) / (y . y) and the totals' noise: the larger of the scatter about r = a y and the noise of a
@@ -302,8 +334,10 @@ def _bin_stats(r: np.ndarray, sigma: float, y: np.ndarray) -> dict[str, float] |
     return {"mean": mean, "z": z, "n": float(n)}
 
 
-def spans(resid: np.ndarray, keep: np.ndarray, t: np.ndarray, sigma: float) -> list[tuple[float, float]]:
-    """Time spans (s) where the smoothed residual stays beyond EFFECT_MIN noise floors."""
+def spans(resid: np.ndarray, keep: np.ndarray, t: np.ndarray, sigma: float,
+          scatter: bool = False) -> list[tuple[float, float]]:
+    """Time spans (s) where the smoothed residual stays beyond EFFECT_MIN noise floors (its smoothed RMS
+    beyond SCATTER_MIN, for a scatter)."""
     if not keep.any():
         return []
     period = float(np.median(np.diff(t[0]))) if t.shape[1] > 1 else 0.04
@@ -311,8 +345,10 @@ def spans(resid: np.ndarray, keep: np.ndarray, t: np.ndarray, sigma: float) -> l
     kernel = np.ones(width) / width
     found: list[tuple[float, float]] = []
     for w in np.flatnonzero(keep):
-        smooth = np.convolve(resid[w], kernel, mode="same")
-        hot = np.abs(smooth) >= EFFECT_MIN * sigma
+        if scatter:
+            hot = np.convolve(resid[w] ** 2, kernel, mode="same") >= (SCATTER_MIN * sigma) ** 2
+        else:
+            hot = np.abs(np.convolve(resid[w], kernel, mode="same")) >= EFFECT_MIN * sigma
         found += _runs(hot, t[w])
     merged: list[tuple[float, float]] = []
     for a, b in sorted(found):

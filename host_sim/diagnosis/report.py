@@ -165,7 +165,7 @@ def _located(cmp: Comparison, f: Finding) -> dict[str, Any]:
     return {"channel": f.channel, "regime": f.regime, "spans": [list(s) for s in f.spans],
             "fit_before": cmp.fit.get(f.channel, float("nan")), "words": sentence(f),
             "mean_residual": f.mean, "z": f.z, "whiteness_p": cmp.whiteness.get(f.channel),
-            "input_lag_periods": cmp.lag.get(f.channel, (None,))[0]}
+            "input_lag_periods": cmp.lag.get(f.channel, (None,))[0]} | ({"rms_residual": f.rms} if f.rms is not None else {})
 
 
 def _fit(rec: Recording, params: RobotParams, world: World | None, first: Comparison,

@@ -43,7 +43,11 @@ def spans_text(spans: list[tuple[float, float]], most: int = 4) -> str:
 
 def sentence(f: Finding) -> str:
     """e.g. "the left wheel turns slower than the twin's at low left-wheel speed, 12–14 s, 40–52 s"."""
-    parts = [what(f.channel, f.mean)]
+    if f.rms is not None:  # no bias: "the left wheel's speed scatters about the twin's (RMS 17 times its noise) ..."
+        side = "left" if f.channel == "wheel_l" else "right"
+        parts = [f"the {side} wheel's speed scatters about the twin's (RMS {f.rms / f.noise:.0f} times its noise)"]
+    else:
+        parts = [what(f.channel, f.mean)]
     parts.append(f.regime if f.regime else "everywhere")
     text = " ".join(parts)
     when = spans_text(f.spans)
