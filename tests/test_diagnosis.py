@@ -299,15 +299,17 @@ def test_the_chosen_effect_is_the_best_of_those_that_pass_held_out(tmp_path, nom
 def test_readings_that_run_behind_the_pose_are_located_on_the_ring(nominal_run):
     """Every sensor's readings two periods late: below the twin's while a sensor closes on a wall, above it
     while it draws away, on the ring's sensors that see walls.  One sensor alone late is not a latency
-    (a blind control showed that much on one sensor), and the twin's own run shows none."""
+    (a blind control showed that much on one sensor), nor are sensors late and others early, and the
+    twin's own run shows none."""
     import dataclasses
 
     from host_sim.diagnosis.compare import compare
     from host_sim.diagnosis.locate import TIMING_SENSORS_MIN, regimes, timing_findings
 
-    def late(rec, sensors):
-        on, amb = rec.ir_on.copy(), rec.ir_amb.copy()
+    def late(rec, sensors, early=()):
+        on, amb, early = rec.ir_on.copy(), rec.ir_amb.copy(), list(early)
         on[2:, sensors], amb[2:, sensors] = rec.ir_on[:-2, sensors], rec.ir_amb[:-2, sensors]
+        on[:-2, early], amb[:-2, early] = rec.ir_on[2:, early], rec.ir_amb[2:, early]
         return dataclasses.replace(rec, ir_on=on, ir_amb=amb)
 
     def timing(rec):
@@ -323,6 +325,16 @@ def test_readings_that_run_behind_the_pose_are_located_on_the_ring(nominal_run):
         assert closing < 0 < receding and f.regime_key.startswith("timing_")
     assert timing(late(nominal_run, [int(found[0].channel[3:])])) == []
     assert timing(nominal_run) == []
+    # four sensors that show it, two late and two early: no latency of the ring
+    shown = [int(f.channel[3:]) for f in found]
+    assert len(shown) >= 4 and timing(late(nominal_run, shown[:2], early=shown[2:4])) == []
+    # half a period late (20 ms, each reading blended with the one before): a sensor that sees a wall for a
+    # few dozen periods shows a half at |z| < 5, too little for a bin alone, enough on the ring
+    blend = dataclasses.replace(nominal_run, **{k: np.concatenate(
+        [v[:1], np.round(0.5 * v[1:] + 0.5 * v[:-1]).astype(v.dtype)]) for k, v in
+        (("ir_on", nominal_run.ir_on), ("ir_amb", nominal_run.ir_amb))})
+    found = timing(blend)
+    assert len(found) >= TIMING_SENSORS_MIN and any(min(abs(b["z"]) for b in f.bins) < 5 for f in found)
 
 
 def test_pressed_against_walls_nearly_the_whole_time_is_refused(tmp_path):

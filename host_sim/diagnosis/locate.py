@@ -50,6 +50,7 @@ SMOOTH_S = 0.5
 TIMING = "timing_"  # regime of sensor k: "timing_k", closing on its wall (0), steady (1), drawing away (2)
 TIMING_RATE = 0.05  # m/s along a sensor's axis: slower is steady
 TIMING_SENSORS_MIN = 3  # sensors that must show a reading running behind before it is located
+TIMING_Z = 3.0  # each half on each sensor: three sensors at 3 pool (Stouffer, sum z / sqrt 3) to 5.2 >= Z_MIN
 REGIME_SHARE_MIN = 0.05  # a regime variable must explain this share of the residual's variation to be named
 CONTACT_MARGIN = 0.005  # m beyond the body's radius: within it, a window touches a wall
 SCALE_MIN = 0.02  # a path or turn 2 % off the twin's: an odometry error worth naming
@@ -137,10 +138,12 @@ def _wall_regimes(out: Regimes, rec: Recording, rows: np.ndarray, world: World) 
 def timing_findings(chans: list[Channel], resids: dict[str, np.ndarray], keep: np.ndarray, reg: Regimes,
                     t: np.ndarray) -> list[Finding]:
     """IR sensors whose readings run behind (or ahead of) the pose: below the twin's while closing on a
-    wall and above it while drawing away (or the reverse), both significant.  A latency is the whole
-    ring's, so this is located only when TIMING_SENSORS_MIN sensors show it: one sensor alone showed it
-    on a blind control.  One finding per sensor, in its larger bin."""
-    found = []
+    wall and above it while drawing away (or the reverse), each half a mismatch at |z| >= TIMING_Z.  A
+    latency is the whole ring's, so this is located only when TIMING_SENSORS_MIN sensors show it the
+    same way round (one sensor alone showed it on a blind control); their evidence pools, so each
+    sensor is held to less than Z_MIN: one that sees a wall for a few dozen periods gives each half a
+    small z.  One finding per sensor, in its larger bin."""
+    found: dict[bool, list[Finding]] = {True: [], False: []}  # behind the pose / ahead of it
     for ch in chans:
         regime = f"{TIMING}{ch.name[3:]}"
         if not ch.name.startswith("ir_") or regime not in reg.labels:
@@ -148,15 +151,16 @@ def timing_findings(chans: list[Channel], resids: dict[str, np.ndarray], keep: n
         labels, words = reg.labels[regime]
         r, lab, y = resids[ch.name][keep], labels[keep], ch.y[keep]
         sigma = noise_level(ch, r)
-        closing, receding = (_bin_stats(r[lab == v], sigma, y[lab == v]) for v in (0, 2))
+        closing, receding = (_bin_stats(r[lab == v], sigma, y[lab == v], TIMING_Z) for v in (0, 2))
         if closing is None or receding is None or closing["mean"] * receding["mean"] >= 0:
             continue
         bins = [{"regime": words[0], "key": f"{regime}=0", **closing},
                 {"regime": words[2], "key": f"{regime}=2", **receding}]
         larger = max(bins, key=lambda b: abs(float(b["mean"])))  # type: ignore[arg-type]
-        found.append(Finding(ch.name, str(larger["regime"]), str(larger["key"]), spans(resids[ch.name], keep, t, sigma),
-                             float(larger["mean"]), float(larger["z"]), sigma, bins))  # type: ignore[arg-type]
-    return found if len(found) >= TIMING_SENSORS_MIN else []
+        found[closing["mean"] < 0].append(Finding(ch.name, str(larger["regime"]), str(larger["key"]),
+                                                  spans(resids[ch.name], keep, t, sigma), float(larger["mean"]),
+                                                  float(larger["z"]), sigma, bins))  # type: ignore[arg-type]
+    return next((same for same in found.values() if len(same) >= TIMING_SENSORS_MIN), [])
 
 
 def contact_windows(rec: Recording, windows: Windows, p: RobotParams, world: World | None) -> np.ndarray:
@@ -321,15 +325,15 @@ def locate_scale(ch: Channel, keep: np.ndarray, t: np.ndarray) -> Finding | None
                    [{"regime": regime, "key": "scale", "mean": a, "z": float(z), "n": float(n)}])
 
 
-def _bin_stats(r: np.ndarray, sigma: float, y: np.ndarray) -> dict[str, float] | None:
-    """Mean and z of a bin's residuals if they are a mismatch (significant, and large against the noise
-    and against the signal), else None."""
+def _bin_stats(r: np.ndarray, sigma: float, y: np.ndarray, z_min: float = Z_MIN) -> dict[str, float] | None:
+    """Mean and z of a bin's residuals if they are a mismatch (significant at z_min, and large against the
+    noise and against the signal), else None."""
     n = r.size
     if n < 10:
         return None
     mean = float(r.mean())
     z = mean / (max(float(r.std()), sigma) / np.sqrt(n))
-    if abs(z) < Z_MIN or abs(mean) < EFFECT_MIN * sigma or abs(mean) < RELATIVE_MIN * float(np.abs(y).mean()):
+    if abs(z) < z_min or abs(mean) < EFFECT_MIN * sigma or abs(mean) < RELATIVE_MIN * float(np.abs(y).mean()):
         return None
     return {"mean": mean, "z": z, "n": float(n)}
 
