@@ -111,8 +111,9 @@ def check_data(rec: Recording, world: World | None) -> list[str]:
                              f"(at least {MIN_WINDOWS * DEFAULT_SECONDS[0]:.0f} s; 60-90 s is better)")
     moving = np.abs(np.diff(rec.enc, axis=0)).max(axis=1) > 0
     if moving.mean() < MIN_MOVING:
-        raise DiagnosisError(f"the wheels turn in only {100 * moving.mean():.0f} % of the periods: too little "
-                             f"excitation to diagnose (run the identification manoeuvre: twinbot serial PORT --excite)")
+        raise DiagnosisError(f"the wheels turn in only {100 * moving.mean():.1f} % of the periods (at least "
+                             f"{100 * MIN_MOVING:.0f} % needed): too little excitation to diagnose (run the "
+                             f"identification manoeuvre: twinbot serial PORT --excite)")
     notes = []
     if rec.pose is None:
         notes.append("no tracker pose: judged on the encoders and the battery only; effects on the body's motion "
@@ -162,10 +163,13 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
 
 
 def _located(cmp: Comparison, f: Finding) -> dict[str, Any]:
-    return {"channel": f.channel, "regime": f.regime, "spans": [list(s) for s in f.spans],
+    item = {"channel": f.channel, "regime": f.regime, "spans": [list(s) for s in f.spans],
             "fit_before": cmp.fit.get(f.channel, float("nan")), "words": sentence(f),
             "mean_residual": f.mean, "z": f.z, "whiteness_p": cmp.whiteness.get(f.channel),
-            "input_lag_periods": cmp.lag.get(f.channel, (None,))[0]} | ({"rms_residual": f.rms} if f.rms is not None else {})
+            "input_lag_periods": cmp.lag.get(f.channel, (None,))[0]}
+    if f.rms is not None:  # a wheel that scatters without a bias (locate.scatter_finding)
+        item["rms_residual"] = f.rms
+    return item
 
 
 def _fit(rec: Recording, params: RobotParams, world: World | None, first: Comparison,
