@@ -257,9 +257,10 @@ def locate_channel(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regime
 
 
 def scatter_finding(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regimes, t: np.ndarray) -> Finding | None:
-    """A wheel whose residual is unbiased in every regime and still SCATTER_MIN noise levels RMS (and
-    RELATIVE_MIN of the wheel's speed), or None.  The regime named is the bin with the largest mean square,
-    if it has SCATTER_REGIME times the whole's: a wheel that slips scatters most when the speed changes."""
+    """A wheel whose residual is SCATTER_MIN noise levels RMS (and RELATIVE_MIN of the wheel's speed), or
+    None; asked only of a wheel no bin located (compare), whose residual has no bias.  The regime named is
+    the bin with the largest mean square, if it has SCATTER_REGIME times the whole's: a wheel that slips
+    scatters most when the speed changes."""
     r = resid[keep]
     if ch.name not in WHEELS or r.size == 0:
         return None
