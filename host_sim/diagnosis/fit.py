@@ -27,8 +27,8 @@ candidate's one linear step from absent and, for one-parameter effects, a few
 values across its range outright (SCREEN_TRIALS: threshold effects such as a
 gear's play barely move the residuals near absent; a range that spans orders
 of magnitude, a grip's or a current limit's, in even ratios, LOG_TRIALS).
-Backward elimination then drops an effect that a later one made redundant (the refitted twin
-without it is as good by the same two tests).
+Backward elimination then drops an effect that a later one made redundant
+(the refitted twin without it is as good by the same two tests).
 """
 from __future__ import annotations
 
