@@ -117,6 +117,10 @@ def test_a_wheel_that_slips_burst_by_burst_is_located_without_a_bias(tmp_path):
     d = diagnose(record_manoeuvre(tmp_path, E.apply(DEFAULT, "traction_limit", "both", [0.2])), DEFAULT, ARENA)
     wheels = [item for item in d.located if item["channel"] in ("wheel_l", "wheel_r")]
     assert len(wheels) == 2 and all("scatters" in item["words"] and item["rms_residual"] > 0 for item in wheels)
+    for finding in (f for f in d.comparisons[0].findings if f.channel in ("wheel_l", "wheel_r")):
+        # the report's picture: the RMS in every regime, the one named first and largest
+        rms = [float(b["rms"]) for b in finding.bins]
+        assert len(rms) > 3 and rms[0] == max(rms) == finding.rms and finding.bins[0]["key"] == finding.regime_key
     assert [e["name"] for e in d.effects] == ["traction_limit"], d.summary()
     assert d.effects[0]["params"]["mu"]["value"] == pytest.approx(0.2, rel=0.05)
     assert all(d.fit_after[item["channel"]] > d.fit_before[item["channel"]] for item in wheels)

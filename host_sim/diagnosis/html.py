@@ -2,7 +2,7 @@
 
 Pictures (matplotlib, embedded as PNG):
 - each located channel's residual against time, before and after the fit;
-- the same residual by the regime that gives it away (mean per bin);
+- the same residual by the regime that gives it away (mean per bin; RMS for a wheel that scatters);
 - the recorded trajectory with the twin's prediction from the start of each long window, before and after.
 """
 from __future__ import annotations
@@ -75,13 +75,19 @@ def scale_figure(before: Comparison, after: Comparison | None, name: str) -> str
     return _png(fig)
 
 
-def regime_figure(finding_bins: list[dict[str, Any]], channel: str, unit: str) -> str:
+def regime_figure(finding_bins: list[dict[str, Any]], channel: str, unit: str, scatter: bool = False) -> str:
+    """The mean residual in each regime where it is not noise; for a wheel that scatters without a bias,
+    the RMS residual in each regime, largest first."""
     plt = _pyplot()
     bins = [b for b in finding_bins if b["key"] != "all"][:12]
     fig, ax = plt.subplots(figsize=(9, 0.35 * len(bins) + 1))
-    ax.barh([str(b["regime"]) for b in bins], [float(b["mean"]) for b in bins], color="tab:red")
+    ax.barh([str(b["regime"]) for b in bins], [float(b["rms" if scatter else "mean"]) for b in bins], color="tab:red")
     ax.axvline(0, color="k", lw=0.5)
-    ax.set_xlabel(f"mean residual of {channel} ({unit}) in the regimes where it is not noise")
+    if scatter:  # each bin's z is its RMS in noise levels
+        ax.axvline(float(bins[0]["rms"]) / float(bins[0]["z"]), color="k", ls="--", lw=1, label="noise level")
+        ax.legend(fontsize=8)
+    ax.set_xlabel(f"RMS residual of {channel} ({unit}) in each regime" if scatter else
+                  f"mean residual of {channel} ({unit}) in the regimes where it is not noise")
     ax.invert_yaxis()
     return _png(fig)
 
@@ -123,7 +129,8 @@ def render(rec: Recording, d: Diagnosis) -> str:
             continue
         parts.append(f'<img src="{residual_figure(rec, before, d.after, ch)}">')
         if len(finding.bins) > 1:
-            parts.append(f'<img src="{regime_figure(finding.bins, ch, before.channel(ch).unit)}">')
+            figure = regime_figure(finding.bins, ch, before.channel(ch).unit, scatter=finding.rms is not None)
+            parts.append(f'<img src="{figure}">')
     rows = "".join(f"<tr><td>{html.escape(k)}</td><td>{d.fit_before[k]:.1f}</td>"
                    f"<td>{d.fit_after.get(k, float('nan')):.1f}</td></tr>" for k in d.fit_before
                    if np.isfinite(d.fit_before[k]))

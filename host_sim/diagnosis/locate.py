@@ -268,17 +268,22 @@ def scatter_finding(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regim
     square = float((r * r).mean())
     if square < (SCATTER_MIN * sigma) ** 2 or square < (RELATIVE_MIN * float(np.abs(ch.y[keep]).mean())) ** 2:
         return None
-    best = {"regime": "", "key": "all", "mean": float(r.mean()), "square": square, "n": float(r.size)}
+    bins = [_rms_bin("", "all", r, sigma)]  # then every regime bin, for the report's picture
     for name, (labels, words) in reg.labels.items():
         if name.startswith(relevant_regimes(ch.name)):
-            for value, text in words.items():
-                part = r[labels[keep] == value]
-                if part.size >= 10 and float((part * part).mean()) > max(best["square"], SCATTER_REGIME * square):
-                    best = {"regime": text, "key": f"{name}={value}", "mean": float(part.mean()),
-                            "square": float((part * part).mean()), "n": float(part.size)}
-    rms = float(np.sqrt(best.pop("square")))
+            bins += [_rms_bin(text, f"{name}={value}", r[labels[keep] == value], sigma) for value, text in words.items()
+                     if int((labels[keep] == value).sum()) >= 10]
+    bins.sort(key=lambda b: -float(b["rms"]))  # type: ignore[arg-type]
+    whole = next(b for b in bins if b["key"] == "all")
+    best = bins[0] if float(bins[0]["rms"]) ** 2 >= SCATTER_REGIME * square else whole  # type: ignore[arg-type]
     return Finding(ch.name, str(best["regime"]), str(best["key"]), spans(resid, keep, t, sigma, scatter=True),
-                   float(best["mean"]), rms / sigma, sigma, [{**best, "z": rms / sigma}], rms=rms)
+                   float(best["mean"]), float(best["z"]), sigma, [best] + [b for b in bins if b is not best],
+                   rms=float(best["rms"]))  # type: ignore[arg-type]
+
+
+def _rms_bin(regime: str, key: str, r: np.ndarray, sigma: float) -> dict[str, object]:
+    rms = float(np.sqrt((r * r).mean()))
+    return {"regime": regime, "key": key, "mean": float(r.mean()), "rms": rms, "z": rms / sigma, "n": float(r.size)}
 
 
 def _scale_fit(ch: Channel, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
