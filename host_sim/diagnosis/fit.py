@@ -53,7 +53,7 @@ FITTED_TOTALS = ("forward", "heading_rate")
 SHORTLIST = 4  # candidates fitted in full after screening
 WITHIN_NOISE = 1.0  # held-out cost per weighted residual below which no further effect is sought
 SCREEN_TRIALS = (0.02, 0.15, 0.5)  # of a one-parameter effect's range: values the screening also tries outright
-# (0.02: a small play or delay)
+# (0.02 came for a 36 mA current limit, now tried in ratios; kept: the suites were measured with it)
 LOG_TRIALS = 8  # a range with 0 < lower <= upper / 10 is tried at lower * (upper / lower) ** (k / 8), k = 1..7: a
 # grip's cost has a narrow valley (ice at mu 0.1: 20 % off costs 6-17 times more), so the trials must not step over it
 P_MAX = 1e-4  # F test against the twin without the effect
@@ -289,10 +289,10 @@ def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candid
                    for i in range(len(x0))]
         trials = screen_trials(cand.name)
         robots += [E.apply(current.params, cand.name, cand.site, [x]) for x in trials]
-        slots.append((first, h, lo - x0, hi - x0, trials))
+        slots.append((first, x0, h, lo - x0, hi - x0, trials))
     train, _test = obj.residuals(robots)
     predicted, starts = [], []
-    for cand, (first, h, dlo, dhi, trials) in zip(cands, slots):
+    for first, x0, h, dlo, dhi, trials in slots:
         r0 = train[first]
         jac = ((train[first + 1:first + 1 + len(h)] - r0) / h[:, None]).T
         step, *_ = np.linalg.lstsq(jac, -r0, rcond=None)
@@ -301,7 +301,6 @@ def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candid
         tried = train[first + 1 + len(h):first + 1 + len(h) + len(trials)]
         costs = [float(resid @ resid)] + [float(r @ r) for r in tried]
         best = int(np.argmin(costs))
-        x0 = np.array(_start_values(base, cand))
         starts.append(list(x0 + step) if best == 0 else [trials[best - 1]])
         predicted.append(costs[best])
     order = np.argsort(predicted)
