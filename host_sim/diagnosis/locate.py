@@ -268,13 +268,13 @@ def scatter_finding(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regim
     square = float((r * r).mean())
     if square < (SCATTER_MIN * sigma) ** 2 or square < (RELATIVE_MIN * float(np.abs(ch.y[keep]).mean())) ** 2:
         return None
-    bins = [_rms_bin("", "all", r, sigma)]  # then every regime bin, for the report's picture
+    whole = _rms_bin("", "all", r, sigma)
+    bins = [whole]  # and every regime bin, for the report's picture
     for name, (labels, words) in reg.labels.items():
         if name.startswith(relevant_regimes(ch.name)):
             bins += [_rms_bin(text, f"{name}={value}", r[labels[keep] == value], sigma) for value, text in words.items()
                      if int((labels[keep] == value).sum()) >= 10]
     bins.sort(key=lambda b: -float(b["rms"]))  # type: ignore[arg-type]
-    whole = next(b for b in bins if b["key"] == "all")
     best = bins[0] if float(bins[0]["rms"]) ** 2 >= SCATTER_REGIME * square else whole  # type: ignore[arg-type]
     return Finding(ch.name, str(best["regime"]), str(best["key"]), spans(resid, keep, t, sigma, scatter=True),
                    float(best["mean"]), float(best["z"]), sigma, [best] + [b for b in bins if b is not best],
