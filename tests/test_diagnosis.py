@@ -25,11 +25,15 @@ ROOM = builtin_world("paper_room")
 ARENA = builtin_world("arena")
 
 
-def record(tmp_path, params=DEFAULT, duration=30.0, name="run.csv", rules=1, seed=4):
+def record(tmp_path, params=DEFAULT, duration=30.0, name="run.csv", rules=1, seed=4, world=ROOM, controller=None,
+           pose=None):
+    """A fixed-step recording of the twin with `params`, its sidecar saying the nominal robot (what the user
+    believes); the firmware explores with `rules` unless another controller is given."""
     path = tmp_path / name
     with RecordingWriter(path, source="simulator", sample_period=0.04, robot=DEFAULT.to_json(),
-                         world=ROOM.to_dict(), extra={"mode": "fixed"}) as w:
-        Simulation(ROOM, params, SilController(rules), seed=seed, recorder=w).run_fixed(duration)
+                         world=world.to_dict(), extra={"mode": "fixed"}) as w:
+        Simulation(world, params, controller or SilController(rules), seed=seed, recorder=w,
+                   pose=pose).run_fixed(duration)
     return load_recording(path)
 
 
@@ -88,11 +92,8 @@ def record_manoeuvre(tmp_path, params, duration=30.0):
     `twinbot sim --excite` records it."""
     from host_sim.excitation import ExcitedController
 
-    path = tmp_path / f"excited_{len(list(tmp_path.iterdir()))}.csv"
-    with RecordingWriter(path, source="simulator", sample_period=0.04, robot=DEFAULT.to_json(),
-                         world=ARENA.to_dict(), extra={"mode": "fixed"}) as w:
-        Simulation(ARENA, params, ExcitedController(SilController(1)), seed=4, recorder=w).run_fixed(duration)
-    return load_recording(path)
+    return record(tmp_path, params, duration, name=f"excited_{len(list(tmp_path.iterdir()))}.csv", world=ARENA,
+                  controller=ExcitedController(SilController(1)))
 
 
 @pytest.mark.parametrize("effect,true_value", [
@@ -344,16 +345,12 @@ def test_readings_that_run_behind_the_pose_are_located_on_the_ring(nominal_run):
 def test_pressed_against_walls_nearly_the_whole_time_is_refused(tmp_path):
     """Driven into a wall and held there: 2 of 19 windows are away from it, too few to judge anything on (a
     held-out window or none): a plain refusal, not a `match`."""
-    from host_sim.world import builtin_world
     from tools.proving_ground.recorder import ProgramController
 
-    arena, path = builtin_world("arena"), tmp_path / "pressed.csv"
-    with RecordingWriter(path, source="simulator", sample_period=0.04, robot=DEFAULT.to_json(),
-                         world=arena.to_dict(), extra={"mode": "fixed"}) as w:
-        Simulation(arena, DEFAULT, ProgramController([(0.06, 0.065)] * 75 + [(0.45, 0.4)] * 425), seed=4, recorder=w,
-                   pose=(1.4, 1.4, 5 * np.pi / 4)).run_fixed(20.0)
+    pressed = record(tmp_path, duration=20.0, name="pressed.csv", world=ARENA, pose=(1.4, 1.4, 5 * np.pi / 4),
+                     controller=ProgramController([(0.06, 0.065)] * 75 + [(0.45, 0.4)] * 425))
     with pytest.raises(DiagnosisError, match="touches a wall in 17 of 19 windows"):
-        diagnose(load_recording(path), DEFAULT, arena)
+        diagnose(pressed, DEFAULT, ARENA)
 
 
 def test_a_value_near_a_small_bound_is_a_measurement_not_a_pin():
@@ -377,12 +374,9 @@ def test_the_speed_rising_and_falling_are_regimes_apart(tmp_path):
     from host_sim.world import World
     from tools.proving_ground.recorder import ProgramController
 
-    floor, path = World(name="floor", size=(20.0, 20.0), walls=[]), tmp_path / "steps.csv"
-    with RecordingWriter(path, source="simulator", sample_period=0.04, robot=DEFAULT.to_json(),
-                         world=floor.to_dict(), extra={"mode": "fixed"}) as w:
-        Simulation(floor, DEFAULT, ProgramController(([(0.15, 0.15)] * 12 + [(0.0, 0.0)] * 13) * 12), seed=4,
-                   recorder=w, pose=(10.0, 10.0, 0.0)).run_fixed(12.0)
-    rec = load_recording(path)
+    floor = World(name="floor", size=(20.0, 20.0), walls=[])
+    rec = record(tmp_path, duration=12.0, name="steps.csv", world=floor, pose=(10.0, 10.0, 0.0),
+                 controller=ProgramController(([(0.15, 0.15)] * 12 + [(0.0, 0.0)] * 13) * 12))
     w = make_windows(rec, 1.0)
     labels, words = regimes(rec, w, DEFAULT, floor).labels["acceleration"]
     mean = _wheel_speeds(rec, w.index, DEFAULT).mean(-1)
