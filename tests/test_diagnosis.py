@@ -14,6 +14,8 @@ import pytest
 
 from host_sim import effects as E
 from host_sim.diagnosis import DiagnosisError, diagnose
+from host_sim.diagnosis.compare import compare
+from host_sim.diagnosis.report import check_excitation
 from host_sim.params import DEFAULT, load_params
 from host_sim.recording import RecordingWriter, load_recording
 from host_sim.sil import SilController
@@ -172,9 +174,27 @@ def test_too_short_or_too_still_is_said_plainly(tmp_path):
     with pytest.raises(DiagnosisError, match="too short"):
         diagnose(short, DEFAULT, ROOM)
     still = record(tmp_path, duration=10.0, name="still.csv")
-    still.enc[:] = still.enc[:1]  # the wheels never turned
+    still.enc[:] = still.enc[:1]  # the wheels never turned ...
+    still.cmd[:] = 0.0  # ... nor were they driven
     with pytest.raises(DiagnosisError, match=r"only 0\.0 % of the periods \(at least 20 % needed\): too little"):
         diagnose(still, DEFAULT, ROOM)
+
+
+def test_wheels_that_stand_still_while_driven_are_a_mismatch_away_from_walls_and_too_little_at_one(tmp_path):
+    """The excitation is in the commands: a seized robot in the open is diagnosed, one held at a wall (or one
+    without a tracker to tell) is refused, and the refusal says why."""
+    seized = record(tmp_path, duration=10.0, name="seized.csv")
+    seized.enc[:] = seized.enc[:1]  # driven by the firmware's commands, the wheels never turned
+    check_excitation(seized, compare(seized, DEFAULT, ROOM, locate=False))
+    with pytest.raises(DiagnosisError, match="without a tracker a wall cannot be told from a seized wheel"):
+        pose, seized.pose = seized.pose, None
+        check_excitation(seized, compare(seized, DEFAULT, ROOM, locate=False))
+    seized.pose = pose
+    x0, y0, x1, _y1 = ROOM.to_dict()["walls"][0]["segment"]
+    seized.pose[:] = (0.5 * (x0 + x1), y0 + DEFAULT.body_radius, 0.0)  # the tracker sees it against a wall
+    with pytest.raises(DiagnosisError, match=r"only 0\.0 % .* turns them in \d+\.\d %, but the robot touches a "
+                                             r"wall in 9 of 9 windows\): too little excitation"):
+        check_excitation(seized, compare(seized, DEFAULT, ROOM, locate=False))
 
 
 def test_without_a_tracker_the_encoders_are_judged_and_the_limits_said(nominal_run):

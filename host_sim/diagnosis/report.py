@@ -17,7 +17,7 @@ from host_sim import effects as E
 from host_sim.diagnosis.apart import tell_apart
 from host_sim.diagnosis.compare import Comparison, compare_all
 from host_sim.diagnosis.fit import Model, Objective, candidates_for, fit_totals, objective_channels, select
-from host_sim.diagnosis.channels import ACCUMULATED
+from host_sim.diagnosis.channels import ACCUMULATED, WHEELS
 from host_sim.diagnosis.locate import Finding, noise_level, regimes, total_noise
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
 from host_sim.diagnosis.words import sentence
@@ -27,7 +27,7 @@ from host_sim.world import World
 
 MIN_WINDOWS = 6  # 1 s windows: fewer and the held-out judgement rests on one or two windows
 MIN_FREE_WINDOWS = MIN_WINDOWS  # of them away from the walls: the contact windows are judged apart
-MIN_MOVING = 0.2  # share of periods in which a wheel turns: less and the recording says little of the physics
+MIN_MOVING = 0.2  # share of periods in which a wheel turns, on the robot or the twin: less says little of the physics
 
 
 class DiagnosisError(ValueError):
@@ -104,16 +104,11 @@ def excitation_notes(rec: Recording, first: Comparison, params: RobotParams, wor
 
 
 def check_data(rec: Recording, world: World | None) -> list[str]:
-    """Refuse what cannot be diagnosed; return notes on what this recording cannot show."""
+    """Refuse what is too short to diagnose; return notes on what this recording cannot show."""
     period = rec.sample_period
     if len(rec) * period < MIN_WINDOWS * DEFAULT_SECONDS[0]:
         raise DiagnosisError(f"the recording lasts {len(rec) * period:.1f} s: too short to diagnose "
                              f"(at least {MIN_WINDOWS * DEFAULT_SECONDS[0]:.0f} s; 60-90 s is better)")
-    moving = np.abs(np.diff(rec.enc, axis=0)).max(axis=1) > 0
-    if moving.mean() < MIN_MOVING:
-        raise DiagnosisError(f"the wheels turn in only {100 * moving.mean():.1f} % of the periods (at least "
-                             f"{100 * MIN_MOVING:.0f} % needed): too little excitation to diagnose (run the "
-                             f"identification manoeuvre: twinbot serial PORT --excite)")
     notes = []
     if rec.pose is None:
         notes.append("no tracker pose: judged on the encoders and the battery only; effects on the body's motion "
@@ -123,6 +118,30 @@ def check_data(rec: Recording, world: World | None) -> list[str]:
     return notes
 
 
+def check_excitation(rec: Recording, first: Comparison) -> None:
+    """Refuse a recording in which the wheels hardly turn, unless the commands would turn the twin's.
+
+    The excitation is in the commands: a robot that stands still away from the walls while its motors are
+    driven (a seized wheel, say) is a mismatch to diagnose, not missing data.  Held against a wall (or
+    without a tracker, which cannot tell a wall from a seized wheel) it is too little to judge.
+    """
+    wheels = [first.channel(name) for name in WHEELS]
+    robot = np.any([np.abs(c.y) >= 1 for c in wheels], axis=0)
+    twin = np.any([np.abs(c.y_hat[:, 0]) >= 0.5 for c in wheels], axis=0)  # rounds to a tick
+    free = ~first.contact[:, None] if rec.pose is not None else np.zeros((len(first.contact), 1), bool)
+    if (robot | (twin & free)).mean() >= MIN_MOVING:
+        return
+    why = ""
+    held = twin & ~robot & ~free
+    if held.mean() >= MIN_MOVING:
+        why = (f"; the twin, driven by the same commands, turns them in {100 * (robot | twin).mean():.1f} %, but "
+               + (f"the robot touches a wall in {int(first.contact.sum())} of {len(first.contact)} windows"
+                  if rec.pose is not None else "without a tracker a wall cannot be told from a seized wheel"))
+    raise DiagnosisError(f"the wheels turn in only {100 * robot.mean():.1f} % of the periods (at least "
+                         f"{100 * MIN_MOVING:.0f} % needed{why}): too little excitation to diagnose (run the "
+                         f"identification manoeuvre: twinbot serial PORT --excite)")
+
+
 def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
              seconds: tuple[float, ...] = DEFAULT_SECONDS, progress: Callable[[str], None] | None = None) -> Diagnosis:
     notes = check_data(rec, world)
@@ -130,6 +149,7 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     say("comparing the twin with the recording")
     comparisons = compare_all(rec, params, world, seconds)
     first = comparisons[0]
+    check_excitation(rec, first)
     if int((~first.contact).sum()) < MIN_FREE_WINDOWS:
         raise DiagnosisError(f"the robot touches a wall in {int(first.contact.sum())} of {len(first.contact)} windows: "
                              f"pressed against walls nearly the whole time, too little else to judge (at least "
