@@ -217,3 +217,25 @@ def test_the_diagnosis_is_blind(suite: dict[str, Any], tmp_path: Path) -> None:
     shutil.copy(str(src) + ".json", tmp_path / (src.name + ".json"))
     alone = bench_diagnose.diagnose_blind(str(tmp_path / src.name))
     assert alone.get("diagnosis", {}).get("verdict", alone.get("error")) == control["verdict"]
+
+
+def test_the_margins_bench_reads_the_kept_suite_and_agrees_with_the_diagnosis(suite: dict[str, Any],
+                                                                               tmp_path: Path) -> None:
+    """`twinbot bench margins --suite DIR` on what `bench diagnose --out DIR` kept: a row per recording, and
+    a rule at 1 or more exactly where the diagnosis located something (a margin is the rules' own test)."""
+    out = tmp_path / "margins.json"
+    assert cli.main(["bench", "margins", "--suite", str(suite["out"]), "--json", str(out), "--quiet"]) == 0
+    report = json.loads(out.read_text())
+    verdicts = {r["case"]: r["verdict"] for r in suite["report"]["cases"]}
+    assert sorted(r["case"] for r in report["cases"]) == sorted(verdicts)
+    for row in report["cases"]:
+        if "refused" in row:
+            assert verdicts[row["case"]].startswith("refused")
+            continue
+        assert set(row["margins"]) == {"bias", "scale", "scatter", "timing"}
+        reached = any(m >= 1 for m, _where in row["margins"].values())
+        assert reached == (verdicts[row["case"]] != "match"), row
+    controls = [r for r in report["cases"] if r["control"] and "margins" in r]
+    bias = next(s for s in report["summary"] if s["rule"] == "bias")
+    assert bias["controls"] == len(controls) and report["targets"][0]["met"] == all(
+        m < 1 for r in controls for m, _where in r["margins"].values())

@@ -14,7 +14,7 @@ import pytest
 
 from host_sim import effects as E
 from host_sim.diagnosis import DiagnosisError, diagnose
-from host_sim.diagnosis.compare import compare
+from host_sim.diagnosis.compare import compare, rule_margins
 from host_sim.diagnosis.report import check_excitation
 from host_sim.params import DEFAULT, load_params
 from host_sim.recording import RecordingWriter, load_recording
@@ -47,6 +47,10 @@ def nominal_run(tmp_path_factory):
 def test_the_twins_own_recording_is_a_match(nominal_run):
     d = diagnose(nominal_run, DEFAULT, ROOM)
     assert d.verdict == "match" and not d.located and not d.effects
+    # every locate rule stays below its threshold (twinbot bench margins measures it on blind controls)
+    margins = rule_margins(d.comparisons[0], nominal_run, DEFAULT, ROOM)
+    assert set(margins) == {"bias", "scale", "scatter", "timing"} and all(m < 1 for m, _w in margins.values())
+    assert margins["bias"][0] > 0 and margins["scatter"][0] > 0  # measured, not absent
     assert d.fit_before["wheel_l"] > 90 and d.fit_before["heading_rate"] > 95
 
 
@@ -116,8 +120,12 @@ def test_an_effect_only_the_identification_manoeuvre_excites_is_named(tmp_path, 
 def test_a_wheel_that_slips_burst_by_burst_is_located_without_a_bias(tmp_path):
     """A grip of 0.2: the wheels spin ahead of the twin's and fall back, a residual that averages out in
     every regime bin, many times the wheels' noise.  The nominal twin's own manoeuvre scatters within it."""
-    assert diagnose(record_manoeuvre(tmp_path, DEFAULT), DEFAULT, ARENA).verdict == "match"
-    d = diagnose(record_manoeuvre(tmp_path, E.apply(DEFAULT, "traction_limit", "both", [0.2])), DEFAULT, ARENA)
+    nominal = record_manoeuvre(tmp_path, DEFAULT)
+    d = diagnose(nominal, DEFAULT, ARENA)
+    assert d.verdict == "match" and rule_margins(d.comparisons[0], nominal, DEFAULT, ARENA)["scatter"][0] < 1
+    slipping = record_manoeuvre(tmp_path, E.apply(DEFAULT, "traction_limit", "both", [0.2]))
+    d = diagnose(slipping, DEFAULT, ARENA)
+    assert rule_margins(d.comparisons[0], slipping, DEFAULT, ARENA)["scatter"][0] >= 1
     wheels = [item for item in d.located if item["channel"] in ("wheel_l", "wheel_r")]
     assert len(wheels) == 2 and all("scatters" in item["words"] and item["rms_residual"] > 0 for item in wheels)
     for finding in (f for f in d.comparisons[0].findings if f.channel in ("wheel_l", "wheel_r")):
@@ -329,7 +337,7 @@ def test_readings_that_run_behind_the_pose_are_located_on_the_ring(nominal_run):
     import dataclasses
 
     from host_sim.diagnosis.compare import compare
-    from host_sim.diagnosis.locate import TIMING_SENSORS_MIN, regimes, timing_findings
+    from host_sim.diagnosis.locate import TIMING_SENSORS_MIN, regimes, timing_findings, timing_margin
 
     def late(rec, sensors, early=()):
         on, amb, early = rec.ir_on.copy(), rec.ir_amb.copy(), list(early)
@@ -340,8 +348,10 @@ def test_readings_that_run_behind_the_pose_are_located_on_the_ring(nominal_run):
     def timing(rec):
         cmp = compare(rec, DEFAULT, ROOM, locate=False)
         resids = {c.name: c.residual() for c in cmp.channels}
-        t = rec.t[cmp.windows.index[:, :-1]]
-        return timing_findings(cmp.channels, resids, ~cmp.contact, regimes(rec, cmp.windows, DEFAULT, ROOM), t)
+        t, reg = rec.t[cmp.windows.index[:, :-1]], regimes(rec, cmp.windows, DEFAULT, ROOM)
+        found = timing_findings(cmp.channels, resids, ~cmp.contact, reg, t)
+        assert (timing_margin(cmp.channels, resids, ~cmp.contact, reg)[0] >= 1) == bool(found)  # the bench's margin
+        return found
 
     found = timing(late(nominal_run, list(range(8))))
     assert len(found) >= TIMING_SENSORS_MIN

@@ -184,6 +184,17 @@ def input_file(text: str) -> str:
     return text
 
 
+def suite_folder(text: str) -> str:
+    """A blind suite to read: DIR/recordings with case_*.csv, DIR/answer_keys (twinbot bench diagnose --out DIR)."""
+    path = Path(text)
+    if not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: no such folder")
+    if not any(path.joinpath("recordings").glob("case_*.csv")) or not path.joinpath("answer_keys").is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: not a suite (it needs recordings/case_*.csv and answer_keys/, "
+                                         f"what 'twinbot bench diagnose --out DIR' keeps)")
+    return text
+
+
 def warn(command: str, text: str) -> None:
     """A warning of a subcommand: one line on stderr."""
     print(f"twinbot {command}: warning: {text}", file=sys.stderr)

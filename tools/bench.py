@@ -31,6 +31,9 @@ BENCHMARKS = (
      "diagnosis proven blind: a suite of MuJoCo recordings with concealed effects, diagnosed, scored against "
      "the answer keys (names, sides, parameters, held-out fit, false alarms, out-of-library, seconds), with "
      "PySINDy beside it"),
+    ("margins", "tools.bench_margins",
+     "the diagnosis's locate rules on a blind suite: how far below its threshold each stays on the "
+     "effect-free controls, and how many of the cases it is there to find it reaches"),
     ("ghost", "tools.bench_ghost",
      "late-signal twin: the ghost's pose error against the raw late pose behind a 0-300 ms late link, "
      "and its latency estimate"),

@@ -15,8 +15,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from host_sim.diagnosis.channels import ACCUMULATED, WHEELS, Channel, build_channels, fit_percent
-from host_sim.diagnosis.locate import (Finding, contact_windows, input_lag, ljung_box, locate_channel, locate_scale,
-                                      regimes, scatter_finding, timing_findings)
+from host_sim.diagnosis.locate import (Finding, bias_margin, contact_windows, input_lag, ljung_box, locate_channel,
+                                      locate_scale, regimes, scale_margin, scatter_finding, scatter_margin,
+                                      timing_findings, timing_margin)
 from host_sim.diagnosis.windows import DEFAULT_SECONDS, Windows, make_windows, run_windows, unjudged_readings
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
@@ -96,6 +97,26 @@ def _locate(cmp: Comparison, rec: Recording, p: RobotParams, world: World | None
             cmp.lag[ch.name] = input_lag(resid[keep], u[keep])
 
 
+def rule_margins(cmp: Comparison, rec: Recording, p: RobotParams, world: World | None) -> dict[str, tuple[float, str]]:
+    """How near each locate rule comes to a finding on this comparison, and where: rule -> (the largest
+    margin over the channels it judges, the channel and bin).  At 1 or more the rule locates something;
+    `twinbot bench margins` shows how far below 1 the blind controls stay."""
+    reg = regimes(rec, cmp.windows, p, world)
+    keep = ~cmp.contact
+    resids = {ch.name: ch.residual() for ch in cmp.channels if ch.locate}
+    out = {"bias": (0.0, ""), "scale": (0.0, ""), "scatter": (0.0, ""), "timing": timing_margin(cmp.channels, resids, keep, reg)}
+    for ch in cmp.channels:
+        if not ch.locate:
+            continue
+        margin, key = bias_margin(ch, resids[ch.name], keep, reg)
+        out["bias"] = max(out["bias"], (margin, f"{ch.name} {key}"))
+        if ch.name in WHEELS:
+            out["scatter"] = max(out["scatter"], (scatter_margin(ch, resids[ch.name], keep), ch.name))
+        if ch.name in ACCUMULATED:
+            out["scale"] = max(out["scale"], (scale_margin(ch, keep), ACCUMULATED[ch.name]))
+    return {rule: (float(margin), where) for rule, (margin, where) in out.items()}
+
+
 def compare_all(rec: Recording, params: RobotParams, world: World | None,
                 seconds: tuple[float, ...] = DEFAULT_SECONDS) -> list[Comparison]:
     """One comparison per window length that fits the recording (the shortest one locates)."""
@@ -106,4 +127,4 @@ def compare_all(rec: Recording, params: RobotParams, world: World | None,
     return out
 
 
-__all__ = ["Comparison", "compare", "compare_all", "held_out_fit"]
+__all__ = ["Comparison", "compare", "compare_all", "held_out_fit", "rule_margins"]

@@ -256,18 +256,55 @@ def locate_channel(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regime
                    float(chosen["mean"]), float(chosen["z"]), sigma, bins)  # type: ignore[arg-type]
 
 
+def bias_margin(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regimes) -> tuple[float, str]:
+    """The largest bin margin of a channel (bin_margin), over the whole and every regime bin that
+    locate_channel judges, and that bin's key: locate_channel locates the channel at 1 or more."""
+    r = resid[keep]
+    if r.size == 0:
+        return 0.0, ""
+    sigma = noise_level(ch, r)
+    y = ch.y[keep] if ch.relative else np.zeros_like(r)
+    parts = [("all", np.ones(r.shape, dtype=bool))]
+    for name, (labels, words) in reg.labels.items():
+        if name.startswith(relevant_regimes(ch.name)):
+            parts += [(f"{name}={value}", labels[keep] == value) for value in words]
+    return max(((bin_margin(r[m], sigma, y[m])[0], key) for key, m in parts if int(m.sum()) >= 10),
+               default=(0.0, ""))
+
+
+def timing_margin(chans: list[Channel], resids: dict[str, np.ndarray], keep: np.ndarray,
+                  reg: Regimes) -> tuple[float, str]:
+    """How near timing_findings comes to a latency, and on which sensors: per sensor the weaker of its two
+    halves' margins at TIMING_Z (0 unless they lie opposite ways round), and of the sensors the same way
+    round the TIMING_SENSORS_MIN-th largest: at 1 or more a latency is located."""
+    ways: dict[bool, list[tuple[float, str]]] = {True: [], False: []}  # behind the pose / ahead of it
+    for ch in chans:
+        regime = f"{TIMING}{ch.name[3:]}"
+        if not ch.name.startswith("ir_") or regime not in reg.labels:
+            continue
+        lab, r, y = reg.labels[regime][0][keep], resids[ch.name][keep], ch.y[keep]
+        sigma = noise_level(ch, r)
+        halves = [bin_margin(r[lab == v], sigma, y[lab == v], TIMING_Z) for v in (0, 2) if int((lab == v).sum()) >= 10]
+        if len(halves) == 2 and halves[0][1] * halves[1][1] < 0:
+            ways[halves[0][1] < 0].append((min(halves[0][0], halves[1][0]), ch.name))
+    best = (0.0, "")
+    for found in ways.values():
+        found.sort(reverse=True)
+        if len(found) >= TIMING_SENSORS_MIN:
+            best = max(best, (found[TIMING_SENSORS_MIN - 1][0], " ".join(n for _m, n in found[:TIMING_SENSORS_MIN])))
+    return best
+
+
 def scatter_finding(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regimes, t: np.ndarray) -> Finding | None:
     """A wheel whose residual is SCATTER_MIN noise levels RMS (and RELATIVE_MIN of the wheel's speed), or
     None; asked only of a wheel no bin located (compare), whose residual has no bias.  The regime named is
     the bin with the largest mean square, if it has SCATTER_REGIME times the whole's: a wheel that slips
     scatters most when the speed changes."""
     r = resid[keep]
-    if ch.name not in WHEELS or r.size == 0:
+    if ch.name not in WHEELS or r.size == 0 or scatter_margin(ch, resid, keep) < 1.0:
         return None
     sigma = noise_level(ch, r)
     square = float((r * r).mean())
-    if square < (SCATTER_MIN * sigma) ** 2 or square < (RELATIVE_MIN * float(np.abs(ch.y[keep]).mean())) ** 2:
-        return None
     whole = _rms_bin("", "all", r, sigma)
     bins = [whole]  # and every regime bin, for the report's picture
     for name, (labels, words) in reg.labels.items():
@@ -279,6 +316,17 @@ def scatter_finding(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regim
     return Finding(ch.name, str(best["regime"]), str(best["key"]), spans(resid, keep, t, sigma, scatter=True),
                    float(best["mean"]), float(best["z"]), sigma, [best] + [b for b in bins if b is not best],
                    rms=float(best["rms"]))  # type: ignore[arg-type]
+
+
+def scatter_margin(ch: Channel, resid: np.ndarray, keep: np.ndarray) -> float:
+    """A wheel's residual RMS against the weaker of its two thresholds (SCATTER_MIN noise levels,
+    RELATIVE_MIN of the wheel's speed): scatter_finding locates it at 1 or more."""
+    r = resid[keep]
+    if r.size == 0:
+        return 0.0
+    rms = float(np.sqrt((r * r).mean()))
+    signal = RELATIVE_MIN * float(np.abs(ch.y[keep]).mean())
+    return min(rms / (SCATTER_MIN * noise_level(ch, r)), rms / signal if signal > 0 else np.inf)
 
 
 def _rms_bin(regime: str, key: str, r: np.ndarray, sigma: float) -> dict[str, object]:
@@ -305,20 +353,29 @@ def total_noise(ch: Channel, keep: np.ndarray) -> float:
     return _scale_fit(ch, keep)[3]
 
 
+def scale_margin(ch: Channel, keep: np.ndarray) -> float:
+    """A channel's proportional error over whole windows against the weaker of its thresholds (|z| >= Z_MIN,
+    |a| >= SCALE_MIN, SCALE_MIN_COUNTS for a count): locate_scale locates it at 1 or more.  0 when it is
+    not judged: too few windows, or a robot that hardly turned (travelled), whose proportion is noise."""
+    y, _r, a, noise = _scale_fit(ch, keep)
+    n, syy = y.size, float(y @ y)
+    if n < SCALE_WINDOWS_MIN or np.sqrt(syy / max(n, 1)) < SCALE_SIGNAL_MIN * noise:
+        return 0.0
+    z = a / (noise / np.sqrt(syy))
+    return min(abs(z) / Z_MIN, abs(a) / (SCALE_MIN_COUNTS if ch.name in WHEELS else SCALE_MIN))
+
+
 def locate_scale(ch: Channel, keep: np.ndarray, t: np.ndarray) -> Finding | None:
     """A proportional error of a channel summed over whole windows (channels.ACCUMULATED), or None.
 
     Each kept window's total, recorded y against the twin's: the residual r = y - y_hat regressed on y
     through the origin (_scale_fit), with a standard error from the totals' noise.
     """
+    if scale_margin(ch, keep) < 1.0:
+        return None
     name, regime = ACCUMULATED[ch.name], SCALE_REGIME
     y, r, a, noise = _scale_fit(ch, keep)
-    n, syy = y.size, float(y @ y)
-    if n < SCALE_WINDOWS_MIN or np.sqrt(syy / max(n, 1)) < SCALE_SIGNAL_MIN * noise:
-        return None  # too few windows, or a robot that hardly turned (travelled): a proportion of noise
-    z = a / (noise / np.sqrt(syy))
-    if abs(z) < Z_MIN or abs(a) < (SCALE_MIN_COUNTS if ch.name in WHEELS else SCALE_MIN):
-        return None
+    n, z = y.size, a / (noise / np.sqrt(float(y @ y)))
     off = np.abs(r) > 2.0 * noise  # the windows where it shows beyond the noise
     found: list[tuple[float, float]] = []
     for w in np.flatnonzero(keep)[off]:
@@ -331,17 +388,25 @@ def locate_scale(ch: Channel, keep: np.ndarray, t: np.ndarray) -> Finding | None
                    [{"regime": regime, "key": "scale", "mean": a, "z": float(z), "n": float(n)}])
 
 
-def _bin_stats(r: np.ndarray, sigma: float, y: np.ndarray, z_min: float = Z_MIN) -> dict[str, float] | None:
-    """Mean and z of a bin's residuals if they are a mismatch (significant at z_min, and large against the
-    noise and against the signal), else None."""
-    n = r.size
-    if n < 10:
-        return None
+def bin_margin(r: np.ndarray, sigma: float, y: np.ndarray, z_min: float = Z_MIN) -> tuple[float, float, float]:
+    """(margin, mean, z) of a bin's residuals.  The margin is the weakest of the three tests, each as a
+    ratio to its threshold (significant at z_min, large against the noise, large against the signal):
+    at 1 or more the bin is a mismatch."""
     mean = float(r.mean())
-    z = mean / (max(float(r.std()), sigma) / np.sqrt(n))
-    if abs(z) < z_min or abs(mean) < EFFECT_MIN * sigma or abs(mean) < RELATIVE_MIN * float(np.abs(y).mean()):
+    z = mean / (max(float(r.std()), sigma) / np.sqrt(r.size))
+    signal = RELATIVE_MIN * float(np.abs(y).mean())
+    margin = min(abs(z) / z_min, abs(mean) / (EFFECT_MIN * sigma), abs(mean) / signal if signal > 0 else np.inf)
+    return margin, mean, z
+
+
+def _bin_stats(r: np.ndarray, sigma: float, y: np.ndarray, z_min: float = Z_MIN) -> dict[str, float] | None:
+    """Mean and z of a bin's residuals if they are a mismatch (bin_margin >= 1, on 10 or more), else None."""
+    if r.size < 10:
         return None
-    return {"mean": mean, "z": z, "n": float(n)}
+    margin, mean, z = bin_margin(r, sigma, y, z_min)
+    if margin < 1.0:
+        return None
+    return {"mean": mean, "z": z, "n": float(r.size)}
 
 
 def spans(resid: np.ndarray, keep: np.ndarray, t: np.ndarray, sigma: float,

@@ -142,6 +142,16 @@ def check_excitation(rec: Recording, first: Comparison) -> None:
                          f"identification manoeuvre: twinbot serial PORT --excite)")
 
 
+def check_judgeable(rec: Recording, first: Comparison) -> None:
+    """Refuse a recording the comparison shows too little of: wheels that hardly turn (check_excitation),
+    or a robot pressed against walls nearly the whole time."""
+    check_excitation(rec, first)
+    if int((~first.contact).sum()) < MIN_FREE_WINDOWS:
+        raise DiagnosisError(f"the robot touches a wall in {int(first.contact.sum())} of {len(first.contact)} windows: "
+                             f"pressed against walls nearly the whole time, too little else to judge (at least "
+                             f"{MIN_FREE_WINDOWS} windows of {first.seconds:g} s away from the walls)")
+
+
 def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
              seconds: tuple[float, ...] = DEFAULT_SECONDS, progress: Callable[[str], None] | None = None) -> Diagnosis:
     notes = check_data(rec, world)
@@ -149,11 +159,7 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     say("comparing the twin with the recording")
     comparisons = compare_all(rec, params, world, seconds)
     first = comparisons[0]
-    check_excitation(rec, first)
-    if int((~first.contact).sum()) < MIN_FREE_WINDOWS:
-        raise DiagnosisError(f"the robot touches a wall in {int(first.contact.sum())} of {len(first.contact)} windows: "
-                             f"pressed against walls nearly the whole time, too little else to judge (at least "
-                             f"{MIN_FREE_WINDOWS} windows of {first.seconds:g} s away from the walls)")
+    check_judgeable(rec, first)
     result = Diagnosis(str(rec.path or "recording"), "match", comparisons, [_located(first, f) for f in first.findings],
                        fit_before=dict(first.fit), notes=notes)
     if int(first.contact.sum()):

@@ -1,0 +1,181 @@
+"""`twinbot bench margins`: how far each of the diagnosis's locate rules stands from its threshold.
+
+On every recording of a blind suite (generated as `twinbot bench diagnose`
+generates it, or one it kept: --suite DIR, its --out DIR), the nominal twin
+is compared with the recording in 1 s windows, and each locate rule's
+margin taken (host_sim.diagnosis.compare.rule_margins): the weakest of the
+rule's tests as a ratio to its threshold, the largest over the channels
+the rule judges.  At 1 or more the rule locates something.
+
+  bias     a regime bin's mean residual: |z| >= 5, 1 noise level, 5 % of the signal
+  scale    a window total's proportional error: |z| >= 5, 2 % (1 % for a count)
+  scatter  a wheel's residual RMS: 5 noise levels, 5 % of its speed
+  timing   IR readings behind (or ahead of) the pose: both halves at |z| >= 3,
+           on the third of the sensors that show it the same way round
+
+Recordings the diagnosis refuses (too still, pressed against walls) are
+listed and left out.  The table: a row per recording (the answer key is
+read only to label it), then per rule the largest margin on the effect-free
+controls (below 1, or the rule raises a false alarm) and, on the cases
+whose effect the rule is there to find, how many reach 1 and the smallest
+margin: the headroom the thresholds were set in.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+from tools.bench import print_targets
+
+RULES = ("bias", "scale", "scatter", "timing")
+# The concealed effects (tools/proving_ground/effects.py) each rule is there to find; bias: the rest of the library.
+MEANT_FOR = {"scale": ("wheel_radius", "track_width", "encoder_scale"), "scatter": ("traction_limit",),
+             "timing": ("ir_latency",)}
+
+
+def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
+    p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1],
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    from tools.arguments import float_range, int_range, output_file, output_folder, suite_folder
+
+    p.add_argument("--suite", metavar="DIR", type=suite_folder,
+                   help="judge this suite (DIR/recordings, DIR/answer_keys: what 'twinbot bench diagnose --out DIR' "
+                        "kept) instead of generating one")
+    p.add_argument("--cases", type=int_range(1, 10_000), default=40, help="cases to generate (default 40)")
+    p.add_argument("--seed", type=int_range(0, 10**9), default=0, help="seed of the first case (default 0)")
+    p.add_argument("--duration", type=float_range(10, 3600, unit="s"), default=90.0,
+                   help="seconds per generated recording (default 90)")
+    p.add_argument("--jobs", type=int_range(1, 256), default=2, help="worker processes (default 2)")
+    p.add_argument("--out", metavar="DIR", type=output_folder, help="keep a generated suite here")
+    p.add_argument("--json", metavar="FILE", type=output_file, help="write every figure here")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def margins_of(rec_path: str) -> dict[str, Any]:
+    """Worker: every rule's margin on one recording against the nominal twin of its sidecar, or why the
+    diagnosis refuses it."""
+    from host_sim.diagnosis import DiagnosisError
+    from host_sim.diagnosis.compare import compare, rule_margins
+    from host_sim.diagnosis.report import check_data, check_judgeable
+    from host_sim.params import params_from_dict
+    from host_sim.recording import load_recording
+    from host_sim.world import world_from_dict
+
+    rec = load_recording(rec_path)
+    params = params_from_dict(rec.meta["robot"], f"{rec_path} (sidecar robot)")
+    world = world_from_dict(rec.meta["world"], f"{rec_path} (sidecar world)") if rec.meta.get("world") else None
+    try:
+        check_data(rec, world)
+        first = compare(rec, params, world, locate=False)
+        check_judgeable(rec, first)
+    except DiagnosisError as exc:
+        return {"recording": rec_path, "refused": str(exc)}
+    return {"recording": rec_path, "margins": rule_margins(first, rec, params, world)}
+
+
+def suite_paths(args: argparse.Namespace, out_dir: Path) -> list[Path]:
+    """The suite's recordings: --suite's, or a suite generated into out_dir."""
+    if args.suite:
+        return sorted(Path(args.suite, "recordings").glob("case_*.csv"))
+    from tqdm import tqdm  # type: ignore[import-untyped]
+
+    from tools.bench_diagnose import compose_suite, generate
+
+    seeds = compose_suite(args.seed, args.cases)
+    rec_dir, key_dir = out_dir / "recordings", out_dir / "answer_keys"
+    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        jobs = [pool.submit(generate, s, str(rec_dir), str(key_dir), args.duration) for s in seeds]
+        return [Path(j.result()) for j in tqdm(jobs, desc="generate", unit="case", file=sys.stderr,
+                                               disable=args.quiet)]
+
+
+def label(path: Path) -> dict[str, Any]:
+    """What the answer key says of a recording, for its row: the concealed effects and the excitation."""
+    key = json.loads((path.parent.parent / "answer_keys" / f"{path.stem}.answer.json").read_text())
+    effects = [e["name"] for e in key["effects"]]
+    return {"case": path.stem, "effects": effects, "control": not effects, "drive": key["excitation"]["kind"],
+            "in_library": [e["name"] for e in key["effects"] if e["in_library"]]}
+
+
+def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per rule: the controls' largest margin, and the cases the rule is for, reached and the smallest."""
+    judged = [r for r in rows if "margins" in r]
+    special = {e for names in MEANT_FOR.values() for e in names}
+    out = []
+    for rule in RULES:
+        controls = [(r["margins"][rule][0], r["case"]) for r in judged if r["control"]]
+        if rule in MEANT_FOR:
+            cases = [(r["margins"][rule][0], r["case"]) for r in judged if set(r["effects"]) & set(MEANT_FOR[rule])]
+        else:  # the in-library effects no other rule is there for
+            cases = [(r["margins"][rule][0], r["case"]) for r in judged if set(r["in_library"]) - special]
+        out.append({"rule": rule, "controls": len(controls), "controls_max": max(controls, default=None),
+                    "for": ", ".join(MEANT_FOR.get(rule, ("the rest of the library",))), "cases": len(cases),
+                    "reached": sum(m >= 1.0 for m, _c in cases), "cases_min": min(cases, default=None)})
+    return out
+
+
+def _m(pair: tuple[float, str] | list[Any] | None) -> str:
+    if pair is None:
+        return "-"
+    return f"{pair[0]:.2f} ({pair[1]})" if pair[1] else f"{pair[0]:.2f}"
+
+
+def print_report(report: dict[str, Any]) -> None:
+    from tools.bench_diagnose import format_table
+
+    m = report["machine"]
+    print("twinbot bench margins")
+    print(f"command:     {report['command']}")
+    print(f"machine:     {m['platform']}, {m['processor']}, {m['cpus']} CPUs, load average {m['load']}")
+    print()
+    rows = [(r["case"], ",".join(r["effects"]) or "control", r["drive"],
+             *([_m(r["margins"][rule]) for rule in RULES] if "margins" in r else ["refused", "", "", ""]))
+            for r in report["cases"]]
+    print(format_table(("case", "concealed", "drive", *RULES), rows))
+    for r in report["cases"]:
+        if "refused" in r:
+            print(f"  {r['case']}: refused: {r['refused']}")
+    print()
+    print(format_table(("rule", "controls: largest margin", "cases it is for: reached", "smallest margin", "for"),
+                       [(s["rule"], _m(s["controls_max"]), f"{s['reached']}/{s['cases']}", _m(s["cases_min"]), s["for"]) for s in report["summary"]]))
+    print_targets(report["targets"])
+    print(f"\nelapsed: {report['elapsed_s']:.1f} s")
+
+
+def targets(summary: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    worst = max((s["controls_max"] for s in summary if s["controls_max"] is not None), default=None)
+    return [{"text": "every rule stays below 1 on every judged control (no false alarm in the making)"
+                     + ("" if worst is None else f": largest {worst[0]:.2f} ({worst[1]})"),
+             "met": None if worst is None else worst[0] < 1.0}]
+
+
+def run(args: argparse.Namespace) -> int:
+    from tqdm import tqdm  # type: ignore[import-untyped]
+
+    from tools.bench_sim import _machine, pin_blas_threads
+
+    blas = pin_blas_threads()
+    t_start = time.monotonic()
+    with tempfile.TemporaryDirectory(prefix="twinbot-bench-margins-") as tmp:
+        paths = suite_paths(args, Path(args.out) if args.out else Path(tmp))
+        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+            results = list(tqdm(pool.map(margins_of, [str(p) for p in paths]), total=len(paths), desc="margins",
+                                unit="recording", file=sys.stderr, disable=args.quiet))
+        rows = [{**label(p), **r} for p, r in zip(paths, results)]
+    command = (f"twinbot bench margins --suite {args.suite}" if args.suite else
+               f"twinbot bench margins --cases {args.cases} --seed {args.seed} --duration {args.duration:g}")
+    report: dict[str, Any] = {"command": command, "machine": _machine(blas), "cases": rows,
+                              "summary": summarise(rows)}
+    report["targets"] = targets(report["summary"])
+    report["elapsed_s"] = time.monotonic() - t_start
+    print_report(report)
+    if args.json:
+        Path(args.json).write_text(json.dumps(report, indent=1) + "\n")
+    return 0
