@@ -104,7 +104,8 @@ def rule_margins(cmp: Comparison, rec: Recording, p: RobotParams, world: World |
     reg = regimes(rec, cmp.windows, p, world)
     keep = ~cmp.contact
     resids = {ch.name: ch.residual() for ch in cmp.channels if ch.locate}
-    out = {"bias": (0.0, ""), "scale": (0.0, ""), "scatter": (0.0, ""), "timing": timing_margin(cmp.channels, resids, keep, reg)}
+    out = {"bias": (0.0, ""), "scale": (0.0, ""), "scatter": (0.0, ""),
+           "timing": timing_margin(cmp.channels, resids, keep, reg)}
     for ch in cmp.channels:
         if not ch.locate:
             continue
