@@ -11,6 +11,15 @@ distance to the walls) and by time, and said in words.
 Verdicts: match (the twin reproduces the recording to its noise), explained,
 partly explained, unexplained (located, but nothing in the library of effects
 names it).  The JSON document is described in docs/diagnosis.md.
+
+What it needs: 6 s at least (60-90 s is better), with the wheels turning
+(or driven, away from the walls) in a fifth of the periods, and 6 windows
+of 1 s away from the walls; a tracker's pose for the body's motion and the
+IR sensors.  Less is refused with a one-line reason and exit status 2.  The
+identification manoeuvre records all of it in 46 s:
+twinbot serial PORT --excite --record run.csv (twinbot sim --excite on the twin).
+A 90 s recording takes about 12 s of one core (median; up to 2 min when a
+gear's play is fitted), with a progress line per step.
 """
 from __future__ import annotations
 
