@@ -51,7 +51,29 @@ def test_the_twins_own_recording_is_a_match(nominal_run):
     margins = rule_margins(d.comparisons[0], nominal_run, DEFAULT, ROOM)
     assert set(margins) == {"bias", "scale", "scatter", "timing"} and all(m < 1 for m, _w in margins.values())
     assert margins["bias"][0] > 0 and margins["scatter"][0] > 0  # measured, not absent
+    # its wheels fit as well as the encoders' rounding lets a right twin fit
+    for wheel in ("wheel_l", "wheel_r"):
+        assert d.fit_ceiling[wheel] < 100 and d.fit_before[wheel] == pytest.approx(d.fit_ceiling[wheel], abs=3)
+    assert set(d.to_json()["fit"]["ceiling"]) == {"wheel_l", "wheel_r"}
     assert d.fit_before["wheel_l"] > 90 and d.fit_before["heading_rate"] > 95
+
+
+def test_the_rounding_ceiling_is_what_rounding_alone_costs_a_right_twin():
+    """Counts rounded down from a twin's exact motion fit it as the ceiling says; a steady wheel's ceiling is low,
+    and it rises with the wheel's variation."""
+    from host_sim.diagnosis.channels import fit_percent, rounding_ceiling
+
+    rng = np.random.default_rng(1)
+    t = np.arange(24) * 0.04
+    ceilings = []
+    for swing in (0.3, 3.0):
+        exact = 4.3 + swing * np.sin(2 * np.pi * t[None, :] + rng.uniform(0, 6, (60, 1)))  # (W, T - 1) ticks/period
+        start = rng.random((60, 1))
+        counts = np.floor(np.concatenate([np.zeros((60, 1)), np.cumsum(exact, axis=1)], axis=1) + start)
+        recorded = np.diff(counts, axis=1)
+        ceilings.append(rounding_ceiling(recorded, exact))
+        assert fit_percent(recorded, exact) == pytest.approx(ceilings[-1], abs=3)
+    assert ceilings[0] < 50 and ceilings[1] > 75, ceilings
 
 
 @pytest.mark.parametrize("effect,site,true_value", [
@@ -167,7 +189,7 @@ def test_json_html_and_parameter_file_from_the_command(tmp_path):
     assert "explained" in r.stdout and "track_width" in r.stdout
     doc = json.loads(out.read_text())
     assert set(doc) >= {"recording", "verdict", "located", "effects", "fit", "unexplained"}
-    assert doc["verdict"] == "explained" and set(doc["fit"]) == {"before", "after"}
+    assert doc["verdict"] == "explained" and set(doc["fit"]) == {"before", "after", "ceiling"}
     assert {"channel", "regime", "spans", "fit_before"} <= set(doc["located"][0])
     assert load_params(fitted).half_axle == pytest.approx(0.0499, rel=0.02)
     # The report stands alone: its pictures are inside it, one per located channel beside the trajectories.

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from host_sim.diagnosis.channels import ACCUMULATED, WHEELS, Channel, build_channels, fit_percent
+from host_sim.diagnosis.channels import ACCUMULATED, WHEELS, Channel, build_channels, fit_percent, rounding_ceiling
 from host_sim.diagnosis.locate import (Finding, bias_margin, contact_windows, input_lag, ljung_box, locate_channel,
                                       locate_scale, regimes, scale_margin, scatter_finding, scatter_margin,
                                       timing_findings, timing_margin)
@@ -36,6 +36,7 @@ class Comparison:
     findings: list[Finding] = field(default_factory=list)
     pose: np.ndarray | None = None  # (W, T, 3) the twin's pose in every window (for pictures)
     unjudged: np.ndarray | None = None  # (W, T - 1, 8) IR readings too sensitive to the tracker's noise to judge
+    ceiling: dict[str, float] = field(default_factory=dict)  # per wheel: the fit % of a twin right but rounding
 
     def channel(self, name: str) -> Channel:
         return next(c for c in self.channels if c.name == name)
@@ -50,7 +51,7 @@ def compare(rec: Recording, params: RobotParams, world: World | None, seconds: f
     chans = build_channels(rec, windows, run, [params], world, unjudged)
     contact = contact_windows(rec, windows, params, world)
     cmp = Comparison(seconds, windows, chans, contact, held_out_fit(chans, windows, contact), pose=run.pose[:, 0],
-                     unjudged=unjudged)
+                     unjudged=unjudged, ceiling=held_out_ceiling(chans, windows, contact))
     if locate:
         _locate(cmp, rec, params, world)
     return cmp
@@ -69,6 +70,13 @@ def held_out_fit(chans: list[Channel], windows: Windows, contact: np.ndarray, s:
         fit["contact"] = fit_percent(np.concatenate([c.y[touching] for c in wheels]),
                                      np.concatenate([c.y_hat[touching, s] for c in wheels]))
     return fit
+
+
+def held_out_ceiling(chans: list[Channel], windows: Windows, contact: np.ndarray) -> dict[str, float]:
+    """Per wheel, on held_out_fit's windows: the fit % of a twin right but for the encoders' rounding."""
+    judged = windows.held_out & ~contact
+    return {c.name: rounding_ceiling(c.y[judged], c.y_hat[judged, 0]) for c in chans
+            if c.name in WHEELS} if judged.any() else {}
 
 
 def _locate(cmp: Comparison, rec: Recording, p: RobotParams, world: World | None) -> None:
@@ -128,4 +136,4 @@ def compare_all(rec: Recording, params: RobotParams, world: World | None,
     return out
 
 
-__all__ = ["Comparison", "compare", "compare_all", "held_out_fit", "rule_margins"]
+__all__ = ["Comparison", "compare", "compare_all", "held_out_ceiling", "held_out_fit", "rule_margins"]

@@ -43,6 +43,7 @@ class Diagnosis:
     effects: list[dict[str, Any]] = field(default_factory=list)
     fit_before: dict[str, float] = field(default_factory=dict)
     fit_after: dict[str, float] = field(default_factory=dict)
+    fit_ceiling: dict[str, float] = field(default_factory=dict)  # per wheel: a twin right but for the rounding
     unexplained: list[dict[str, Any]] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     model: Model | None = None  # the fitted twin, when effects were tried
@@ -51,7 +52,8 @@ class Diagnosis:
 
     def to_json(self) -> dict[str, Any]:
         return {"recording": self.recording, "verdict": self.verdict, "located": self.located,
-                "effects": self.effects, "fit": {"before": _finite(self.fit_before), "after": _finite(self.fit_after)},
+                "effects": self.effects, "fit": {"before": _finite(self.fit_before), "after": _finite(self.fit_after),
+                        "ceiling": _finite(self.fit_ceiling)},
                 "unexplained": self.unexplained, "notes": self.notes}
 
     def summary(self) -> str:
@@ -72,6 +74,10 @@ class Diagnosis:
         lines.append("  held-out fit % per channel (1 s windows), before" + (" -> after" if self.effects else "") + ": "
                      + ", ".join(f"{k} {self.fit_before[k]:.0f}" + (f" -> {self.fit_after.get(k, float('nan')):.0f}"
                                                                     if self.effects else "") for k in shown))
+        wheels = [k for k in WHEELS if k in self.fit_ceiling]
+        if wheels:
+            lines.append("  the wheels' ceiling (a twin right but for the encoders' rounding): "
+                         + ", ".join(f"{k} {self.fit_ceiling[k]:.0f}" for k in wheels))
         return "\n".join(lines)
 
 
@@ -161,7 +167,7 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     first = comparisons[0]
     check_judgeable(rec, first)
     result = Diagnosis(str(rec.path or "recording"), "match", comparisons, [_located(first, f) for f in first.findings],
-                       fit_before=dict(first.fit), notes=notes)
+                       fit_before=dict(first.fit), fit_ceiling=dict(first.ceiling), notes=notes)
     if int(first.contact.sum()):
         result.notes.append(f"{int(first.contact.sum())} of {len(first.contact)} windows touch a wall: judged apart "
                             f"(channel 'contact')")

@@ -209,6 +209,7 @@ def score_case(key: dict[str, Any], diagnosis: dict[str, Any] | None, rec: Recor
     if diagnosis is not None:
         row["fit_before"] = _wheel_fit(diagnosis["fit"]["before"])
         row["fit_after"] = _wheel_fit(diagnosis["fit"]["after"])
+        row["fit_ceiling"] = _wheel_fit(diagnosis["fit"].get("ceiling", {}))  # a twin right but for the rounding
     if row["kind"] == "control":
         row["outcome"] = "right" if diagnosis and diagnosis["verdict"] == "match" else "false alarm"
         return row
