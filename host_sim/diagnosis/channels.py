@@ -133,7 +133,6 @@ def fit_percent(y: np.ndarray, y_hat: np.ndarray) -> float:
     return 100.0 * (1.0 - err / spread)
 
 
-
 def rounding_ceiling(y: np.ndarray, y_hat: np.ndarray, seed: int = 0) -> float:
     """The fit % (as fit_percent judges y) of a twin whose motion is right, against encoders that round it:
     the twin's counts per window (W, T - 1 increments) rounded down from a random sub-tick phase.  A steady
