@@ -197,6 +197,10 @@ def test_json_html_and_parameter_file_from_the_command(tmp_path):
     assert html.startswith("<!doctype html>") and "Verdict: explained" in html
     assert "<h2>turn</h2>" in html and "turns" in html
     assert html.count('src="data:image/png;base64,') >= 1 + len(doc["located"])
+    # the fit table: every channel before and after, the wheels' ceiling beside them
+    import re
+    assert re.search(r"<tr><td>wheel_l</td>(<td>-?\d+\.\d</td>){3}</tr>", html)
+    assert re.search(r"<tr><td>turn</td>(<td>-?\d+\.\d</td>){2}<td></td></tr>", html)
 
 
 def test_too_short_or_too_still_is_said_plainly(tmp_path):

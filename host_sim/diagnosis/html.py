@@ -132,9 +132,10 @@ def render(rec: Recording, d: Diagnosis) -> str:
             figure = regime_figure(finding.bins, ch, before.channel(ch).unit, scatter=finding.rms is not None)
             parts.append(f'<img src="{figure}">')
     rows = "".join(f"<tr><td>{html.escape(k)}</td><td>{d.fit_before[k]:.1f}</td>"
-                   f"<td>{d.fit_after.get(k, float('nan')):.1f}</td></tr>" for k in d.fit_before
+                   f"<td>{d.fit_after.get(k, float('nan')):.1f}</td>"
+                   f"<td>{(f'{d.fit_ceiling[k]:.1f}' if k in d.fit_ceiling else '')}</td></tr>" for k in d.fit_before
                    if np.isfinite(d.fit_before[k]))
     parts.append(f"<h2>Held-out fit %</h2><table border=1 cellpadding=3><tr><th>channel</th><th>before</th>"
-                 f"<th>after</th></tr>{rows}</table>")
+                 f"<th>after</th><th>ceiling (a twin right but for the encoders' rounding)</th></tr>{rows}</table>")
     return ("<!doctype html><html><head><meta charset='utf-8'><title>twinbot diagnose</title></head>"
             "<body style='font-family: sans-serif; max-width: 1000px'>" + "\n".join(parts) + "</body></html>\n")
