@@ -239,3 +239,23 @@ def test_the_margins_bench_reads_the_kept_suite_and_agrees_with_the_diagnosis(su
     bias = next(s for s in report["summary"] if s["rule"] == "bias")
     assert bias["controls"] == len(controls) and report["targets"][0]["met"] == all(
         m < 1 for r in controls for m, _where in r["margins"].values())
+
+
+
+def test_the_margins_bench_says_which_recordings_it_could_not_read_or_label(suite: dict[str, Any],
+                                                                            tmp_path: Path) -> None:
+    """A broken recording is listed as unreadable, one without an answer key as unlabelled; neither stops the
+    bench or enters the summary."""
+    copy = tmp_path / "suite"
+    shutil.copytree(suite["out"], copy)
+    (copy / "recordings" / "case_9998.csv").write_text("not,a,recording\n")
+    first = sorted((copy / "recordings").glob("case_0*.csv"))[0]
+    shutil.copy(first, copy / "recordings" / "case_9999.csv")
+    shutil.copy(str(first) + ".json", copy / "recordings" / "case_9999.csv.json")
+    out = tmp_path / "margins.json"
+    assert cli.main(["bench", "margins", "--suite", str(copy), "--json", str(out), "--quiet"]) == 0
+    rows = {r["case"]: r for r in json.loads(out.read_text())["cases"]}
+    assert "error" in rows["case_9998"] and "case_9998.csv" in rows["case_9998"]["error"]
+    assert rows["case_9999"]["unlabelled"] and "margins" in rows["case_9999"]
+    summary = json.loads(out.read_text())["summary"]
+    assert sum(s["controls"] for s in summary) == 4 * sum(1 for r in rows.values() if r["control"] and "margins" in r)

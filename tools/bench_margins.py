@@ -73,9 +73,12 @@ def margins_of(rec_path: str) -> dict[str, Any]:
     from host_sim.recording import load_recording
     from host_sim.world import world_from_dict
 
-    rec = load_recording(rec_path)
-    params = params_from_dict(rec.meta["robot"], f"{rec_path} (sidecar robot)")
-    world = world_from_dict(rec.meta["world"], f"{rec_path} (sidecar world)") if rec.meta.get("world") else None
+    try:
+        rec = load_recording(rec_path)
+        params = params_from_dict(rec.meta["robot"], f"{rec_path} (sidecar robot)")
+        world = world_from_dict(rec.meta["world"], f"{rec_path} (sidecar world)") if rec.meta.get("world") else None
+    except ValueError as exc:  # the loaders' one-line errors (RecordingError, ParamsError, ... are ValueErrors)
+        return {"recording": rec_path, "error": str(exc)}
     try:
         check_data(rec, world)
         first = compare(rec, params, world, locate=False)
@@ -103,7 +106,11 @@ def suite_paths(args: argparse.Namespace, out_dir: Path) -> list[Path]:
 
 def label(path: Path) -> dict[str, Any]:
     """What the answer key says of a recording, for its row: the concealed effects and the excitation."""
-    key = json.loads((path.parent.parent / "answer_keys" / f"{path.stem}.answer.json").read_text())
+    key_path = path.parent.parent / "answer_keys" / f"{path.stem}.answer.json"
+    if not key_path.is_file():  # judged, but left out of the summary: nobody can say what it concealed
+        return {"case": path.stem, "effects": [], "control": False, "drive": "-", "in_library": [],
+                "unlabelled": True}
+    key = json.loads(key_path.read_text())
     effects = [e["name"] for e in key["effects"]]
     return {"case": path.stem, "effects": effects, "control": not effects, "drive": key["excitation"]["kind"],
             "in_library": [e["name"] for e in key["effects"] if e["in_library"]]}
@@ -111,7 +118,7 @@ def label(path: Path) -> dict[str, Any]:
 
 def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per rule: the controls' largest margin, and the cases the rule is for, reached and the smallest."""
-    judged = [r for r in rows if "margins" in r]
+    judged = [r for r in rows if "margins" in r and not r.get("unlabelled")]
     special = {e for names in MEANT_FOR.values() for e in names}
     out = []
     for rule in RULES:
@@ -142,13 +149,14 @@ def print_report(report: dict[str, Any]) -> None:
     print(f"command:     {report['command']}")
     print(f"machine:     {m['platform']}, {m['processor']}, {m['cpus']} CPUs, load average {m['load']}")
     print()
-    rows = [(r["case"], ",".join(r["effects"]) or "control", r["drive"],
-             *([_m(r["margins"][rule]) for rule in RULES] if "margins" in r else ["refused", "", "", ""]))
+    rows = [(r["case"], "no answer key" if r.get("unlabelled") else ",".join(r["effects"]) or "control", r["drive"],
+             *([_m(r["margins"][rule]) for rule in RULES] if "margins" in r else
+               ["refused" if "refused" in r else "unreadable", "", "", ""]))
             for r in report["cases"]]
     print(format_table(("case", "concealed", "drive", *RULES), rows))
     for r in report["cases"]:
-        if "refused" in r:
-            print(f"  {r['case']}: refused: {r['refused']}")
+        if "refused" in r or "error" in r:
+            print(f"  {r['case']}: {'refused' if 'refused' in r else 'unreadable'}: {r.get('refused', r.get('error'))}")
     print()
     print(format_table(("rule", "controls: largest margin", "cases it is for: reached", "smallest margin",
                         "by any rule", "for"),
