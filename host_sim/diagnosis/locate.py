@@ -31,6 +31,7 @@ reported as evidence.
 """
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -144,13 +145,7 @@ def timing_findings(chans: list[Channel], resids: dict[str, np.ndarray], keep: n
     sensor is held to less than Z_MIN: one that sees a wall for a few dozen periods gives each half a
     small z.  One finding per sensor, in its larger bin."""
     found: dict[bool, list[Finding]] = {True: [], False: []}  # behind the pose / ahead of it
-    for ch in chans:
-        regime = f"{TIMING}{ch.name[3:]}"
-        if not ch.name.startswith("ir_") or regime not in reg.labels:
-            continue
-        labels, words = reg.labels[regime]
-        r, lab, y = resids[ch.name][keep], labels[keep], ch.y[keep]
-        sigma = noise_level(ch, r)
+    for ch, regime, words, r, lab, y, sigma in _timing_sensors(chans, resids, keep, reg):
         closing, receding = (_bin_stats(r[lab == v], sigma, y[lab == v], TIMING_Z) for v in (0, 2))
         if closing is None or receding is None or closing["mean"] * receding["mean"] >= 0:
             continue
@@ -161,6 +156,19 @@ def timing_findings(chans: list[Channel], resids: dict[str, np.ndarray], keep: n
                                                   spans(resids[ch.name], keep, t, sigma), float(larger["mean"]),
                                                   float(larger["z"]), sigma, bins))  # type: ignore[arg-type]
     return next((same for same in found.values() if len(same) >= TIMING_SENSORS_MIN), [])
+
+
+def _timing_sensors(chans: list[Channel], resids: dict[str, np.ndarray], keep: np.ndarray, reg: Regimes) -> Iterator[
+        tuple[Channel, str, dict[int, str], np.ndarray, np.ndarray, np.ndarray, float]]:
+    """The IR sensors the timing rule judges (those with a closing / drawing-away regime), each with its regime's
+    name and words and, on the kept windows, its residual, labels, recorded readings and noise level."""
+    for ch in chans:
+        regime = f"{TIMING}{ch.name[3:]}"
+        if not ch.name.startswith("ir_") or regime not in reg.labels:
+            continue
+        labels, words = reg.labels[regime]
+        r = resids[ch.name][keep]
+        yield ch, regime, words, r, labels[keep], ch.y[keep], noise_level(ch, r)
 
 
 def contact_windows(rec: Recording, windows: Windows, p: RobotParams, world: World | None) -> np.ndarray:
@@ -278,12 +286,7 @@ def timing_margin(chans: list[Channel], resids: dict[str, np.ndarray], keep: np.
     halves' margins at TIMING_Z (0 unless they lie opposite ways round), and of the sensors the same way
     round the TIMING_SENSORS_MIN-th largest: at 1 or more a latency is located."""
     ways: dict[bool, list[tuple[float, str]]] = {True: [], False: []}  # behind the pose / ahead of it
-    for ch in chans:
-        regime = f"{TIMING}{ch.name[3:]}"
-        if not ch.name.startswith("ir_") or regime not in reg.labels:
-            continue
-        lab, r, y = reg.labels[regime][0][keep], resids[ch.name][keep], ch.y[keep]
-        sigma = noise_level(ch, r)
+    for ch, _regime, _words, r, lab, y, sigma in _timing_sensors(chans, resids, keep, reg):
         halves = [bin_margin(r[lab == v], sigma, y[lab == v], TIMING_Z) for v in (0, 2) if int((lab == v).sum()) >= 10]
         if len(halves) == 2 and halves[0][1] * halves[1][1] < 0:
             ways[halves[0][1] < 0].append((min(halves[0][0], halves[1][0]), ch.name))
@@ -301,9 +304,11 @@ def scatter_finding(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regim
     the bin with the largest mean square, if it has SCATTER_REGIME times the whole's: a wheel that slips
     scatters most when the speed changes."""
     r = resid[keep]
-    if ch.name not in WHEELS or r.size == 0 or scatter_margin(ch, resid, keep) < 1.0:
+    if ch.name not in WHEELS or r.size == 0:
         return None
     sigma = noise_level(ch, r)
+    if _scatter_margin(r, sigma, ch.y[keep]) < 1.0:
+        return None
     square = float((r * r).mean())
     whole = _rms_bin("", "all", r, sigma)
     bins = [whole]  # and every regime bin, for the report's picture
@@ -322,11 +327,13 @@ def scatter_margin(ch: Channel, resid: np.ndarray, keep: np.ndarray) -> float:
     """A wheel's residual RMS against the weaker of its two thresholds (SCATTER_MIN noise levels,
     RELATIVE_MIN of the wheel's speed): scatter_finding locates it at 1 or more."""
     r = resid[keep]
-    if r.size == 0:
-        return 0.0
+    return _scatter_margin(r, noise_level(ch, r), ch.y[keep]) if r.size else 0.0
+
+
+def _scatter_margin(r: np.ndarray, sigma: float, y: np.ndarray) -> float:
     rms = float(np.sqrt((r * r).mean()))
-    signal = RELATIVE_MIN * float(np.abs(ch.y[keep]).mean())
-    return min(rms / (SCATTER_MIN * noise_level(ch, r)), rms / signal if signal > 0 else np.inf)
+    signal = RELATIVE_MIN * float(np.abs(y).mean())
+    return min(rms / (SCATTER_MIN * sigma), rms / signal if signal > 0 else np.inf)
 
 
 def _rms_bin(regime: str, key: str, r: np.ndarray, sigma: float) -> dict[str, object]:
@@ -353,16 +360,22 @@ def total_noise(ch: Channel, keep: np.ndarray) -> float:
     return _scale_fit(ch, keep)[3]
 
 
-def scale_margin(ch: Channel, keep: np.ndarray) -> float:
-    """A channel's proportional error over whole windows against the weaker of its thresholds (|z| >= Z_MIN,
-    |a| >= SCALE_MIN, SCALE_MIN_COUNTS for a count): locate_scale locates it at 1 or more.  0 when it is
-    not judged: too few windows, or a robot that hardly turned (travelled), whose proportion is noise."""
-    y, _r, a, noise = _scale_fit(ch, keep)
+def _scale_judged(ch: Channel, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float, float, float]:
+    """(y, r, a, noise, z, margin) of _scale_fit's proportional error; the margin is the weaker of its
+    thresholds (|z| >= Z_MIN, |a| >= SCALE_MIN, SCALE_MIN_COUNTS for a count), 0 when it is not judged:
+    too few windows, or a robot that hardly turned (travelled), whose proportion is noise."""
+    y, r, a, noise = _scale_fit(ch, keep)
     n, syy = y.size, float(y @ y)
     if n < SCALE_WINDOWS_MIN or np.sqrt(syy / max(n, 1)) < SCALE_SIGNAL_MIN * noise:
-        return 0.0
+        return y, r, a, noise, 0.0, 0.0
     z = a / (noise / np.sqrt(syy))
-    return min(abs(z) / Z_MIN, abs(a) / (SCALE_MIN_COUNTS if ch.name in WHEELS else SCALE_MIN))
+    return y, r, a, noise, z, min(abs(z) / Z_MIN, abs(a) / (SCALE_MIN_COUNTS if ch.name in WHEELS else SCALE_MIN))
+
+
+def scale_margin(ch: Channel, keep: np.ndarray) -> float:
+    """A channel's proportional error over whole windows against its thresholds (_scale_judged):
+    locate_scale locates it at 1 or more."""
+    return _scale_judged(ch, keep)[5]
 
 
 def locate_scale(ch: Channel, keep: np.ndarray, t: np.ndarray) -> Finding | None:
@@ -371,11 +384,10 @@ def locate_scale(ch: Channel, keep: np.ndarray, t: np.ndarray) -> Finding | None
     Each kept window's total, recorded y against the twin's: the residual r = y - y_hat regressed on y
     through the origin (_scale_fit), with a standard error from the totals' noise.
     """
-    if scale_margin(ch, keep) < 1.0:
+    y, r, a, noise, z, margin = _scale_judged(ch, keep)
+    if margin < 1.0:
         return None
-    name, regime = ACCUMULATED[ch.name], SCALE_REGIME
-    y, r, a, noise = _scale_fit(ch, keep)
-    n, z = y.size, a / (noise / np.sqrt(float(y @ y)))
+    name, regime, n = ACCUMULATED[ch.name], SCALE_REGIME, y.size
     off = np.abs(r) > 2.0 * noise  # the windows where it shows beyond the noise
     found: list[tuple[float, float]] = []
     for w in np.flatnonzero(keep)[off]:
