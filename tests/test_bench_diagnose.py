@@ -232,7 +232,7 @@ def test_the_margins_bench_reads_the_kept_suite_and_agrees_with_the_diagnosis(su
         if "refused" in row:
             assert verdicts[row["case"]].startswith("refused")
             continue
-        assert set(row["margins"]) == {"bias", "scale", "scatter", "timing"}
+        assert set(row["margins"]) == {"bias", "scale", "scatter", "timing", "lag"}
         reached = any(m >= 1 for m, _where in row["margins"].values())
         assert reached == (verdicts[row["case"]] != "match"), row
     controls = [r for r in report["cases"] if r["control"] and "margins" in r]
@@ -258,4 +258,4 @@ def test_the_margins_bench_says_which_recordings_it_could_not_read_or_label(suit
     assert "error" in rows["case_9998"] and "case_9998.csv" in rows["case_9998"]["error"]
     assert rows["case_9999"]["unlabelled"] and "margins" in rows["case_9999"]
     summary = json.loads(out.read_text())["summary"]
-    assert sum(s["controls"] for s in summary) == 4 * sum(1 for r in rows.values() if r["control"] and "margins" in r)
+    assert sum(s["controls"] for s in summary) == 5 * sum(1 for r in rows.values() if r["control"] and "margins" in r)

@@ -14,6 +14,7 @@ import pytest
 
 from host_sim import effects as E
 from host_sim.diagnosis import DiagnosisError, diagnose
+from host_sim.diagnosis import locate
 from host_sim.diagnosis.compare import compare, rule_margins
 from host_sim.diagnosis.report import check_excitation
 from host_sim.params import DEFAULT, load_params
@@ -49,7 +50,7 @@ def test_the_twins_own_recording_is_a_match(nominal_run):
     assert d.verdict == "match" and not d.located and not d.effects
     # every locate rule stays below its threshold (twinbot bench margins measures it on blind controls)
     margins = rule_margins(d.comparisons[0], nominal_run, DEFAULT, ROOM)
-    assert set(margins) == {"bias", "scale", "scatter", "timing"} and all(m < 1 for m, _w in margins.values())
+    assert set(margins) == {"bias", "scale", "scatter", "timing", "lag"} and all(m < 1 for m, _w in margins.values())
     assert margins["bias"][0] > 0 and margins["scatter"][0] > 0  # measured, not absent
     # its wheels fit as well as the encoders' rounding lets a right twin fit
     for wheel in ("wheel_l", "wheel_r"):
@@ -157,6 +158,46 @@ def test_a_wheel_that_slips_burst_by_burst_is_located_without_a_bias(tmp_path):
     assert [e["name"] for e in d.effects] == ["traction_limit"], d.summary()
     assert d.effects[0]["params"]["mu"]["value"] == pytest.approx(0.2, rel=0.05)
     assert all(d.fit_after[item["channel"]] > d.fit_before[item["channel"]] for item in wheels)
+
+
+def test_a_wheel_that_answers_late_is_located_by_its_lag(tmp_path, nominal_run):
+    """A 25 ms actuator delay under the firmware's exploration: a bias too small for any regime bin (the
+    blind suite's 31 ms delay, case 0132, was a match), but over 0.2 s blocks each wheel's count falls
+    behind the twin's by the delay times its change of speed.  Judged per period instead of per block, the
+    speed loop's feedback of the encoders' rounding makes the twin's own run seem to lead by 6-10 ms."""
+    nominal = compare(nominal_run, DEFAULT, ROOM)
+    assert rule_margins(nominal, nominal_run, DEFAULT, ROOM)["lag"][0] < 0.5
+    late = record(tmp_path, E.apply(DEFAULT, "actuator_delay", "both", [0.025]))
+    d = diagnose(late, DEFAULT, ROOM)
+    margins = rule_margins(d.comparisons[0], late, DEFAULT, ROOM)
+    assert margins["lag"][0] >= 1 and margins["bias"][0] < 1 and margins["scatter"][0] < 1
+    wheels = [item for item in d.located if item["channel"] in ("wheel_l", "wheel_r")]
+    assert wheels and all("ms behind the twin's whenever its speed changes" in item["words"] for item in wheels)
+    assert all(item["lag_s"] == pytest.approx(0.025, rel=0.4) for item in wheels), d.summary()
+    assert [e["name"] for e in d.effects] == ["actuator_delay"], d.summary()
+    assert d.effects[0]["params"]["delay"]["value"] == pytest.approx(0.025, rel=0.15)
+    # the report draws each lagging wheel's blocks against the twin's change of speed, beside its residual
+    from host_sim.diagnosis.html import render
+
+    assert render(late, d).count("<img") == 1 + 2 * len(wheels)  # and the trajectory
+
+
+def test_a_wheel_that_chatters_is_located_against_its_encoders_rounding(tmp_path):
+    """A small gear play (0.035 rad) in the left wheel's speed loop: the motor and its encoder rattle in
+    the play, so the count alternates period to period.  Its first differences then read the mismatch
+    as noise (a noise level above the residual's own RMS), and only the encoder's rounding, its noise
+    floor, shows it: an RMS of some 14 roundings.  The blind suite's 0.034 rad (case 0127) was a match."""
+    chatter = record(tmp_path, E.apply(DEFAULT, "backlash", "left", [0.035]))
+    cmp = compare(chatter, DEFAULT, ROOM)
+    ch = cmp.channel("wheel_l")
+    r = ch.residual()[~cmp.contact]
+    rms = float(np.sqrt((r * r).mean()))
+    assert rms < locate.SCATTER_MIN * locate.noise_level(ch, r)  # the first differences alone would not see it
+    assert rms >= locate.SCATTER_FLOOR_MIN * ch.noise_floor
+    (finding,) = cmp.findings
+    assert finding.channel == "wheel_l" and finding.rms is not None and finding.noise == ch.noise_floor
+    assert rule_margins(cmp, chatter, DEFAULT, ROOM)["scatter"] == (pytest.approx(finding.rms / (
+        locate.SCATTER_FLOOR_MIN * ch.noise_floor)), "wheel_l")
 
 
 @pytest.mark.parametrize("change,channel,sign,not_there", [

@@ -9,9 +9,11 @@ the rule judges.  At 1 or more the rule locates something.
 
   bias     a regime bin's mean residual: |z| >= 5, 1 noise level, 5 % of the signal
   scale    a window total's proportional error: |z| >= 5, 2 % (1 % for a count)
-  scatter  a wheel's residual RMS: 5 noise levels, 5 % of its speed
+  scatter  a wheel's residual RMS: 5 noise levels (or 8 encoder roundings), 5 % of its speed
   timing   IR readings behind (or ahead of) the pose: both halves at |z| >= 3,
            on the third of the sensors that show it the same way round
+  lag      a wheel behind (or ahead of) the twin whenever its speed changes:
+           |z| >= 5, 8 ms
 
 Recordings the diagnosis refuses (too still, pressed against walls) are
 listed and left out.  The table: a row per recording (the answer key is
@@ -38,10 +40,10 @@ from typing import Any
 
 from tools.bench import print_targets
 
-RULES = ("bias", "scale", "scatter", "timing")
+RULES = ("bias", "scale", "scatter", "timing", "lag")
 # The concealed effects (tools/proving_ground/effects.py) each rule is there to find; bias: the rest of the library.
-MEANT_FOR = {"scale": ("wheel_radius", "track_width", "encoder_scale"), "scatter": ("traction_limit",),
-             "timing": ("ir_latency",)}
+MEANT_FOR = {"scale": ("wheel_radius", "track_width", "encoder_scale"), "scatter": ("traction_limit", "backlash"),
+             "timing": ("ir_latency",), "lag": ("actuator_delay",)}
 
 
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
@@ -151,7 +153,7 @@ def print_report(report: dict[str, Any]) -> None:
     print()
     rows = [(r["case"], "no answer key" if r.get("unlabelled") else ",".join(r["effects"]) or "control", r["drive"],
              *([_m(r["margins"][rule]) for rule in RULES] if "margins" in r else
-               ["refused" if "refused" in r else "unreadable", "", "", ""]))
+               ["refused" if "refused" in r else "unreadable"] + [""] * (len(RULES) - 1)))
             for r in report["cases"]]
     print(format_table(("case", "concealed", "drive", *RULES), rows))
     for r in report["cases"]:

@@ -38,6 +38,11 @@ AMBIENT = tuple(f"amb_{k}" for k in range(8))
 ACCUMULATED = {"forward": "travel", "heading_rate": "turn", "wheel_l": "count_l", "wheel_r": "count_r"}
 
 
+def drive_channel(name: str) -> bool:
+    """A channel of the drive (the wheels, the body's motion, their totals, the battery), not of a sensor."""
+    return name in WHEELS or name in MOTION or name in ACCUMULATED.values() or name == "vbat"
+
+
 @dataclass
 class Channel:
     """One compared quantity: recorded y and the twin's y_hat, per window and period."""

@@ -40,7 +40,8 @@ import numpy as np
 from scipy import optimize, stats
 
 from host_sim import effects as E
-from host_sim.diagnosis.channels import ACCUMULATED, AMBIENT, IR, MOTION, WHEELS, Channel, build_channels
+from host_sim.diagnosis.channels import (ACCUMULATED, AMBIENT, IR, MOTION, WHEELS, Channel, build_channels,
+                                        drive_channel)
 from host_sim.diagnosis.windows import Windows, run_windows
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
@@ -95,13 +96,9 @@ class Model:
     located_gain: float = 0.0  # what its newest effect removed of the located channels' held-out residuals
 
 
-def _drive_channel(c: str) -> bool:
-    return c in WHEELS or c in MOTION or c in ACCUMULATED.values() or c == "vbat"
-
-
 def candidates_for(channels: list[str]) -> list[Candidate]:
     out: list[Candidate] = []
-    if any(_drive_channel(c) for c in channels):
+    if any(drive_channel(c) for c in channels):
         for name in DRIVE_EFFECTS:
             out += [Candidate(name, s) for s in E.LIBRARY[name].sites()]
     sensors = sorted({int(c.split("_")[1]) for c in channels if c.startswith(("ir_", "amb_"))})
@@ -116,7 +113,7 @@ def objective_channels(channels: list[str], available: list[str]) -> list[str]:
     """The channels a fit is judged on: the located ones and their family."""
     wanted: set[str] = set()
     for c in channels:
-        if _drive_channel(c):
+        if drive_channel(c):
             wanted |= set(WHEELS) | set(MOTION) | {"vbat"}
         elif c.startswith(("ir_", "amb_")):
             k = int(c.split("_")[1])

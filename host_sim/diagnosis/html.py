@@ -2,7 +2,8 @@
 
 Pictures (matplotlib, embedded as PNG):
 - each located channel's residual against time, before and after the fit;
-- the same residual by the regime that gives it away (mean per bin; RMS for a wheel that scatters);
+- the same residual by the regime that gives it away (mean per bin; RMS for a wheel that scatters; for a
+  wheel that runs behind the twin, each 0.2 s block's residual count against the twin's change of speed);
 - the recorded trajectory with the twin's prediction from the start of each long window, before and after.
 """
 from __future__ import annotations
@@ -16,6 +17,7 @@ import numpy as np
 
 from host_sim.diagnosis.channels import ACCUMULATED
 from host_sim.diagnosis.compare import Comparison
+from host_sim.diagnosis.locate import lag_blocks
 from host_sim.diagnosis.report import Diagnosis
 from host_sim.recording import Recording
 
@@ -92,6 +94,25 @@ def regime_figure(finding_bins: list[dict[str, Any]], channel: str, unit: str, s
     return _png(fig)
 
 
+def lag_figure(before: Comparison, after: Comparison | None, channel: str, lag_s: float, period: float) -> str:
+    """A wheel that runs behind the twin: each block's residual count against the twin's change of speed
+    across it, before and after the fit, with the slope of the lag located."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6, 3.2))
+    for cmp, colour, label in ((before, "tab:red", "before: recorded − twin"), (after, "tab:blue", "after the fit")):
+        if cmp is not None:
+            change, sums = lag_blocks(cmp.channel(channel), ~cmp.contact)
+            ax.plot(change.ravel(), sums.ravel(), "o", ms=2, color=colour, label=label)
+    change, _sums = lag_blocks(before.channel(channel), ~before.contact)
+    x = np.array([float(change.min()), float(change.max())]) if change.size else np.zeros(2)
+    ax.plot(x, -lag_s / period * x, "k--", lw=1, label=f"{1000 * lag_s:.0f} ms behind")
+    ax.axhline(0, color="k", lw=0.5)
+    ax.set_xlabel("the twin's change of speed across a 0.2 s block (ticks/period)")
+    ax.set_ylabel("recorded − twin, summed (ticks)")
+    ax.legend(fontsize=8)
+    return _png(fig)
+
+
 def trajectory_figure(rec: Recording, before: Comparison, after: Comparison | None) -> str | None:
     if rec.pose is None or before.pose is None:
         return None
@@ -128,7 +149,9 @@ def render(rec: Recording, d: Diagnosis) -> str:
             parts.append(f'<img src="{scale_figure(before, d.after, ch)}">')
             continue
         parts.append(f'<img src="{residual_figure(rec, before, d.after, ch)}">')
-        if len(finding.bins) > 1:
+        if finding.lag is not None:
+            parts.append(f'<img src="{lag_figure(before, d.after, ch, finding.lag, rec.sample_period)}">')
+        elif len(finding.bins) > 1:
             figure = regime_figure(finding.bins, ch, before.channel(ch).unit, scatter=finding.rms is not None)
             parts.append(f'<img src="{figure}">')
     rows = "".join(f"<tr><td>{html.escape(k)}</td><td>{d.fit_before[k]:.1f}</td>"

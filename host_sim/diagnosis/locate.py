@@ -23,7 +23,11 @@ recorded total against the twin's, as a proportional error (recorded =
 A wheel can also disagree without a bias: a slipping wheel spins ahead of the
 twin's and falls back, burst by burst, so its residual averages out in every
 regime bin while its RMS is many times its noise (`scatter_finding`,
-SCATTER_MIN noise levels; the blind controls reach 2.9).
+SCATTER_MIN noise levels, or SCATTER_FLOOR_MIN times the encoder's rounding
+for a wheel that chatters period to period).  And a wheel that answers
+late (an actuator's delay, a heavier body) lags the twin by a fixed time
+whenever its speed changes: over blocks of LAG_BLOCK periods its residual
+count is proportional to the twin's change of speed (`lag_finding`).
 
 Whiteness (Ljung-Box) and the cross-correlation of the residual with the
 command (a peak at a lag k > 0 means the robot answers k periods late) are
@@ -63,6 +67,12 @@ SCALE_WINDOWS_MIN = 6  # windows away from the walls a proportional error is jud
 SCALE_SIGNAL_MIN = 10.0  # window totals (RMS) must be this many times their noise for a proportion to mean much
 SCALE_REGIME = "window by window"  # "the robot turns 3 % less than the twin, window by window"
 SCATTER_MIN = 5.0  # a wheel's residual RMS in noise levels beyond which it is a mismatch with or without a bias
+# ... or in the encoder's rounding (its noise floor): a wheel that chatters period to period (a gear's play
+# in the speed loop) raises its first differences, and so the noise they estimate, more than its RMS
+SCATTER_FLOOR_MIN = 8.0
+LAG_BLOCK = 5  # periods summed before a wheel's lag is judged: the encoder's rounding telescopes in a sum
+LAG_MIN_S = 0.008  # s: a wheel that answers the twin's speed changes this much late (or early) is a mismatch
+LAG_REGIME = "whenever its speed changes"
 SCATTER_REGIME = 2.0  # a bin whose mean square is this many times the wheel's is where it scatters most
 
 
@@ -194,6 +204,7 @@ class Finding:
     noise: float
     bins: list[dict[str, object]]  # every significant bin: {regime, key, mean, z, n}
     rms: float | None = None  # a scatter without a bias (scatter_finding): the RMS residual in that regime
+    lag: float | None = None  # a wheel that runs behind the twin (lag_finding): s, > 0 late
 
 
 def noise_level(ch: Channel, resid: np.ndarray) -> float:
@@ -307,8 +318,10 @@ def scatter_finding(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regim
     if ch.name not in WHEELS or r.size == 0:
         return None
     sigma = noise_level(ch, r)
-    if _scatter_margin(r, sigma, ch.y[keep]) < 1.0:
+    if _scatter_margin(r, sigma, ch.y[keep], ch.noise_floor) < 1.0:
         return None
+    if float(np.sqrt((r * r).mean())) < SCATTER_MIN * sigma:  # found against the rounding: say it in those terms
+        sigma = ch.noise_floor
     square = float((r * r).mean())
     whole = _rms_bin("", "all", r, sigma)
     bins = [whole]  # and every regime bin, for the report's picture
@@ -327,13 +340,66 @@ def scatter_margin(ch: Channel, resid: np.ndarray, keep: np.ndarray) -> float:
     """A wheel's residual RMS against the weaker of its two thresholds (SCATTER_MIN noise levels,
     RELATIVE_MIN of the wheel's speed): scatter_finding locates it at 1 or more."""
     r = resid[keep]
-    return _scatter_margin(r, noise_level(ch, r), ch.y[keep]) if r.size else 0.0
+    return _scatter_margin(r, noise_level(ch, r), ch.y[keep], ch.noise_floor) if r.size else 0.0
 
 
-def _scatter_margin(r: np.ndarray, sigma: float, y: np.ndarray) -> float:
+def _scatter_margin(r: np.ndarray, sigma: float, y: np.ndarray, floor: float) -> float:
+    """The RMS against SCATTER_MIN noise levels or SCATTER_FLOOR_MIN encoder roundings (the nearer of the
+    two: either witness is enough), and against RELATIVE_MIN of the wheel's speed (always)."""
     rms = float(np.sqrt((r * r).mean()))
     signal = RELATIVE_MIN * float(np.abs(y).mean())
-    return min(rms / (SCATTER_MIN * sigma), rms / signal if signal > 0 else np.inf)
+    noise = max(rms / (SCATTER_MIN * sigma), rms / (SCATTER_FLOOR_MIN * max(floor, 1e-12)))
+    return min(noise, rms / signal if signal > 0 else np.inf)
+
+
+def lag_blocks(ch: Channel, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(change, sums), each (W, B): over blocks of LAG_BLOCK periods of the kept windows, the twin's change
+    of speed across each block and the residual count summed over it.  A wheel late by L periods counts
+    L times that change less.  Per period the firmware's speed loop feeds the encoder's rounding back into
+    the commands, and so into the twin's speed (the twin's own firmware runs then seem to lead by a fifth
+    of a period); summed over a block the rounding telescopes to its two ends."""
+    r, y_hat = ch.residual()[keep], ch.y_hat[keep, 0]
+    w, t = r.shape
+    n = (t - 1) // LAG_BLOCK
+    sums = r[:, 1:1 + n * LAG_BLOCK].reshape(w, n, LAG_BLOCK).sum(axis=-1)
+    change = y_hat[:, LAG_BLOCK:1 + n * LAG_BLOCK:LAG_BLOCK] - y_hat[:, 0:n * LAG_BLOCK:LAG_BLOCK]
+    return change, sums
+
+
+def _lag_fit(ch: Channel, keep: np.ndarray) -> tuple[float, float, int]:
+    """(lag in periods, > 0 late; its z; blocks): the blocks' residual sums regressed through the origin
+    on the twin's change of speed (lag_blocks)."""
+    change, sums = lag_blocks(ch, keep)
+    sdd = float((change * change).sum())
+    if sums.size == 0 or sdd <= 0:
+        return 0.0, 0.0, 0
+    beta = float((sums * change).sum()) / sdd
+    scatter = float(((sums - beta * change) ** 2).mean())
+    se = np.sqrt(max(scatter, ch.noise_floor ** 2) / sdd)  # a block's rounding: its two ends, sqrt(1/6) tick
+    return -beta, -beta / se, sums.size
+
+
+def lag_margin(ch: Channel, keep: np.ndarray, period: float) -> float:
+    """A wheel's lag against its thresholds (|z| >= Z_MIN, LAG_MIN_S): lag_finding locates it at 1 or more."""
+    if ch.name not in WHEELS:
+        return 0.0
+    lag, z, n = _lag_fit(ch, keep)
+    return min(abs(z) / Z_MIN, abs(lag) * period / LAG_MIN_S) if n >= SCALE_WINDOWS_MIN else 0.0
+
+
+def lag_finding(ch: Channel, resid: np.ndarray, keep: np.ndarray, t: np.ndarray) -> Finding | None:
+    """A wheel that answers the twin's speed changes late (or early), or None; asked only of a wheel no
+    bin located (nor a scatter)."""
+    if ch.name not in WHEELS or not keep.any():
+        return None
+    period = float(np.median(np.diff(t[0]))) if t.shape[1] > 1 else 0.04
+    if lag_margin(ch, keep, period) < 1.0:
+        return None
+    lag, z, n = _lag_fit(ch, keep)
+    sigma = noise_level(ch, resid[keep])
+    mean = float(resid[keep].mean())
+    return Finding(ch.name, LAG_REGIME, "lag", spans(resid, keep, t, sigma), mean, z, sigma,
+                   [{"regime": LAG_REGIME, "key": "lag", "mean": mean, "z": z, "n": float(n)}], lag=lag * period)
 
 
 def _rms_bin(regime: str, key: str, r: np.ndarray, sigma: float) -> dict[str, object]:

@@ -201,6 +201,8 @@ def _located(cmp: Comparison, f: Finding) -> dict[str, Any]:
             "input_lag_periods": cmp.lag.get(f.channel, (None,))[0]}
     if f.rms is not None:  # a wheel that scatters without a bias (locate.scatter_finding)
         item["rms_residual"] = f.rms
+    if f.lag is not None:  # a wheel that runs behind (or ahead of) the twin (locate.lag_finding)
+        item["lag_s"] = f.lag
     return item
 
 

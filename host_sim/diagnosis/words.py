@@ -43,9 +43,11 @@ def spans_text(spans: list[tuple[float, float]], most: int = 4) -> str:
 
 def sentence(f: Finding) -> str:
     """e.g. "the left wheel turns slower than the twin's at low left-wheel speed, 12–14 s, 40–52 s"."""
+    side = "left" if f.channel == "wheel_l" else "right"
     if f.rms is not None:  # no bias: "the left wheel's speed scatters about the twin's (RMS 17 times its noise) ..."
-        side = "left" if f.channel == "wheel_l" else "right"
         parts = [f"the {side} wheel's speed scatters about the twin's (RMS {f.rms / f.noise:.0f} times its noise)"]
+    elif f.lag is not None:  # "the left wheel runs 31 ms behind the twin's whenever its speed changes"
+        parts = [f"the {side} wheel runs {1000 * abs(f.lag):.0f} ms {'behind' if f.lag > 0 else 'ahead of'} the twin's"]
     else:
         parts = [what(f.channel, f.mean)]
     parts.append(f.regime if f.regime else "everywhere")
