@@ -18,8 +18,7 @@ from host_sim.diagnosis.channels import (ACCUMULATED, WHEELS, Channel, build_cha
                                         rounding_ceiling)
 from host_sim.diagnosis.locate import (Finding, bias_margin, contact_windows, input_lag, ljung_box, locate_channel,
                                       lag_finding, lag_margin, locate_scale, regimes, scale_margin, scatter_finding,
-                                      scatter_margin,
-                                      timing_findings, timing_margin)
+                                      scatter_margin, timing_findings, timing_margin)
 from host_sim.diagnosis.windows import DEFAULT_SECONDS, Windows, make_windows, run_windows, unjudged_readings
 from host_sim.params import RobotParams
 from host_sim.recording import Recording

@@ -337,8 +337,8 @@ def scatter_finding(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regim
 
 
 def scatter_margin(ch: Channel, resid: np.ndarray, keep: np.ndarray) -> float:
-    """A wheel's residual RMS against the weaker of its two thresholds (SCATTER_MIN noise levels,
-    RELATIVE_MIN of the wheel's speed): scatter_finding locates it at 1 or more."""
+    """A wheel's residual RMS against its thresholds (SCATTER_MIN noise levels or SCATTER_FLOOR_MIN encoder
+    roundings, and RELATIVE_MIN of the wheel's speed): scatter_finding locates it at 1 or more."""
     r = resid[keep]
     return _scatter_margin(r, noise_level(ch, r), ch.y[keep], ch.noise_floor) if r.size else 0.0
 
@@ -383,13 +383,15 @@ def lag_margin(ch: Channel, keep: np.ndarray, period: float) -> float:
     """A wheel's lag against its thresholds (|z| >= Z_MIN, LAG_MIN_S): lag_finding locates it at 1 or more."""
     if ch.name not in WHEELS:
         return 0.0
-    lag, z, n = _lag_fit(ch, keep)
-    return min(abs(z) / Z_MIN, abs(lag) * period / LAG_MIN_S) if n >= SCALE_WINDOWS_MIN else 0.0
+    if int(keep.sum()) < SCALE_WINDOWS_MIN:
+        return 0.0
+    lag, z, _n = _lag_fit(ch, keep)
+    return min(abs(z) / Z_MIN, abs(lag) * period / LAG_MIN_S)
 
 
 def lag_finding(ch: Channel, resid: np.ndarray, keep: np.ndarray, t: np.ndarray) -> Finding | None:
-    """A wheel that answers the twin's speed changes late (or early), or None; asked only of a wheel no
-    bin located (nor a scatter)."""
+    """A wheel that answers the twin's speed changes late (or early), or None; asked only when no other
+    rule located any channel of the drive (compare)."""
     if ch.name not in WHEELS or not keep.any():
         return None
     period = float(np.median(np.diff(t[0]))) if t.shape[1] > 1 else 0.04
