@@ -100,14 +100,14 @@ def _locate(cmp: Comparison, rec: Recording, p: RobotParams, world: World | None
         if found is not None:
             _add(cmp, rec, found, resid, keep)
     # A wheel that runs behind the twin, only where nothing else located the drive: many drive effects
-    # leave a small lag (a larger wheel or a wider track reflects more of the body's inertia to the motor),
-    # and beside the finding that names them it only blurs what the fit must improve (blind 0004, 0022,
-    # 0153 went from named to unexplained).
+    # leave a small lag (blind 0153's larger wheel, 0004's finer encoder, 0022's narrower track: 10-16 ms),
+    # and beside the finding that names them it only blurs what the fit must improve (the three went from
+    # named to unexplained).
     if not any(drive_channel(f.channel) for f in cmp.findings):
-        for ch in cmp.channels:
-            late = lag_finding(ch, resids[ch.name], keep, t) if ch.locate else None
+        for name in WHEELS:
+            late = lag_finding(cmp.channel(name), resids[name], keep, t, rec.sample_period)
             if late is not None:
-                _add(cmp, rec, late, resids[ch.name], keep)
+                _add(cmp, rec, late, resids[name], keep)
 
 
 def _add(cmp: Comparison, rec: Recording, found: Finding, resid: np.ndarray, keep: np.ndarray) -> None:

@@ -320,9 +320,9 @@ def scatter_finding(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regim
     sigma = noise_level(ch, r)
     if _scatter_margin(r, sigma, ch.y[keep], ch.noise_floor) < 1.0:
         return None
-    if float(np.sqrt((r * r).mean())) < SCATTER_MIN * sigma:  # found against the rounding: say it in those terms
-        sigma = ch.noise_floor
     square = float((r * r).mean())
+    if np.sqrt(square) < SCATTER_MIN * sigma:  # found against the encoder's rounding: say it in those terms
+        sigma = ch.noise_floor
     whole = _rms_bin("", "all", r, sigma)
     bins = [whole]  # and every regime bin, for the report's picture
     for name, (labels, words) in reg.labels.items():
@@ -379,25 +379,26 @@ def _lag_fit(ch: Channel, keep: np.ndarray) -> tuple[float, float, int]:
     return -beta, -beta / se, sums.size
 
 
+def _lag_judged(ch: Channel, keep: np.ndarray, period: float) -> tuple[float, float, int, float]:
+    """(lag in periods, its z, blocks, margin) of _lag_fit's lag; the margin is the weaker of its
+    thresholds (|z| >= Z_MIN, LAG_MIN_S), 0 for a channel other than a wheel or too few windows."""
+    if ch.name not in WHEELS or int(keep.sum()) < SCALE_WINDOWS_MIN:
+        return 0.0, 0.0, 0, 0.0
+    lag, z, n = _lag_fit(ch, keep)
+    return lag, z, n, min(abs(z) / Z_MIN, abs(lag) * period / LAG_MIN_S)
+
+
 def lag_margin(ch: Channel, keep: np.ndarray, period: float) -> float:
-    """A wheel's lag against its thresholds (|z| >= Z_MIN, LAG_MIN_S): lag_finding locates it at 1 or more."""
-    if ch.name not in WHEELS:
-        return 0.0
-    if int(keep.sum()) < SCALE_WINDOWS_MIN:
-        return 0.0
-    lag, z, _n = _lag_fit(ch, keep)
-    return min(abs(z) / Z_MIN, abs(lag) * period / LAG_MIN_S)
+    """A wheel's lag against its thresholds (_lag_judged): lag_finding locates it at 1 or more."""
+    return _lag_judged(ch, keep, period)[3]
 
 
-def lag_finding(ch: Channel, resid: np.ndarray, keep: np.ndarray, t: np.ndarray) -> Finding | None:
+def lag_finding(ch: Channel, resid: np.ndarray, keep: np.ndarray, t: np.ndarray, period: float) -> Finding | None:
     """A wheel that answers the twin's speed changes late (or early), or None; asked only when no other
     rule located any channel of the drive (compare)."""
-    if ch.name not in WHEELS or not keep.any():
+    lag, z, n, margin = _lag_judged(ch, keep, period)
+    if margin < 1.0:
         return None
-    period = float(np.median(np.diff(t[0]))) if t.shape[1] > 1 else 0.04
-    if lag_margin(ch, keep, period) < 1.0:
-        return None
-    lag, z, n = _lag_fit(ch, keep)
     sigma = noise_level(ch, resid[keep])
     mean = float(resid[keep].mean())
     return Finding(ch.name, LAG_REGIME, "lag", spans(resid, keep, t, sigma), mean, z, sigma,
