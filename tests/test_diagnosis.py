@@ -410,10 +410,11 @@ def test_the_chosen_effect_is_the_best_of_those_that_pass_held_out(tmp_path, nom
 def test_a_leak_that_varies_less_than_a_readings_noise_is_an_offset(nominal_run):
     """A sensor's offset and its ambient leakage both pass, the leakage a little lower in BIC: under a light so
     steady that the fitted leak varies by less than a reading's noise, the two are one constant and the offset
-    (plainer) is chosen; a leak that varies more is kept (blind case 0187: an offset named a leakage)."""
+    (plainer) is chosen; a leak that varies more, or one very strongly favoured, is kept (blind case 0187:
+    an offset named a leakage)."""
     from types import SimpleNamespace
 
-    from host_sim.diagnosis.fit import LEAK_DISTINCT_COUNTS, Candidate, Model, choose, leak_swing
+    from host_sim.diagnosis.fit import LEAK_DISTINCT_COUNTS, LEAK_STRONG_BIC, Candidate, Model, bic, choose, leak_swing
 
     obj = SimpleNamespace(rec=nominal_run, located_gain=lambda *_a: 0.0)
     spread = leak_swing(nominal_run, 2, 1.0)  # counts of S3's ambient light, 5th to 95th percentile
@@ -424,10 +425,16 @@ def test_a_leak_that_varies_less_than_a_readings_noise_is_an_offset(nominal_run)
     cands = [offset, Candidate("ir_gain", 2), leakage]
     for swing, chosen in ((0.5 * LEAK_DISTINCT_COUNTS, offset), (2.0 * LEAK_DISTINCT_COUNTS, leakage)):
         leak = swing / spread
-        as_offset = Model([offset], [[150.0 * leak]], DEFAULT, 3010.0, 1.0 * n, 4000, r_test=np.ones(n))
+        as_offset = Model([offset], [[150.0 * leak]], DEFAULT, 3005.0, 1.0 * n, 4000, r_test=np.ones(n))  # BIC + 6.7
         as_leak = Model([leakage], [[leak]], DEFAULT, 3000.0, 1.0 * n, 4000, r_test=np.ones(n))
         assert choose(obj, current, [as_offset, as_leak], cands, []).effects == [chosen]
     assert choose(obj, current, [as_leak], cands, []).effects == [leakage]  # no offset beside it: the leak stays
+    leak = 0.5 * LEAK_DISTINCT_COUNTS / spread  # steady light, the leak's edge in BIC just below and just above strong
+    for cost_offset, chosen in ((3007.0, offset), (3008.0, leakage)):  # BIC + 9.3, + 10.7
+        as_offset = Model([offset], [[150.0 * leak]], DEFAULT, cost_offset, 1.0 * n, 4000, r_test=np.ones(n))
+        as_leak = Model([leakage], [[leak]], DEFAULT, 3000.0, 1.0 * n, 4000, r_test=np.ones(n))
+        assert (bic(as_offset) - bic(as_leak) > LEAK_STRONG_BIC) == (chosen == leakage)
+        assert choose(obj, current, [as_offset, as_leak], cands, []).effects == [chosen]
 
 
 def test_readings_that_run_behind_the_pose_are_located_on_the_ring(nominal_run):
