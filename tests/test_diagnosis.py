@@ -503,6 +503,37 @@ def test_a_value_near_a_small_bound_is_a_measurement_not_a_pin():
     assert _pinned(DEFAULT, fitted(0.0105)) and _pinned(DEFAULT, fitted(2.999))
 
 
+def test_screening_tries_each_effect_about_twice_as_far_each_time_then_zooms_in_on_the_best():
+    """A dry friction's cost valley is about 2x wide (blind case 0168): the trials from absent towards each
+    bound are at most 2.5x apart.  A rough cost (a gear's play, blind case 0165) is then tried between the
+    best trial's neighbours, and the fit starts from the best of those, not from the trial itself."""
+    from types import SimpleNamespace
+
+    from host_sim.diagnosis.fit import Candidate, Model, screen_trials, zoom
+
+    lo, hi = E.bounds("dry_friction")
+    trials = screen_trials("dry_friction", 0.0)
+    for side in ([x for x in trials if x > 0], [-x for x in trials if x < 0]):
+        assert side == sorted(side) and max(b / a for a, b in zip(side, side[1:])) <= 2.5
+    assert max(trials) >= 0.5 * hi[0] and min(trials) <= 0.5 * lo[0] and min(abs(x) for x in trials) <= 0.03 * hi[0]
+    assert any(0.5e-3 < x < 2e-3 for x in trials)  # 0168's valley
+
+    play = Candidate("backlash", "left")
+
+    def cost(x):  # a dip at 0.052 rad, on a rough floor
+        return 1.0 + 100 * (x - 0.052) ** 2 + 0.1 * np.cos(400 * x)
+
+    def residuals(robots):
+        return np.array([[np.sqrt(cost(E.values(r, "backlash", "left")[0]))] for r in robots]), None
+
+    obj = SimpleNamespace(residuals=residuals)
+    current = Model([], [], DEFAULT, 1.0, 1.0, 1)
+    seen = sorted((x, cost(x)) for x in [0.0, 0.03, 0.06, 0.105])
+    ((cand, start),) = zoom(obj, current, [(play, [0.06], seen)])
+    assert cand == play and 0.03 < start[0] < 0.06 and abs(start[0] - 0.052) < abs(0.06 - 0.052)
+    assert zoom(obj, current, [(play, [0.0571], seen)]) == [(play, [0.0571])]  # a linear step's start: as it was
+
+
 def test_the_speed_rising_and_falling_are_regimes_apart(tmp_path):
     """A slipping wheel runs ahead of the twin's while the speed rises and behind it while it falls (a heavy
     robot the other way round): pooled, the halves cancel, so they are two regimes.  Steps of current on

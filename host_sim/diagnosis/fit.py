@@ -56,6 +56,7 @@ WITHIN_NOISE = 1.0  # held-out cost per weighted residual below which no further
 SCREEN_STEPS = (0.02, 0.05, 0.1, 0.2, 0.35, 0.6)  # of the span from a one-parameter effect's start to each bound:
 # the values the screening also tries outright, about 2x apart (a dry friction's cost has a valley 2x wide, blind
 # case 0168: 14k at 1 mN m, 176k at 0.5, 222k at 2; the earlier 2 %, 15 % and 50 % of the range stepped over it)
+ZOOM_POINTS = 8  # values between a shortlisted effect's best trial and its neighbours, tried before its fit
 LOG_TRIALS = 8  # a range with 0 < lower <= upper / 10 is tried at lower * (upper / lower) ** (k / 8), k = 1..7: a
 # grip's cost has a narrow valley (ice at mu 0.1: 20 % off costs 6-17 times more), so the trials must not step over it
 P_MAX = 1e-4  # F test against the twin without the effect
@@ -276,7 +277,8 @@ def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candid
     Gauss-Newton step from absent and its trials: effects with a threshold (a gear's play, a delay)
     barely change the residuals near absent, so the linear step alone would screen them out.  The fit
     starts where that best was, not at absent: a grip (traction_limit) at its nominal value never
-    slips, so a fit started there sees no gradient and stays.
+    slips, so a fit started there sees no gradient and stays; and where a trial was best, from the best
+    of a few values around it (zoom).
     """
     robots = [current.params]
     slots = []
@@ -292,7 +294,7 @@ def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candid
         robots += [E.apply(current.params, cand.name, cand.site, [x]) for x in trials]
         slots.append((first, x0, h, lo - x0, hi - x0, trials))
     train, _test = obj.residuals(robots)
-    predicted, starts = [], []
+    predicted, starts, seen = [], [], []
     for first, x0, h, dlo, dhi, trials in slots:
         r0 = train[first]
         jac = ((train[first + 1:first + 1 + len(h)] - r0) / h[:, None]).T
@@ -304,8 +306,42 @@ def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candid
         best = int(np.argmin(costs))
         starts.append(list(x0 + step) if best == 0 else [trials[best - 1]])
         predicted.append(costs[best])
-    order = np.argsort(predicted)
-    return [(cands[i], starts[i]) for i in order[:keep]]
+        # the values tried outright, with their actual costs, for zoom
+        seen.append(sorted([(float(x0[0]), float(r0 @ r0))] + [(x, c) for x, c in zip(trials, costs[1:])]))
+    order = [int(i) for i in np.argsort(predicted)[:keep]]
+    return zoom(obj, current, [(cands[i], starts[i], seen[i]) for i in order])
+
+
+def zoom(obj: Objective, current: Model, shortlist: list[tuple[Candidate, list[float], list[tuple[float, float]]]]
+         ) -> list[tuple[Candidate, list[float]]]:
+    """Each shortlisted one-parameter effect whose best screening value was a trial starts its fit from the
+    best of ZOOM_POINTS more values between that trial's neighbours (one batch run for all): a gear's play
+    or a latency has a rough cost, and a fit stays in the dip it starts in (blind case 0165: a 0.052 rad
+    play fitted 0.060 from the trial at 0.060, 0.052 from one at 0.045)."""
+    robots, grids = [], []
+    for cand, start, seen in shortlist:
+        xs = [x for x, _c in seen]
+        if len(start) != 1 or start[0] not in xs:  # a linear step's start, or more parameters: as screened
+            grids.append([])
+            continue
+        k = xs.index(start[0])
+        lo, hi = xs[max(k - 1, 0)], xs[min(k + 1, len(xs) - 1)]
+        grid = (np.geomspace(lo, hi, ZOOM_POINTS + 2) if lo > 0 and E.bounds(cand.name)[0][0] > 0
+                else np.linspace(lo, hi, ZOOM_POINTS + 2))[1:-1]
+        grids.append([float(x) for x in grid if x != start[0]])
+        robots += [E.apply(current.params, cand.name, cand.site, [x]) for x in grids[-1]]
+    if not robots:
+        return [(cand, start) for cand, start, _seen in shortlist]
+    train, _test = obj.residuals(robots)
+    out, at = [], 0
+    for (cand, start, seen), grid in zip(shortlist, grids):
+        costs = [float(r @ r) for r in train[at:at + len(grid)]]
+        at += len(grid)
+        best_seen = dict(seen).get(start[0], math.inf) if len(start) == 1 else math.inf
+        if costs and min(costs) < best_seen:
+            start = [grid[int(np.argmin(costs))]]
+        out.append((cand, start))
+    return out
 
 
 def screen_trials(name: str, start: float) -> list[float]:
