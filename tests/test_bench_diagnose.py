@@ -207,6 +207,25 @@ def test_scoreboard_structure(suite: dict[str, Any], capsys: pytest.CaptureFixtu
     header = next(ln for ln in out.splitlines() if ln.startswith("case "))
     assert [c.strip() for c in header.split("|")] == list(bench_diagnose.HEADER)
     assert out.count("[MET]") + out.count("[MISSED]") + out.count("[NOT RUN]") == len(report["targets"])
+    # the named cases, by what drove the robot: the key's excitation and rule set
+    totals = report["totals"]
+    assert sum(n for _named, n in totals["named_by_drive"].values()) == totals["excited"]
+    assert sum(named for named, _n in totals["named_by_drive"].values()) == totals["named"]
+    for r in report["cases"]:
+        answer = json.loads((suite["out"] / "answer_keys" / f"{r['case']}.answer.json").read_text())
+        assert r["rule_set"] == answer["excitation"]["rule_set"] and r["excitation"] == answer["excitation"]["kind"]
+    assert "named, by what drove the robot: " in out
+
+
+def test_a_case_is_labelled_by_what_drove_it() -> None:
+    assert bench_diagnose.drive_label({"excitation": "manoeuvre", "rule_set": 1}) == "manoeuvre"
+    assert bench_diagnose.drive_label({"excitation": "firmware", "rule_set": 0}) == "exploration (first rules)"
+    assert bench_diagnose.drive_label({"excitation": "firmware", "rule_set": 1}) == "exploration (refined rules)"
+    rows = [{"kind": "in library", "outcome": o, "excitation": "firmware", "rule_set": rules, "sindy": {"error": "not run"},
+             "param": {"error": 0.01}, "seconds_per_90s": 1.0, "cpu_seconds_per_90s": 1.0}
+            for o, rules in (("right", 1), ("refused", 0), ("right", 0), ("missed", 0))]
+    assert bench_diagnose.totals(rows)["named_by_drive"] == {"exploration (refined rules)": [1, 1],
+                                                             "exploration (first rules)": [1, 3]}
 
 
 def test_the_diagnosis_is_blind(suite: dict[str, Any], tmp_path: Path) -> None:

@@ -171,6 +171,7 @@ def score_all(seeds: list[int], results: dict[int, dict[str, Any]], out_dir: Pat
         rec = load_recording(res["recording"])
         row = scoring.score_case(key, res.get("diagnosis"), rec, params_from_dict(rec.meta["robot"]), res.get("error"))
         row["excitation"] = key["excitation"]["kind"]
+        row["rule_set"] = key["excitation"].get("rule_set")
         row["world"] = key["world"]
         row["seconds"] = res["seconds"]
         row["seconds_per_90s"] = res["seconds"] * REFERENCE_SECONDS / res["duration"]
@@ -209,13 +210,18 @@ def totals(rows: list[dict[str, Any]]) -> dict[str, Any]:
     outcomes: dict[str, int] = {}
     for r in excited:
         outcomes[r["outcome"]] = outcomes.get(r["outcome"], 0) + 1
+    by_drive: dict[str, list[int]] = {}  # drive -> [named, excited]
+    for r in excited:
+        counts = by_drive.setdefault(drive_label(r), [0, 0])
+        counts[0] += r["outcome"] == "right"
+        counts[1] += 1
     # Only diagnoses that ran to a verdict are timed: a crash or a refusal returns early.
     secs = [r["seconds_per_90s"] for r in rows if "fit_before" in r] or [float("nan")]
     cpu = [r["cpu_seconds_per_90s"] for r in rows if "fit_before" in r] or [float("nan")]
     sindy_ok = [r for r in rows if "error" not in r["sindy"]]
     return {
         "cases": len(rows), "in_library": len(listed), "not_excited": len(listed) - len(excited),
-        "excited": len(excited), "outcomes_excited": outcomes,
+        "excited": len(excited), "outcomes_excited": outcomes, "named_by_drive": by_drive,
         "named": len(named), "named_share": _share(len(named), len(excited)),
         "params_within": len(params_ok), "params_share": _share(len(params_ok), len(named)),
         "param_error_median": statistics.median([r["param"]["error"] for r in named]) if named else None,
@@ -237,6 +243,17 @@ def totals(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "seconds_median": _median([r["sindy"]["seconds"] for r in sindy_ok]),
         },
     }
+
+
+RULE_SETS = {0: "first", 1: "refined"}  # the firmware's fuzzy rule sets (protocol parameter 4)
+
+
+def drive_label(row: dict[str, Any]) -> str:
+    """What drove a case: the identification manoeuvre, or the firmware's exploration with which rule set."""
+    if row["excitation"] != "firmware":
+        return str(row["excitation"])
+    rules = RULE_SETS.get(row.get("rule_set"))  # type: ignore[arg-type]
+    return f"exploration ({rules} rules)" if rules else "exploration"
 
 
 def _median(values: list[Any]) -> float | None:
@@ -341,6 +358,8 @@ def print_report(report: dict[str, Any]) -> None:
     print()
     print(f"outcomes of the {t['excited']} excited in-library cases: "
           + ", ".join(f"{k} {v}" for k, v in sorted(t["outcomes_excited"].items())))
+    print("named, by what drove the robot: "
+          + ", ".join(f"{k} {named}/{n}" for k, (named, n) in sorted(t["named_by_drive"].items())))
     print(f"median parameter error of those named: "
           + ("-" if t["param_error_median"] is None else f"{100 * t['param_error_median']:.0f} %"))
     print(f"median held-out wheel fit (controls + in-library): before {_f(t['wheel_fit_before_median'])} %, "
