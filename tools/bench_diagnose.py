@@ -252,7 +252,7 @@ def drive_label(row: dict[str, Any]) -> str:
     """What drove a case: the identification manoeuvre, or the firmware's exploration with which rule set."""
     if row["excitation"] != "firmware":
         return str(row["excitation"])
-    rules = RULE_SETS.get(row.get("rule_set"))  # type: ignore[arg-type]
+    rules = RULE_SETS.get(int(row["rule_set"])) if row.get("rule_set") is not None else None
     return f"exploration ({rules} rules)" if rules else "exploration"
 
 

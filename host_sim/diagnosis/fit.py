@@ -70,7 +70,7 @@ DRIVE_EFFECTS = ("dry_friction", "viscous_friction", "wheel_radius", "torque_con
                  "caster_drag", "turning_resistance", "com_offset", "mass")
 SENSOR_EFFECTS = ("ir_offset", "ir_gain", "ambient_leakage", "ir_misalignment")  # plainest first: ties go to it
 LEAK_DISTINCT_COUNTS = 3.0  # counts (one reading's noise): a leak that varies less over the recording is a constant
-LEAK_STRONG_BIC = 10.0  # ... to the eye, and named over the sensor's offset only on very strong evidence (Kass & Raftery)
+LEAK_STRONG_BIC = 10.0  # BIC by which such a leak must beat the sensor's offset to be named (Kass & Raftery: very strong)
 AMBIENT_SMOOTH_S = 0.5  # s: the ambient light is judged on a running mean (the readings' own noise is not light)
 
 
@@ -334,12 +334,12 @@ def zoom(obj: Objective, current: Model, shortlist: list[tuple[Candidate, list[f
         return [(cand, start) for cand, start, _seen in shortlist]
     train, _test = obj.residuals(robots)
     out, at = [], 0
-    for (cand, start, seen), grid in zip(shortlist, grids):
-        costs = [float(r @ r) for r in train[at:at + len(grid)]]
-        at += len(grid)
+    for (cand, start, seen), values in zip(shortlist, grids):
+        costs = [float(r @ r) for r in train[at:at + len(values)]]
+        at += len(values)
         best_seen = dict(seen).get(start[0], math.inf) if len(start) == 1 else math.inf
         if costs and min(costs) < best_seen:
-            start = [grid[int(np.argmin(costs))]]
+            start = [values[int(np.argmin(costs))]]
         out.append((cand, start))
     return out
 
