@@ -221,8 +221,9 @@ def test_a_case_is_labelled_by_what_drove_it() -> None:
     assert bench_diagnose.drive_label({"excitation": "manoeuvre", "rule_set": 1}) == "manoeuvre"
     assert bench_diagnose.drive_label({"excitation": "firmware", "rule_set": 0}) == "exploration (first rules)"
     assert bench_diagnose.drive_label({"excitation": "firmware", "rule_set": 1}) == "exploration (refined rules)"
-    rows = [{"kind": "in library", "outcome": o, "excitation": "firmware", "rule_set": rules, "sindy": {"error": "not run"},
-             "param": {"error": 0.01}, "seconds_per_90s": 1.0, "cpu_seconds_per_90s": 1.0}
+    rows = [{"kind": "in library", "outcome": o, "excitation": "firmware", "rule_set": rules,
+             "sindy": {"error": "not run"}, "param": {"error": 0.01}, "seconds_per_90s": 1.0,
+             "cpu_seconds_per_90s": 1.0}
             for o, rules in (("right", 1), ("refused", 0), ("right", 0), ("missed", 0))]
     assert bench_diagnose.totals(rows)["named_by_drive"] == {"exploration (refined rules)": [1, 1],
                                                              "exploration (first rules)": [1, 3]}

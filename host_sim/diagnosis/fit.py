@@ -70,7 +70,7 @@ DRIVE_EFFECTS = ("dry_friction", "viscous_friction", "wheel_radius", "torque_con
                  "caster_drag", "turning_resistance", "com_offset", "mass")
 SENSOR_EFFECTS = ("ir_offset", "ir_gain", "ambient_leakage", "ir_misalignment")  # plainest first: ties go to it
 LEAK_DISTINCT_COUNTS = 3.0  # counts (one reading's noise): a leak that varies less over the recording is a constant
-LEAK_STRONG_BIC = 10.0  # BIC by which such a leak must beat the sensor's offset to be named (Kass & Raftery: very strong)
+LEAK_STRONG_BIC = 10.0  # BIC by which such a leak must beat the sensor's offset to be named (Kass & Raftery)
 AMBIENT_SMOOTH_S = 0.5  # s: the ambient light is judged on a running mean (the readings' own noise is not light)
 
 
