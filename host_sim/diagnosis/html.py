@@ -99,11 +99,11 @@ def lag_figure(before: Comparison, after: Comparison | None, channel: str, lag_s
     across it, before and after the fit, with the slope of the lag located."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6, 3.2))
-    for cmp, colour, label in ((before, "tab:red", "before: recorded − twin"), (after, "tab:blue", "after the fit")):
-        if cmp is not None:
-            change, sums = lag_blocks(cmp.channel(channel), ~cmp.contact)
-            ax.plot(change.ravel(), sums.ravel(), "o", ms=2, color=colour, label=label)
-    change, _sums = lag_blocks(before.channel(channel), ~before.contact)
+    change, sums = lag_blocks(before.channel(channel), ~before.contact)
+    ax.plot(change.ravel(), sums.ravel(), "o", ms=2, color="tab:red", label="before: recorded − twin")
+    if after is not None:
+        after_change, after_sums = lag_blocks(after.channel(channel), ~after.contact)
+        ax.plot(after_change.ravel(), after_sums.ravel(), "o", ms=2, color="tab:blue", label="after the fit")
     x = np.array([float(change.min()), float(change.max())]) if change.size else np.zeros(2)
     ax.plot(x, -lag_s / period * x, "k--", lw=1, label=f"{1000 * lag_s:.0f} ms behind")
     ax.axhline(0, color="k", lw=0.5)
