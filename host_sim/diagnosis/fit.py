@@ -337,8 +337,7 @@ def zoom(obj: Objective, current: Model, shortlist: list[tuple[Candidate, list[f
     for (cand, start, seen), values in zip(shortlist, grids):
         costs = [float(r @ r) for r in train[at:at + len(values)]]
         at += len(values)
-        best_seen = dict(seen).get(start[0], math.inf) if len(start) == 1 else math.inf
-        if costs and min(costs) < best_seen:
+        if costs and min(costs) < dict(seen)[start[0]]:  # zoomed only round a trial, whose cost was seen
             start = [values[int(np.argmin(costs))]]
         out.append((cand, start))
     return out
