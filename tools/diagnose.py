@@ -19,7 +19,7 @@ IR sensors.  Less is refused with a one-line reason and exit status 2.  The
 identification manoeuvre records all of it in 46 s:
 twinbot serial PORT --excite --record run.csv (twinbot sim --excite on the twin).
 A 90 s recording takes 6-12 s of one core (the medians of twinbot bench
-diagnose's five suites, on a quiet or a busy machine; up to 2 min when a
+diagnose's six suites, on a quiet or a busy machine; up to 2 min when a
 gear's play is fitted), with a progress line per step.
 """
 from __future__ import annotations
