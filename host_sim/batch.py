@@ -234,6 +234,14 @@ class BatchSim:
         self._wall_force = np.zeros((2, self.n, max(world.n_walls, 1)))
         self._walls = world.n_walls > 0
 
+    def start_sliding(self, slides: Any, body: Any) -> None:
+        """Robots `slides` ((N,) bool) start sliding over the floor with body velocity (u, l, omega) of C
+        `body` ((N, 3)), not rolling at their wheels' speeds: a replay from a row where the tracker saw the
+        robot slide (replay.sliding_rows)."""
+        slides = np.asarray(slides, dtype=bool)
+        self.slipping[slides] = True
+        self.body[slides] = np.asarray(body, dtype=float)[slides]
+
     def seed_commands(self, times: Any, cmds: Any) -> None:
         """The commands issued before now (times ascending, s; cmds (K, N, 2) or (K, 2), A): what a delayed
         actuator still has on its way when the run starts.  Without it: no current before the first."""

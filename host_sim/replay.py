@@ -112,6 +112,68 @@ def state_at(rec: Recording, k: int, p: RobotParams) -> tuple[tuple[float, ...],
     return q, (float(v[0]), float(v[1]))
 
 
+# A robot slides at a row when the tracker's velocity of C differs from what its wheels, rolling, would
+# give by more than SLIDE_NOISE times the recording's own spread of that difference (the tracker's noise:
+# the robot rolls most of the time) plus SLIDE_RELATIVE of the faster rim's speed (a wheel a few % larger
+# than the twin's is not a slide), and by at least SLIDE_FLOOR (a simulator's exact tracker).
+SLIDE_NOISE = 6.0
+SLIDE_RELATIVE = 0.15
+SLIDE_FLOOR = (0.01, 0.01, 0.1)  # m/s, m/s, rad/s: u, l, omega
+SLOPE_ROWS = 2  # both velocities: the least-squares slope over rows k - 2 .. k + 2 (fewer at the ends)
+
+
+def _slopes(t: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """(n, m) the least-squares slope of each column of y (n, m) over SLOPE_ROWS rows either side."""
+    n = len(t)
+    out = np.zeros(y.shape)
+    for k in range(n):
+        lo, hi = max(k - SLOPE_ROWS, 0), min(k + SLOPE_ROWS + 1, n)
+        dt = t[lo:hi] - t[lo:hi].mean()
+        den = float(dt @ dt)
+        if den > 0:
+            out[k] = dt @ (y[lo:hi] - y[lo:hi].mean(axis=0)) / den
+    return out
+
+
+def tracked_velocity(rec: Recording) -> np.ndarray:
+    """(n, 3) (u, l, omega) of C at every row from the tracker: u along the heading, l to its left."""
+    assert rec.pose is not None
+    slope = _slopes(rec.t, np.column_stack([rec.pose[:, 0], rec.pose[:, 1], np.unwrap(rec.pose[:, 2])]))
+    c, s = np.cos(rec.pose[:, 2]), np.sin(rec.pose[:, 2])
+    return np.column_stack([c * slope[:, 0] + s * slope[:, 1], c * slope[:, 1] - s * slope[:, 0], slope[:, 2]])
+
+
+def rolling_velocity(rec: Recording, p: RobotParams) -> np.ndarray:
+    """(n, 3) (u, l, omega) of C at every row if the wheels rolled as the encoders turned (smoothed as
+    tracked_velocity, so that the two differ by a slide, not by their bandwidths)."""
+    angle = np.column_stack([rec.enc[:, w] * (2 * math.pi / motors.ticks_per_rev(p, w)) for w in range(2)])
+    speed = _slopes(rec.t, angle)
+    rim_l = (p.wheel_radius + p.wheel_radius_delta_l) * speed[:, 0]
+    rim_r = (p.wheel_radius + p.wheel_radius_delta_r) * speed[:, 1]
+    return np.column_stack([0.5 * (rim_l + rim_r), 0.0 * rim_l, 0.5 * (rim_r - rim_l) / p.half_axle])
+
+
+def sliding_rows(rec: Recording, p: RobotParams) -> tuple[np.ndarray, np.ndarray]:
+    """(slides (n,) bool, body (n, 3)): the rows where the tracker says the robot slides over the floor,
+    and the tracked (u, l, omega) of C at every row, which a replay started there gives its robot.
+
+    A replay started at rest or rolling where the robot slid (braking on ice: the wheels stopped, the body
+    still going; or pressed into a wall, the wheels turning, the body still) starts a way off the truth.
+    Without a tracker nothing slides."""
+    n = len(rec)
+    if rec.pose is None or n < 2 * SLOPE_ROWS + 1:
+        return np.zeros(n, dtype=bool), np.zeros((n, 3))
+    body = tracked_velocity(rec)
+    rolling = rolling_velocity(rec, p)
+    diff = body - rolling
+    noise = 1.4826 * np.median(np.abs(diff - np.median(diff, axis=0)), axis=0)
+    rim = np.abs(rolling[:, 0]) + p.half_axle * np.abs(rolling[:, 2])  # the faster rim's speed
+    scale = np.array([1.0, 1.0, 1.0 / p.half_axle])
+    limit = np.maximum(SLIDE_NOISE * noise[None, :] + SLIDE_RELATIVE * rim[:, None] * scale[None, :],
+                       np.array(SLIDE_FLOOR)[None, :])
+    return (np.abs(diff) > limit).any(axis=1), body
+
+
 def wheel_speeds_at(rec: Recording, k: int, p: RobotParams) -> tuple[float, float]:
     """Wheel speeds (rad/s) at row k from the encoder counts around it: second-order differences, central
     inside and one-sided (three rows) at the ends.
@@ -160,6 +222,9 @@ def replay(rec: Recording, p: RobotParams, world: World, start: int = 0, stop: i
     inputs = replay_inputs(rec, start, stop, nominal_timing)
     robot = SimRobot(world, p, seed=seed, noise=seed is not None)
     robot.q, robot.v = state_at(rec, start, p)
+    slides, body = sliding_rows(rec, p)
+    if slides[start] and not inputs.at_rest:
+        robot.slip = tuple(float(x) for x in body[start])  # type: ignore[assignment]
     robot.t = inputs.t0
     n = len(inputs.cmd)
     enc = np.zeros((n, 2), dtype=np.int64)
@@ -210,6 +275,9 @@ def replay_batch(rec: Recording, params_list: Any, start: int = 0, *, stop: int 
     q = np.array([s[0] for s in states], dtype=float).reshape(-1, 5)
     v = np.array([s[1] for s in states], dtype=float).reshape(-1, 2)
     sim = BatchSim(world, params, q=q, v=v, t=inputs.t0, base=base, cycle_s=rec.sample_period, substeps=substeps)
+    slides, body = sliding_rows(rec, robots[0])
+    if slides[start] and not inputs.at_rest:
+        sim.start_sliding(np.ones(sim.n, dtype=bool), np.tile(body[start], (sim.n, 1)))
     if start > 0 and SEED_ROWS:  # actuator_delay: the recorded commands before `start` are still on their way
         before = replay_inputs(rec, max(start - SEED_ROWS, 0), start, nominal_timing)
         sim.seed_commands(inputs.t0 - np.cumsum(before.period[::-1])[::-1], before.cmd)

@@ -156,8 +156,9 @@ class SimRobot:
         twin = self._effects
         assert twin is not None
         twin.q[0], twin.v[0], twin.t = self.q, self.v, self.t
-        if self.slip is None:
-            twin.slipping[0] = False
+        twin.slipping[0] = self.slip is not None
+        if self.slip is not None:  # set from outside too (a replay started sliding)
+            twin.body[0] = self.slip
         twin.substep(self.i_ref, dt)
         self.q = tuple(float(x) for x in twin.q[0])
         self.v = (float(twin.v[0, 0]), float(twin.v[0, 1]))

@@ -261,7 +261,8 @@ def test_too_short_or_too_still_is_said_plainly(tmp_path):
         diagnose(short, DEFAULT, ROOM)
     still = record(tmp_path, duration=10.0, name="still.csv")
     still.enc[:] = still.enc[:1]  # the wheels never turned ...
-    still.cmd[:] = 0.0  # ... nor were they driven
+    still.cmd[:] = 0.0  # ... nor were they driven ...
+    still.pose[:] = still.pose[:1]  # ... nor did the robot move (a tracker that saw it go would be a slide)
     with pytest.raises(DiagnosisError, match=r"only 0\.0 % of the periods \(at least 20 % needed\): too little"):
         diagnose(still, DEFAULT, ROOM)
 

@@ -23,7 +23,8 @@ from host_sim import dynamics, ir_sensor, motors
 from host_sim.batch import BatchSim, robot_params
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
-from host_sim.replay import SEED_ROWS, ReplayError, replay_inputs, starts_at_rest, state_at, wheel_speeds_at
+from host_sim.replay import (SEED_ROWS, ReplayError, replay_inputs, sliding_rows, starts_at_rest, state_at,
+                             wheel_speeds_at)
 from host_sim.world import World
 
 DEFAULT_SECONDS = (1.0, 5.0)
@@ -124,6 +125,12 @@ def run_windows(rec: Recording, windows: Windows, params: Any, world: World | No
     period = np.median(inputs.period[idx], axis=0)
     _seed_commands(sim, inputs.cmd, windows.start, n_sets, float(np.median(period)))
     sim.engage_gears(np.repeat(_last_push(inputs.cmd, windows.start), n_sets, axis=0))
+    # where the tracker saw the robot slide, its windows start sliding (judged once, with the first set's
+    # wheels: a fit's parameters move no window between sliding and rolling)
+    slides, body = sliding_rows(rec, robots[0])
+    starts = windows.start
+    slid = slides[starts] & np.array([not starts_at_rest(rec, int(k)) for k in starts], dtype=bool)
+    sim.start_sliding(np.repeat(slid, n_sets), np.repeat(body[starts], n_sets, axis=0))
     res = sim.run_inputs(cmd, substeps=substeps, sensors=False, period=period)
     assert res.theta is not None and res.vbat is not None
     counts = res.theta * (_ticks_per_rev(robots, n_win) / (2 * np.pi))
