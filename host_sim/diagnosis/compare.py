@@ -19,7 +19,8 @@ from host_sim.diagnosis.channels import (ACCUMULATED, WHEELS, Channel, build_cha
 from host_sim.diagnosis.locate import (Finding, bias_margin, contact_windows, input_lag, ljung_box, locate_channel,
                                       lag_finding, lag_margin, locate_scale, regimes, scale_margin, scatter_finding,
                                       scatter_margin, timing_findings, timing_margin)
-from host_sim.diagnosis.windows import DEFAULT_SECONDS, Windows, make_windows, run_windows, unjudged_readings
+from host_sim.diagnosis.windows import (DEFAULT_SECONDS, Windows, judge_slides, make_windows, run_windows,
+                                       unjudged_readings)
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
 from host_sim.world import World
@@ -46,11 +47,12 @@ class Comparison:
 def compare(rec: Recording, params: RobotParams, world: World | None, seconds: float = DEFAULT_SECONDS[0],
             *, locate: bool = True) -> Comparison:
     windows = make_windows(rec, seconds)
+    contact = contact_windows(rec, windows, params, world)
+    judge_slides(rec, windows, params, contact)
     run = run_windows(rec, windows, params, world)
     unjudged = (unjudged_readings(rec, windows.index[:, 1:], params, world)
                 if rec.pose is not None and world is not None and world.n_walls else None)
     chans = build_channels(rec, windows, run, [params], world, unjudged)
-    contact = contact_windows(rec, windows, params, world)
     cmp = Comparison(seconds, windows, chans, contact, held_out_fit(chans, windows, contact), pose=run.pose[:, 0],
                      unjudged=unjudged, ceiling=held_out_ceiling(chans, windows, contact))
     if locate:

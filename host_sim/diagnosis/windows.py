@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from host_sim import dynamics, ir_sensor, motors
-from host_sim.batch import BatchSim, robot_params
+from host_sim.batch import SUBSTEPS, BatchSim, robot_params
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
 from host_sim.replay import (SEED_ROWS, ReplayError, replay_inputs, sliding_rows, starts_at_rest, state_at,
@@ -36,6 +36,12 @@ OFFSET_S = 0.5
 POSE_DOUBT_RAD = 0.02  # a tracker's heading is good to a few tenths of a degree; its position, at the
 # sensors' range (~0.1 m), to about as much: a reading that changes this much within 1.1 degrees is not judged
 POSE_DOUBT_COUNTS = 50.0
+# The twin steps SUBSTEPS times a period; a robot that slides over the floor (ice) spins its wheels up and
+# down within milliseconds, which 5 ms steps blur: fits on blind case 0214 (a grip of 0.12) then needed a
+# 1.3 ms actuator delay that the plant did not have, and none at 16 steps a period (0.5 ms, 3 % of the cost).
+# So where the tracker sees slides in SLIDING_SHARE of the windows away from the walls, FINE_SUBSTEPS.
+FINE_SUBSTEPS = 16
+SLIDING_SHARE = 0.05
 
 
 @dataclass
@@ -45,6 +51,9 @@ class Windows:
     start: np.ndarray  # (W,) first row of each window
     rows: int  # T, rows per window
     held_out: np.ndarray  # (W,) bool: judged only, never fitted on
+    substeps: int = SUBSTEPS  # the twin's steps per period in every window (judge_slides)
+    sliding: np.ndarray | None = None  # (W,) bool: the window starts with the robot sliding (judge_slides)
+    body: np.ndarray | None = None  # (W, 3) the tracked (u, l, omega) of C at each window's start
 
     @property
     def index(self) -> np.ndarray:
@@ -53,6 +62,20 @@ class Windows:
 
     def __len__(self) -> int:
         return len(self.start)
+
+
+def judge_slides(rec: Recording, windows: Windows, p: RobotParams, contact: np.ndarray) -> None:
+    """Set the windows that start with the robot sliding (replay.sliding_rows, with p's wheels: judged once,
+    so that no fit moves a window between sliding and rolling) and the twin's steps per period:
+    FINE_SUBSTEPS if the robot slides in SLIDING_SHARE of the windows away from the walls (contact: (W,)
+    bool, those touching one), else SUBSTEPS."""
+    slides, body = sliding_rows(rec, p)
+    at_rest = np.array([starts_at_rest(rec, int(k)) for k in windows.start], dtype=bool)
+    windows.sliding = slides[windows.start] & ~at_rest
+    windows.body = body[windows.start]
+    free = ~contact
+    sliding = slides[windows.index].any(axis=1) & free
+    windows.substeps = FINE_SUBSTEPS if free.any() and sliding.sum() >= SLIDING_SHARE * free.sum() else SUBSTEPS
 
 
 def make_windows(rec: Recording, seconds: float, hold_out_every: int = 3) -> Windows:
@@ -100,12 +123,13 @@ def initial_states(rec: Recording, rows: np.ndarray, p: RobotParams) -> tuple[np
 
 
 def run_windows(rec: Recording, windows: Windows, params: Any, world: World | None, *,
-                base: RobotParams | None = None, substeps: int = 8) -> WindowRun:
+                base: RobotParams | None = None, substeps: int | None = None) -> WindowRun:
     """Replay every window for every parameter set at once (physics only; see sensors_on_track).
 
     params: one RobotParams, a sequence of N, or a ParamBatch of N (with base).
     world: the walls (without a tracker the twin drives in an empty world).
     """
+    substeps = windows.substeps if substeps is None else substeps
     batch_params, robots = robot_params(params, base)
     n_sets = len(robots)
     inputs = replay_inputs(rec)
@@ -125,12 +149,8 @@ def run_windows(rec: Recording, windows: Windows, params: Any, world: World | No
     period = np.median(inputs.period[idx], axis=0)
     _seed_commands(sim, inputs.cmd, windows.start, n_sets, float(np.median(period)))
     sim.engage_gears(np.repeat(_last_push(inputs.cmd, windows.start), n_sets, axis=0))
-    # where the tracker saw the robot slide, its windows start sliding (judged once, with the first set's
-    # wheels: a fit's parameters move no window between sliding and rolling)
-    slides, body = sliding_rows(rec, robots[0])
-    starts = windows.start
-    slid = slides[starts] & np.array([not starts_at_rest(rec, int(k)) for k in starts], dtype=bool)
-    sim.start_sliding(np.repeat(slid, n_sets), np.repeat(body[starts], n_sets, axis=0))
+    if windows.sliding is not None and windows.body is not None:  # where the tracker saw the robot slide
+        sim.start_sliding(np.repeat(windows.sliding, n_sets), np.repeat(windows.body, n_sets, axis=0))
     res = sim.run_inputs(cmd, substeps=substeps, sensors=False, period=period)
     assert res.theta is not None and res.vbat is not None
     counts = res.theta * (_ticks_per_rev(robots, n_win) / (2 * np.pi))
