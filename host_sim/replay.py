@@ -13,7 +13,9 @@ The state at row k comes from the recording alone: the pose of C from the
 tracker columns (needed), the wheel angles from the encoder counts (the
 middle of the recorded tick), and the
 wheel speeds from the encoder counts around row k (central differences, or
-the rows after it at the start).  At row 0 of a simulator recording the
+the rows after it at the start).  Where the tracker saw the robot slide over
+the floor at row k (`sliding_rows`), the body's velocity too: the replay
+starts sliding.  At row 0 of a simulator recording the
 robot is at rest, so a replay from there repeats the run exactly.
 """
 from __future__ import annotations
@@ -123,15 +125,23 @@ SLOPE_ROWS = 2  # both velocities: the least-squares slope over rows k - 2 .. k 
 
 
 def _slopes(t: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """(n, m) the least-squares slope of each column of y (n, m) over SLOPE_ROWS rows either side."""
-    n = len(t)
+    """(n, m) the least-squares slope of each column of y (n, m) over SLOPE_ROWS rows either side (fewer
+    at the ends; 0 where the times repeat)."""
+    n, width = len(t), 2 * SLOPE_ROWS + 1
     out = np.zeros(y.shape)
-    for k in range(n):
+    inner = range(SLOPE_ROWS, n - SLOPE_ROWS) if n >= width else range(0)
+    if len(inner):
+        tw = np.lib.stride_tricks.sliding_window_view(t, width)  # (K, width)
+        yw = np.lib.stride_tricks.sliding_window_view(y, width, axis=0)  # (K, m, width)
+        dt = tw - tw.mean(axis=1, keepdims=True)
+        den = (dt * dt).sum(axis=1)
+        num = np.einsum("kw,kmw->km", dt, yw - yw.mean(axis=2, keepdims=True))
+        out[SLOPE_ROWS:n - SLOPE_ROWS] = num / np.where(den > 0, den, np.inf)[:, None]
+    for k in (k for k in range(n) if k not in inner):
         lo, hi = max(k - SLOPE_ROWS, 0), min(k + SLOPE_ROWS + 1, n)
-        dt = t[lo:hi] - t[lo:hi].mean()
-        den = float(dt @ dt)
-        if den > 0:
-            out[k] = dt @ (y[lo:hi] - y[lo:hi].mean(axis=0)) / den
+        d = t[lo:hi] - t[lo:hi].mean()
+        if float(d @ d) > 0:
+            out[k] = d @ (y[lo:hi] - y[lo:hi].mean(axis=0)) / float(d @ d)
     return out
 
 
