@@ -70,8 +70,7 @@ def judge_slides(rec: Recording, windows: Windows, p: RobotParams, contact: np.n
     FINE_SUBSTEPS if the robot slides in SLIDING_SHARE of the windows away from the walls (contact: (W,)
     bool, those touching one), else SUBSTEPS."""
     slides, body = sliding_rows(rec, p)
-    at_rest = np.array([starts_at_rest(rec, int(k)) for k in windows.start], dtype=bool)
-    windows.sliding = slides[windows.start] & ~at_rest
+    windows.sliding = slides[windows.start]  # windows start OFFSET_S in: never at a simulator run's rest
     windows.body = body[windows.start]
     free = ~contact
     sliding = slides[windows.index].any(axis=1) & free
