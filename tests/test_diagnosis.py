@@ -259,10 +259,9 @@ def test_too_short_or_too_still_is_said_plainly(tmp_path):
     short = record(tmp_path, duration=3.0, name="short.csv")
     with pytest.raises(DiagnosisError, match="too short"):
         diagnose(short, DEFAULT, ROOM)
-    still = record(tmp_path, duration=10.0, name="still.csv")
-    still.enc[:] = still.enc[:1]  # the wheels never turned ...
-    still.cmd[:] = 0.0  # ... nor were they driven ...
-    still.pose[:] = still.pose[:1]  # ... nor did the robot move (a tracker that saw it go would be a slide)
+    from tools.proving_ground.recorder import ProgramController
+
+    still = record(tmp_path, duration=10.0, name="still.csv", controller=ProgramController([]))  # never driven
     with pytest.raises(DiagnosisError, match=r"only 0\.0 % of the periods \(at least 20 % needed\): too little"):
         diagnose(still, DEFAULT, ROOM)
 
@@ -490,6 +489,39 @@ def test_pressed_against_walls_nearly_the_whole_time_is_refused(tmp_path):
                      controller=ProgramController([(0.06, 0.065)] * 75 + [(0.45, 0.4)] * 425))
     with pytest.raises(DiagnosisError, match="touches a wall in 17 of 19 windows"):
         diagnose(pressed, DEFAULT, ARENA)
+
+
+def test_too_little_to_call_a_match_still_shows_a_mismatch_and_names_it_only_if_it_explains_it(tmp_path):
+    """Short bursts of driving in 36 s of standing still in the open: the wheels turn in under 20 % of the
+    periods.  The twin's own recording is refused: that nothing is located there is no evidence.  A robot with
+    weak motors is located and named all the same, and said to rest on little data.  An encoder that counts
+    half as much again from 18 s on as well: the library fits a part of it; with so little data, no name."""
+    import dataclasses
+
+    from tools.proving_ground.recorder import ProgramController
+
+    bursts = ([(0.0, 0.0)] * 92 + [(0.06, 0.055)] * 4 + [(-0.06, -0.055)] * 4) * 9
+
+    def thin(params, name):
+        return record(tmp_path, params, 36.0, name=name, world=ARENA, pose=(1.0, 1.0, 0.0),
+                      controller=ProgramController(bursts))
+
+    with pytest.raises(DiagnosisError, match=r"the wheels turn in only 1\d\.\d % of the periods \(at least 20 % "
+                                             r"needed\): too little excitation"):
+        diagnose(thin(DEFAULT, "nominal.csv"), DEFAULT, ARENA)
+    weak = thin(E.apply(DEFAULT, "torque_constant", "both", [-1.2e-3]), "weak.csv")
+    d = diagnose(weak, DEFAULT, ARENA)
+    assert d.verdict == "explained" and [e["name"] for e in d.effects] == ["torque_constant"]
+    assert d.effects[0]["params"]["torque_constant"]["value"] == pytest.approx(-1.2e-3, rel=0.05)
+    assert any(n.startswith("little data: the wheels turn in only 1") for n in d.notes)
+    counts = np.diff(weak.enc[:, 0])
+    counts[weak.t[1:] > 18.0] = np.round(1.5 * counts[weak.t[1:] > 18.0])
+    changing = dataclasses.replace(weak, enc=np.column_stack([weak.enc[0, 0] + np.concatenate([[0], np.cumsum(counts)]),
+                                                              weak.enc[:, 1]]).astype(weak.enc.dtype))
+    d = diagnose(changing, DEFAULT, ARENA)
+    assert d.verdict == "unexplained" and not d.effects and d.model is not None and not d.model.effects
+    assert d.unexplained and any("leaves the mismatch located: no name is given" in n for n in d.notes)
+    assert d.fit_after == d.fit_before
 
 
 def test_a_value_near_a_small_bound_is_a_measurement_not_a_pin():

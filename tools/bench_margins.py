@@ -15,8 +15,9 @@ the rule judges.  At 1 or more the rule locates something.
   lag      a wheel behind (or ahead of) the twin whenever its speed changes:
            |z| >= 5, 8 ms
 
-Recordings the diagnosis refuses (too still, pressed against walls) are
-listed and left out.  The table: a row per recording (the answer key is
+Recordings too short to diagnose are listed and left out; those with too
+little data to call a match (too still, pressed against walls) are judged
+all the same, since a mismatch located there is diagnosed, and listed.  The table: a row per recording (the answer key is
 read only to label it), then per rule the largest margin on the effect-free
 controls (below 1, or the rule raises a false alarm) and, on the cases
 whose effect the rule is there to find, how many reach 1, the smallest
@@ -70,7 +71,7 @@ def margins_of(rec_path: str) -> dict[str, Any]:
     diagnosis refuses it."""
     from host_sim.diagnosis import DiagnosisError
     from host_sim.diagnosis.compare import compare, rule_margins
-    from host_sim.diagnosis.report import check_data, check_judgeable
+    from host_sim.diagnosis.report import TooLittleData, check_data, check_judgeable
     from host_sim.params import params_from_dict
     from host_sim.recording import load_recording
     from host_sim.world import world_from_dict
@@ -83,11 +84,15 @@ def margins_of(rec_path: str) -> dict[str, Any]:
         return {"recording": rec_path, "error": str(exc)}
     try:
         check_data(rec, world)
-        first = compare(rec, params, world, locate=False)
-        check_judgeable(rec, first)
     except DiagnosisError as exc:
         return {"recording": rec_path, "refused": str(exc)}
-    return {"recording": rec_path, "margins": rule_margins(first, rec, params, world)}
+    first = compare(rec, params, world, locate=False)
+    out: dict[str, Any] = {"recording": rec_path, "margins": rule_margins(first, rec, params, world)}
+    try:
+        check_judgeable(rec, first)
+    except TooLittleData as exc:  # judged all the same: a mismatch located there is diagnosed (a match refused)
+        out["little_data"] = exc.shortfall
+    return out
 
 
 def suite_paths(args: argparse.Namespace, out_dir: Path) -> list[Path]:
@@ -159,6 +164,8 @@ def print_report(report: dict[str, Any]) -> None:
     for r in report["cases"]:
         if "refused" in r or "error" in r:
             print(f"  {r['case']}: {'refused' if 'refused' in r else 'unreadable'}: {r.get('refused', r.get('error'))}")
+        elif "little_data" in r:
+            print(f"  {r['case']}: little data (a match would be refused): {r['little_data']}")
     print()
     print(format_table(("rule", "controls: largest margin", "cases it is for: reached", "smallest margin",
                         "by any rule", "for"),
