@@ -17,8 +17,9 @@ the rule judges.  At 1 or more the rule locates something.
 
 Recordings too short to diagnose are listed and left out; those with too
 little data to call a match (too still, pressed against walls) are judged
-all the same, since a mismatch located there is diagnosed, and listed.  The table: a row per recording (the answer key is
-read only to label it), then per rule the largest margin on the effect-free
+all the same, since a mismatch located there is diagnosed, and listed.
+The table: a row per recording (the answer key is read only to label
+it), then per rule the largest margin on the effect-free
 controls (below 1, or the rule raises a false alarm) and, on the cases
 whose effect the rule is there to find, how many reach 1, the smallest
 margin, and how many some rule locates (a latency that shows as a bias on
