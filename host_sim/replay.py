@@ -137,7 +137,8 @@ def _slopes(t: np.ndarray, y: np.ndarray) -> np.ndarray:
         den = (dt * dt).sum(axis=1)
         num = np.einsum("kw,kmw->km", dt, yw - yw.mean(axis=2, keepdims=True))
         out[SLOPE_ROWS:n - SLOPE_ROWS] = num / np.where(den > 0, den, np.inf)[:, None]
-    for k in (k for k in range(n) if k not in inner):
+    edges = [*range(SLOPE_ROWS), *range(n - SLOPE_ROWS, n)] if len(inner) else range(n)
+    for k in edges:
         lo, hi = max(k - SLOPE_ROWS, 0), min(k + SLOPE_ROWS + 1, n)
         d = t[lo:hi] - t[lo:hi].mean()
         if float(d @ d) > 0:
