@@ -135,9 +135,7 @@ class Objective:
         self.rec, self.world = rec, world
         self.unjudged = unjudged[keep] if unjudged is not None else None
         # Only the windows judged are simulated: those touching a wall are not fitted on.
-        self.windows = Windows(windows.start[keep], windows.rows, windows.held_out[keep], windows.substeps,
-                               None if windows.sliding is None else windows.sliding[keep],
-                               None if windows.body is None else windows.body[keep])
+        self.windows = windows.select(keep)
         self.names = names
         self.sigma = sigma
         self.totals = totals  # the channels whose window totals are residuals too (fit_totals)

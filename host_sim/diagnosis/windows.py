@@ -55,6 +55,12 @@ class Windows:
     sliding: np.ndarray | None = None  # (W,) bool: the window starts with the robot sliding (judge_slides)
     body: np.ndarray | None = None  # (W, 3) the tracked (u, l, omega) of C at each window's start
 
+    def select(self, keep: np.ndarray) -> Windows:
+        """These windows only (keep: (W,) bool or indices), with what judge_slides found of each."""
+        return Windows(self.start[keep], self.rows, self.held_out[keep], self.substeps,
+                       None if self.sliding is None else self.sliding[keep],
+                       None if self.body is None else self.body[keep])
+
     @property
     def index(self) -> np.ndarray:
         """(W, T) recording row of every window row."""
