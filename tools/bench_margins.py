@@ -8,7 +8,8 @@ rule's tests as a ratio to its threshold, the largest over the channels
 the rule judges.  At 1 or more the rule locates something.
 
   bias     a regime bin's mean residual: |z| >= 5, 1 noise level, 5 % of the signal
-  scale    a window total's proportional error: |z| >= 5, 2 % (1 % for a count)
+  scale    a window total's proportional error: |z| >= 5, 2 % (1 % for a count),
+           over 1 s windows and over 5 s
   scatter  a wheel's residual RMS: 5 noise levels (or 8 encoder roundings), 5 % of its speed
   timing   IR readings behind (or ahead of) the pose: both halves at |z| >= 3,
            on the third of the sensors that show it the same way round
@@ -71,7 +72,7 @@ def margins_of(rec_path: str) -> dict[str, Any]:
     """Worker: every rule's margin on one recording against the nominal twin of its sidecar, or why the
     diagnosis refuses it."""
     from host_sim.diagnosis import DiagnosisError
-    from host_sim.diagnosis.compare import compare, rule_margins
+    from host_sim.diagnosis.compare import compare_all, rule_margins
     from host_sim.diagnosis.report import TooLittleData, check_data, check_judgeable
     from host_sim.params import params_from_dict
     from host_sim.recording import load_recording
@@ -87,8 +88,10 @@ def margins_of(rec_path: str) -> dict[str, Any]:
         check_data(rec, world)
     except DiagnosisError as exc:
         return {"recording": rec_path, "refused": str(exc)}
-    first = compare(rec, params, world, locate=False)
-    out: dict[str, Any] = {"recording": rec_path, "margins": rule_margins(first, rec, params, world)}
+    comparisons = compare_all(rec, params, world, locate=False)
+    first = comparisons[0]
+    longer = comparisons[-1] if len(comparisons) > 1 else None
+    out: dict[str, Any] = {"recording": rec_path, "margins": rule_margins(first, rec, params, world, longer)}
     try:
         check_judgeable(rec, first)
     except TooLittleData as exc:  # judged all the same: a mismatch located there is diagnosed (a match refused)

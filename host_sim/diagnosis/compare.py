@@ -17,8 +17,9 @@ import numpy as np
 from host_sim.diagnosis.channels import (ACCUMULATED, WHEELS, Channel, build_channels, drive_channel, fit_percent,
                                         rounding_ceiling)
 from host_sim.diagnosis.locate import (Finding, bias_margin, contact_windows, input_lag, ljung_box, locate_channel,
-                                      lag_finding, lag_margin, locate_scale, regimes, scale_margin, scatter_finding,
-                                      scatter_margin, timing_findings, timing_margin)
+                                      lag_finding, lag_margin, locate_scale, reading_lag_findings, reading_lag_margin,
+                                      regimes, scale_margin, scatter_finding, scatter_margin, timing_findings,
+                                      timing_margin)
 from host_sim.diagnosis.windows import (DEFAULT_SECONDS, Windows, judge_slides, make_windows, run_windows,
                                        unjudged_readings)
 from host_sim.params import RobotParams
@@ -82,13 +83,16 @@ def held_out_ceiling(chans: list[Channel], windows: Windows, contact: np.ndarray
             if c.name in WHEELS} if judged.any() else {}
 
 
-def _locate(cmp: Comparison, rec: Recording, p: RobotParams, world: World | None) -> None:
+def _locate(cmp: Comparison, rec: Recording, p: RobotParams, world: World | None,
+            longer: Comparison | None = None) -> None:
     reg = regimes(rec, cmp.windows, p, world)
     keep = ~cmp.contact
     t = rec.t[cmp.windows.index[:, :-1]]
     resids = {ch.name: ch.residual() for ch in cmp.channels if ch.locate}
     # a reading that runs behind the pose, on several sensors: where no other mismatch locates them
-    timing = {f.channel: f for f in timing_findings(cmp.channels, resids, keep, reg, t)}
+    timing = {f.channel: f for f in (timing_findings(cmp.channels, resids, keep, reg, t)
+                                     or reading_lag_findings(cmp.channels, resids, keep, cmp.unjudged, t,
+                                                             rec.sample_period))}
     for ch in cmp.channels:
         if not ch.locate:
             continue
@@ -96,7 +100,7 @@ def _locate(cmp: Comparison, rec: Recording, p: RobotParams, world: World | None
         found = (locate_channel(ch, resid, keep, reg, t) or timing.get(ch.name)
                  or scatter_finding(ch, resid, keep, reg, t))
         if ch.name in ACCUMULATED:
-            scale = locate_scale(ch, keep, t)
+            scale = locate_scale(ch, keep, t) or _longer_scale(longer, ch.name, rec)
             if scale is not None:
                 cmp.findings.append(scale)
         if found is not None:
@@ -112,6 +116,15 @@ def _locate(cmp: Comparison, rec: Recording, p: RobotParams, world: World | None
                 _add(cmp, rec, late, resids[name], keep)
 
 
+def _longer_scale(longer: Comparison | None, name: str, rec: Recording) -> Finding | None:
+    """locate_scale on the longer windows' channel.  A proportional error grows with the window while what
+    its start cannot say does not: a count 1.8 % off shows as 0.9 % over 1 s, as 1.6 % over 5 s (blind
+    0086's finer encoder, from a start the twin takes at the recorded ticks' nominal speed)."""
+    if longer is None:
+        return None
+    return locate_scale(longer.channel(name), ~longer.contact, rec.t[longer.windows.index[:, :-1]])
+
+
 def _add(cmp: Comparison, rec: Recording, found: Finding, resid: np.ndarray, keep: np.ndarray) -> None:
     """A finding, with its evidence: the residual's whiteness and, for a wheel, its lag behind the command."""
     cmp.findings.append(found)
@@ -121,15 +134,18 @@ def _add(cmp: Comparison, rec: Recording, found: Finding, resid: np.ndarray, kee
         cmp.lag[found.channel] = input_lag(resid[keep], u[keep])
 
 
-def rule_margins(cmp: Comparison, rec: Recording, p: RobotParams, world: World | None) -> dict[str, tuple[float, str]]:
-    """How near each locate rule comes to a finding on this comparison, and where: rule -> (the largest
-    margin over the channels it judges, the channel and bin).  At 1 or more the rule locates something;
-    `twinbot bench margins` shows how far below 1 the blind controls stay."""
+def rule_margins(cmp: Comparison, rec: Recording, p: RobotParams, world: World | None,
+                 longer: Comparison | None = None) -> dict[str, tuple[float, str]]:
+    """How near each locate rule comes to a finding on this comparison (the scale rule on `longer`'s
+    windows too, as _locate judges it), and where: rule -> (the largest margin over the channels it
+    judges, the channel and bin).  At 1 or more the rule locates something; `twinbot bench margins`
+    shows how far below 1 the blind controls stay."""
     reg = regimes(rec, cmp.windows, p, world)
     keep = ~cmp.contact
     resids = {ch.name: ch.residual() for ch in cmp.channels if ch.locate}
     out = {"bias": (0.0, ""), "scale": (0.0, ""), "scatter": (0.0, ""),
-           "timing": timing_margin(cmp.channels, resids, keep, reg), "lag": (0.0, "")}
+           "timing": max(timing_margin(cmp.channels, resids, keep, reg),
+                         reading_lag_margin(cmp.channels, resids, keep, cmp.unjudged)), "lag": (0.0, "")}
     period = rec.sample_period
     for ch in cmp.channels:
         if not ch.locate:
@@ -141,16 +157,20 @@ def rule_margins(cmp: Comparison, rec: Recording, p: RobotParams, world: World |
             out["lag"] = max(out["lag"], (lag_margin(ch, keep, period), ch.name))
         if ch.name in ACCUMULATED:
             out["scale"] = max(out["scale"], (scale_margin(ch, keep), ACCUMULATED[ch.name]))
+            if longer is not None:
+                out["scale"] = max(out["scale"], (scale_margin(longer.channel(ch.name), ~longer.contact),
+                                                  f"{ACCUMULATED[ch.name]} ({longer.seconds:g} s)"))
     return {rule: (float(margin), where) for rule, (margin, where) in out.items()}
 
 
 def compare_all(rec: Recording, params: RobotParams, world: World | None,
-                seconds: tuple[float, ...] = DEFAULT_SECONDS) -> list[Comparison]:
-    """One comparison per window length that fits the recording (the shortest one locates)."""
-    out = []
-    for i, s in enumerate(seconds):
-        if len(rec) > int(round(s / rec.sample_period)) * 3:
-            out.append(compare(rec, params, world, s, locate=i == 0))
+                seconds: tuple[float, ...] = DEFAULT_SECONDS, *, locate: bool = True) -> list[Comparison]:
+    """One comparison per window length that fits the recording.  The shortest one locates; the longest
+    one also judges the totals' proportional errors (_longer_scale)."""
+    out = [compare(rec, params, world, s, locate=False) for s in seconds
+           if len(rec) > int(round(s / rec.sample_period)) * 3]
+    if locate and out:
+        _locate(out[0], rec, params, world, out[-1] if len(out) > 1 else None)
     return out
 
 

@@ -18,7 +18,8 @@ windows it is not, so the wheels and the motion are also judged accumulated
 (`locate_scale`): "count_l", "count_r" (each encoder's count), "travel" (the
 distance along the path) and "turn" (the angle turned), each window's
 recorded total against the twin's, as a proportional error (recorded =
-(1 + a) twin) significant at |z| >= Z_MIN and at least SCALE_MIN.
+(1 + a) twin) significant at |z| >= Z_MIN and at least SCALE_MIN; the
+comparison asks it of its longer windows too (compare._longer_scale).
 
 A wheel can also disagree without a bias: a slipping wheel spins ahead of the
 twin's and falls back, burst by burst, so its residual averages out in every
@@ -57,6 +58,9 @@ TIMING_RATE = 0.05  # m/s along a sensor's axis: slower is steady
 TIMING_SENSORS_MIN = 3  # sensors that must show a reading running behind before it is located
 TIMING_Z = 3.0  # each half on each sensor: three sensors at 3 pool (Stouffer, sum z / sqrt 3) to 5.2 >= Z_MIN
 REGIME_SHARE_MIN = 0.05  # a regime variable must explain this share of the residual's variation to be named
+READING_LAG_Z = 4.0  # each sensor's lag (reading_lag_findings): the blind controls' largest was 3.1, on one sensor
+READING_LAG_SPREAD = 0.5  # of the median lag: the sensors that show a latency show the same one
+READING_LAG_REGIME = "as it changes"  # "sensor 4's reading runs 21 ms behind the tracked pose's as it changes"
 CONTACT_MARGIN = 0.005  # m beyond the body's radius: within it, a window touches a wall
 SCALE_MIN = 0.02  # a path or turn 2 % off the twin's: an odometry error worth naming
 SCALE_MIN_COUNTS = 0.01  # a count, 1 %: the firmware's speed loop takes back most of an encoder's error
@@ -166,6 +170,71 @@ def timing_findings(chans: list[Channel], resids: dict[str, np.ndarray], keep: n
                                                   spans(resids[ch.name], keep, t, sigma), float(larger["mean"]),
                                                   float(larger["z"]), sigma, bins))  # type: ignore[arg-type]
     return next((same for same in found.values() if len(same) >= TIMING_SENSORS_MIN), [])
+
+
+def _reading_lags(chans: list[Channel], resids: dict[str, np.ndarray], keep: np.ndarray,
+                  unjudged: np.ndarray | None) -> Iterator[tuple[Channel, float, float]]:
+    """Per IR sensor (kept windows, judged readings): (channel, lag in periods, its z).  A reading that runs
+    tau behind the pose is the twin's reading tau earlier, recorded - twin = -tau d(twin)/dt: the residual
+    regressed on the twin's centred change (which leaves out the period's own tracker noise, so that noise
+    cannot pass for a lag), with a standard error robust to a residual that grows with the change."""
+    for ch in chans:
+        if not ch.name.startswith("ir_"):
+            continue
+        twin, r = ch.y_hat[keep, 0], resids[ch.name][keep]
+        x = (twin[:, 2:] - twin[:, :-2]) / 2.0
+        r = r[:, 1:-1]
+        if unjudged is not None:
+            judged = ~unjudged[keep][:, 1:-1, int(ch.name[3:])]
+            x, r = x[judged], r[judged]
+        sxx = float((x * x).sum())
+        if sxx <= 0.0:
+            continue
+        tau = -float((r * x).sum()) / sxx
+        se = float(np.sqrt((((r + tau * x) * x) ** 2).sum())) / sxx
+        yield ch, tau, tau / se if se > 0 else 0.0
+
+
+def reading_lag_findings(chans: list[Channel], resids: dict[str, np.ndarray], keep: np.ndarray,
+                         unjudged: np.ndarray | None, t: np.ndarray, period: float) -> list[Finding]:
+    """IR sensors whose readings run a common time behind (or ahead of) the pose (_reading_lags): located
+    when TIMING_SENSORS_MIN sensors show it the same way round at |z| >= READING_LAG_Z, their lags within
+    READING_LAG_SPREAD of the median's (a latency is the ring's; an offset or a turned sensor skews one
+    sensor's lag, or several by unlike amounts).  Where closing and drawing-away periods are few (a
+    manoeuvre that meets walls in a few dozen periods), their means are noise (timing_findings) while the
+    reading's proportion to its change is not (blind 0234, 23 ms)."""
+    lags = [(ch, tau, z) for ch, tau, z in _reading_lags(chans, resids, keep, unjudged) if abs(z) >= READING_LAG_Z]
+    for late in (True, False):
+        same = [(ch, tau, z) for ch, tau, z in lags if (tau > 0) == late]
+        if len(same) < TIMING_SENSORS_MIN:
+            continue
+        mid = float(np.median([tau for _c, tau, _z in same]))
+        same = [(ch, tau, z) for ch, tau, z in same if abs(tau - mid) <= READING_LAG_SPREAD * abs(mid)]
+        if len(same) >= TIMING_SENSORS_MIN:
+            out = []
+            for ch, tau, z in same:
+                r = resids[ch.name]
+                sigma = noise_level(ch, r[keep])
+                out.append(Finding(ch.name, READING_LAG_REGIME, "lag", spans(r, keep, t, sigma), float(r[keep].mean()),
+                                   float(z), sigma, [{"regime": READING_LAG_REGIME, "key": "lag", "mean": tau * period,
+                                                      "z": float(z), "n": float(r[keep].size)}], lag=tau * period))
+            return out
+    return []
+
+
+def reading_lag_margin(chans: list[Channel], resids: dict[str, np.ndarray], keep: np.ndarray,
+                       unjudged: np.ndarray | None) -> tuple[float, str]:
+    """How near reading_lag_findings comes to a latency: of the sensors the same way round, the
+    TIMING_SENSORS_MIN-th largest |z| over READING_LAG_Z (the lags' spread aside)."""
+    ways: dict[bool, list[tuple[float, str]]] = {True: [], False: []}
+    for ch, tau, z in _reading_lags(chans, resids, keep, unjudged):
+        ways[tau > 0].append((abs(z) / READING_LAG_Z, ch.name))
+    best = (0.0, "")
+    for found in ways.values():
+        found.sort(reverse=True)
+        if len(found) >= TIMING_SENSORS_MIN:
+            best = max(best, (found[TIMING_SENSORS_MIN - 1][0], " ".join(n for _m, n in found[:TIMING_SENSORS_MIN])))
+    return best
 
 
 def _timing_sensors(chans: list[Channel], resids: dict[str, np.ndarray], keep: np.ndarray, reg: Regimes) -> Iterator[

@@ -46,6 +46,9 @@ def sentence(f: Finding) -> str:
     side = "left" if f.channel == "wheel_l" else "right"
     if f.rms is not None:  # no bias: "the left wheel's speed scatters about the twin's (RMS 17 times its noise) ..."
         parts = [f"the {side} wheel's speed scatters about the twin's (RMS {f.rms / f.noise:.0f} times its noise)"]
+    elif f.lag is not None and f.channel.startswith("ir_"):  # "sensor S5 back's reading runs 21 ms behind the ..."
+        parts = [f"sensor {SENSOR_NAMES[int(f.channel[3:])]}'s reading runs {1000 * abs(f.lag):.0f} ms "
+                 f"{'behind' if f.lag > 0 else 'ahead of'} the tracked pose's"]
     elif f.lag is not None:  # "the left wheel runs 31 ms behind the twin's whenever its speed changes"
         parts = [f"the {side} wheel runs {1000 * abs(f.lag):.0f} ms {'behind' if f.lag > 0 else 'ahead of'} the twin's"]
     else:
