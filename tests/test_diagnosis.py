@@ -17,6 +17,7 @@ from host_sim.diagnosis import DiagnosisError, diagnose
 from host_sim.diagnosis import locate
 from host_sim.diagnosis.compare import compare, rule_margins
 from host_sim.diagnosis.report import check_excitation
+from host_sim.diagnosis.words import sentence
 from host_sim.params import DEFAULT, load_params
 from host_sim.recording import RecordingWriter, load_recording
 from host_sim.sil import SilController
@@ -498,6 +499,48 @@ def test_readings_that_run_behind_the_pose_are_located_on_the_ring(nominal_run):
         (("ir_on", nominal_run.ir_on), ("ir_amb", nominal_run.ir_amb))})
     found = timing(blend)
     assert len(found) >= TIMING_SENSORS_MIN and any(min(abs(b["z"]) for b in f.bins) < 5 for f in found)
+
+
+def test_readings_in_proportion_to_their_change_give_the_rings_latency(nominal_run):
+    """The residual regressed on the twin's centred change of reading: every sensor two periods late gives
+    each sensor that sees walls a lag near 80 ms, the same on all; one sensor late, sensors late and others
+    early, an offset on a few sensors and the twin's own run give no latency of the ring."""
+    import dataclasses
+
+    from host_sim.diagnosis.compare import compare
+    from host_sim.diagnosis.locate import TIMING_SENSORS_MIN, reading_lag_findings, reading_lag_margin
+
+    def shifted(rec, late=(), early=(), offset=()):
+        on, amb = rec.ir_on.copy(), rec.ir_amb.copy()
+        late, early, offset = list(late), list(early), list(offset)
+        on[2:, late], amb[2:, late] = rec.ir_on[:-2, late], rec.ir_amb[:-2, late]
+        on[:-2, early], amb[:-2, early] = rec.ir_on[2:, early], rec.ir_amb[2:, early]
+        on[:, offset] += 40
+        return dataclasses.replace(rec, ir_on=on, ir_amb=amb)
+
+    def lags(rec):
+        cmp = compare(rec, DEFAULT, ROOM, locate=False)
+        resids = {c.name: c.residual() for c in cmp.channels}
+        t = rec.t[cmp.windows.index[:, :-1]]
+        found = reading_lag_findings(cmp.channels, resids, ~cmp.contact, cmp.unjudged, t, rec.sample_period)
+        if found:
+            assert reading_lag_margin(cmp.channels, resids, ~cmp.contact, cmp.unjudged)[0] >= 1  # the bench's
+        return found
+
+    found = lags(shifted(nominal_run, late=range(8)))
+    assert len(found) >= TIMING_SENSORS_MIN
+    assert all(0.06 < f.lag < 0.1 and f.z > 4 and f.regime_key == "lag" for f in found), [(f.lag, f.z) for f in found]
+    assert "ms behind the tracked pose's" in sentence(found[0])
+    shown = [int(f.channel[3:]) for f in found]
+    assert lags(shifted(nominal_run, late=shown[:1])) == []
+    assert lags(nominal_run) == []
+    assert len(shown) >= 4 and lags(shifted(nominal_run, late=shown[:2], early=shown[2:4])) == []
+    assert lags(shifted(nominal_run, offset=shown[:4])) == []
+    # three sensors late by unlike times (40, 120, 240 ms): each a lag, but not the ring's one latency
+    unlike = dataclasses.replace(nominal_run, ir_on=nominal_run.ir_on.copy(), ir_amb=nominal_run.ir_amb.copy())
+    for k, n in zip(shown[:3], (1, 3, 6)):
+        unlike.ir_on[n:, k], unlike.ir_amb[n:, k] = nominal_run.ir_on[:-n, k], nominal_run.ir_amb[:-n, k]
+    assert lags(unlike) == []
 
 
 def test_pressed_against_walls_nearly_the_whole_time_is_refused(tmp_path):

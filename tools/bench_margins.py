@@ -12,7 +12,8 @@ the rule judges.  At 1 or more the rule locates something.
            over 1 s windows and over 5 s
   scatter  a wheel's residual RMS: 5 noise levels (or 8 encoder roundings), 5 % of its speed
   timing   IR readings behind (or ahead of) the pose: both halves at |z| >= 3,
-           on the third of the sensors that show it the same way round
+           on the third of the sensors that show it the same way round; or
+           each reading's lag behind its change at |z| >= 4, on the third
   lag      a wheel behind (or ahead of) the twin whenever its speed changes:
            |z| >= 5, 8 ms
 
