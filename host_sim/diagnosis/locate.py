@@ -229,6 +229,12 @@ def reading_lag_margin(chans: list[Channel], resids: dict[str, np.ndarray], keep
     ways: dict[bool, list[tuple[float, str]]] = {True: [], False: []}
     for ch, tau, z in _reading_lags(chans, resids, keep, unjudged):
         ways[tau > 0].append((abs(z) / READING_LAG_Z, ch.name))
+    return _ring_margin(ways)
+
+
+def _ring_margin(ways: dict[bool, list[tuple[float, str]]]) -> tuple[float, str]:
+    """Of the sensors' margins, late and early apart, the TIMING_SENSORS_MIN-th largest either way round and
+    the sensors that reach it: a latency is the ring's, so it takes that many sensors."""
     best = (0.0, "")
     for found in ways.values():
         found.sort(reverse=True)
@@ -370,12 +376,7 @@ def timing_margin(chans: list[Channel], resids: dict[str, np.ndarray], keep: np.
         halves = [bin_margin(r[lab == v], sigma, y[lab == v], TIMING_Z) for v in (0, 2) if int((lab == v).sum()) >= 10]
         if len(halves) == 2 and halves[0][1] * halves[1][1] < 0:
             ways[halves[0][1] < 0].append((min(halves[0][0], halves[1][0]), ch.name))
-    best = (0.0, "")
-    for found in ways.values():
-        found.sort(reverse=True)
-        if len(found) >= TIMING_SENSORS_MIN:
-            best = max(best, (found[TIMING_SENSORS_MIN - 1][0], " ".join(n for _m, n in found[:TIMING_SENSORS_MIN])))
-    return best
+    return _ring_margin(ways)
 
 
 def scatter_finding(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regimes, t: np.ndarray) -> Finding | None:
