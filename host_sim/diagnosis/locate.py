@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from host_sim.diagnosis.channels import ACCUMULATED, SENSOR_NAMES, WHEELS, Channel
+from host_sim.diagnosis.channels import ACCUMULATED, SENSOR_NAMES, WHEELS, Channel, sensor_channel
 from host_sim.diagnosis.windows import Windows
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
@@ -299,7 +299,7 @@ def relevant_regimes(channel: str) -> tuple[str, ...]:
         return (f"speed_{side}", f"command_{side}", "acceleration", "turning", "direction", "battery")
     if channel in ("forward", "lateral", "heading_rate"):
         return ("speed_", "command_", "acceleration", "turning", "direction", "battery", "heading")
-    if channel.startswith(("ir_", "amb_")):
+    if sensor_channel(channel):
         return (f"wall_{channel.split('_')[1]}", "heading", "turning", "direction")
     return ("battery", "speed_", "acceleration")
 

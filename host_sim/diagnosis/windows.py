@@ -35,6 +35,8 @@ DEFAULT_SECONDS = (1.0, 5.0)
 OFFSET_S = 0.5
 POSE_DOUBT_RAD = 0.02  # a tracker's heading is good to a few tenths of a degree; its position, at the
 # sensors' range (~0.1 m), to about as much: a reading that changes this much within 1.1 degrees is not judged
+POSE_DOUBT_M = 0.002  # and its position to a millimetre or two: what counts where a sensor touches a wall,
+# whose reflection then goes from nothing to 130 counts within 4 mm (blind control 0007's S2, pressed on a wall)
 POSE_DOUBT_COUNTS = 50.0
 # The twin steps SUBSTEPS times a period; a robot that slides over the floor (ice) spins its wheels up and
 # down within milliseconds, which 5 ms steps blur: fits on blind case 0214 (a grip of 0.12) then needed a
@@ -219,17 +221,20 @@ def unjudged_readings(rec: Recording, rows: np.ndarray, p: RobotParams, world: W
     """(*rows.shape, 8) bool: the twin's reflected light at the recorded pose is ill-conditioned there.
 
     A sensor's ray that grazes a wall's end (or a corner) hits or misses it as the pose moves by the
-    tracker's noise: the twin would read 500 counts or nothing from the same recorded pose.  Such a reading
-    says nothing about the robot, and a fit would turn the sensor to explain it.  Judged instead: readings
-    that change by less than POSE_DOUBT_COUNTS (or half of themselves) with the heading turned by
-    +-POSE_DOUBT_RAD.
+    tracker's noise: the twin would read 500 counts or nothing from the same recorded pose; so does a sensor
+    pressed on a wall as the position moves by a millimetre.  Such a reading says nothing about the robot,
+    and a fit would turn the sensor to explain it.  Judged instead: readings that change by less than
+    POSE_DOUBT_COUNTS (or half of themselves) with the heading turned by +-POSE_DOUBT_RAD or the position
+    moved by +-POSE_DOUBT_M along either axis.
     """
     assert rec.pose is not None
     inputs = replay_inputs(rec)
     flat = rows.reshape(-1)
     refl = []
-    for turn in (0.0, -POSE_DOUBT_RAD, POSE_DOUBT_RAD):
-        poses = rec.pose[flat] + np.array([0.0, 0.0, turn])
+    moves = [(0.0, 0.0, 0.0), (0.0, 0.0, -POSE_DOUBT_RAD), (0.0, 0.0, POSE_DOUBT_RAD)]
+    moves += [(d, 0.0, 0.0) for d in (-POSE_DOUBT_M, POSE_DOUBT_M)] + [(0.0, d, 0.0) for d in (-POSE_DOUBT_M, POSE_DOUBT_M)]
+    for move in moves:
+        poses = rec.pose[flat] + np.array(move)
         amb, on = ir_sensor.read_sensors_batch(world, poses, inputs.emitter[flat], rec.t[flat], p, None,
                                                quantise=False)
         refl.append(on - amb)
