@@ -35,9 +35,9 @@ DEFAULT_SECONDS = (1.0, 5.0)
 OFFSET_S = 0.5
 POSE_DOUBT_RAD = 0.02  # a tracker's heading is good to a few tenths of a degree; its position, at the
 # sensors' range (~0.1 m), to about as much: a reading that changes this much within 1.1 degrees is not judged
-POSE_DOUBT_M = 0.002  # and its position to a millimetre or two: what counts where a sensor touches a wall,
-# whose reflection then goes from nothing to 130 counts within 4 mm (blind control 0007's S2, pressed on a wall)
 POSE_DOUBT_COUNTS = 50.0
+CONTACT_MARGIN = 0.005  # m beyond the body's radius: within it, the robot touches a wall
+FACING_COS = -0.17  # a sensor whose axis is within 100 degrees of the way to a touched wall faces it
 # The twin steps SUBSTEPS times a period; a robot that slides over the floor (ice) spins its wheels up and
 # down within milliseconds, which 5 ms steps blur: fits on blind case 0214 (a grip of 0.12) then needed a
 # 1.3 ms actuator delay that the plant did not have, and none at 16 steps a period (0.5 ms, 3 % of the cost).
@@ -221,23 +221,29 @@ def unjudged_readings(rec: Recording, rows: np.ndarray, p: RobotParams, world: W
     """(*rows.shape, 8) bool: the twin's reflected light at the recorded pose is ill-conditioned there.
 
     A sensor's ray that grazes a wall's end (or a corner) hits or misses it as the pose moves by the
-    tracker's noise: the twin would read 500 counts or nothing from the same recorded pose; so does a sensor
-    pressed on a wall as the position moves by a millimetre.  Such a reading says nothing about the robot,
-    and a fit would turn the sensor to explain it.  Judged instead: readings that change by less than
-    POSE_DOUBT_COUNTS (or half of themselves) with the heading turned by +-POSE_DOUBT_RAD or the position
-    moved by +-POSE_DOUBT_M along either axis.
+    tracker's noise: the twin would read 500 counts or nothing from the same recorded pose.  Such a reading
+    says nothing about the robot, and a fit would turn the sensor to explain it.  Judged instead: readings
+    that change by less than POSE_DOUBT_COUNTS (or half of themselves) with the heading turned by
+    +-POSE_DOUBT_RAD.
+
+    Nor is a sensor that faces a wall the robot touches (FACING_COS): it reads the wall within millimetres
+    of its mount, where the contact decides the reading (a hull pressed into the wall, a bumper's give), and
+    its reflection goes from nothing to 130 counts within the tracker's 2 mm (blind control 0007's S2,
+    where the robot read a steady 11).
     """
     assert rec.pose is not None
     inputs = replay_inputs(rec)
     flat = rows.reshape(-1)
     refl = []
-    moves = [(0.0, 0.0, 0.0), (0.0, 0.0, -POSE_DOUBT_RAD), (0.0, 0.0, POSE_DOUBT_RAD)]
-    moves += [(d, 0.0, 0.0) for d in (-POSE_DOUBT_M, POSE_DOUBT_M)] + [(0.0, d, 0.0) for d in (-POSE_DOUBT_M, POSE_DOUBT_M)]
-    for move in moves:
-        poses = rec.pose[flat] + np.array(move)
+    for turn in (0.0, -POSE_DOUBT_RAD, POSE_DOUBT_RAD):
+        poses = rec.pose[flat] + np.array([0.0, 0.0, turn])
         amb, on = ir_sensor.read_sensors_batch(world, poses, inputs.emitter[flat], rec.t[flat], p, None,
                                                quantise=False)
         refl.append(on - amb)
     spread = np.ptp(np.stack(refl), axis=0)
     doubt = spread > np.maximum(POSE_DOUBT_COUNTS, 0.5 * np.abs(refl[0]))
+    dist, away = world.nearest_wall(rec.pose[flat, :2])  # away: the unit normal from the wall to C
+    bearing = rec.pose[flat, 2:3] + np.asarray(ir_sensor.BEARINGS)
+    facing = -(np.cos(bearing) * away[:, :1] + np.sin(bearing) * away[:, 1:]) > FACING_COS
+    doubt |= (dist < p.body_radius + CONTACT_MARGIN)[:, None] & facing
     return doubt.reshape(*rows.shape, ir_sensor.N_SENSORS)
