@@ -229,7 +229,9 @@ def unjudged_readings(rec: Recording, rows: np.ndarray, p: RobotParams, world: W
     Nor is a sensor that faces a wall the robot touches (FACING_COS): it reads the wall within millimetres
     of its mount, where the contact decides the reading (a hull pressed into the wall, a bumper's give), and
     its reflection goes from nothing to 130 counts within the tracker's 2 mm (blind control 0007's S2,
-    where the robot read a steady 11).
+    where the robot read a steady 11).  Nor is a wall nearer the sensor than the response's maximum
+    (ir_near_peak): on that branch the law is double-valued and steep, and a robot 5-7 mm from a wall read
+    430 counts where the twin read 1000 (blind control 0122's S8).
     """
     assert rec.pose is not None
     inputs = replay_inputs(rec)
@@ -246,4 +248,5 @@ def unjudged_readings(rec: Recording, rows: np.ndarray, p: RobotParams, world: W
     bearing = rec.pose[flat, 2:3] + np.asarray(ir_sensor.BEARINGS)
     facing = -(np.cos(bearing) * away[:, :1] + np.sin(bearing) * away[:, 1:]) > FACING_COS
     doubt |= (dist < p.body_radius + CONTACT_MARGIN)[:, None] & facing
+    doubt |= ir_sensor.reflection(world, rec.pose[flat], p)[0] < p.ir_near_peak
     return doubt.reshape(*rows.shape, ir_sensor.N_SENSORS)
