@@ -554,6 +554,31 @@ def test_pressed_against_walls_nearly_the_whole_time_is_refused(tmp_path):
         diagnose(pressed, DEFAULT, ARENA)
 
 
+def test_the_ir_ring_of_a_robot_pressed_against_a_wall_is_judged_there(tmp_path):
+    """The IR channels read the recorded track, not the twin's motion, so a wall contact does not hide them:
+    pressed on a wall for 17 of 19 windows, an offset on the back sensor (which sees no wall) is located and
+    named.  The sensors that face the wall it touches (the front three, and the side pair along it) read the
+    contact, not the IR law (the front corners ~1600 counts that a millimetre halves): left unjudged there;
+    the back three are judged."""
+    from host_sim.diagnosis.windows import unjudged_readings
+    from tools.proving_ground.recorder import ProgramController
+
+    push = ProgramController([(0.06, 0.065)] * 75 + [(0.45, 0.4)] * 425)
+    back = DEFAULT.replace(ir_offset=tuple(30.0 if k == 4 else 0.0 for k in range(8)))
+    pressed = record(tmp_path, back, duration=20.0, name="pressed.csv", world=ARENA, pose=(1.4, 1.4, 5 * np.pi / 4),
+                     controller=push)
+    d = diagnose(pressed, DEFAULT, ARENA)
+    assert d.verdict == "explained" and any("touches a wall in 17 of 19 windows" in n for n in d.notes)
+    assert [(e["name"], e["sensor"]) for e in d.effects] == [("ir_offset", 4)]
+    assert d.effects[0]["params"]["ir_offset"]["value"] == pytest.approx(30.0, abs=1.5)
+
+    last = np.arange(len(pressed) - 100, len(pressed))[None, :]  # pressed on the wall
+    refl = (pressed.ir_on - pressed.ir_amb)[last[0]]
+    assert (refl[:, [1, 7]] > 1000).all()
+    doubt = unjudged_readings(pressed, last, DEFAULT, ARENA)[0]
+    assert doubt[:, [0, 1, 2, 6, 7]].all() and not doubt[:, 3:6].any()
+
+
 def test_too_little_to_call_a_match_still_shows_a_mismatch_and_names_it_only_if_it_explains_it(tmp_path):
     """Short bursts of driving in 36 s of standing still in the open: the wheels turn in under 20 % of the
     periods.  The twin's own recording is refused: that nothing is located there is no evidence.  A robot with

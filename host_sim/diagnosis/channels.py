@@ -43,6 +43,18 @@ def drive_channel(name: str) -> bool:
     return name in WHEELS or name in MOTION or name in ACCUMULATED.values() or name == "vbat"
 
 
+def sensor_channel(name: str) -> bool:
+    """An IR or ambient channel: the twin's sensors on the recorded track, whatever the twin's motion."""
+    return name.startswith(("ir_", "amb_"))
+
+
+def judged_windows(name: str, contact: np.ndarray) -> np.ndarray:
+    """(W,) bool: the windows a channel is judged on.  A wall contact the twin's dynamics get wrong is left
+    out of the drive's channels; the sensors' readings come from the recorded track, so their windows at a
+    wall are judged too (a robot pressed against one shows its IR pairs a wall the whole time)."""
+    return np.ones_like(contact) if sensor_channel(name) else ~contact
+
+
 @dataclass
 class Channel:
     """One compared quantity: recorded y and the twin's y_hat, per window and period."""

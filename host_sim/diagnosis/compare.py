@@ -5,8 +5,10 @@
     cmp.findings                              # located mismatches
 
 Windows where the recorded robot touches a wall are a channel of their own
-("contact": the wheels' fit in those windows) and are left out of every other
-channel, so a collision cannot swamp a slow effect elsewhere.
+("contact": the wheels' fit in those windows) and are left out of the drive's
+channels, so a collision cannot swamp a slow effect elsewhere.  The IR and
+ambient channels are judged there too: the twin's sensors read the recorded
+track, not the twin's motion (channels.judged_windows).
 """
 from __future__ import annotations
 
@@ -15,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from host_sim.diagnosis.channels import (ACCUMULATED, WHEELS, Channel, build_channels, drive_channel, fit_percent,
-                                        rounding_ceiling)
+                                        judged_windows, rounding_ceiling)
 from host_sim.diagnosis.locate import (Finding, bias_margin, contact_windows, input_lag, ljung_box, locate_channel,
                                       lag_finding, lag_margin, locate_scale, reading_lag_findings, reading_lag_margin,
                                       regimes, scale_margin, scatter_finding, scatter_margin, timing_findings,
@@ -62,11 +64,15 @@ def compare(rec: Recording, params: RobotParams, world: World | None, seconds: f
 
 
 def held_out_fit(chans: list[Channel], windows: Windows, contact: np.ndarray, s: int = 0) -> dict[str, float]:
-    """Fit % of every channel on the held-out windows away from walls; "contact" on those touching one."""
-    judged = windows.held_out & ~contact
-    fit = {c.name: fit_percent(c.y[judged], c.y_hat[judged, s]) for c in chans} if judged.any() else {}
-    for c in chans:  # each window's totals: count_l, count_r, travel, turn
-        if c.name in ACCUMULATED and judged.any():
+    """Fit % of every channel on its held-out windows (the drive's away from walls, judged_windows);
+    "contact": the wheels' on those touching one."""
+    fit = {}
+    for c in chans:
+        judged = windows.held_out & judged_windows(c.name, contact)
+        if not judged.any():
+            continue
+        fit[c.name] = fit_percent(c.y[judged], c.y_hat[judged, s])
+        if c.name in ACCUMULATED:  # each window's totals: count_l, count_r, travel, turn
             fit[ACCUMULATED[c.name]] = fit_percent(c.y[judged].sum(axis=1), c.y_hat[judged, s].sum(axis=1))
     touching = windows.held_out & contact
     if touching.any():
@@ -86,17 +92,17 @@ def held_out_ceiling(chans: list[Channel], windows: Windows, contact: np.ndarray
 def _locate(cmp: Comparison, rec: Recording, p: RobotParams, world: World | None,
             longer: Comparison | None = None) -> None:
     reg = regimes(rec, cmp.windows, p, world)
-    keep = ~cmp.contact
     t = rec.t[cmp.windows.index[:, :-1]]
     resids = {ch.name: ch.residual() for ch in cmp.channels if ch.locate}
     # a reading that runs behind the pose, on several sensors: where no other mismatch locates them
-    timing = {f.channel: f for f in (timing_findings(cmp.channels, resids, keep, reg, t)
-                                     or reading_lag_findings(cmp.channels, resids, keep, cmp.unjudged, t,
+    ring = judged_windows("ir_0", cmp.contact)
+    timing = {f.channel: f for f in (timing_findings(cmp.channels, resids, ring, reg, t)
+                                     or reading_lag_findings(cmp.channels, resids, ring, cmp.unjudged, t,
                                                              rec.sample_period))}
     for ch in cmp.channels:
         if not ch.locate:
             continue
-        resid = resids[ch.name]
+        resid, keep = resids[ch.name], judged_windows(ch.name, cmp.contact)
         found = (locate_channel(ch, resid, keep, reg, t) or timing.get(ch.name)
                  or scatter_finding(ch, resid, keep, reg, t))
         if ch.name in ACCUMULATED:
@@ -110,10 +116,11 @@ def _locate(cmp: Comparison, rec: Recording, p: RobotParams, world: World | None
     # and beside the finding that names them it only blurs what the fit must improve (the three went from
     # named to unexplained).
     if not any(drive_channel(f.channel) for f in cmp.findings):
+        free = ~cmp.contact
         for name in WHEELS:
-            late = lag_finding(cmp.channel(name), resids[name], keep, t, rec.sample_period)
+            late = lag_finding(cmp.channel(name), resids[name], free, t, rec.sample_period)
             if late is not None:
-                _add(cmp, rec, late, resids[name], keep)
+                _add(cmp, rec, late, resids[name], free)
 
 
 def _longer_scale(longer: Comparison | None, name: str, rec: Recording) -> Finding | None:
@@ -141,15 +148,16 @@ def rule_margins(cmp: Comparison, rec: Recording, p: RobotParams, world: World |
     judges, the channel and bin).  At 1 or more the rule locates something; `twinbot bench margins`
     shows how far below 1 the blind controls stay."""
     reg = regimes(rec, cmp.windows, p, world)
-    keep = ~cmp.contact
+    ring = judged_windows("ir_0", cmp.contact)
     resids = {ch.name: ch.residual() for ch in cmp.channels if ch.locate}
     out = {"bias": (0.0, ""), "scale": (0.0, ""), "scatter": (0.0, ""),
-           "timing": max(timing_margin(cmp.channels, resids, keep, reg),
-                         reading_lag_margin(cmp.channels, resids, keep, cmp.unjudged)), "lag": (0.0, "")}
+           "timing": max(timing_margin(cmp.channels, resids, ring, reg),
+                         reading_lag_margin(cmp.channels, resids, ring, cmp.unjudged)), "lag": (0.0, "")}
     period = rec.sample_period
     for ch in cmp.channels:
         if not ch.locate:
             continue
+        keep = judged_windows(ch.name, cmp.contact)
         margin, key = bias_margin(ch, resids[ch.name], keep, reg)
         out["bias"] = max(out["bias"], (margin, f"{ch.name} {key}"))
         if ch.name in WHEELS:

@@ -41,7 +41,7 @@ from scipy import optimize, stats
 
 from host_sim import effects as E
 from host_sim.diagnosis.channels import (ACCUMULATED, AMBIENT, IR, MOTION, WHEELS, Channel, build_channels,
-                                        drive_channel)
+                                        drive_channel, judged_windows, sensor_channel)
 from host_sim.diagnosis.windows import Windows, run_windows
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
@@ -106,7 +106,7 @@ def candidates_for(channels: list[str]) -> list[Candidate]:
     if any(drive_channel(c) for c in channels):
         for name in DRIVE_EFFECTS:
             out += [Candidate(name, s) for s in E.LIBRARY[name].sites()]
-    sensors = sorted({int(c.split("_")[1]) for c in channels if c.startswith(("ir_", "amb_"))})
+    sensors = sorted({int(c.split("_")[1]) for c in channels if sensor_channel(c)})
     for k in sensors:
         out += [Candidate(name, k) for name in SENSOR_EFFECTS]
     if sensors:
@@ -120,7 +120,7 @@ def objective_channels(channels: list[str], available: list[str]) -> list[str]:
     for c in channels:
         if drive_channel(c):
             wanted |= set(WHEELS) | set(MOTION) | {"vbat"}
-        elif c.startswith(("ir_", "amb_")):
+        elif sensor_channel(c):
             k = int(c.split("_")[1])
             wanted |= {IR[k], AMBIENT[k]}
     return [c for c in available if c in wanted]
@@ -130,18 +130,22 @@ class Objective:
     """Weighted residuals of the chosen channels, on the training and the held-out windows, for many twins."""
 
     def __init__(self, rec: Recording, windows: Windows, world: World | None, names: list[str],
-                 sigma: dict[str, float], keep: np.ndarray, unjudged: np.ndarray | None = None,
+                 sigma: dict[str, float], contact: np.ndarray, unjudged: np.ndarray | None = None,
                  totals: tuple[str, ...] = FITTED_TOTALS) -> None:
         self.rec, self.world = rec, world
+        # Only the windows judged are simulated: the drive's channels are not fitted on those touching a
+        # wall, the sensors' are (channels.judged_windows).
+        judged = {name: judged_windows(name, contact) for name in names}
+        keep = np.any(list(judged.values()), axis=0) if names else ~contact
         self.unjudged = unjudged[keep] if unjudged is not None else None
-        # Only the windows judged are simulated: those touching a wall are not fitted on.
         self.windows = windows.select(keep)
+        self.rows = {name: rows[keep] for name, rows in judged.items()}  # each channel's windows, of those kept
         self.names = names
         self.sigma = sigma
         self.totals = totals  # the channels whose window totals are residuals too (fit_totals)
         self.train = ~self.windows.held_out
         self.test = self.windows.held_out
-        self.sensors = any(n.startswith(("ir_", "amb_")) for n in names)
+        self.sensors = any(sensor_channel(n) for n in names)
         self.evaluations = 0
         self.test_columns: dict[str, np.ndarray] = {}  # channel (or window total) -> its held-out residuals' columns
 
@@ -162,8 +166,9 @@ class Objective:
                 # noise in any one period and above it over a window (locate.locate_scale).
                 total = (c.y.sum(axis=-1)[:, None] - c.y_hat.sum(axis=-1)) / self.sigma[ACCUMULATED[name]]
                 r = np.concatenate([r, total[..., None]], axis=-1)
-            train.append(r[self.train].transpose(1, 0, 2).reshape(len(robots), -1))
-            test.append(r[self.test].transpose(1, 0, 2).reshape(len(robots), -1))
+            rows = self.rows[name]
+            train.append(r[self.train & rows].transpose(1, 0, 2).reshape(len(robots), -1))
+            test.append(r[self.test & rows].transpose(1, 0, 2).reshape(len(robots), -1))
             cols = at + np.arange(test[-1].shape[1]).reshape(-1, r.shape[-1])  # (held-out windows, T' [+ 1])
             self.test_columns[name] = cols[:, :periods].ravel()
             if name in self.totals:

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from host_sim.diagnosis.channels import ACCUMULATED
+from host_sim.diagnosis.channels import ACCUMULATED, judged_windows
 from host_sim.diagnosis.compare import Comparison
 from host_sim.diagnosis.locate import lag_blocks
 from host_sim.diagnosis.report import Diagnosis
@@ -44,7 +44,7 @@ def residual_figure(rec: Recording, before: Comparison, after: Comparison | None
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(9, 2.6))
     t = rec.t[before.windows.index[:, 1:]]
-    keep = ~before.contact
+    keep = judged_windows(channel, before.contact)
     ax.plot(t[keep].ravel(), before.channel(channel).residual()[keep].ravel(), ".", ms=2, color="tab:red",
             label="before: recorded − twin")
     if after is not None:

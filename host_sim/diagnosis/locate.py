@@ -42,8 +42,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from host_sim.diagnosis.channels import ACCUMULATED, SENSOR_NAMES, WHEELS, Channel
-from host_sim.diagnosis.windows import Windows
+from host_sim.diagnosis.channels import ACCUMULATED, SENSOR_NAMES, WHEELS, Channel, sensor_channel
+from host_sim.diagnosis.windows import CONTACT_MARGIN, Windows
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
 from host_sim.world import World
@@ -61,7 +61,6 @@ REGIME_SHARE_MIN = 0.05  # a regime variable must explain this share of the resi
 READING_LAG_Z = 4.0  # each sensor's lag (reading_lag_findings): the blind controls' largest was 3.1, on one sensor
 READING_LAG_SPREAD = 0.5  # of the median lag: the sensors that show a latency show the same one
 READING_LAG_REGIME = "as it changes"  # "sensor S5 back's reading runs 25 ms behind the tracked pose's as it changes"
-CONTACT_MARGIN = 0.005  # m beyond the body's radius: within it, a window touches a wall
 SCALE_MIN = 0.02  # a path or turn 2 % off the twin's: an odometry error worth naming
 SCALE_MIN_COUNTS = 0.01  # a count, 1 %: the firmware's speed loop takes back most of an encoder's error
 # A window total's noise in per-period noise levels: its two ends (first differences of differenced white
@@ -299,7 +298,7 @@ def relevant_regimes(channel: str) -> tuple[str, ...]:
         return (f"speed_{side}", f"command_{side}", "acceleration", "turning", "direction", "battery")
     if channel in ("forward", "lateral", "heading_rate"):
         return ("speed_", "command_", "acceleration", "turning", "direction", "battery", "heading")
-    if channel.startswith(("ir_", "amb_")):
+    if sensor_channel(channel):
         return (f"wall_{channel.split('_')[1]}", "heading", "turning", "direction")
     return ("battery", "speed_", "acceleration")
 

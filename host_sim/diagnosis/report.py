@@ -17,7 +17,7 @@ from host_sim import effects as E
 from host_sim.diagnosis.apart import tell_apart
 from host_sim.diagnosis.compare import Comparison, compare_all
 from host_sim.diagnosis.fit import Model, Objective, candidates_for, fit_totals, objective_channels, select
-from host_sim.diagnosis.channels import ACCUMULATED, WHEELS
+from host_sim.diagnosis.channels import ACCUMULATED, WHEELS, judged_windows
 from host_sim.diagnosis.locate import Finding, noise_level, regimes, total_noise
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
 from host_sim.diagnosis.words import sentence
@@ -241,16 +241,17 @@ def _fit(rec: Recording, params: RobotParams, world: World | None, first: Compar
 
 
 def fit_objective(rec: Recording, world: World | None, first: Comparison) -> Objective:
-    """What a fit minimises: the located channels and their family, on the windows away from the walls."""
+    """What a fit minimises: the located channels and their family, each on the windows it is judged on
+    (the drive's away from the walls)."""
     located = [f.channel for f in first.findings]
     names = objective_channels(located, [c.name for c in first.channels])
     totals = fit_totals(located)
-    keep = ~first.contact
-    sigma = {c.name: noise_level(c, c.residual()[keep]) for c in first.channels if c.name in names}
+    sigma = {c.name: noise_level(c, c.residual()[judged_windows(c.name, first.contact)])
+             for c in first.channels if c.name in names}
     # The window totals the fit adds (fit.Objective), weighed by how far they stray from a proportion.
-    sigma |= {ACCUMULATED[c.name]: total_noise(c, keep) for c in first.channels
+    sigma |= {ACCUMULATED[c.name]: total_noise(c, judged_windows(c.name, first.contact)) for c in first.channels
               if c.name in names and c.name in totals}
-    return Objective(rec, first.windows, world, names, sigma, keep, first.unjudged, totals)
+    return Objective(rec, first.windows, world, names, sigma, first.contact, first.unjudged, totals)
 
 
 def _effect_entry(model: Model, i: int, chain: list[Model]) -> dict[str, Any]:

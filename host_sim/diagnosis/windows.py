@@ -36,6 +36,8 @@ OFFSET_S = 0.5
 POSE_DOUBT_RAD = 0.02  # a tracker's heading is good to a few tenths of a degree; its position, at the
 # sensors' range (~0.1 m), to about as much: a reading that changes this much within 1.1 degrees is not judged
 POSE_DOUBT_COUNTS = 50.0
+CONTACT_MARGIN = 0.005  # m beyond the body's radius: within it, the robot touches a wall
+FACING_COS = -0.17  # a sensor whose axis is within 100 degrees of the way to a touched wall faces it
 # The twin steps SUBSTEPS times a period; a robot that slides over the floor (ice) spins its wheels up and
 # down within milliseconds, which 5 ms steps blur: fits on blind case 0214 (a grip of 0.12) then needed a
 # 1.3 ms actuator delay that the plant did not have, and none at 16 steps a period (0.5 ms, 3 % of the cost).
@@ -223,6 +225,13 @@ def unjudged_readings(rec: Recording, rows: np.ndarray, p: RobotParams, world: W
     says nothing about the robot, and a fit would turn the sensor to explain it.  Judged instead: readings
     that change by less than POSE_DOUBT_COUNTS (or half of themselves) with the heading turned by
     +-POSE_DOUBT_RAD.
+
+    Nor is a sensor that faces a wall the robot touches (FACING_COS): it reads the wall within millimetres
+    of its mount, where the contact decides the reading (a hull pressed into the wall, a bumper's give), and
+    its reflection goes from nothing to 130 counts within the tracker's 2 mm (blind control 0007's S2,
+    where the robot read a steady 11).  Nor is a wall nearer the sensor than the response's maximum
+    (ir_near_peak): on that branch the law is double-valued and steep, and a robot 5-7 mm from a wall read
+    430 counts where the twin read 1000 (blind control 0122's S8).
     """
     assert rec.pose is not None
     inputs = replay_inputs(rec)
@@ -235,4 +244,9 @@ def unjudged_readings(rec: Recording, rows: np.ndarray, p: RobotParams, world: W
         refl.append(on - amb)
     spread = np.ptp(np.stack(refl), axis=0)
     doubt = spread > np.maximum(POSE_DOUBT_COUNTS, 0.5 * np.abs(refl[0]))
+    dist, away = world.nearest_wall(rec.pose[flat, :2])  # away: the unit normal from the wall to C
+    bearing = rec.pose[flat, 2:3] + np.asarray(ir_sensor.BEARINGS)
+    facing = -(np.cos(bearing) * away[:, :1] + np.sin(bearing) * away[:, 1:]) > FACING_COS
+    doubt |= (dist < p.body_radius + CONTACT_MARGIN)[:, None] & facing
+    doubt |= ir_sensor.reflection(world, rec.pose[flat], p)[0] < p.ir_near_peak
     return doubt.reshape(*rows.shape, ir_sensor.N_SENSORS)
