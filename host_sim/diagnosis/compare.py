@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from host_sim.diagnosis.channels import (ACCUMULATED, WHEELS, Channel, build_channels, drive_channel, fit_percent,
+from host_sim.diagnosis.channels import (ACCUMULATED, IR, WHEELS, Channel, build_channels, drive_channel, fit_percent,
                                         judged_windows, rounding_ceiling)
 from host_sim.diagnosis.locate import (Finding, bias_margin, contact_windows, input_lag, ljung_box, locate_channel,
                                       lag_finding, lag_margin, locate_scale, reading_lag_findings, reading_lag_margin,
@@ -95,7 +95,7 @@ def _locate(cmp: Comparison, rec: Recording, p: RobotParams, world: World | None
     t = rec.t[cmp.windows.index[:, :-1]]
     resids = {ch.name: ch.residual() for ch in cmp.channels if ch.locate}
     # a reading that runs behind the pose, on several sensors: where no other mismatch locates them
-    ring = judged_windows("ir_0", cmp.contact)
+    ring = judged_windows(IR[0], cmp.contact)  # every sensor channel is judged on the same windows
     timing = {f.channel: f for f in (timing_findings(cmp.channels, resids, ring, reg, t)
                                      or reading_lag_findings(cmp.channels, resids, ring, cmp.unjudged, t,
                                                              rec.sample_period))}
@@ -148,7 +148,7 @@ def rule_margins(cmp: Comparison, rec: Recording, p: RobotParams, world: World |
     judges, the channel and bin).  At 1 or more the rule locates something; `twinbot bench margins`
     shows how far below 1 the blind controls stay."""
     reg = regimes(rec, cmp.windows, p, world)
-    ring = judged_windows("ir_0", cmp.contact)
+    ring = judged_windows(IR[0], cmp.contact)  # every sensor channel is judged on the same windows
     resids = {ch.name: ch.residual() for ch in cmp.channels if ch.locate}
     out = {"bias": (0.0, ""), "scale": (0.0, ""), "scatter": (0.0, ""),
            "timing": max(timing_margin(cmp.channels, resids, ring, reg),
