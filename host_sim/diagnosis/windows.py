@@ -228,8 +228,8 @@ def unjudged_readings(rec: Recording, rows: np.ndarray, p: RobotParams, world: W
 
     Nor is a sensor that faces a wall the robot touches (FACING_COS): it reads the wall within millimetres
     of its mount, where the contact decides the reading (a hull pressed into the wall, a bumper's give), and
-    its reflection goes from nothing to 130 counts within the tracker's 2 mm (blind control 0007's S2,
-    where the robot read a steady 11).  Nor is a wall nearer the sensor than the response's maximum
+    the twin's goes from 4 to 134 counts over the tracker's -2..+2 mm of gap (blind control 0007's S2,
+    where the robot read a steady 11-12).  Nor is a wall nearer the sensor than the response's maximum
     (ir_near_peak): on that branch the law is double-valued and steep, and a robot 5-7 mm from a wall read
     430 counts where the twin read 1000 (blind control 0122's S8).
     """
