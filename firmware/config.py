@@ -6,7 +6,7 @@ geometry here; a test checks that they do.
 """
 from protocol.compat import const
 
-FIRMWARE_VERSION = (0, 2, 0)
+FIRMWARE_VERSION = (0, 3, 0)
 
 # Geometry, micrometres.
 WHEEL_DIAMETER_UM = const(42000)

@@ -26,6 +26,7 @@ BOARD_FILES = (
     "firmware/ir.py",
     "firmware/odometry.py",
     "firmware/wheels.py",
+    "firmware/stall.py",
     "firmware/hal.py",
     "firmware/hal_buffered.py",
     "firmware/hal_rp2040.py",

@@ -2,8 +2,9 @@
 
 Each cycle: wait for the cycle tick -> IR acquisition (ambient removed) ->
 encoders -> odometry and wheel speeds -> messages from the host -> the mode
-decides the wheel setpoints (AUTONOMOUS: the fuzzy explorer; HOST, TELEOP:
-the host's COMMAND, guarded by the watchdog; STOP: zero) -> wheel PI ->
+decides the wheel setpoints (AUTONOMOUS: the fuzzy explorer, with the stall
+guard backing it out of a wedge; HOST, TELEOP: the host's COMMAND, guarded by
+the watchdog; STOP: zero) -> wheel PI ->
 current references -> TELEMETRY.
 
 No path allocates once the robot is built, whatever the host sends (tests
@@ -25,6 +26,7 @@ from firmware.fuzzy import FuzzyController
 from firmware.hal import TICK_MASK
 from firmware.ir import IRArray
 from firmware.odometry import Odometry
+from firmware.stall import StallGuard
 from firmware.wheels import WheelLoop
 from protocol import wire as M
 from protocol.compat import const
@@ -46,7 +48,8 @@ P_CURRENT_LIMIT = const(11)
 P_WHEEL_DIAMETER = const(12)
 P_WHEEL_BASE = const(13)
 P_TICKS_PER_REV = const(14)
-N_PARAMS = const(15)
+P_STALL = const(15)
+N_PARAMS = const(16)
 MAX_RX_PER_CYCLE = const(512)  # bounds the cycle time under a flood of bytes
 MAX_DT_MS = const(2000)  # a longer gap (a stalled board) counts as this much: keeps the PI in range
 
@@ -98,6 +101,7 @@ class Robot:
             p[pid] = geometry[k]
         self.ir = IRArray(hal, p[P_EMITTER], p[P_AVERAGING], p[P_WINDOW])
         self.fuzzy = FuzzyController(p[P_RULE_SET], p[P_MAX_SPEED])
+        self.stall = StallGuard(p[P_STALL], p[P_MAX_SPEED])
         self.odometry = Odometry(p[P_WHEEL_DIAMETER], p[P_WHEEL_BASE], p[P_TICKS_PER_REV], p[P_ODOMETRY])
         q8 = self.odometry.um_per_tick_q8
         self.wheel_l = WheelLoop(q8, p[P_KP], p[P_KI], p[P_CURRENT_LIMIT])
@@ -144,7 +148,7 @@ class Robot:
         self.wheel_l.measure(enc[0], dt)
         self.wheel_r.measure(enc[1], dt)
         self.read_host()
-        self.decide()
+        self.decide(dt)
         if self.mode == M.MODE_STOP or self.watchdog_tripped:
             self.wheel_l.reset()
             self.wheel_r.reset()
@@ -160,12 +164,15 @@ class Robot:
         hal.end_cycle()  # type: ignore[attr-defined]
         self.cycles += 1
 
-    def decide(self) -> None:
+    def decide(self, dt: int) -> None:
         mode = self.mode
         if mode == M.MODE_AUTONOMOUS:
-            self.fuzzy.infer(self.ir.value)
-            self.setpoint_l = self.fuzzy.left
-            self.setpoint_r = self.fuzzy.right
+            fuzzy = self.fuzzy
+            guard = self.stall
+            fuzzy.infer(self.ir.value)
+            guard.steer(fuzzy.left, fuzzy.right, self.wheel_l.speed, self.wheel_r.speed, dt, self.ir.value)
+            self.setpoint_l = guard.left
+            self.setpoint_r = guard.right
             self.watchdog_tripped = False
         elif mode == M.MODE_HOST or mode == M.MODE_TELEOP:
             if (self.tick - self.last_command) & TICK_MASK > self.params[P_WATCHDOG]:
@@ -180,6 +187,8 @@ class Robot:
             self.setpoint_l = 0
             self.setpoint_r = 0
             self.watchdog_tripped = False
+        if mode != M.MODE_AUTONOMOUS:
+            self.stall.reset()
 
     def make_flags(self) -> int:
         f = 0
@@ -195,6 +204,8 @@ class Robot:
             f |= M.FLAG_CURRENT_LIMIT
         if 0 < self.vbat < config.LOW_BATTERY_MV:
             f |= M.FLAG_LOW_BATTERY
+        if self.stall.state:  # not WATCHING: backing out
+            f |= M.FLAG_STALL
         return f
 
     def run(self, cycles: int = -1) -> None:
@@ -357,8 +368,10 @@ class Robot:
         p[pid] = value
         if pid == P_EMITTER or pid == P_AVERAGING or pid == P_WINDOW:
             self.ir.configure(p[P_EMITTER], p[P_AVERAGING], p[P_WINDOW])
-        elif pid == P_RULE_SET or pid == P_MAX_SPEED:
+        elif pid == P_RULE_SET or pid == P_MAX_SPEED or pid == P_STALL:
             self.fuzzy.configure(p[P_RULE_SET], p[P_MAX_SPEED])
+            self.stall.stall_ms = p[P_STALL]
+            self.stall.max_speed = p[P_MAX_SPEED]
         elif pid == P_ODOMETRY:
             self.odometry.method = value
         elif pid == P_KP or pid == P_KI or pid == P_CURRENT_LIMIT:
@@ -367,7 +380,7 @@ class Robot:
                 w.kp = p[P_KP]
                 w.ki = p[P_KI]
                 w.limit = p[P_CURRENT_LIMIT]
-        elif pid >= P_WHEEL_DIAMETER:
+        elif P_WHEEL_DIAMETER <= pid <= P_TICKS_PER_REV:
             odo = self.odometry
             odo.configure(p[P_WHEEL_DIAMETER], p[P_WHEEL_BASE], p[P_TICKS_PER_REV])
             self.wheel_l.um_per_tick_q8 = odo.um_per_tick_q8

@@ -39,7 +39,7 @@ LAYOUTS = (
 
 MODE_NAMES = ("STOP", "AUTONOMOUS", "HOST", "TELEOP")
 BOARD_NAMES = ("UNKNOWN", "HOST", "VIRTUAL", "RP2040")
-FLAG_NAMES = ("WATCHDOG", "IR_SATURATED", "OVERRUN", "FAULT", "CURRENT_LIMIT", "LOW_BATTERY")
+FLAG_NAMES = ("WATCHDOG", "IR_SATURATED", "OVERRUN", "FAULT", "CURRENT_LIMIT", "LOW_BATTERY", "STALL")
 ERROR_NAMES = ("OK", "UNKNOWN_PARAM", "OUT_OF_RANGE", "BAD_MODE", "UNSUPPORTED", "BUSY")
 LOG_LEVEL_NAMES = ("DEBUG", "INFO", "WARNING", "ERROR")
 
@@ -59,6 +59,7 @@ PARAMS = (
     (12, "wheel_diameter_um", 10000, 200000, 42000, "um wheel diameter (odometry, wheel speeds)"),
     (13, "wheel_base_um", 20000, 1000000, 96000, "um between the wheel contact points (odometry)"),
     (14, "ticks_per_rev", 100, 16000, 1200, "encoder ticks per wheel revolution"),
+    (15, "stall_ms", 0, 10000, 1500, "ms a wheel may stall (under 1/4 of its setpoint) before the explorer backs out; 0 off"),
 )
 
 VARIABLE = bytearray(N_TYPES)  # 1 where the payload's last field runs to its end

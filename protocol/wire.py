@@ -73,6 +73,7 @@ FLAG_OVERRUN = const(0x04)  # the last cycle took longer than its period
 FLAG_FAULT = const(0x08)  # an exception was caught in the last cycle
 FLAG_CURRENT_LIMIT = const(0x10)  # a current reference was clamped
 FLAG_LOW_BATTERY = const(0x20)
+FLAG_STALL = const(0x40)  # the explorer is backing out of a stall (firmware/stall.py)
 
 # NACK.error codes.
 ERR_UNKNOWN_PARAM = const(1)
@@ -107,4 +108,5 @@ PARAM_LIMITS = array("i", [
     10000, 200000, 42000,  # 12 wheel_diameter_um
     20000, 1000000, 96000,  # 13 wheel_base_um
     100, 16000, 1200,  # 14 ticks_per_rev
+    0, 10000, 1500,  # 15 stall_ms
 ])

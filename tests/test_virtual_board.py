@@ -136,7 +136,7 @@ def test_flash_a_blank_board_then_it_answers_hello(tmp_path, standin):
         robot.write_text('{"wheel_radius": 0.026, "half_axle": 0.055}')
         r = run_twinbot("flash", "--port", vb.path, "--params", str(robot), timeout=240)
         assert r.returncode == 0, r.stdout + r.stderr
-        assert "the board answered HELLO: firmware 0.2.0" in r.stdout
+        assert "the board answered HELLO: firmware 0.3.0" in r.stdout
         assert "the board's geometry: wheel_diameter_um 52000, wheel_base_um 110000, ticks_per_rev 1200" in r.stdout
         r = mpremote(vb.path, "ls", ":firmware")
         assert "robot.mpy" in r.stdout and "robot.py" not in r.stdout

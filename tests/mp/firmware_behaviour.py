@@ -227,6 +227,70 @@ def check_telemetry_every_cycle_in_sequence():
     assert ticks == sorted(ticks)
 
 
+def held_cycles(hal, robot, n):
+    """n cycles with both wheels held still (a wall, a wedge): the encoders never move.
+    The setpoints and flags of each cycle, oldest first."""
+    seen = []
+    for _ in range(n):
+        robot.cycle()
+        hal.encs[0] = 0
+        hal.encs[1] = 0
+        seen.append((robot.setpoint_l, robot.setpoint_r, robot.flags & W.FLAG_STALL))
+    return seen
+
+
+def check_a_stalled_explorer_backs_out_then_turns_away_from_the_wall():
+    hal, robot = robot_with(0)
+    hal.reflection[2] = 600  # a wall on the left (S3): the explorer bears right, both wheels forward
+    seen = held_cycles(hal, robot, 37)  # 1480 ms held: under stall_ms (1500)
+    assert all(l > 0 and r > 0 and not f for l, r, f in seen), seen
+    seen = held_cycles(hal, robot, 1)  # 1520 ms: it takes over and backs out
+    assert seen[-1] == (-100, -100, W.FLAG_STALL), seen
+    assert telemetry(hal.take_output())[-1][2] & W.FLAG_STALL
+    seen = held_cycles(hal, robot, 15)  # backing for 600 ms, then spinning right, away from the wall
+    assert seen[:14] == [(-100, -100, W.FLAG_STALL)] * 14 and seen[14] == (100, -100, W.FLAG_STALL), seen
+    seen = held_cycles(hal, robot, 18)  # 700 ms of turning, then the explorer has the wheels again
+    assert seen[:17] == [(100, -100, W.FLAG_STALL)] * 17, seen
+    assert seen[17][0] > 0 and seen[17][1] > 0 and not seen[17][2], seen
+    assert robot.stall.escapes == 1
+    hal.reflection[2] = 0
+    hal.reflection[6] = 600  # the wall on the right (S7) now: the next spin is to the left
+    seen = held_cycles(hal, robot, 38 + 15)
+    assert seen[-1] == (-100, 100, W.FLAG_STALL), seen
+
+
+def check_a_creeping_explorer_held_by_a_wall_backs_out_too():
+    hal, robot = robot_with(0)
+    hal.reflection[0] = 4000  # S1 saturated, S2 and S8 bright: the first rule set creeps on (docs/fuzzy.md)
+    hal.reflection[1] = hal.reflection[7] = 3000
+    seen = held_cycles(hal, robot, 38)
+    assert seen[-2] == (22, 22, 0) and seen[-1] == (-100, -100, W.FLAG_STALL), seen
+
+
+def check_wheels_that_turn_never_trip_the_stall_guard():
+    hal, robot = robot_with(1)
+    for _ in range(200):  # 8 s of free driving, starting from rest
+        robot.cycle()
+        assert not robot.flags & W.FLAG_STALL
+    assert robot.setpoint_l == robot.setpoint_r == 110 and robot.stall.escapes == 0
+
+
+def check_the_stall_guard_is_a_parameter_and_autonomous_only():
+    hal, robot = robot_with(1)
+    hal.give(param_set(15, 0))  # off: the explorer pushes on for ever
+    seen = held_cycles(hal, robot, 100)
+    assert all(l == r == 110 and not f for l, r, f in seen[1:]), seen
+    hal.give(param_set(15, 400))  # 400 ms: ten cycles of 40 ms
+    seen = held_cycles(hal, robot, 10)
+    assert seen[-2][0] == 110 and seen[-1] == (-100, -100, W.FLAG_STALL), seen
+    hal, robot = robot_with(1, W.MODE_HOST)  # the host drives: its commands stand, held or not
+    for _ in range(100):
+        hal.give(command(W.MODE_HOST, 150, 150))
+        robot.cycle()
+        hal.encs[0] = hal.encs[1] = 0
+        assert (robot.setpoint_l, robot.setpoint_r) == (150, 150) and not robot.flags & W.FLAG_STALL
+
+
 def noise_run(repl_link):
     """300 cycles of unfiltered random bursts with mpremote's 0D 03 planted inside them, at
     their start, and after silent cycles (on the UART only); the robot keeps driving."""
