@@ -23,7 +23,7 @@ from host_sim.diagnosis.locate import (Finding, bias_margin, contact_windows, in
                                       regimes, scale_margin, scatter_finding, scatter_margin, timing_findings,
                                       timing_margin)
 from host_sim.diagnosis.windows import (DEFAULT_SECONDS, Windows, judge_slides, make_windows, run_windows,
-                                       unjudged_readings)
+                                       stratified_held_out, unjudged_readings)
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
 from host_sim.world import World
@@ -48,8 +48,11 @@ class Comparison:
 
 
 def compare(rec: Recording, params: RobotParams, world: World | None, seconds: float = DEFAULT_SECONDS[0],
-            *, locate: bool = True) -> Comparison:
+            *, locate: bool = True, held_out: np.ndarray | None = None) -> Comparison:
+    """held_out: the held-out windows (stratify's), else make_windows' every third."""
     windows = make_windows(rec, seconds)
+    if held_out is not None:
+        windows.held_out = held_out
     contact = contact_windows(rec, windows, params, world)
     judge_slides(rec, windows, params, contact)
     run = run_windows(rec, windows, params, world)
@@ -61,6 +64,17 @@ def compare(rec: Recording, params: RobotParams, world: World | None, seconds: f
     if locate:
         _locate(cmp, rec, params, world)
     return cmp
+
+
+def stratify(cmp: Comparison, rec: Recording) -> None:
+    """Hold out a share of the windows that show what was located (windows.stratified_held_out), and
+    judge the held-out fit on them: the fit is judged where there is something to improve."""
+    spans = [span for f in cmp.findings for span in f.spans]
+    held = stratified_held_out(cmp.windows, rec.t, spans)
+    if held is not cmp.windows.held_out:
+        cmp.windows.held_out = held
+        cmp.fit = held_out_fit(cmp.channels, cmp.windows, cmp.contact)
+        cmp.ceiling = held_out_ceiling(cmp.channels, cmp.windows, cmp.contact)
 
 
 def held_out_fit(chans: list[Channel], windows: Windows, contact: np.ndarray, s: int = 0) -> dict[str, float]:
@@ -172,14 +186,17 @@ def rule_margins(cmp: Comparison, rec: Recording, p: RobotParams, world: World |
 
 
 def compare_all(rec: Recording, params: RobotParams, world: World | None,
-                seconds: tuple[float, ...] = DEFAULT_SECONDS, *, locate: bool = True) -> list[Comparison]:
+                seconds: tuple[float, ...] = DEFAULT_SECONDS, *, locate: bool = True,
+                held_out: np.ndarray | None = None) -> list[Comparison]:
     """One comparison per window length that fits the recording.  The shortest one locates; the longest
-    one also judges the totals' proportional errors (_longer_scale)."""
-    out = [compare(rec, params, world, s, locate=False) for s in seconds
-           if len(rec) > int(round(s / rec.sample_period)) * 3]
+    one also judges the totals' proportional errors (_longer_scale).  held_out: the shortest one's
+    held-out windows (stratify's), else every third."""
+    fits = [s for s in seconds if len(rec) > int(round(s / rec.sample_period)) * 3]
+    out = [compare(rec, params, world, s, locate=False, held_out=held_out if k == 0 else None)
+           for k, s in enumerate(fits)]
     if locate and out:
         _locate(out[0], rec, params, world, out[-1] if len(out) > 1 else None)
     return out
 
 
-__all__ = ["Comparison", "compare", "compare_all", "held_out_ceiling", "held_out_fit", "rule_margins"]
+__all__ = ["Comparison", "compare", "compare_all", "held_out_ceiling", "held_out_fit", "rule_margins", "stratify"]

@@ -15,7 +15,7 @@ import numpy as np
 
 from host_sim import effects as E
 from host_sim.diagnosis.apart import tell_apart
-from host_sim.diagnosis.compare import Comparison, compare_all
+from host_sim.diagnosis.compare import Comparison, compare_all, stratify
 from host_sim.diagnosis.fit import Model, Objective, candidates_for, fit_totals, objective_channels, select
 from host_sim.diagnosis.channels import ACCUMULATED, WHEELS, judged_windows
 from host_sim.diagnosis.locate import Finding, noise_level, regimes, total_noise
@@ -174,6 +174,7 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     say("comparing the twin with the recording")
     comparisons = compare_all(rec, params, world, seconds)
     first = comparisons[0]
+    stratify(first, rec)  # before any figure is taken: the held-out windows hold a share of what was located
     result = Diagnosis(str(rec.path or "recording"), "match", comparisons, [_located(first, f) for f in first.findings],
                        fit_before=dict(first.fit), fit_ceiling=dict(first.ceiling), notes=notes)
     little_data = False
@@ -199,7 +200,7 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     final = chain[-1]
     result.model = final
     say("judging the fitted twin")
-    afters = compare_all(rec, final.params, world, seconds)
+    afters = compare_all(rec, final.params, world, seconds, held_out=first.windows.held_out)
     after = result.after = afters[0]
     result.after_long = afters[-1]
     result.fit_after = dict(after.fit)

@@ -72,6 +72,31 @@ class Windows:
         return len(self.start)
 
 
+def stratified_held_out(windows: Windows, times: np.ndarray, spans: list[tuple[float, float]],
+                        hold_out_every: int = 3) -> np.ndarray:
+    """The held-out windows, with a share of those that show a located mismatch (they overlap `spans`, s;
+    times: the recording's t).  make_windows holds out every third window whatever it shows; a mismatch
+    seen in a few windows only (a weak motor that shows when the firmware backs out of a stall, twice in
+    90 s) can then fall wholly in the training windows, and no fit, however right, improves the held-out
+    ones.  If the split holds out fewer of these windows than one in `hold_out_every` (at least one of
+    two), it is redrawn apart for them and for the rest, each in time order: the evidence is split
+    between fitting and judging as the whole run is.  Otherwise it is kept."""
+    t0 = times[windows.start]
+    t1 = times[windows.start + windows.rows - 1]
+    shows = np.zeros(len(windows), dtype=bool)
+    for a, b in spans:
+        shows |= (t0 < b) & (t1 > a)
+    n = int(shows.sum())
+    wanted = max(1, n // hold_out_every) if n >= 2 else 0  # what every third gives a run that shows it all
+    if int((windows.held_out & shows).sum()) >= wanted:
+        return windows.held_out
+    held = np.zeros(len(windows), dtype=bool)
+    evidence, rest = np.flatnonzero(shows), np.flatnonzero(~shows)
+    held[evidence[np.arange(n) % hold_out_every == 1]] = True  # the second, fifth, ...: one of two is judged
+    held[rest[np.arange(len(rest)) % hold_out_every == hold_out_every - 1]] = True
+    return held
+
+
 def judge_slides(rec: Recording, windows: Windows, p: RobotParams, contact: np.ndarray) -> None:
     """Set the windows that start with the robot sliding (replay.sliding_rows, with p's wheels: judged once,
     so that no fit moves a window between sliding and rolling) and the twin's steps per period:
@@ -250,3 +275,4 @@ def unjudged_readings(rec: Recording, rows: np.ndarray, p: RobotParams, world: W
     doubt |= (dist < p.body_radius + CONTACT_MARGIN)[:, None] & facing
     doubt |= ir_sensor.reflection(world, rec.pose[flat], p)[0] < p.ir_near_peak
     return doubt.reshape(*rows.shape, ir_sensor.N_SENSORS)
+
