@@ -170,7 +170,13 @@ class Robot:
             fuzzy = self.fuzzy
             guard = self.stall
             fuzzy.infer(self.ir.value)
+            phase = guard.state
             guard.steer(fuzzy.left, fuzzy.right, self.wheel_l.speed, self.wheel_r.speed, dt, self.ir.value)
+            if guard.state != phase:
+                # The integrals hold the push the guard just ended (wound up to the current limit against
+                # the wall): cleared, the back-out reverses the wheels at once instead of unwinding them.
+                self.wheel_l.acc = 0
+                self.wheel_r.acc = 0
             self.setpoint_l = guard.left
             self.setpoint_r = guard.right
             self.watchdog_tripped = False

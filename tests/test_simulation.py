@@ -168,18 +168,20 @@ def test_refined_rules_find_the_exit_the_first_do_not(seed):
 
 
 def test_the_stall_guard_backs_the_first_rule_set_out_of_a_wedge():
-    """In the maze the first rule set drives nose first into a gap and stays there (stall guard off:
-    parameter 15, stall_ms = 0); with the guard (its default) it backs out, turns and explores on."""
+    """In the maze the first rule set drives nose first into a gap 14 cm from its start and stays there
+    (stall guard off: parameter 15, stall_ms = 0); with the guard (its default) it backs out, turns and
+    explores on, over half a metre away, until the rule set's own stop in front of a wall (docs/fuzzy.md),
+    which is not a stall."""
     runs = {}
     for stall_ms in (0, 1500):
         controller = SilController(0)
         controller.send(FrameEncoder().encode(M.PARAM_SET, M.pack_payload(M.PARAM_SET, {"param": 15, "value": stall_ms})))
         sim = Simulation(builtin_world("maze"), DEFAULT, controller, seed=5, pose=(1.075, 1.025, 2.605))
         run = sim.run_fixed(60.0)
-        moving = float((np.hypot(*np.diff(run.pose[:, :2], axis=0).T) > 1e-4).mean())
-        runs[stall_ms] = (moving, run.coverage[-1], controller.robot.stall.escapes)
-    assert runs[0][0] < 0.15 and runs[0][2] == 0, runs
-    assert runs[1500][0] > 0.8 and runs[1500][1] > 5 * runs[0][1] and runs[1500][2] >= 1, runs
+        farthest = float(np.hypot(*(run.pose[:, :2] - run.pose[0, :2]).T).max())
+        runs[stall_ms] = (farthest, run.coverage[-1], controller.robot.stall.escapes)
+    assert runs[0][0] < 0.2 and runs[0][2] == 0, runs
+    assert runs[1500][0] > 0.5 and runs[1500][1] > 5 * runs[0][1] and runs[1500][2] >= 1, runs
 
 
 def test_sim_command_prints_the_figures_and_writes_files(tmp_path):

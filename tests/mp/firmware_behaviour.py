@@ -244,8 +244,11 @@ def check_a_stalled_explorer_backs_out_then_turns_away_from_the_wall():
     hal.reflection[2] = 600  # a wall on the left (S3): the explorer bears right, both wheels forward
     seen = held_cycles(hal, robot, 37)  # 1480 ms held: under stall_ms (1500)
     assert all(l > 0 and r > 0 and not f for l, r, f in seen), seen
+    assert robot.wheel_l.current > 250 and robot.wheel_r.current > 250  # the loops wound up against the wall
     seen = held_cycles(hal, robot, 1)  # 1520 ms: it takes over and backs out
     assert seen[-1] == (-100, -100, W.FLAG_STALL), seen
+    # at once: the push's integral is dropped, not unwound (that took longer than the whole back-out)
+    assert robot.wheel_l.current < 0 and robot.wheel_r.current < 0, (robot.wheel_l.current, robot.wheel_r.current)
     assert telemetry(hal.take_output())[-1][2] & W.FLAG_STALL
     seen = held_cycles(hal, robot, 15)  # backing for 600 ms, then spinning right, away from the wall
     assert seen[:14] == [(-100, -100, W.FLAG_STALL)] * 14 and seen[14] == (100, -100, W.FLAG_STALL), seen
