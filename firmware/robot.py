@@ -49,7 +49,8 @@ P_WHEEL_DIAMETER = const(12)
 P_WHEEL_BASE = const(13)
 P_TICKS_PER_REV = const(14)
 P_STALL = const(15)
-N_PARAMS = const(16)
+P_PUSH = const(16)
+N_PARAMS = const(17)
 MAX_RX_PER_CYCLE = const(512)  # bounds the cycle time under a flood of bytes
 MAX_DT_MS = const(2000)  # a longer gap (a stalled board) counts as this much: keeps the PI in range
 
@@ -101,7 +102,7 @@ class Robot:
             p[pid] = geometry[k]
         self.ir = IRArray(hal, p[P_EMITTER], p[P_AVERAGING], p[P_WINDOW])
         self.fuzzy = FuzzyController(p[P_RULE_SET], p[P_MAX_SPEED])
-        self.stall = StallGuard(p[P_STALL], p[P_MAX_SPEED])
+        self.stall = StallGuard(p[P_STALL], p[P_PUSH], p[P_MAX_SPEED])
         self.odometry = Odometry(p[P_WHEEL_DIAMETER], p[P_WHEEL_BASE], p[P_TICKS_PER_REV], p[P_ODOMETRY])
         q8 = self.odometry.um_per_tick_q8
         self.wheel_l = WheelLoop(q8, p[P_KP], p[P_KI], p[P_CURRENT_LIMIT])
@@ -171,12 +172,14 @@ class Robot:
             guard = self.stall
             fuzzy.infer(self.ir.value)
             phase = guard.state
-            guard.steer(fuzzy.left, fuzzy.right, self.wheel_l.speed, self.wheel_r.speed, dt, self.ir.value)
+            wl = self.wheel_l
+            wr = self.wheel_r
+            guard.steer(fuzzy.left, fuzzy.right, wl.speed, wr.speed, wl.current, wr.current, dt, self.ir.value)
             if guard.state != phase:
                 # The integrals hold the push the guard just ended (wound up to the current limit against
                 # the wall): cleared, the back-out reverses the wheels at once instead of unwinding them.
-                self.wheel_l.acc = 0
-                self.wheel_r.acc = 0
+                wl.acc = 0
+                wr.acc = 0
             self.setpoint_l = guard.left
             self.setpoint_r = guard.right
             self.watchdog_tripped = False
@@ -374,9 +377,10 @@ class Robot:
         p[pid] = value
         if pid == P_EMITTER or pid == P_AVERAGING or pid == P_WINDOW:
             self.ir.configure(p[P_EMITTER], p[P_AVERAGING], p[P_WINDOW])
-        elif pid == P_RULE_SET or pid == P_MAX_SPEED or pid == P_STALL:
+        elif pid == P_RULE_SET or pid == P_MAX_SPEED or pid == P_STALL or pid == P_PUSH:
             self.fuzzy.configure(p[P_RULE_SET], p[P_MAX_SPEED])
             self.stall.stall_ms = p[P_STALL]
+            self.stall.push_ma = p[P_PUSH]
             self.stall.max_speed = p[P_MAX_SPEED]
         elif pid == P_ODOMETRY:
             self.odometry.method = value

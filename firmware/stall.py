@@ -3,13 +3,19 @@
 The fuzzy explorer sees walls only through its IR ring.  Wedged nose first
 into a gap narrower than the robot (the two front-side sensors see walls, the
 front one sees the gap) it drives on with its wheels held still; the speed
-loops wind up to the current limit and stay there, each motor at its stall
-current for as long as the run lasts.  The guard watches the wheels: when one
-is asked for at least STALL_MIN_SPEED and turns at under a quarter of that (or
-the wrong way) for stall_ms, it takes over: BACK_MS with both wheels back,
-then TURN_MS spinning on the spot away from the side whose IR sees more light
+loops wind up to the current limit and stay there.  Pressed on a wall between
+two sensors' beams, or nearer than the IR response's maximum (where the
+reading falls again), its wheels spin on the floor instead: the encoders say
+they turn, but only against a load free driving never puts on them.  The
+guard watches both: a wheel asked for at least STALL_MIN_SPEED that turns at
+under a quarter of that (or the wrong way), and a wheel whose current
+reference is above push_ma.  Time stuck counts up while either holds and
+down while neither does (a wheel slipping by fits and starts is caught too);
+at stall_ms it takes over: BACK_MS with both wheels back, then TURN_MS
+spinning on the spot away from the side whose IR sees more light
 (alternating when both see the same), both at half max_speed; then the
-explorer has the wheels again.  stall_ms = 0 turns the guard off.
+explorer has the wheels again.  stall_ms = 0 turns the guard off, push_ma = 0
+its current rule.
 
 Integers only and no allocation, like the rest of the control cycle.
 """
@@ -34,15 +40,16 @@ def _stalled(setpoint: int, speed: int) -> bool:
 
 class StallGuard:
     """steer() passes the explorer's setpoints through, or replaces them while backing out (state is
-    not WATCHING).  stall_ms and max_speed are set as attributes (RAM is scarce: no setter)."""
+    not WATCHING).  stall_ms, push_ma and max_speed are set as attributes (RAM is scarce: no setter)."""
 
-    def __init__(self, stall_ms: int, max_speed: int) -> None:
+    def __init__(self, stall_ms: int, push_ma: int, max_speed: int) -> None:
         self.stall_ms = stall_ms
+        self.push_ma = push_ma
         self.max_speed = max_speed
         self.left = 0
         self.right = 0
         self.state = WATCHING
-        self.stalled_ms = 0  # how long a wheel has been stalled, while watching
+        self.stalled_ms = 0  # time stuck (counted up while stalled or pushing, down while not), while watching
         self.phase_ms = 0  # time spent backing or turning
         self.spin = 1  # +1: spin clockwise (to the right), -1: counter-clockwise
         self.escapes = 0  # times it took over since start
@@ -52,16 +59,27 @@ class StallGuard:
         self.stalled_ms = 0
         self.phase_ms = 0
 
-    def steer(self, left: int, right: int, speed_l: int, speed_r: int, dt_ms: int, ir: list[int]) -> None:
+    def steer(self, left: int, right: int, speed_l: int, speed_r: int, current_l: int, current_r: int,
+              dt_ms: int, ir: list[int]) -> None:
         """The setpoints (mm/s) for this cycle: the explorer's (left, right) or the guard's.
-        speed_l, speed_r: the wheels' measured speeds, mm/s; ir: the eight reflected readings."""
+        speed_l, speed_r: the wheels' measured speeds, mm/s; current_l, current_r: their last current
+        references, mA; ir: the eight reflected readings."""
         state = self.state
+        if not self.stall_ms:  # off: nothing counts, so that turning it on starts afresh
+            self.reset()
+            self.left = left
+            self.right = right
+            return
         if state == WATCHING:
-            if self.stall_ms and (_stalled(left, speed_l) or _stalled(right, speed_r)):
+            push = self.push_ma
+            if _stalled(left, speed_l) or _stalled(right, speed_r) or (
+                    push and (current_l > push or current_l < -push or current_r > push or current_r < -push)):
                 self.stalled_ms += dt_ms
+            elif self.stalled_ms > dt_ms:
+                self.stalled_ms -= dt_ms
             else:
                 self.stalled_ms = 0
-            if not self.stall_ms or self.stalled_ms < self.stall_ms:
+            if self.stalled_ms < self.stall_ms:
                 self.left = left
                 self.right = right
                 return

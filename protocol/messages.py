@@ -60,6 +60,7 @@ PARAMS = (
     (13, "wheel_base_um", 20000, 1000000, 96000, "um between the wheel contact points (odometry)"),
     (14, "ticks_per_rev", 100, 16000, 1200, "encoder ticks per wheel revolution"),
     (15, "stall_ms", 0, 10000, 1500, "ms a wheel may stall (under 1/4 of its setpoint) before the explorer backs out; 0 off"),
+    (16, "push_ma", 0, 3000, 150, "mA: a wheel's current reference above this counts towards stall_ms too (a wall pushed, wheels spinning); 0 off"),
 )
 
 VARIABLE = bytearray(N_TYPES)  # 1 where the payload's last field runs to its end

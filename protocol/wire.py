@@ -109,4 +109,5 @@ PARAM_LIMITS = array("i", [
     20000, 1000000, 96000,  # 13 wheel_base_um
     100, 16000, 1200,  # 14 ticks_per_rev
     0, 10000, 1500,  # 15 stall_ms
+    0, 3000, 150,  # 16 push_ma
 ])

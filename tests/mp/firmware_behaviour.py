@@ -10,6 +10,7 @@ import sys
 
 from firmware.fuzzy import FuzzyController
 from firmware.robot import BreakToRepl, Robot
+from firmware.stall import StallGuard
 from protocol import wire as W
 from protocol.framing import FrameDecoder, FrameEncoder
 from firmware.hal_testbench import TestHal
@@ -276,6 +277,51 @@ def check_wheels_that_turn_never_trip_the_stall_guard():
         robot.cycle()
         assert not robot.flags & W.FLAG_STALL
     assert robot.setpoint_l == robot.setpoint_r == 110 and robot.stall.escapes == 0
+
+
+def loaded_cycles(hal, robot, n, keep):
+    """n cycles with the wheels turning at 1/keep of what the current gives free (a wall pushed, the
+    wheels spinning on the floor): the encoders advance, but the current needed is keep times more.
+    (setpoint, STALL flag, left current, left speed) of each cycle."""
+    seen = []
+    for _ in range(n):
+        before = list(hal.encs)
+        robot.cycle()
+        for k in (0, 1):
+            hal.encs[k] = before[k] + (hal.encs[k] - before[k]) // keep
+        seen.append((robot.setpoint_l, robot.flags & W.FLAG_STALL, robot.wheel_l.current, robot.wheel_l.speed))
+    return seen
+
+
+def check_wheels_spinning_against_a_wall_back_out_on_their_current():
+    """The wheels turn (at over a quarter of their setpoint: no stall by speed), but on three times
+    the current free driving needs; past push_ma (parameter 16, 150 mA) that counts as stuck."""
+    hal, robot = robot_with(1)
+    hal.give(param_set(16, 0))  # the current rule off: the speed rule alone never trips
+    seen = loaded_cycles(hal, robot, 100, 3)
+    assert not any(f for _sp, f, _c, _v in seen) and seen[-1][2] > 150, seen
+    assert all(4 * v >= sp for sp, _f, _c, v in seen[5:]), seen  # turning, not stalled
+    hal, robot = robot_with(1)  # push_ma 150 mA, its default
+    seen = loaded_cycles(hal, robot, 100, 3)
+    first = [k for k, (_sp, f, _c, _v) in enumerate(seen) if f][0]
+    over = [k for k, (_sp, _f, c, _v) in enumerate(seen) if c > 150][0]
+    assert 0.04 * (first - over) == 1.52, (first, over, seen)  # 1500 ms over 150 mA, then it backs out
+    assert seen[first][0] == -100 and robot.stall.escapes == 1
+
+
+def check_a_push_by_fits_and_starts_counts_up_and_down():
+    """Time stuck counts up while pushing, down while not: 3 cycles of 4 pushing trips the guard
+    after 74 cycles (3 s), not 38 (1.5 s); one cycle of two never does."""
+    for pushing, cycles in ((3, 74), (2, 0)):
+        guard = StallGuard(1500, 150, 200)
+        ir = [0] * 8
+        tripped = 0
+        for k in range(400):
+            current = 300 if k % 4 < pushing else 50
+            guard.steer(110, 110, 110, 110, current, current, 40, ir)
+            if guard.state and not tripped:
+                tripped = k + 1
+        assert tripped == cycles, (pushing, tripped)
 
 
 def check_the_stall_guard_is_a_parameter_and_autonomous_only():
