@@ -78,6 +78,12 @@ def setup_frames(rule_set: int, mode: int = M.MODE_AUTONOMOUS, params: RobotPara
     ]
 
 
+def stall_guard_off() -> bytes:
+    """The PARAM_SET that leaves the paper's explorer alone: the firmware's stall guard off (stall_ms = 0)."""
+    return FrameEncoder().encode(M.PARAM_SET, M.pack_payload(M.PARAM_SET, {"param": M.param_by_name("stall_ms")[0],
+                                                                           "value": 0}))
+
+
 class IdleController:
     """Zero currents, emitters off: a robot that is switched off."""
 

@@ -57,7 +57,9 @@ def route_gap(a: RunResult, b: RunResult) -> float:
 
 
 def _simulation(sc: ForkScenario, heading: float, world: World, params: RobotParams) -> Simulation:
-    return Simulation(world, params, SilController(RULE_SETS[sc.rules]), seed=sc.seed, pose=(sc.x, sc.y, heading))
+    # the paper's controller alone: the stall guard (firmware 0.3.0) would back a robot that pushes the wall out
+    controller = SilController(RULE_SETS[sc.rules], stall_guard=False)
+    return Simulation(world, params, controller, seed=sc.seed, pose=(sc.x, sc.y, heading))
 
 
 def fixed_run(sc: ForkScenario, heading: float, world: World | None = None,

@@ -9,7 +9,7 @@ fixed-step mode they give the same trajectory bit for bit.
 from __future__ import annotations
 
 from firmware.hal_buffered import BufferedHal
-from host_sim.interface import Actuate, Sense, setup_frames
+from host_sim.interface import Actuate, Sense, setup_frames, stall_guard_off
 from host_sim.params import RobotParams
 from protocol import messages as M
 from protocol.framing import FrameDecoder
@@ -42,14 +42,18 @@ class _InProcessHal(BufferedHal):
 class SilController:
     name = "SIL"
 
-    def __init__(self, rule_set: int = 1, params: RobotParams | None = None) -> None:
-        """params: the robot the firmware runs on (its geometry is sent first); None: the firmware's defaults."""
+    def __init__(self, rule_set: int = 1, params: RobotParams | None = None, *, stall_guard: bool = True) -> None:
+        """params: the robot the firmware runs on (its geometry is sent first); None: the firmware's defaults.
+        stall_guard=False: the paper's explorer alone, as the paper's experiments ran it (stall_ms = 0;
+        docs/firmware.md, "The stall guard")."""
         from firmware.robot import Robot
 
         self.hal = _InProcessHal()
         self.robot = Robot(self.hal)
         for frame in setup_frames(rule_set, params=params):
             self.hal.inbox += frame
+        if not stall_guard:
+            self.send(stall_guard_off())
 
     def send(self, frame: bytes) -> None:
         """Queue a frame from the host; the firmware reads it at its next cycle."""

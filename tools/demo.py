@@ -73,14 +73,20 @@ def run(args: argparse.Namespace) -> int:
     print(f"1. exploration of {world.name}, up to {args.duration:.0f} s per rule set or until the robot finds "
           "the exit; firmware in the loop (SIL), fixed step")
     runs = {}
-    for rules, rule_set in (("first", 0), ("refined", 1)):
-        progress = Progress(args.duration, f"{rules} rule set")
+    # the paper's explorers alone (the stall guard off), then the first one as the firmware runs it
+    for rules, rule_set, guard in (("first", 0, False), ("refined", 1, False), ("guarded", 0, True)):
+        progress = Progress(args.duration, f"{rules} rule set" if rules != "guarded" else "first + stall guard")
+        controller = SilController(rule_set, stall_guard=guard)
         try:
-            runs[rules] = Simulation(world, DEFAULT, SilController(rule_set), seed=1).run_fixed(
+            runs[rules] = Simulation(world, DEFAULT, controller, seed=1).run_fixed(
                 args.duration, progress=progress, stop_at_exit=True)
         finally:
             progress.close()
-        print("   " + summary(runs[rules], f"{rules:>7}: "))
+        line = summary(runs[rules], f"{rules:>7}: ")
+        if guard:
+            line += f"; the first rule set with the firmware's stall guard: {controller.robot.stall.escapes} escapes"
+        print("   " + line)
+    runs.pop("guarded")  # the pictures show the paper's two
     pic = save_runs(out / "exploration.png", world, list(runs.values()),
                     [_title("first", runs["first"]), _title("refined", runs["refined"])],
                     DEFAULT.body_radius, f"{world.name}: the paper's exploration task")

@@ -40,6 +40,9 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--world", default="paper_room",
                    help="built-in world (paper_room, maze, arena) or a world JSON file (default paper_room)")
     p.add_argument("--rules", choices=("first", "refined"), default="refined", help="fuzzy rule set (default refined)")
+    p.add_argument("--no-stall-guard", action="store_true",
+                   help="the paper's explorer alone: the firmware's stall guard off (parameter stall_ms = 0; "
+                        "on, it backs a robot that is held or pushing a wall out and turns it away)")
     p.add_argument("--duration", type=sim_seconds(), default=60.0,
                    help="simulated seconds, 0.04 (one control period) to 86400 (default 60)")
     mode = p.add_mutually_exclusive_group()
@@ -88,7 +91,7 @@ def load_inputs(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 
 def make_controller(args: argparse.Namespace, params=None):  # type: ignore[no-untyped-def]
     """The firmware in the loop, configured with the robot's geometry (params) as flashing it would be."""
-    from host_sim.interface import RULE_SETS
+    from host_sim.interface import RULE_SETS, stall_guard_off
     from host_sim.pil import PilController
     from host_sim.sil import SilController
 
@@ -102,6 +105,8 @@ def make_controller(args: argparse.Namespace, params=None):  # type: ignore[no-u
         raise CliError(f"PIL: {exc}") from None
     except ValueError as exc:
         raise CliError(f"--params: the firmware cannot hold this robot's geometry: {exc}") from None
+    if getattr(args, "no_stall_guard", False):
+        controller.send(stall_guard_off())  # type: ignore[attr-defined]
     if getattr(args, "excite", False):
         from host_sim.excitation import ExcitedController
 
