@@ -6,12 +6,16 @@ front one sees the gap) it drives on with its wheels held still; the speed
 loops wind up to the current limit and stay there.  Pressed on a wall between
 two sensors' beams, or nearer than the IR response's maximum (where the
 reading falls again), its wheels spin on the floor instead: the encoders say
-they turn, but only against a load free driving never puts on them.  The
-guard watches both: a wheel asked for at least STALL_MIN_SPEED that turns at
-under a quarter of that (or the wrong way), and a wheel whose current
-reference is above push_ma.  Time stuck counts up while either holds and
-down while neither does (a wheel slipping by fits and starts is caught too);
-at stall_ms it takes over: BACK_MS with both wheels back, then TURN_MS
+they turn, but only against a load free driving never puts on them.  Facing
+a wall square, the refined rule set's "back" and "go ahead" can balance at
+a distance where both setpoints are a few mm/s, too little to move a wheel:
+the robot stands there for ever.  The guard watches all three: a wheel asked
+for at least STALL_MIN_SPEED that turns at under a quarter of that (or the
+wrong way), a wheel whose current reference is above push_ma, and both
+setpoints under STALL_MIN_SPEED (the explorer's unconditional "go ahead"
+never asks that of a robot that is free).  Time stuck counts up while any
+holds and down while none does (a wheel slipping by fits and starts is
+caught too); at stall_ms it takes over: BACK_MS with both wheels back, then TURN_MS
 spinning on the spot away from the side whose IR sees more light
 (alternating when both see the same), both at half max_speed; then the
 explorer has the wheels again.  stall_ms = 0 turns the guard off, push_ma = 0
@@ -21,12 +25,17 @@ Integers only and no allocation, like the rest of the control cycle.
 """
 from protocol.compat import const
 
-STALL_MIN_SPEED = const(5)  # mm/s: a setpoint below this is "stand still" (the wheel may rest on a tick), never a stall
+STALL_MIN_SPEED = const(5)  # mm/s: a setpoint below this asks the wheel to stand (it may rest on a tick)
 BACK_MS = const(600)  # ~6 cm back at the default 100 mm/s
 TURN_MS = const(700)  # ~80 degrees at 100 mm/s a wheel on the 96 mm axle
 WATCHING = const(0)
 BACKING = const(1)
 TURNING = const(2)
+
+
+def _standing(left: int, right: int) -> bool:
+    """Both setpoints too small to move a wheel: the explorer's rules cancel out."""
+    return -STALL_MIN_SPEED < left < STALL_MIN_SPEED and -STALL_MIN_SPEED < right < STALL_MIN_SPEED
 
 
 def _stalled(setpoint: int, speed: int) -> bool:
@@ -72,7 +81,7 @@ class StallGuard:
             return
         if state == WATCHING:
             push = self.push_ma
-            if _stalled(left, speed_l) or _stalled(right, speed_r) or (
+            if _stalled(left, speed_l) or _stalled(right, speed_r) or _standing(left, right) or (
                     push and (current_l > push or current_l < -push or current_r > push or current_r < -push)):
                 self.stalled_ms += dt_ms
             elif self.stalled_ms > dt_ms:

@@ -169,8 +169,7 @@ def test_refined_rules_find_the_exit_the_first_do_not(seed):
 def test_the_stall_guard_backs_the_first_rule_set_out_of_a_wedge():
     """In the maze the first rule set drives nose first into a gap 14 cm from its start and stays there
     (stall guard off: parameter 15, stall_ms = 0); with the guard (its default) it backs out, turns and
-    explores on, over half a metre away, until the rule set's own stop in front of a wall (docs/fuzzy.md),
-    which is not a stall."""
+    explores on, over half a metre away."""
     runs = {}
     for stall_ms in (0, 1500):
         controller = SilController(0, stall_guard=stall_ms > 0)

@@ -324,6 +324,19 @@ def check_a_push_by_fits_and_starts_counts_up_and_down():
         assert tripped == cycles, (pushing, tripped)
 
 
+def check_an_explorer_whose_rules_cancel_out_is_stuck_too():
+    """Both setpoints under 5 mm/s (the refined set's "back" and "go ahead" balanced at a wall): the
+    wheels stand still, not stalled (nothing asked) nor pushing, and it backs out after stall_ms all
+    the same; a wheel asked for 5 mm/s that turns at it is free."""
+    ir = [0] * 8
+    for left, right, speed, trips in ((3, -4, 0, True), (0, 0, 0, True), (5, 4, 5, False), (-4, 5, 5, False)):
+        guard = StallGuard(1500, 150, 200)
+        for _ in range(38):
+            guard.steer(left, right, speed, speed, 10, 10, 40, ir)
+        assert bool(guard.state) == trips and (guard.left, guard.right) == ((-100, -100) if trips else (left, right)), (
+            left, right, guard.state)
+
+
 def check_the_stall_guard_is_a_parameter_and_autonomous_only():
     hal, robot = robot_with(1)
     hal.give(param_set(15, 0))  # off: the explorer pushes on for ever
