@@ -15,10 +15,11 @@ wrong way), a wheel whose current reference is above push_ma, and both
 setpoints under STALL_MIN_SPEED (the explorer's unconditional "go ahead"
 never asks that of a robot that is free).  Time stuck counts up while any
 holds and down while none does (a wheel slipping by fits and starts is
-caught too); at stall_ms it takes over: BACK_MS with both wheels back, then TURN_MS
-spinning on the spot away from the side whose IR sees more light
-(alternating when both see the same), both at half max_speed; then the
-explorer has the wheels again.  stall_ms = 0 turns the guard off, push_ma = 0
+caught too); at stall_ms it takes over: BACK_MS with both wheels back, HALT_MS at
+rest, then TURN_MS spinning on the spot away from the side whose IR sees
+more light (alternating when both see the same), both at half max_speed,
+and HALT_MS at rest again; then the explorer has the wheels.  The halts
+spare the gears a reversal at full speed, and keep the wheels' grip.  stall_ms = 0 turns the guard off, push_ma = 0
 its current rule.
 
 Integers only and no allocation, like the rest of the control cycle.
@@ -28,9 +29,12 @@ from protocol.compat import const
 STALL_MIN_SPEED = const(5)  # mm/s: a setpoint below this asks the wheel to stand (it may rest on a tick)
 BACK_MS = const(600)  # ~6 cm back at the default 100 mm/s
 TURN_MS = const(700)  # ~80 degrees at 100 mm/s a wheel on the 96 mm axle
+HALT_MS = const(200)  # the wheels brought to rest between moves: no wheel reverses at full speed
 WATCHING = const(0)
 BACKING = const(1)
-TURNING = const(2)
+HALTING = const(2)  # after backing, before the turn
+TURNING = const(3)
+SETTLING = const(4)  # after the turn, before the explorer has the wheels again
 
 
 def _standing(left: int, right: int) -> bool:
@@ -107,18 +111,21 @@ class StallGuard:
                 self.spin = -self.spin
         else:
             self.phase_ms += dt_ms
-            if state == BACKING and self.phase_ms >= BACK_MS:
-                self.state = state = TURNING
+            if self.phase_ms >= (BACK_MS if state == BACKING else TURN_MS if state == TURNING else HALT_MS):
                 self.phase_ms = 0
-            elif state == TURNING and self.phase_ms >= TURN_MS:
-                self.reset()
-                self.left = left
-                self.right = right
-                return
+                if state == SETTLING:
+                    self.reset()
+                    self.left = left
+                    self.right = right
+                    return
+                self.state = state = state + 1
         v = self.max_speed // 2
         if state == BACKING:
             self.left = -v
             self.right = -v
-        else:
+        elif state == TURNING:
             self.left = v * self.spin
             self.right = -v * self.spin
+        else:
+            self.left = 0
+            self.right = 0

@@ -251,15 +251,22 @@ def check_a_stalled_explorer_backs_out_then_turns_away_from_the_wall():
     # at once: the push's integral is dropped, not unwound (that took longer than the whole back-out)
     assert robot.wheel_l.current < 0 and robot.wheel_r.current < 0, (robot.wheel_l.current, robot.wheel_r.current)
     assert telemetry(hal.take_output())[-1][2] & W.FLAG_STALL
-    seen = held_cycles(hal, robot, 15)  # backing for 600 ms, then spinning right, away from the wall
-    assert seen[:14] == [(-100, -100, W.FLAG_STALL)] * 14 and seen[14] == (100, -100, W.FLAG_STALL), seen
-    seen = held_cycles(hal, robot, 18)  # 700 ms of turning, then the explorer has the wheels again
-    assert seen[:17] == [(100, -100, W.FLAG_STALL)] * 17, seen
-    assert seen[17][0] > 0 and seen[17][1] > 0 and not seen[17][2], seen
+    # 600 ms back (with the cycle that took over), 200 ms at rest, 700 ms spinning right (away from the
+    # wall), 200 ms at rest, then the explorer has the wheels again: no wheel reverses at full speed
+    seen = held_cycles(hal, robot, 14 + 5 + 18 + 5 + 1)
+    runs = []
+    for step in seen:
+        if runs and runs[-1][0] == step:
+            runs[-1][1] += 1
+        else:
+            runs.append([step, 1])
+    stall = W.FLAG_STALL
+    assert runs[:4] == [[(-100, -100, stall), 14], [(0, 0, stall), 5], [(100, -100, stall), 18], [(0, 0, stall), 5]], runs
+    assert seen[-1][0] > 0 and seen[-1][1] > 0 and not seen[-1][2], seen
     assert robot.stall.escapes == 1
     hal.reflection[2] = 0
     hal.reflection[6] = 600  # the wall on the right (S7) now: the next spin is to the left
-    seen = held_cycles(hal, robot, 38 + 15)
+    seen = held_cycles(hal, robot, 37 + 15 + 5 + 1)
     assert seen[-1] == (-100, 100, W.FLAG_STALL), seen
 
 
