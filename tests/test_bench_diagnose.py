@@ -17,6 +17,7 @@ import pytest
 
 from host_sim.params import DEFAULT
 from host_sim.recording import load_recording
+from host_sim.world import world_from_dict
 from tools import bench_diagnose, cli
 from tools.proving_ground import scoring
 from tools.proving_ground.robot_model import nominal_spec
@@ -153,6 +154,27 @@ def test_not_excited_is_read_from_the_recording(suite: dict[str, Any]) -> None:
     row = scoring.score_case(key([concealed("current_limit", "current_limit", 1.01 * top, 0.5)]), diag("match"),
                              rec, DEFAULT)
     assert "not_excited" in row and row["outcome"] == "missed"  # reported apart by the totals
+
+
+def test_a_limit_shown_only_against_a_wall_is_not_excited(suite: dict[str, Any]) -> None:
+    """Diagnosis does not judge the drive touching a wall, so neither does the scorer's excitation."""
+    rec = load_recording(next((suite["out"] / "recordings").glob("*.csv")))
+    assert rec.pose is not None and rec.meta.get("world")
+    world = world_from_dict(rec.meta["world"], "test")
+    start = rec.meta["world"]["start"]
+    rec.pose[:, :2] = (start["x"], start["y"])  # parked clear of the walls
+    rec.cmd[:] = 0.01
+    n = len(rec)
+    burst = slice(n // 2, n // 2 + n // 10)  # 10 % of the periods ask more than the limit
+    rec.cmd[burst] = 0.2
+    limit = concealed("current_limit", "current_limit", 0.1, 0.5)
+    assert scoring.not_excited(limit, PLANT, rec) is None
+    distance, normal = world.nearest_wall(rec.pose[burst, :2])
+    rec.pose[burst, :2] -= distance[:, None] * normal  # ... now while pressed against a wall
+    reason = scoring.not_excited(limit, PLANT, rec)
+    assert reason is not None and "0.0 % of the periods clear of the walls (10.0 % in all" in reason
+    grip = concealed("traction_limit", "floor_friction", 0.005, 1.0)  # asked for everywhere
+    assert scoring.not_excited(grip, PLANT, rec) is None
 
 
 def test_ambient_leakage_under_a_steady_light_is_not_excited(suite: dict[str, Any]) -> None:

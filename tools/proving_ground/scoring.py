@@ -18,7 +18,11 @@ puts a diagnosis (its JSON document, docs/diagnosis.md) beside the key:
   exceed, a floor the tyres can never slip on, an IR pair that never sees
   a wall, an ambient leakage under a steady light, which is then one
   constant with an offset) are "not excited": judged from the recording itself
-  (`not_excited`), reported apart, not counted as misses.
+  (`not_excited`), reported apart, not counted as misses.  A current limit
+  or a grip shown only while the robot touches a wall counts as not
+  excited too: diagnosis does not judge the drive there (the twin's wall
+  contact is not the plant's; docs/diagnosis.md), so the periods counted
+  are those in 1 s blocks clear of every wall.
 
 `score_sindy` judges the SINDy baseline (sindy_baseline.py) on the same
 case: whether one of its terms could name the concealed effect.
@@ -36,6 +40,7 @@ import numpy as np
 from host_sim import effects as library
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
+from host_sim.world import world_from_dict
 from tools.proving_ground.robot_model import CASTER_X
 
 G = 9.81
@@ -45,6 +50,8 @@ MIN_EXCITED_SHARE = 0.01  # an effect shown in fewer than 1 % of the periods is 
 TRACTION_MARGIN = 0.8  # demand within 80 % of mu N may already slip: weight shifts as the robot accelerates
 WALL_SEEN_COUNTS = 50  # reflected counts (on - off) from which an IR pair "sees a wall"
 LEAK_SEEN_COUNTS = 3.0  # counts (one reading's noise) the leaked ambient must vary by to differ from an offset
+WALL_TOUCH_MARGIN = 0.005  # m beyond the body's radius: within it, the robot touches a wall
+WALL_BLOCK_S = 1.0  # diagnosis judges the drive in windows of 1 s clear of the walls: blocks of that length
 AMBIENT_SMOOTH_S = 0.5  # the ambient light is judged on a running mean: the readings' own noise is not light
 
 
@@ -145,14 +152,16 @@ def not_excited(effect: dict[str, Any], plant: dict[str, Any], rec: Recording) -
     name = effect["name"]
     value = float(next(iter(effect["params"].values()))["value"])
     if name == "current_limit":
-        share = float((np.abs(rec.cmd) > value).any(axis=1).mean())
+        shown = (np.abs(rec.cmd) > value).any(axis=1)
+        share, where = _shown_clear_of_walls(shown, plant, rec)
         if share < MIN_EXCITED_SHARE:
-            return f"the references exceed the {1000 * value:.0f} mA limit in {100 * share:.1f} % of the periods"
+            return f"the references exceed the {1000 * value:.0f} mA limit in {100 * share:.1f} % of the periods{where}"
     elif name == "traction_limit":
-        share = float((traction_demand(plant, rec) > TRACTION_MARGIN * value * wheel_load(plant)).any(axis=1).mean())
+        shown = (traction_demand(plant, rec) > TRACTION_MARGIN * value * wheel_load(plant)).any(axis=1)
+        share, where = _shown_clear_of_walls(shown, plant, rec)
         if share < MIN_EXCITED_SHARE:
             return (f"the drive can ask more than {100 * TRACTION_MARGIN:.0f} % of the grip (mu = {value:.2f}) "
-                    f"in {100 * share:.1f} % of the periods")
+                    f"in {100 * share:.1f} % of the periods{where}")
     elif name in ("ir_gain", "ir_misalignment", "ir_latency"):
         sensors = [int(effect["sensor"])] if "sensor" in effect else list(range(8))
         seen = ((rec.ir_on - rec.ir_amb)[:, sensors] > WALL_SEEN_COUNTS).any(axis=1)
@@ -168,6 +177,34 @@ def not_excited(effect: dict[str, Any], plant: dict[str, Any], rec: Recording) -
             return (f"sensor {k}'s ambient light varies so little that the leak varies by {swing:.1f} counts "
                     f"(< {LEAK_SEEN_COUNTS:.0f}): a constant, the same as an ir_offset")
     return None
+
+
+def _shown_clear_of_walls(shown: np.ndarray, plant: dict[str, Any], rec: Recording) -> tuple[float, str]:
+    """The share of the periods that show the effect clear of the walls, and words for the periods that
+    show it only touching one ("" if none do)."""
+    clear = clear_of_walls(plant, rec)
+    share = float((shown & clear).mean())
+    at_walls = float((shown & ~clear).mean())
+    if share + at_walls < MIN_EXCITED_SHARE:  # not shown anywhere: no wall to blame
+        return share, ""
+    return share, (f" clear of the walls ({100 * (share + at_walls):.1f} % in all: the rest touch a wall, where "
+                   f"diagnosis does not judge the drive)")
+
+
+def clear_of_walls(plant: dict[str, Any], rec: Recording) -> np.ndarray:
+    """(n,) bool: the period lies in a block of WALL_BLOCK_S in which the tracked robot never comes within
+    WALL_TOUCH_MARGIN of a wall (all True without a tracker or walls)."""
+    world = rec.meta.get("world")
+    if rec.pose is None or not world:
+        return np.ones(len(rec.t), dtype=bool)
+    walls = world_from_dict(world, "the recording's sidecar world")
+    if walls.n_walls == 0:
+        return np.ones(len(rec.t), dtype=bool)
+    distance = walls.nearest_wall(rec.pose[:, :2])[0]
+    touching = distance < float(plant["body_radius"]) + WALL_TOUCH_MARGIN
+    block = max(1, int(round(WALL_BLOCK_S / rec.sample_period)))
+    blocks = np.arange(len(rec.t)) // block
+    return ~np.bincount(blocks, weights=touching, minlength=blocks[-1] + 1)[blocks].astype(bool)
 
 
 def wheel_load(plant: dict[str, Any]) -> float:
