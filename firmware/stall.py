@@ -10,15 +10,15 @@ they turn, but only against a load free driving never puts on them.  Facing
 a wall square, the refined rule set's "back" and "go ahead" can balance at
 a distance where both setpoints are a few mm/s, too little to move a wheel:
 the robot stands there for ever.  The guard watches all three: a wheel asked
-for at least STALL_MIN_SPEED that turns at under a quarter of that (or the
+for at least _STALL_MIN_SPEED that turns at under a quarter of that (or the
 wrong way), a wheel whose current reference is above push_ma, and both
-setpoints under STALL_MIN_SPEED (the explorer's unconditional "go ahead"
+setpoints under _STALL_MIN_SPEED (the explorer's unconditional "go ahead"
 never asks that of a robot that is free).  Time stuck counts up while any
 holds and down while none does (a wheel slipping by fits and starts is
-caught too); at stall_ms it takes over: BACK_MS with both wheels back, HALT_MS at
-rest, then TURN_MS spinning on the spot away from the side whose IR sees
+caught too); at stall_ms it takes over: _BACK_MS with both wheels back, _HALT_MS at
+rest, then _TURN_MS spinning on the spot away from the side whose IR sees
 more light (alternating when both see the same), both at half max_speed,
-and HALT_MS at rest again; then the explorer has the wheels.  The halts
+and _HALT_MS at rest again; then the explorer has the wheels.  The halts
 spare the gears a reversal at full speed, and keep the wheels' grip.  stall_ms = 0 turns the guard off, push_ma = 0
 its current rule.
 
@@ -26,34 +26,34 @@ Integers only and no allocation, like the rest of the control cycle.
 """
 from protocol.compat import const
 
-STALL_MIN_SPEED = const(5)  # mm/s: a setpoint below this asks the wheel to stand (it may rest on a tick)
-BACK_MS = const(600)  # ~6 cm back at the default 100 mm/s
-TURN_MS = const(700)  # ~80 degrees at 100 mm/s a wheel on the 96 mm axle
-HALT_MS = const(200)  # the wheels brought to rest between moves: no wheel reverses at full speed
-WATCHING = const(0)
-BACKING = const(1)
-HALTING = const(2)  # after backing, before the turn
-TURNING = const(3)
-SETTLING = const(4)  # after the turn, before the explorer has the wheels again
+_STALL_MIN_SPEED = const(5)  # mm/s: a setpoint below this asks the wheel to stand (it may rest on a tick)
+_BACK_MS = const(600)  # ~6 cm back at the default 100 mm/s
+_TURN_MS = const(700)  # ~80 degrees at 100 mm/s a wheel on the 96 mm axle
+_HALT_MS = const(200)  # the wheels brought to rest between moves: no wheel reverses at full speed
+_WATCHING = const(0)
+_BACKING = const(1)
+_HALTING = const(2)  # after backing, before the turn
+_TURNING = const(3)
+_SETTLING = const(4)  # after the turn, before the explorer has the wheels again
 
 
 def _standing(left: int, right: int) -> bool:
     """Both setpoints too small to move a wheel: the explorer's rules cancel out."""
-    return -STALL_MIN_SPEED < left < STALL_MIN_SPEED and -STALL_MIN_SPEED < right < STALL_MIN_SPEED
+    return -_STALL_MIN_SPEED < left < _STALL_MIN_SPEED and -_STALL_MIN_SPEED < right < _STALL_MIN_SPEED
 
 
 def _stalled(setpoint: int, speed: int) -> bool:
     """A wheel asked to turn that turns at under a quarter of its setpoint, or the other way."""
-    if setpoint >= STALL_MIN_SPEED:
+    if setpoint >= _STALL_MIN_SPEED:
         return 4 * speed < setpoint
-    if setpoint <= -STALL_MIN_SPEED:
+    if setpoint <= -_STALL_MIN_SPEED:
         return 4 * speed > setpoint
     return False
 
 
 class StallGuard:
     """steer() passes the explorer's setpoints through, or replaces them while backing out (state is
-    not WATCHING).  stall_ms, push_ma and max_speed are set as attributes (RAM is scarce: no setter)."""
+    not _WATCHING).  stall_ms, push_ma and max_speed are set as attributes (RAM is scarce: no setter)."""
 
     def __init__(self, stall_ms: int, push_ma: int, max_speed: int) -> None:
         self.stall_ms = stall_ms
@@ -61,14 +61,14 @@ class StallGuard:
         self.max_speed = max_speed
         self.left = 0
         self.right = 0
-        self.state = WATCHING
+        self.state = _WATCHING
         self.stalled_ms = 0  # time stuck (counted up while stalled or pushing, down while not), while watching
         self.phase_ms = 0  # time spent backing or turning
         self.spin = 1  # +1: spin clockwise (to the right), -1: counter-clockwise
         self.escapes = 0  # times it took over since start
 
     def reset(self) -> None:
-        self.state = WATCHING
+        self.state = _WATCHING
         self.stalled_ms = 0
         self.phase_ms = 0
 
@@ -83,7 +83,7 @@ class StallGuard:
             self.left = left
             self.right = right
             return
-        if state == WATCHING:
+        if state == _WATCHING:
             push = self.push_ma
             if _stalled(left, speed_l) or _stalled(right, speed_r) or _standing(left, right) or (
                     push and (current_l > push or current_l < -push or current_r > push or current_r < -push)):
@@ -96,7 +96,7 @@ class StallGuard:
                 self.left = left
                 self.right = right
                 return
-            self.state = state = BACKING
+            self.state = state = _BACKING
             self.phase_ms = 0
             self.stalled_ms = 0
             self.escapes += 1
@@ -111,19 +111,19 @@ class StallGuard:
                 self.spin = -self.spin
         else:
             self.phase_ms += dt_ms
-            if self.phase_ms >= (BACK_MS if state == BACKING else TURN_MS if state == TURNING else HALT_MS):
+            if self.phase_ms >= (_BACK_MS if state == _BACKING else _TURN_MS if state == _TURNING else _HALT_MS):
                 self.phase_ms = 0
-                if state == SETTLING:
+                if state == _SETTLING:
                     self.reset()
                     self.left = left
                     self.right = right
                     return
                 self.state = state = state + 1
         v = self.max_speed // 2
-        if state == BACKING:
+        if state == _BACKING:
             self.left = -v
             self.right = -v
-        elif state == TURNING:
+        elif state == _TURNING:
             self.left = v * self.spin
             self.right = -v * self.spin
         else:
