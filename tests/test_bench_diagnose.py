@@ -239,6 +239,29 @@ def test_scoreboard_structure(suite: dict[str, Any], capsys: pytest.CaptureFixtu
     assert "named, by what drove the robot: " in out
 
 
+def test_a_kept_suite_is_scored_again_without_diagnosing(suite: dict[str, Any], tmp_path: Path,
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """--rescore reads the diagnoses --out kept, wherever the suite has moved, and scores them alike."""
+    moved = tmp_path / "moved"
+    shutil.copytree(suite["out"], moved)
+    assert sorted(p.name for p in (moved / "diagnoses").iterdir()) == \
+        sorted(f"case_{s:04d}.json" for s in suite["report"]["seeds"])
+    again = tmp_path / "again.json"
+    assert cli.main(["bench", "diagnose", "--rescore", str(moved), "--json", str(again)]) == 0
+    report = json.loads(again.read_text())
+    assert report["seeds"] == suite["report"]["seeds"] and report["duration"] == 30
+    keep = ("case", "verdict", "named", "outcome", "fit_after", "cpu_seconds", "not_excited")
+    assert [{k: r.get(k) for k in keep} for r in report["cases"]] == \
+        [{k: r.get(k) for k in keep} for r in suite["report"]["cases"]]
+    assert f"--rescore {moved}" in capsys.readouterr().out
+    (moved / "diagnoses" / f"case_{report['seeds'][0]:04d}.json").write_text("{\"recording\": ")
+    assert cli.main(["bench", "diagnose", "--rescore", str(moved)]) == 2
+    assert "not a kept diagnosis" in capsys.readouterr().err
+    shutil.rmtree(moved / "diagnoses")
+    assert cli.main(["bench", "diagnose", "--rescore", str(moved)]) == 2
+    assert "no diagnoses/case_*.json" in capsys.readouterr().err
+
+
 def test_a_case_is_labelled_by_what_drove_it() -> None:
     assert bench_diagnose.drive_label({"excitation": "manoeuvre", "rule_set": 1}) == "manoeuvre"
     assert bench_diagnose.drive_label({"excitation": "firmware", "rule_set": 0}) == "exploration (first rules)"

@@ -16,6 +16,11 @@
      residuals, same windows (tools/proving_ground/sindy_baseline.py).
   4. Score: tools/proving_ground/scoring.py, the only reader of the keys.
 
+With --out DIR each case's diagnosis (its JSON document, or why it was
+refused, its timings and SINDy's result) is kept in DIR/diagnoses as it
+comes; --rescore DIR scores such a suite again without generating or
+diagnosing anything, for a change of the scorer.
+
 Generation and diagnosis run on --jobs worker processes (one core each).
 A case's seconds are the diagnosis's CPU time in its worker (one core,
 one BLAS thread), scaled to a 90 s recording; its wall time is kept too,
@@ -51,7 +56,7 @@ REFERENCE_SECONDS = 90.0
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
     p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1],
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    from tools.arguments import float_range, int_range, output_file, output_folder
+    from tools.arguments import float_range, int_range, output_file, output_folder, suite_folder
 
     p.add_argument("--cases", type=int_range(1, 10_000), default=40, help="blind cases in the suite (default 40)")
     p.add_argument("--seed", type=int_range(0, 10**9), default=0, help="seed of the first case (default 0)")
@@ -60,6 +65,8 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
     p.add_argument("--jobs", type=int_range(1, 256), default=2, help="worker processes (default 2)")
     p.add_argument("--out", metavar="DIR", type=output_folder,
                    help="keep the recordings and answer keys here (default: a temporary folder, removed)")
+    p.add_argument("--rescore", metavar="DIR", type=suite_folder,
+                   help="score the diagnoses a run with --out DIR kept, again (nothing generated or diagnosed)")
     p.add_argument("--json", metavar="FILE", type=output_file, help="write every figure here")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -153,7 +160,41 @@ def run_suite(seeds: list[int], out_dir: Path, duration: float, jobs: int, quiet
                     pending[pool.submit(diagnose_blind, fut.result())] = ("diagnose", seed)
                 else:
                     results[seed] = fut.result()
+                    keep_diagnosis(out_dir, seed, results[seed])
     return results
+
+
+def keep_diagnosis(out_dir: Path, seed: int, result: dict[str, Any]) -> None:
+    """DIR/diagnoses/case_NNNN.json: what --rescore reads, written as each case is done."""
+    folder = out_dir / "diagnoses"
+    folder.mkdir(exist_ok=True)
+    (folder / f"case_{seed:04d}.json").write_text(json.dumps(result, indent=1, default=_plain) + "\n")
+
+
+def _plain(x: Any) -> Any:
+    """numpy scalars and arrays as JSON numbers and lists."""
+    return x.tolist() if hasattr(x, "tolist") else str(x)
+
+
+def kept_diagnoses(out_dir: Path) -> tuple[list[int], dict[int, dict[str, Any]]]:
+    """The seeds and results a run with --out kept in DIR/diagnoses (keep_diagnosis); ValueError if there
+    are none, or one is broken or lacks its recording."""
+    files = sorted((out_dir / "diagnoses").glob("case_*.json"))
+    if not files:
+        raise ValueError(f"{out_dir}: no diagnoses/case_*.json (a suite kept with --out before they were kept?)")
+    results: dict[int, dict[str, Any]] = {}
+    for f in files:
+        try:
+            res = json.loads(f.read_text())
+            seed = int(f.stem.split("_")[1])
+        except (ValueError, IndexError) as exc:
+            raise ValueError(f"{f}: not a kept diagnosis ({exc})") from None
+        missing = [k for k in ("recording", "seconds", "cpu_seconds", "duration", "sindy") if k not in res]
+        if missing:
+            raise ValueError(f"{f}: not a kept diagnosis (no {', '.join(missing)})")
+        res["recording"] = str(out_dir / "recordings" / Path(res["recording"]).name)  # the suite may have moved
+        results[seed] = res
+    return sorted(results), results
 
 
 # --------------------------------------------------------------------------- #
@@ -381,16 +422,27 @@ def run(args: argparse.Namespace) -> int:
 
     blas = pin_blas_threads()
     t_start = time.monotonic()
-    seeds = compose_suite(args.seed, args.cases)
-    with tempfile.TemporaryDirectory(prefix="twinbot-bench-diagnose-") as tmp:
-        out_dir = Path(args.out) if args.out else Path(tmp)
-        results = run_suite(seeds, out_dir, args.duration, args.jobs, args.quiet)
-        rows = score_all(seeds, results, out_dir)
+    if args.rescore:
+        try:
+            seeds, results = kept_diagnoses(Path(args.rescore))
+        except ValueError as exc:
+            print(f"twinbot bench diagnose: error: {exc}", file=sys.stderr)
+            return 2
+        rows = score_all(seeds, results, Path(args.rescore))
+        args.duration = round(statistics.median(r["duration"] for r in results.values()), 3)
+        command = f"twinbot bench diagnose --rescore {args.rescore} (the timings are the kept run's)"
+    else:
+        seeds = compose_suite(args.seed, args.cases)
+        with tempfile.TemporaryDirectory(prefix="twinbot-bench-diagnose-") as tmp:
+            out_dir = Path(args.out) if args.out else Path(tmp)
+            results = run_suite(seeds, out_dir, args.duration, args.jobs, args.quiet)
+            rows = score_all(seeds, results, out_dir)
+        command = (f"twinbot bench diagnose --cases {args.cases} --seed {args.seed} --duration {args.duration:g} "
+                   f"--jobs {args.jobs}")
     import pysindy  # type: ignore[import-untyped]
 
     report: dict[str, Any] = {
-        "command": f"twinbot bench diagnose --cases {args.cases} --seed {args.seed} --duration {args.duration:g} "
-                   f"--jobs {args.jobs}", "seeds": seeds, "duration": args.duration, "jobs": args.jobs,
+        "command": command, "seeds": seeds, "duration": args.duration, "jobs": args.jobs,
         "machine": {**_machine(blas), "pysindy": pysindy.__version__}, "cases": rows}
     report["totals"] = totals(rows)
     report["targets"] = targets(report["totals"])

@@ -155,9 +155,10 @@ def not_excited(effect: dict[str, Any], plant: dict[str, Any], rec: Recording) -
         shown = (np.abs(rec.cmd) > value).any(axis=1)
         share, where = _shown_clear_of_walls(shown, plant, rec)
         if share < MIN_EXCITED_SHARE:
-            return f"the references exceed the {1000 * value:.0f} mA limit in {100 * share:.1f} % of the periods{where}"
+            return (f"the references exceed the {1000 * value:.0f} mA limit in {100 * share:.1f} % of the "
+                    f"periods{where}")
     elif name == "traction_limit":
-        shown = (traction_demand(plant, rec) > TRACTION_MARGIN * value * wheel_load(plant)).any(axis=1)
+        shown = np.asarray((traction_demand(plant, rec) > TRACTION_MARGIN * value * wheel_load(plant)).any(axis=1))
         share, where = _shown_clear_of_walls(shown, plant, rec)
         if share < MIN_EXCITED_SHARE:
             return (f"the drive can ask more than {100 * TRACTION_MARGIN:.0f} % of the grip (mu = {value:.2f}) "
