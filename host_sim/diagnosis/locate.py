@@ -118,7 +118,7 @@ def regimes(rec: Recording, windows: Windows, p: RobotParams, world: World | Non
     out.add("turning", np.digitize(yaw, [-0.5, 0.5]), {0: "when turning right", 1: "when going straight",
                                                         2: "when turning left"})
     out.add("direction", (mean < -0.005).astype(int) + 2 * (np.abs(mean) <= 0.005),
-            {0: "when driving forwards", 1: "when driving backwards", 2: "when not moving"})
+            {0: "when driving forwards", 1: "when driving backwards", 2: "when the robot stands or turns on the spot"})
     if np.ptp(rec.vbat) > 0.05:
         out.add("battery", (rec.vbat[rows] < np.median(rec.vbat)).astype(int),
                 {0: "at high battery voltage", 1: "at low battery voltage"})
