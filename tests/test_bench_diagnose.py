@@ -254,6 +254,13 @@ def test_a_kept_suite_is_scored_again_without_diagnosing(suite: dict[str, Any], 
     assert [{k: r.get(k) for k in keep} for r in report["cases"]] == \
         [{k: r.get(k) for k in keep} for r in suite["report"]["cases"]]
     assert f"--rescore {moved}" in capsys.readouterr().out
+    assert cli.main(["bench", "diagnose", "--rescore", str(moved), "--out", str(tmp_path / "new")]) == 2
+    assert "give one of them" in capsys.readouterr().err
+    first_key = moved / "answer_keys" / f"case_{report['seeds'][0]:04d}.answer.json"
+    first_key.rename(first_key.with_suffix(".gone"))
+    assert cli.main(["bench", "diagnose", "--rescore", str(moved)]) == 2
+    assert first_key.name in capsys.readouterr().err
+    first_key.with_suffix(".gone").rename(first_key)
     (moved / "diagnoses" / f"case_{report['seeds'][0]:04d}.json").write_text("{\"recording\": ")
     assert cli.main(["bench", "diagnose", "--rescore", str(moved)]) == 2
     assert "not a kept diagnosis" in capsys.readouterr().err

@@ -423,12 +423,16 @@ def run(args: argparse.Namespace) -> int:
     blas = pin_blas_threads()
     t_start = time.monotonic()
     if args.rescore:
+        if args.out:
+            print("twinbot bench diagnose: error: --rescore scores a kept suite; --out keeps a new one: "
+                  "give one of them", file=sys.stderr)
+            return 2
         try:
             seeds, results = kept_diagnoses(Path(args.rescore))
-        except ValueError as exc:
+            rows = score_all(seeds, results, Path(args.rescore))
+        except (OSError, ValueError) as exc:  # a missing or broken key or recording: the loaders' one-line errors
             print(f"twinbot bench diagnose: error: {exc}", file=sys.stderr)
             return 2
-        rows = score_all(seeds, results, Path(args.rescore))
         args.duration = round(statistics.median(r["duration"] for r in results.values()), 3)
         command = f"twinbot bench diagnose --rescore {args.rescore} (the timings are the kept run's)"
     else:
