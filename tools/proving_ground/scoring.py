@@ -183,12 +183,11 @@ def not_excited(effect: dict[str, Any], plant: dict[str, Any], rec: Recording) -
 def _shown_clear_of_walls(shown: np.ndarray, plant: dict[str, Any], rec: Recording) -> tuple[float, str]:
     """The share of the periods that show the effect clear of the walls, and words for the periods that
     show it only touching one ("" if none do)."""
-    clear = clear_of_walls(plant, rec)
-    share = float((shown & clear).mean())
-    at_walls = float((shown & ~clear).mean())
-    if share + at_walls < MIN_EXCITED_SHARE:  # not shown anywhere: no wall to blame
+    share = float((shown & clear_of_walls(plant, rec)).mean())
+    in_all = float(shown.mean())
+    if in_all < MIN_EXCITED_SHARE:  # not shown anywhere: no wall to blame
         return share, ""
-    return share, (f" clear of the walls ({100 * (share + at_walls):.1f} % in all: the rest touch a wall, where "
+    return share, (f" clear of the walls ({100 * in_all:.1f} % in all: the rest touch a wall, where "
                    f"diagnosis does not judge the drive)")
 
 
