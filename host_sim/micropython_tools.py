@@ -12,6 +12,7 @@ the RP2040 and its objects are the RP2040's size.
 """
 from __future__ import annotations
 
+import fcntl
 import importlib.metadata
 import json
 import os
@@ -143,10 +144,14 @@ def wasm_port() -> Path:
         raise RigError("the 32-bit MicroPython (webassembly port) needs Node.js: install node and npm")
     installed = WASM_DIR / "node_modules" / WASM_PACKAGE / "package.json"
     wanted = json.loads((WASM_DIR / "package.json").read_text())["dependencies"][WASM_PACKAGE]
-    if installed.exists() and json.loads(installed.read_text()).get("version") == wanted:
-        return WASM_DIR
-    r = subprocess.run([npm, "ci", "--prefix", str(WASM_DIR), "--no-audit", "--no-fund"],
-                       capture_output=True, text=True, check=False, timeout=600)
+    # One install at a time: `npm ci` first deletes node_modules, so a second process (a parallel test
+    # worker, a bench beside the tests) would find it half gone.
+    with open(WASM_DIR / ".install.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if installed.exists() and json.loads(installed.read_text()).get("version") == wanted:
+            return WASM_DIR
+        r = subprocess.run([npm, "ci", "--prefix", str(WASM_DIR), "--no-audit", "--no-fund"],
+                           capture_output=True, text=True, check=False, timeout=600)
     if r.returncode != 0 or not installed.exists():
         raise RigError(f"npm ci in {WASM_DIR} failed: {(r.stderr or r.stdout).strip()[-2000:]}")
     return WASM_DIR
