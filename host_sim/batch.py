@@ -638,6 +638,15 @@ class BatchSim:
 # --------------------------------------------------------------------------- #
 # Identification: N parameter sets replaying one recording
 # --------------------------------------------------------------------------- #
+def machinery(p: RobotParams) -> tuple[bool, bool, bool]:
+    """The optional parts of BatchSim's step a robot sets going: the drive with effects, a gear's play, an
+    actuator delay.  A batch runs every robot through each part one of them needs (a gear's play is the
+    dearest), so robots batched by their machinery run faster (diagnosis.windows.run_windows).  A robot's
+    figures do not depend on its batch but to rounding, and to the contact solve's tolerance where robots
+    slide (it iterates until the batch's slowest robot settles)."""
+    return (drive_effects.active(p), bool(p.backlash_l or p.backlash_r), bool(p.actuator_delay))
+
+
 def robot_params(params: Any, base: RobotParams | None) -> tuple[Any, list[RobotParams]]:
     """(what BatchSim takes, the N RobotParams) from a RobotParams, a sequence of them or a ParamBatch."""
     if isinstance(params, RobotParams):
@@ -648,4 +657,4 @@ def robot_params(params: Any, base: RobotParams | None) -> tuple[Any, list[Robot
     return robots, robots
 
 
-__all__ = ["BatchSim", "BatchResult", "robot_params", "IR_FIELDS", "CYCLE_S", "SUBSTEPS"]
+__all__ = ["BatchSim", "BatchResult", "machinery", "robot_params", "IR_FIELDS", "CYCLE_S", "SUBSTEPS"]

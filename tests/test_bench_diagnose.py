@@ -54,7 +54,7 @@ def suite(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     out = tmp_path_factory.mktemp("suite")
     report = out / "report.json"
     rc = cli.main(["bench", "diagnose", "--cases", "3", "--seed", str(SEED), "--duration", "30", "--jobs", "2",
-                   "--out", str(out / "cases"), "--json", str(report), "--quiet"])
+                   "--workers", "2", "--out", str(out / "cases"), "--json", str(report), "--quiet"])
     assert rc == 0
     return {"out": out / "cases", "report": json.loads(report.read_text())}
 
@@ -225,7 +225,8 @@ def test_scoreboard_structure(suite: dict[str, Any], capsys: pytest.CaptureFixtu
     assert names == ["named", "params", "wheel_fit", "false_alarms", "out_of_library", "seconds"]
     bench_diagnose.print_report(report)
     out = capsys.readouterr().out
-    assert "command:     twinbot bench diagnose --cases 3 --seed 18 --duration 30 --jobs 2" in out
+    assert "command:     twinbot bench diagnose --cases 3 --seed 18 --duration 30 --jobs 2 --workers 2" in out
+    assert report["workers"] == 2 and "2 worker processes, 2 per diagnosis" in out
     header = next(ln for ln in out.splitlines() if ln.startswith("case "))
     assert [c.strip() for c in header.split("|")] == list(bench_diagnose.HEADER)
     assert out.count("[MET]") + out.count("[MISSED]") + out.count("[NOT RUN]") == len(report["targets"])
@@ -282,13 +283,17 @@ def test_a_case_is_labelled_by_what_drove_it() -> None:
 
 
 def test_the_diagnosis_is_blind(suite: dict[str, Any], tmp_path: Path) -> None:
-    """Moved away from its answer key, a recording gets the same diagnosis."""
+    """Moved away from its answer key, a recording gets the same diagnosis (and in one process, as the suite's
+    two per diagnosis gave)."""
     control = next(r for r in suite["report"]["cases"] if r["kind"] == "control")
     src = suite["out"] / "recordings" / f"{control['case']}.csv"
     shutil.copy(src, tmp_path / src.name)
     shutil.copy(str(src) + ".json", tmp_path / (src.name + ".json"))
     alone = bench_diagnose.diagnose_blind(str(tmp_path / src.name))
     assert alone.get("diagnosis", {}).get("verdict", alone.get("error")) == control["verdict"]
+    kept = json.loads((suite["out"] / "diagnoses" / f"{control['case']}.json").read_text())
+    if "diagnosis" in kept:
+        assert {**alone["diagnosis"], "recording": ""} == {**kept["diagnosis"], "recording": ""}
 
 
 def test_the_margins_bench_reads_the_kept_suite_and_agrees_with_the_diagnosis(suite: dict[str, Any],

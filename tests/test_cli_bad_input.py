@@ -164,6 +164,7 @@ CASES: list[tuple[str, list[str], str]] = [
     ("diagnose-write-params-folder", ["diagnose", "{in}/run.csv", "--write-params", "{case}/adir"], "adir"),
     ("diagnose-params-bad", ["diagnose", "{in}/run.csv", "--params", "{in}/adc64.json"], "adc_bits"),
     ("diagnose-world-huge", ["diagnose", "{in}/run.csv", "--world", "{in}/huge.json"], "limit"),
+    ("diagnose-workers-zero", ["diagnose", "{in}/run.csv", "--workers", "0"], "--workers"),
     # sweep
     ("sweep-out-missing", ["sweep", "--seeds", "1"], "--out"),
     ("sweep-seeds-zero", ["sweep", "--seeds", "0", "--out", "{case}/o"], "'0'"),
@@ -199,6 +200,7 @@ CASES: list[tuple[str, list[str], str]] = [
     ("bench-gui-prerun-nan", ["bench", "gui", "--prerun", "nan"], "'nan'"),
     ("bench-diagnose-cases-zero", ["bench", "diagnose", "--cases", "0"], "'0'"),
     ("bench-diagnose-duration-short", ["bench", "diagnose", "--duration", "5"], "'5'"),
+    ("bench-diagnose-workers-zero", ["bench", "diagnose", "--workers", "0"], "--workers"),
     ("bench-diagnose-jobs-zero", ["bench", "diagnose", "--jobs", "0"], "'0'"),
     ("bench-diagnose-out-in-a-file", ["bench", "diagnose", "--out", "{case}/afile/cases"], "afile"),
     ("bench-diagnose-json-folder", ["bench", "diagnose", "--json", "{case}/adir"], "adir"),

@@ -712,3 +712,32 @@ def test_an_effect_seen_in_two_fitted_windows_only_is_judged_on_one_of_them(tmp_
     assert [e["name"] for e in d.to_json()["effects"]] == ["current_limit"], d.to_json()
     limit = d.to_json()["effects"][0]["params"]["limit"]["value"]
     assert abs(limit - 0.1) < 0.005, limit
+
+
+def test_robots_run_in_one_batch_per_machinery_as_they_would_together(nominal_run):
+    """A gear's play sets the whole batch through its substep, so run_windows batches robots by machinery
+    (batch.machinery); each robot's replay is the one it gets in a single batch, to rounding, in its place."""
+    from host_sim.diagnosis.windows import Windows, _run_windows, by_machinery, run_windows
+
+    robots = [E.apply(DEFAULT, "backlash", "left", [0.05]), DEFAULT, E.apply(DEFAULT, "actuator_delay", "both", [0.03]),
+              E.apply(DEFAULT, "dry_friction", "right", [2e-3]), E.apply(DEFAULT, "backlash", "right", [0.08]),
+              E.apply(DEFAULT, "wheel_radius", "left", [1e-3])]
+    assert by_machinery(robots) == [[0, 4], [1], [2], [3, 5]]
+    windows = Windows(np.array([25, 150, 400]), 26, np.array([False, True, False]))
+    grouped = run_windows(nominal_run, windows, robots, ROOM)
+    together = _run_windows(nominal_run, windows, robots, ROOM, None, None)
+    for field in ("enc", "pose", "vbat"):
+        np.testing.assert_allclose(getattr(grouped, field), getattr(together, field), rtol=0, atol=1e-9)
+    alone = _run_windows(nominal_run, windows, [robots[4]], ROOM, None, None)
+    np.testing.assert_allclose(grouped.enc[:, 4], alone.enc[:, 0], rtol=0, atol=1e-9)
+
+
+def test_workers_fit_side_by_side_to_the_same_diagnosis(tmp_path):
+    """diagnose(workers=2) screens and fits in two processes (the CLI's default on two cores): the
+    verdict, the figures and the JSON are those of one process, number for number."""
+    rec = record(tmp_path, E.apply(DEFAULT, "torque_constant", "right", [-6e-4]))
+    said: list[str] = []
+    alone, shared = diagnose(rec, DEFAULT, ROOM), diagnose(rec, DEFAULT, ROOM, progress=said.append, workers=2)
+    assert any("side by side" in line for line in said), said
+    assert [e["name"] for e in shared.effects] == ["torque_constant"], shared.summary()
+    assert json.dumps(shared.to_json()) == json.dumps(alone.to_json())

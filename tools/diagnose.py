@@ -18,18 +18,21 @@ of 1 s away from the walls; a tracker's pose for the body's motion and the
 IR sensors.  Less is refused with a one-line reason and exit status 2.  The
 identification manoeuvre records all of it in 46 s:
 twinbot serial PORT --excite --record run.csv (twinbot sim --excite on the twin).
-A 90 s recording takes 6-12 s of one core (the medians of twinbot bench
-diagnose's six suites, on a quiet or a busy machine; up to 2 min when a
-gear's play is fitted), with a progress line per step.
+A 90 s recording takes about 20 s of one core (the median of twinbot bench
+diagnose's eight suites); a gear's play or a slippery floor takes minutes.
+--workers (default: one process per core) screens the library and fits the
+shortlisted effects side by side: the same verdict and figures, sooner.
+A progress line per step.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
-from tools.arguments import input_file, output_file
+from tools.arguments import input_file, int_range, output_file
 from tools.cli import CliError
 
 
@@ -45,8 +48,20 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
     p.add_argument("--html", metavar="FILE", type=output_file, help="write a self-contained report with the pictures")
     p.add_argument("--write-params", metavar="FILE", type=output_file,
                    help="write the fitted twin as a robot parameter file (twinbot sim --params FILE loads it)")
+    p.add_argument("--workers", type=int_range(1, 64),
+                   help="processes that screen and fit the effects side by side: the same verdict and figures, "
+                        f"sooner (default on Linux: one per core, {os.cpu_count()} here, up to the effects fitted "
+                        "at a time; elsewhere 1, which runs it all in this process)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=run)
+
+
+def default_workers() -> int:
+    """The machine's cores, at most as many as effects are fitted side by side; one but on Linux (the
+    workers fork, which macOS's system libraries do not all survive)."""
+    from host_sim.diagnosis.fit import SHORTLIST
+
+    return min(os.cpu_count() or 1, SHORTLIST) if sys.platform.startswith("linux") else 1
 
 
 def load(args: argparse.Namespace):  # type: ignore[no-untyped-def]
@@ -83,7 +98,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"  ... {stage}", file=sys.stderr, flush=True)
 
     try:
-        result = diagnose(rec, params, world, progress=progress)
+        result = diagnose(rec, params, world, progress=progress,
+                           workers=args.workers or default_workers())
     except DiagnosisError as exc:
         raise CliError(f"{args.recording}: {exc}") from None
     print(result.summary())

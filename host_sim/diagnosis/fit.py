@@ -33,6 +33,9 @@ Backward elimination then drops an effect that a later one made redundant
 from __future__ import annotations
 
 import math
+import multiprocessing
+from concurrent.futures import Executor, ProcessPoolExecutor
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -42,7 +45,7 @@ from scipy import optimize, stats
 from host_sim import effects as E
 from host_sim.diagnosis.channels import (ACCUMULATED, AMBIENT, IR, MOTION, WHEELS, Channel, build_channels,
                                         drive_channel, judged_windows, sensor_channel)
-from host_sim.diagnosis.windows import Windows, run_windows
+from host_sim.diagnosis.windows import Windows, by_machinery, run_windows
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
 from host_sim.world import World
@@ -147,10 +150,24 @@ class Objective:
         self.test = self.windows.held_out
         self.sensors = any(sensor_channel(n) for n in names)
         self.evaluations = 0
+        self.workers: Executor | None = None  # processes that share the work (select's, while it runs)
         self.test_columns: dict[str, np.ndarray] = {}  # channel (or window total) -> its held-out residuals' columns
 
     def residuals(self, robots: list[RobotParams]) -> tuple[np.ndarray, np.ndarray]:
-        """(train (N, n), test (N, m)) weighted residuals of N twins."""
+        """(train (N, n), test (N, m)) weighted residuals of N twins: with workers (select), the robots of
+        each machinery (windows.by_machinery) in a process of their own; they run apart anyway."""
+        workers = self.workers
+        groups = by_machinery(robots) if workers is not None else []
+        if workers is not None and len(groups) > 1:
+            self.evaluations += len(robots)
+            parts = list(workers.map(_residuals_in_worker, [[robots[i] for i in ix] for ix in groups]))
+            order = np.argsort(np.concatenate(groups))
+            return (np.concatenate([train for train, _test in parts])[order],
+                    np.concatenate([test for _train, test in parts])[order])
+        return self.residuals_here(robots)
+
+    def residuals_here(self, robots: list[RobotParams]) -> tuple[np.ndarray, np.ndarray]:
+        """residuals, in this process."""
         self.evaluations += len(robots)
         run = run_windows(self.rec, self.windows, robots, self.world)
         chans = {c.name: c for c in build_channels(self.rec, self.windows, run, robots,
@@ -390,9 +407,48 @@ def _plainest(tried: list[Model], cands: list[Candidate]) -> Model:
     return min(tied, key=lambda m: (cands.index(m.effects[-1]), bic(m)))
 
 
+_OBJECTIVE: Objective | None = None  # what a fitting worker fits: select's, inherited as the worker forks
+
+
+def _fit_in_worker(base: RobotParams, effects: list[Candidate], start: list[list[float]]) -> Model:
+    assert _OBJECTIVE is not None
+    _OBJECTIVE.workers = None  # a worker works alone (its copy of the pool is the parent's)
+    return fit_model(_OBJECTIVE, base, effects, start)
+
+
+def _residuals_in_worker(robots: list[RobotParams]) -> tuple[np.ndarray, np.ndarray]:
+    assert _OBJECTIVE is not None
+    _OBJECTIVE.workers = None
+    return _OBJECTIVE.residuals_here(robots)
+
+
+def _fitting_pool(obj: Objective, workers: int) -> Executor | None:
+    """Processes that screen and fit side by side (None for one worker).  Each figure is the one the
+    parent would have computed, number for number: only the time changes."""
+    global _OBJECTIVE
+    if workers <= 1 or "fork" not in multiprocessing.get_all_start_methods():  # Windows: one process
+        return None
+    _OBJECTIVE = obj  # before the workers fork, so that each has it
+    return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"))
+
+
 def select(obj: Objective, base: RobotParams, cands: list[Candidate],
-           progress: Callable[[str], None] | None = None, located: list[str] | None = None) -> list[Model]:
-    """Forward selection, then backward elimination: the chain of accepted models, nominal first."""
+           progress: Callable[[str], None] | None = None, located: list[str] | None = None,
+           workers: int = 1) -> list[Model]:
+    """Forward selection, then backward elimination: the chain of accepted models, nominal first.
+    workers > 1: each step's screening (by machinery) and its shortlist's fits run in that many processes
+    (forked: where a platform cannot fork, in this one)."""
+    fitters = _fitting_pool(obj, workers)
+    with fitters or nullcontext():
+        obj.workers = fitters
+        try:
+            return _select(obj, base, cands, progress, located, fitters)
+        finally:
+            obj.workers = None
+
+
+def _select(obj: Objective, base: RobotParams, cands: list[Candidate], progress: Callable[[str], None] | None,
+            located: list[str] | None, fitters: Executor | None) -> list[Model]:
     say = progress or (lambda _t: None)
     r_train, r_test = obj.residuals([base])
     chain = [Model([], [], base, float(r_train[0] @ r_train[0]), float(r_test[0] @ r_test[0]), int(r_train.size),
@@ -407,10 +463,16 @@ def select(obj: Objective, base: RobotParams, cands: list[Candidate],
             break
         say(f"effect {step + 1}: screening {len(pool)} candidates")
         shortlist = screen(obj, base, current, pool, SHORTLIST)
-        tried = []
-        for cand, start in shortlist:
-            say(f"effect {step + 1}: fitting {cand.label()}")
-            tried.append(fit_model(obj, base, current.effects + [cand], current.values + [start]))
+        if fitters is None:
+            tried = []
+            for cand, start in shortlist:
+                say(f"effect {step + 1}: fitting {cand.label()}")
+                tried.append(fit_model(obj, base, current.effects + [cand], current.values + [start]))
+        else:
+            say(f"effect {step + 1}: fitting {', '.join(c.label() for c, _s in shortlist)} side by side")
+            tried = list(fitters.map(_fit_in_worker, [base] * len(shortlist),
+                                     [current.effects + [c] for c, _s in shortlist],
+                                     [current.values + [s] for _c, s in shortlist]))
         # A value pinned at a fitting bound is a stand-in for something else, not a measurement.
         tried = [m for m in tried if not _pinned(base, m)]
         best = choose(obj, current, tried, cands, located or [])

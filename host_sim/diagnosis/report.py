@@ -168,7 +168,10 @@ def check_judgeable(rec: Recording, first: Comparison) -> None:
 
 
 def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
-             seconds: tuple[float, ...] = DEFAULT_SECONDS, progress: Callable[[str], None] | None = None) -> Diagnosis:
+             seconds: tuple[float, ...] = DEFAULT_SECONDS, progress: Callable[[str], None] | None = None,
+             workers: int = 1) -> Diagnosis:
+    """workers > 1: the shortlisted effects of each step are fitted in that many processes (the same
+    figures, sooner)."""
     notes = check_data(rec, world)
     say = progress or (lambda _text: None)
     say("comparing the twin with the recording")
@@ -196,7 +199,7 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     if not result.located:
         result.fit_after = dict(first.fit)
         return result
-    chain = _fit(rec, params, world, first, say)
+    chain = _fit(rec, params, world, first, say, workers)
     final = chain[-1]
     result.model = final
     say("judging the fitted twin")
@@ -236,9 +239,10 @@ def _located(cmp: Comparison, f: Finding) -> dict[str, Any]:
 
 
 def _fit(rec: Recording, params: RobotParams, world: World | None, first: Comparison,
-         say: Callable[[str], None]) -> list[Model]:
+         say: Callable[[str], None], workers: int = 1) -> list[Model]:
     located = [f.channel for f in first.findings]
-    return select(fit_objective(rec, world, first), params, candidates_for(located), progress=say, located=located)
+    return select(fit_objective(rec, world, first), params, candidates_for(located), progress=say, located=located,
+                  workers=workers)
 
 
 def fit_objective(rec: Recording, world: World | None, first: Comparison) -> Objective:

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from host_sim import dynamics, ir_sensor, motors
-from host_sim.batch import SUBSTEPS, BatchSim, robot_params
+from host_sim.batch import SUBSTEPS, BatchSim, machinery, robot_params
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
 from host_sim.replay import (SEED_ROWS, ReplayError, replay_inputs, sliding_rows, starts_at_rest, state_at,
@@ -156,11 +156,31 @@ def initial_states(rec: Recording, rows: np.ndarray, p: RobotParams) -> tuple[np
 
 def run_windows(rec: Recording, windows: Windows, params: Any, world: World | None, *,
                 base: RobotParams | None = None, substeps: int | None = None) -> WindowRun:
-    """Replay every window for every parameter set at once (physics only; see sensors_on_track).
+    """Replay every window for every parameter set (physics only; see sensors_on_track): in one batch
+    per machinery (batch.machinery), so that a few robots with a gear's play do not slow the rest.
 
     params: one RobotParams, a sequence of N, or a ParamBatch of N (with base).
     world: the walls (without a tracker the twin drives in an empty world).
     """
+    groups = by_machinery(params) if isinstance(params, (list, tuple)) else []
+    if len(groups) > 1:
+        runs = [_run_windows(rec, windows, [params[i] for i in ix], world, base, substeps) for ix in groups]
+        order = np.argsort(np.concatenate(groups))
+        return WindowRun(*(np.concatenate([getattr(run, f) for run in runs], axis=1)[:, order]
+                           for f in ("enc", "pose", "vbat")))
+    return _run_windows(rec, windows, params, world, base, substeps)
+
+
+def by_machinery(robots: list[RobotParams] | tuple[RobotParams, ...]) -> list[list[int]]:
+    """The robots' indices grouped by the parts of the step they set going (batch.machinery), in order."""
+    groups: dict[tuple[bool, ...], list[int]] = {}
+    for i, p in enumerate(robots):
+        groups.setdefault(machinery(p), []).append(i)
+    return list(groups.values())
+
+
+def _run_windows(rec: Recording, windows: Windows, params: Any, world: World | None, base: RobotParams | None,
+                 substeps: int | None) -> WindowRun:
     substeps = windows.substeps if substeps is None else substeps
     batch_params, robots = robot_params(params, base)
     n_sets = len(robots)
