@@ -170,8 +170,8 @@ def check_judgeable(rec: Recording, first: Comparison) -> None:
 def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
              seconds: tuple[float, ...] = DEFAULT_SECONDS, progress: Callable[[str], None] | None = None,
              workers: int = 1) -> Diagnosis:
-    """workers > 1: the shortlisted effects of each step are fitted in that many processes (the same
-    figures, sooner)."""
+    """workers > 1: each step's screening and its shortlisted fits run in that many processes (the same
+    figures, sooner: fit.select)."""
     notes = check_data(rec, world)
     say = progress or (lambda _text: None)
     say("comparing the twin with the recording")
