@@ -741,3 +741,29 @@ def test_workers_fit_side_by_side_to_the_same_diagnosis(tmp_path):
     assert any("side by side" in line for line in said), said
     assert [e["name"] for e in shared.effects] == ["torque_constant"], shared.summary()
     assert json.dumps(shared.to_json()) == json.dumps(alone.to_json())
+
+
+def test_a_fit_on_the_sensors_alone_runs_no_physics(nominal_run, monkeypatch):
+    """The IR channels are the twin's sensors on the recorded track, whatever its motion: an objective of
+    sensor channels alone (an IR effect located on the ring) gets the same residuals without running the
+    drive, which on a robot at the walls was most of an IR fit's time (blind case 0205)."""
+    from host_sim.diagnosis import fit as F
+
+    first = compare(nominal_run, DEFAULT, ROOM)
+    names = ["ir_0", "amb_0", "ir_1"]
+    obj = F.Objective(nominal_run, first.windows, ROOM, names, {n: 1.0 for n in names}, first.contact,
+                      first.unjudged)
+    robots = [DEFAULT, E.apply(DEFAULT, "ir_gain", 0, [1.3]), E.apply(DEFAULT, "ir_latency", "both", [0.04])]
+    assert obj.sensors_only
+    obj.sensors_only = False
+    with_run = obj.residuals(robots)
+
+    def no_run(*_args, **_kw):
+        raise AssertionError("the drive was run for the sensors alone")
+
+    monkeypatch.setattr(F, "run_windows", no_run)
+    obj.sensors_only = True
+    without = obj.residuals(robots)
+    for a, b in zip(without, with_run):
+        np.testing.assert_array_equal(a, b)
+    assert np.abs(without[0][1] - without[0][0]).max() > 1  # the gain shows in S1's residuals

@@ -101,7 +101,7 @@ def build_channels(rec: Recording, windows: Windows, run: WindowRun, robots: lis
     if rec.pose is not None:
         chans += _motion_channels(rec, idx, run, p)
         if world is not None and world.n_walls:
-            chans += _sensor_channels(rec, idx[:, 1:], robots, world, unjudged)
+            chans += sensor_channels(rec, idx[:, 1:], robots, world, unjudged)
     vb = rec.vbat[idx[:, 1:]]
     vb_twin = (run.vbat[..., 1:] if run.vbat is not None
                else np.repeat(np.full_like(vb, p.battery_voltage)[:, None], run.enc.shape[1], 1))
@@ -124,8 +124,10 @@ def _motion_channels(rec: Recording, idx: np.ndarray, run: WindowRun, p: RobotPa
     return chans
 
 
-def _sensor_channels(rec: Recording, rows: np.ndarray, robots: list[RobotParams], world: World,
-                     unjudged: np.ndarray | None) -> list[Channel]:
+def sensor_channels(rec: Recording, rows: np.ndarray, robots: list[RobotParams], world: World,
+                    unjudged: np.ndarray | None) -> list[Channel]:
+    """The IR and ambient channels at the rows (W, T - 1): the twin's sensors on the recorded track, so
+    whatever the twin's motion (no run needed)."""
     on, amb = sensors_on_track(rec, rows, robots, world)  # (N, W, T - 1, 8)
     p = robots[0]
     refl_rec = (rec.ir_on - rec.ir_amb)[rows].astype(float)

@@ -44,7 +44,7 @@ from scipy import optimize, stats
 
 from host_sim import effects as E
 from host_sim.diagnosis.channels import (ACCUMULATED, AMBIENT, IR, MOTION, WHEELS, Channel, build_channels,
-                                        drive_channel, judged_windows, sensor_channel)
+                                        drive_channel, judged_windows, sensor_channel, sensor_channels)
 from host_sim.diagnosis.windows import Windows, by_machinery, run_windows
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
@@ -149,6 +149,7 @@ class Objective:
         self.train = ~self.windows.held_out
         self.test = self.windows.held_out
         self.sensors = any(sensor_channel(n) for n in names)
+        self.sensors_only = bool(names) and all(sensor_channel(n) for n in names)  # then no physics to run
         self.evaluations = 0
         self.workers: Executor | None = None  # processes that share the work (select's, while it runs)
         self.test_columns: dict[str, np.ndarray] = {}  # channel (or window total) -> its held-out residuals' columns
@@ -157,7 +158,7 @@ class Objective:
         """(train (N, n), test (N, m)) weighted residuals of N twins: with workers (select), the robots of
         each machinery (windows.by_machinery) in a process of their own; they run apart anyway."""
         workers = self.workers
-        groups = by_machinery(robots) if workers is not None else []
+        groups = by_machinery(robots) if workers is not None and not self.sensors_only else []
         if workers is not None and len(groups) > 1:
             self.evaluations += len(robots)
             parts = list(workers.map(_residuals_in_worker, [[robots[i] for i in ix] for ix in groups]))
@@ -169,9 +170,14 @@ class Objective:
     def residuals_here(self, robots: list[RobotParams]) -> tuple[np.ndarray, np.ndarray]:
         """residuals, in this process."""
         self.evaluations += len(robots)
-        run = run_windows(self.rec, self.windows, robots, self.world)
-        chans = {c.name: c for c in build_channels(self.rec, self.windows, run, robots,
-                                                    self.world if self.sensors else None, self.unjudged)}
+        if self.sensors_only:  # the sensors read the recorded track: the twin's motion does not enter them
+            assert self.world is not None
+            chans = {c.name: c for c in sensor_channels(self.rec, self.windows.index[:, 1:], robots, self.world,
+                                                        self.unjudged)}
+        else:
+            run = run_windows(self.rec, self.windows, robots, self.world)
+            chans = {c.name: c for c in build_channels(self.rec, self.windows, run, robots,
+                                                        self.world if self.sensors else None, self.unjudged)}
         train, test = [], []
         at = 0
         for name in self.names:
