@@ -463,7 +463,7 @@ def run(args: argparse.Namespace) -> int:
 
     report: dict[str, Any] = {
         "command": command, "seeds": seeds, "duration": args.duration, "jobs": args.jobs,
-        "workers": getattr(args, "workers", 1),
+        "workers": args.workers,
         "machine": {**_machine(blas), "pysindy": pysindy.__version__}, "cases": rows}
     report["totals"] = totals(rows)
     report["targets"] = targets(report["totals"])

@@ -444,13 +444,14 @@ def select(obj: Objective, base: RobotParams, cands: list[Candidate],
     """Forward selection, then backward elimination: the chain of accepted models, nominal first.
     workers > 1: each step's screening (by machinery) and its shortlist's fits run in that many processes
     (forked: where a platform cannot fork, in this one)."""
+    global _OBJECTIVE
     fitters = _fitting_pool(obj, workers)
     with fitters or nullcontext():
         obj.workers = fitters
         try:
             return _select(obj, base, cands, progress, located, fitters)
         finally:
-            obj.workers = None
+            obj.workers = _OBJECTIVE = None  # the workers forked with their own copy: hold the recording no longer
 
 
 def _select(obj: Objective, base: RobotParams, cands: list[Candidate], progress: Callable[[str], None] | None,
