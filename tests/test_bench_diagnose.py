@@ -212,7 +212,7 @@ def test_scoreboard_structure(suite: dict[str, Any], capsys: pytest.CaptureFixtu
     assert len(report["cases"]) == 3 and report["duration"] == 30
     assert {r["kind"] for r in report["cases"]} == {"in library", "control", "out of library"}
     assert sorted(p.name for p in (suite["out"] / "answer_keys").iterdir()) == \
-        sorted(f"case_{s:04d}.answer.json" for s in report["seeds"])
+        sorted(f"case_{s:04d}.{kind}" for s in report["seeds"] for kind in ("answer.json", "truth.npz"))
     assert not list((suite["out"] / "recordings").glob("*.answer.json"))  # keys apart from the recordings
     for r in report["cases"]:
         assert r["seconds"] > 0 and "outcome" in r
@@ -268,6 +268,49 @@ def test_a_kept_suite_is_scored_again_without_diagnosing(suite: dict[str, Any], 
     shutil.rmtree(moved / "diagnoses")
     assert cli.main(["bench", "diagnose", "--rescore", str(moved)]) == 2
     assert "no diagnoses/case_*.json" in capsys.readouterr().err
+
+
+def test_the_perfect_twin_is_the_plants_own_encoders_on_the_judged_windows(suite: dict[str, Any]) -> None:
+    """The answer keys keep the plant's unrounded encoders (their floor is the recording's counts), and the
+    scorer judges them as a twin's prediction on the windows the diagnosis judged: no twin does better."""
+    for r in suite["report"]["cases"]:
+        if "fit_before" not in r:
+            continue
+        answer = scoring.load_key(suite["out"] / "answer_keys" / f"{r['case']}.answer.json")
+        rec = load_recording(suite["out"] / "recordings" / f"{r['case']}.csv")
+        exact = answer["encoders"]
+        assert exact.shape == rec.enc.shape and (np.floor(exact) == rec.enc).all()
+        assert not (exact == rec.enc).all()  # not the counts themselves
+        judged = json.loads((suite["out"] / "diagnoses" / f"{r['case']}.json").read_text())["diagnosis"]["fit"]["judged"]
+        assert judged and all(t1 > t0 for t0, t1 in judged)
+        assert r["fit_perfect"] == scoring.perfect_twin_fit(exact, rec, judged) < 100
+        assert scoring.perfect_twin_fit(rec.enc.astype(float), rec, judged) == 100.0  # the counts themselves
+        # only the judged windows count: the truth elsewhere changes nothing
+        elsewhere = exact.copy()
+        inside = np.zeros(len(rec), dtype=bool)
+        for t0, t1 in judged:
+            inside |= (rec.t >= t0 - 1e-6) & (rec.t <= t1 + 1e-6)
+        elsewhere[~inside] += 7.3
+        assert scoring.perfect_twin_fit(elsewhere, rec, judged) == r["fit_perfect"]
+        assert scoring.perfect_twin_fit(exact, rec, []) is None
+
+
+def test_the_wheel_fit_target_sets_apart_what_no_twin_could_meet() -> None:
+    """A case where even a perfect twin scores under the target is listed apart, not counted a miss; a case
+    without the truth (a suite from before session 28) is counted."""
+    base = {"kind": "control", "outcome": "right", "excitation": "firmware", "rule_set": 1, "fit_before": 80.0,
+            "sindy": {"error": "not run"}, "seconds_per_90s": 1.0, "cpu_seconds_per_90s": 1.0}
+    rows = [{**base, "case": "case_0001", "fit_after": 95.0, "fit_perfect": 97.0},
+            {**base, "case": "case_0002", "fit_after": 88.0, "fit_perfect": 89.0},  # apart
+            {**base, "case": "case_0003", "fit_after": 85.0, "fit_perfect": 96.0},  # a miss
+            {**base, "case": "case_0004", "fit_after": 92.0}]  # no truth: counted
+    t = bench_diagnose.totals(rows)
+    assert (t["wheel_attainable_ok"], t["wheel_attainable"], t["wheel_ok"], t["wheel_judged"]) == (2, 3, 2, 4)
+    assert t["wheel_unattainable"] == [{"case": "case_0002", "fit_after": 88.0, "fit_perfect": 89.0}]
+    target = next(x for x in bench_diagnose.targets(t) if x["name"] == "wheel_fit")
+    assert not target["met"] and "2/3" in target["text"] and "1 where it does not, apart; in all 2/4" in target["text"]
+    assert bench_diagnose.case_row({**rows[1], "truth": "none (control)", "verdict": "match", "named": "-"})[7] == \
+        "80 -> 88 (p 89)"
 
 
 def test_a_case_is_labelled_by_what_drove_it() -> None:

@@ -57,6 +57,17 @@ def test_the_twins_own_recording_is_a_match(nominal_run):
     for wheel in ("wheel_l", "wheel_r"):
         assert d.fit_ceiling[wheel] < 100 and d.fit_before[wheel] == pytest.approx(d.fit_ceiling[wheel], abs=3)
     assert set(d.to_json()["fit"]["ceiling"]) == {"wheel_l", "wheel_r"}
+    # fit.judged says which windows the wheels' fit % is taken on: those rows give it again
+    from host_sim.diagnosis.channels import fit_percent
+
+    first = d.comparisons[0]
+    starts = [int(np.searchsorted(nominal_run.t, t0 - 1e-6)) for t0, _t1 in d.to_json()["fit"]["judged"]]
+    assert starts and all(nominal_run.t[k + first.windows.rows - 1] == pytest.approx(t1)
+                          for k, (_t0, t1) in zip(starts, d.fit_judged))
+    at = np.isin(first.windows.start, starts)
+    for wheel in ("wheel_l", "wheel_r"):
+        ch = first.channel(wheel)
+        assert fit_percent(ch.y[at], ch.y_hat[at, 0]) == pytest.approx(d.fit_before[wheel], abs=1e-9)
     assert d.fit_before["wheel_l"] > 90 and d.fit_before["heading_rate"] > 95
 
 
@@ -262,7 +273,7 @@ def test_json_html_and_parameter_file_from_the_command(tmp_path):
     assert "explained" in r.stdout and "track_width" in r.stdout
     doc = json.loads(out.read_text())
     assert set(doc) >= {"recording", "verdict", "located", "effects", "fit", "unexplained"}
-    assert doc["verdict"] == "explained" and set(doc["fit"]) == {"before", "after", "ceiling"}
+    assert doc["verdict"] == "explained" and set(doc["fit"]) == {"before", "after", "ceiling", "judged"}
     assert {"channel", "regime", "spans", "fit_before"} <= set(doc["located"][0])
     assert load_params(fitted).half_axle == pytest.approx(0.0499, rel=0.02)
     # The report stands alone: its pictures are inside it, one per located channel beside the trajectories.

@@ -67,11 +67,15 @@ def travelled(run: Run) -> float:
 def test_plant_is_deterministic_and_its_recording_loads(tmp_path):
     world = builtin_world("paper_room")
     a, b = tmp_path / "a.csv", tmp_path / "b.csv"
-    record(a, nominal_spec(), world, SilController(1), 4.0, seed=5)
+    truth = record(a, nominal_spec(), world, SilController(1), 4.0, seed=5)
     record(b, nominal_spec(), world, SilController(1), 4.0, seed=5)
     assert a.read_text() == b.read_text()
     rec = load_recording(a)
     assert len(rec) == 100 and rec.pose is not None
+    # what only the plant knows, a row each: the encoders before rounding (their floor is the reading)
+    exact = np.array(truth.encoders)
+    assert exact.shape == (100, 2) and (np.floor(exact) == rec.enc).all() and (exact != rec.enc).any()
+    assert len(truth.poses) == 100
     assert rec.meta["source"] == "robot" and rec.meta["plant"] == "mujoco"
     assert rec.enc[-1].min() > 50  # the firmware drove it
     assert rec.emitter is not None and rec.emitter[0] == 0 and rec.emitter[-1] > 0  # off until the first actuation

@@ -44,6 +44,7 @@ class Diagnosis:
     fit_before: dict[str, float] = field(default_factory=dict)
     fit_after: dict[str, float] = field(default_factory=dict)
     fit_ceiling: dict[str, float] = field(default_factory=dict)  # per wheel: a twin right but for the rounding
+    fit_judged: list[list[float]] = field(default_factory=list)  # [t0, t1] of the windows the wheels are judged on
     unexplained: list[dict[str, Any]] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     model: Model | None = None  # the fitted twin, when effects were tried
@@ -53,7 +54,7 @@ class Diagnosis:
     def to_json(self) -> dict[str, Any]:
         return {"recording": self.recording, "verdict": self.verdict, "located": self.located,
                 "effects": self.effects, "fit": {"before": _finite(self.fit_before), "after": _finite(self.fit_after),
-                        "ceiling": _finite(self.fit_ceiling)},
+                        "ceiling": _finite(self.fit_ceiling), "judged": self.fit_judged},
                 "unexplained": self.unexplained, "notes": self.notes}
 
     def summary(self) -> str:
@@ -179,7 +180,8 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     first = comparisons[0]
     stratify(first, rec)  # before any figure is taken: the held-out windows hold a share of what was located
     result = Diagnosis(str(rec.path or "recording"), "match", comparisons, [_located(first, f) for f in first.findings],
-                       fit_before=dict(first.fit), fit_ceiling=dict(first.ceiling), notes=notes)
+                       fit_before=dict(first.fit), fit_ceiling=dict(first.ceiling), fit_judged=judged_spans(rec, first),
+                       notes=notes)
     little_data = False
     try:
         check_judgeable(rec, first)
@@ -224,6 +226,14 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     else:
         result.verdict = "explained" if not remaining else "partly explained"
     return result
+
+
+def judged_spans(rec: Recording, cmp: Comparison) -> list[list[float]]:
+    """[t0, t1] (s, the first and last rows' times) of each held-out window the wheels' fit % is judged on:
+    away from the walls (channels.judged_windows), in time order."""
+    w = cmp.windows
+    judged = w.held_out & judged_windows(WHEELS[0], cmp.contact)
+    return [[float(rec.t[k]), float(rec.t[k + w.rows - 1])] for k in w.start[judged]]
 
 
 def _located(cmp: Comparison, f: Finding) -> dict[str, Any]:

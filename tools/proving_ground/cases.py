@@ -16,7 +16,9 @@ runs the plant for `duration` seconds and writes the recording
 (out_dir/case_NNNN.csv, source "robot", plant "mujoco", the nominal robot
 in its sidecar) and, apart, the answer key
 (key_dir/case_NNNN.answer.json, default out_dir/answer_keys/): what was
-concealed and the plant's true values.  Only a scorer should read it.
+concealed and the plant's true values, with beside it
+case_NNNN.truth.npz: the encoders' unrounded positions at every reading
+(`truth_file`; the scorer's perfect twin).  Only a scorer should read them.
 """
 from __future__ import annotations
 
@@ -103,13 +105,19 @@ def make_case(seed: int, out_dir: str | Path, duration: float = 90.0,
     key_dir.mkdir(parents=True, exist_ok=True)
     name = f"case_{seed:04d}"
     rec_path = out_dir / f"{name}.csv"
-    record(rec_path, spec, world, controller, duration, seed=seed, pose=start)
+    truth = record(rec_path, spec, world, controller, duration, seed=seed, pose=start)
+    np.savez_compressed(truth_file(key_dir, name), encoders=np.array(truth.encoders))
     key = {"case": name, "seed": seed, "recording": rec_path.name, "world": world.name, "start": start,
            "excitation": how, "duration": duration, "verdict_expected": _expected(concealed),
            "effects": concealed, "plant": _jsonable(dataclasses.asdict(spec))}
     key_path = key_dir / f"{name}.answer.json"
     key_path.write_text(json.dumps(key, indent=1) + "\n")
     return rec_path, key_path
+
+
+def truth_file(key_dir: str | Path, name: str) -> Path:
+    """Where make_case keeps what only the plant knows of case `name` (beside its answer key)."""
+    return Path(key_dir) / f"{name}.truth.npz"
 
 
 def _expected(concealed: list[dict[str, object]]) -> str:

@@ -122,10 +122,15 @@ class Plant:
         """Drive joint speeds (rad/s)."""
         return float(self.data.qvel[self._drive_v[0]]), float(self.data.qvel[self._drive_v[1]])
 
-    def encoder_ticks(self) -> tuple[int, int]:
+    def encoder_position(self) -> tuple[float, float]:
+        """Each encoder's position in ticks, not rounded: what a perfect twin would predict of its counts."""
         d, s = self.data, self.spec
-        return tuple(math.floor(float(d.qpos[self._drive_q[k]]) * s.ticks_per_rev[k] / (2 * math.pi))
+        return tuple(float(d.qpos[self._drive_q[k]]) * s.ticks_per_rev[k] / (2 * math.pi)
                      for k in range(2))  # type: ignore[return-value]
+
+    def encoder_ticks(self) -> tuple[int, int]:
+        left, right = self.encoder_position()
+        return math.floor(left), math.floor(right)
 
     # ------------------------------------------------------------------ I/O
     def actuate(self, a: Actuate) -> None:

@@ -1,7 +1,7 @@
 """Scenarios on the plant, written as recordings in the project's one format.
 
-    run(plant, controller, duration, writer)      # one control period at a time
-    record(path, spec, world, controller, ...)    # a recording (source "robot", plant "mujoco")
+    run(plant, controller, duration, writer)      # one control period at a time -> Truth
+    record(path, spec, world, controller, ...)    # a recording (source "robot", plant "mujoco") -> Truth
 
 Each control period (40 ms): the plant's readings go to the controller
 (anything with `cycle(Sense) -> Actuate`: host_sim's SilController, or
@@ -11,12 +11,15 @@ tracker's noisy pose of C taken at the readings), then the physics runs on.
 
 The sidecar says source "robot" and plant "mujoco", with the twin's
 nominal robot parameters (what a user would believe their robot is) and
-the world; the plant's true values and effects never go in it.
+the world; the plant's true values and effects never go in it.  What
+only the plant knows (`Truth`: the true pose of C and the encoders'
+unrounded positions at each reading) is returned, for an answer key.
 """
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from host_sim.interface import CYCLE_S, Actuate, Sense
@@ -26,6 +29,14 @@ from host_sim.world import World
 from tools.proving_ground.plant import Plant
 from tools.proving_ground.robot_model import PlantSpec
 
+
+
+@dataclass
+class Truth:
+    """What the plant knows and a recording does not, one entry per control instant (row)."""
+
+    poses: list[tuple[float, float, float]] = field(default_factory=list)  # C's true pose
+    encoders: list[tuple[float, float]] = field(default_factory=list)  # ticks, not rounded (the readings' floor)
 
 
 class ProgramController:
@@ -62,28 +73,30 @@ class ProgramController:
 
 
 def run(plant: Plant, controller: object, duration: float, writer: RecordingWriter | None = None,
-        cycle_s: float = CYCLE_S) -> list[tuple[float, float, float]]:
-    """Drive the plant for `duration` s; returns the true pose of C at each control instant."""
-    truth = []
+        cycle_s: float = CYCLE_S) -> Truth:
+    """Drive the plant for `duration` s; returns the truth at each control instant."""
+    truth = Truth()
     for _ in range(int(round(duration / cycle_s))):
         pose = plant.true_pose()
         seen = plant.tracker_pose()
         pct = plant.emitter_pct  # the power of this reading's emitter-on sample
+        exact = plant.encoder_position()
         s = plant.sense()
         a: Actuate = controller.cycle(s)  # type: ignore[attr-defined]
         plant.actuate(a)
         if writer is not None:
             writer.row(plant.t, (a.i_left_ma / 1000.0, a.i_right_ma / 1000.0), (s.enc_l, s.enc_r), s.adc_on,
                        s.adc_off, s.vbat_mv / 1000.0, seen, emitter_pct=pct)
-        truth.append(pose)
+        truth.poses.append(pose)
+        truth.encoders.append(exact)
         plant.advance(cycle_s)
     return truth
 
 
 def record(path: str | Path, spec: PlantSpec, world: World, controller: object, duration: float, seed: int = 0,
            pose: tuple[float, float, float] | None = None, extra: dict[str, object] | None = None
-           ) -> list[tuple[float, float, float]]:
-    """Run a scenario and write it as a recording; returns the true poses (not written)."""
+           ) -> Truth:
+    """Run a scenario and write it as a recording; returns the truth (not written)."""
     plant = Plant(spec, world, pose, seed)
     meta = {"plant": "mujoco", "controller": getattr(controller, "name", "?"), "seed": seed,
             "emitter_pct": getattr(controller, "emitter_pct", 60), **(extra or {})}

@@ -24,6 +24,12 @@ puts a diagnosis (its JSON document, docs/diagnosis.md) beside the key:
   contact is not the plant's; docs/diagnosis.md), so the periods counted
   are those in 1 s blocks clear of every wall.
 
+The wheel-fit target is judged where it can be met: `perfect_twin_fit`
+scores the plant's own unrounded encoder positions (cases.truth_file) as a
+twin's prediction, on the windows the diagnosis judged its fit on.  No twin
+does better; where even it scores under the target, the encoders' rounding
+is most of what the wheels' counts vary by, and the case is listed apart.
+
 `score_sindy` judges the SINDy baseline (sindy_baseline.py) on the same
 case: whether one of its terms could name the concealed effect.
 """
@@ -102,7 +108,32 @@ PARAMS: dict[str, ParamMap] = {
 
 
 def load_key(path: str | Path) -> dict[str, Any]:
-    return json.loads(Path(path).read_text())  # type: ignore[no-any-return]
+    """The answer key, with the plant's unrounded encoder positions (n, 2) as "encoders" where
+    cases.make_case kept them beside it (suites generated before session 28 have none)."""
+    key: dict[str, Any] = json.loads(Path(path).read_text())
+    truth = Path(path).with_name(Path(path).name.replace(".answer.json", ".truth.npz"))
+    if truth.exists():
+        with np.load(truth) as data:
+            key["encoders"] = data["encoders"]
+    return key
+
+
+def perfect_twin_fit(exact: np.ndarray, rec: Recording, judged: list[list[float]]) -> float | None:
+    """The worse wheel's fit % (channels.fit_percent, as diagnosis judges it) of a twin that knows each
+    encoder's true unrounded position: the plant's own, `exact` (n, 2) ticks at each row, in the windows
+    `judged` ([t0, t1] of each: the diagnosis JSON's fit.judged).  None without windows."""
+    from host_sim.diagnosis.channels import fit_percent
+
+    rows = [np.arange(int(np.searchsorted(rec.t, t0 - 1e-6)), int(np.searchsorted(rec.t, t1 + 1e-6)))
+            for t0, t1 in judged]
+    if not rows:
+        return None
+    fits = []
+    for w in range(2):
+        y = np.concatenate([np.diff(rec.enc[r, w]).astype(float) for r in rows])
+        y_hat = np.concatenate([np.diff(exact[r, w]) for r in rows])
+        fits.append(fit_percent(y, y_hat))
+    return float(min(fits))
 
 
 def _nominal_field(nominal: RobotParams, library_name: str) -> float:
@@ -247,6 +278,8 @@ def score_case(key: dict[str, Any], diagnosis: dict[str, Any] | None, rec: Recor
         row["fit_before"] = _wheel_fit(diagnosis["fit"]["before"])
         row["fit_after"] = _wheel_fit(diagnosis["fit"]["after"])
         row["fit_ceiling"] = _wheel_fit(diagnosis["fit"].get("ceiling", {}))  # a twin right but for the rounding
+        if "encoders" in key and "judged" in diagnosis["fit"]:
+            row["fit_perfect"] = perfect_twin_fit(key["encoders"], rec, diagnosis["fit"]["judged"])
     if row["kind"] == "control":
         row["outcome"] = "right" if diagnosis and diagnosis["verdict"] == "match" else "false alarm"
         return row
