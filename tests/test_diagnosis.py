@@ -754,6 +754,39 @@ def test_workers_fit_side_by_side_to_the_same_diagnosis(tmp_path):
     assert json.dumps(shared.to_json()) == json.dumps(alone.to_json())
 
 
+def test_ctrl_c_while_workers_fit_exits_130_and_leaves_no_process(tmp_path):
+    """A terminal's Ctrl-C reaches the whole foreground group, the forked workers too: the command exits
+    130 without a traceback and no worker is left running."""
+    import os
+    import signal
+    import subprocess
+    import time
+
+    from tests.helpers import twinbot_cmd
+
+    rec = record(tmp_path, DEFAULT.replace(half_axle=0.0499), name="wide.csv")
+    # SIGINT's default handler, as under a terminal (a suite started with nohup & inherits it ignored)
+    proc = subprocess.Popen(twinbot_cmd("diagnose", str(rec.path), "--workers", "2"), stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    assert proc.stderr is not None
+    said = b""
+    deadline = time.monotonic() + 120
+    while b"side by side" not in said and time.monotonic() < deadline:
+        line = proc.stderr.readline()
+        if not line:
+            break
+        said += line
+    assert b"side by side" in said, said.decode()
+    os.killpg(proc.pid, signal.SIGINT)  # the group: as a terminal's Ctrl-C
+    assert proc.wait(timeout=60) == 130
+    rest = proc.stderr.read().decode()
+    assert "Traceback" not in rest, rest
+    time.sleep(0.5)
+    with pytest.raises(ProcessLookupError):  # nothing of the group is left
+        os.killpg(proc.pid, 0)
+
+
 def test_a_fit_on_the_sensors_alone_runs_no_physics(nominal_run, monkeypatch):
     """The IR channels are the twin's sensors on the recorded track, whatever its motion: an objective of
     sensor channels alone (an IR effect located on the ring) gets the same residuals without running the

@@ -263,8 +263,7 @@ def totals(rows: list[dict[str, Any]]) -> dict[str, Any]:
     wheel_ok = [r for r in judged if (r.get("fit_after") or -1e9) >= TARGET_WHEEL_FIT]
     # The target is judged where a perfect twin meets it (scoring.perfect_twin_fit: the plant's own unrounded
     # encoders; a suite without them counts every case); the rest are listed apart.
-    unattainable = [r for r in judged if (r.get("fit_perfect") if r.get("fit_perfect") is not None else 1e9)
-                    < TARGET_WHEEL_FIT]
+    unattainable = [r for r in judged if r.get("fit_perfect") is not None and r["fit_perfect"] < TARGET_WHEEL_FIT]
     attainable = [r for r in judged if r not in unattainable]
     attainable_ok = [r for r in attainable if r in wheel_ok]
     outcomes: dict[str, int] = {}

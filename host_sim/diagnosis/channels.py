@@ -155,7 +155,9 @@ def fit_percent(y: np.ndarray, y_hat: np.ndarray) -> float:
 def rounding_ceiling(y: np.ndarray, y_hat: np.ndarray, seed: int = 0) -> float:
     """The fit % (as fit_percent judges y) of a twin whose motion is right, against encoders that round it:
     the twin's counts per window (W, T - 1 increments) rounded down from a random sub-tick phase.  A steady
-    wheel moves a few ticks a period, so its rounding alone keeps the fit well below 100."""
+    wheel moves a few ticks a period, so its rounding alone keeps the fit well below 100.  Optimistic under a
+    speed loop, which answers each rounded count: there the rounding and the motion are not independent, as a
+    random phase takes them to be (docs/proving-ground.md, the perfect twin)."""
     phase = np.random.default_rng(seed).random((y_hat.shape[0], 1))
     counts = np.concatenate([np.zeros((y_hat.shape[0], 1)), np.cumsum(y_hat, axis=1)], axis=1) + phase
     spread = float(np.linalg.norm(y - y.mean()))

@@ -34,8 +34,8 @@ from __future__ import annotations
 
 import math
 import multiprocessing
+import signal
 from concurrent.futures import Executor, ProcessPoolExecutor
-from contextlib import nullcontext
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -428,14 +428,32 @@ def _residuals_in_worker(robots: list[RobotParams]) -> tuple[np.ndarray, np.ndar
     return _OBJECTIVE.residuals_here(robots)
 
 
-def _fitting_pool(obj: Objective, workers: int) -> Executor | None:
+def _fitting_pool(obj: Objective, workers: int) -> ProcessPoolExecutor | None:
     """Processes that screen and fit side by side (None for one worker).  Each figure is the one the
     parent would have computed, number for number: only the time changes."""
     global _OBJECTIVE
     if workers <= 1 or "fork" not in multiprocessing.get_all_start_methods():  # Windows: one process
         return None
     _OBJECTIVE = obj  # before the workers fork, so that each has it
-    return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"))
+    return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
+                               initializer=_leave_ctrl_c_to_the_parent)
+
+
+def _leave_ctrl_c_to_the_parent() -> None:
+    """A worker's start: a terminal's Ctrl-C reaches every process of its group, and a worker would print
+    its own traceback; the parent stops the workers instead (_stop_workers)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _stop_workers(pool: ProcessPoolExecutor) -> None:
+    """Interrupted: end the workers' fits now rather than wait for them."""
+    terminate = getattr(pool, "terminate_workers", None)  # Python 3.14+
+    if terminate is not None:
+        terminate()
+        return
+    for proc in list((getattr(pool, "_processes", None) or {}).values()):
+        proc.terminate()
+    pool.shutdown(wait=True, cancel_futures=True)
 
 
 def select(obj: Objective, base: RobotParams, cands: list[Candidate],
@@ -446,12 +464,17 @@ def select(obj: Objective, base: RobotParams, cands: list[Candidate],
     (forked: where a platform cannot fork, in this one)."""
     global _OBJECTIVE
     fitters = _fitting_pool(obj, workers)
-    with fitters or nullcontext():
-        obj.workers = fitters
-        try:
-            return _select(obj, base, cands, progress, located, fitters)
-        finally:
-            obj.workers = _OBJECTIVE = None  # the workers forked with their own copy: hold the recording no longer
+    obj.workers = fitters
+    try:
+        return _select(obj, base, cands, progress, located, fitters)
+    except BaseException:  # Ctrl-C above all: the workers' fits are dropped, not awaited
+        if fitters is not None:
+            _stop_workers(fitters)
+        raise
+    finally:
+        if fitters is not None:
+            fitters.shutdown(wait=True)
+        obj.workers = _OBJECTIVE = None  # the workers forked with their own copy: hold the recording no longer
 
 
 def _select(obj: Objective, base: RobotParams, cands: list[Candidate], progress: Callable[[str], None] | None,
