@@ -255,6 +255,17 @@ def test_a_kept_suite_is_scored_again_without_diagnosing(suite: dict[str, Any], 
     assert [{k: r.get(k) for k in keep} for r in report["cases"]] == \
         [{k: r.get(k) for k in keep} for r in suite["report"]["cases"]]
     assert f"--rescore {moved}" in capsys.readouterr().out
+    assert all("fit_perfect" in r for r in report["cases"] if "fit_before" in r)
+    # a suite kept before the truth files: scored alike, every case counted, diagnosis's ceiling shown
+    for truth in (moved / "answer_keys").glob("*.truth.npz"):
+        truth.rename(truth.with_suffix(".gone"))
+    assert cli.main(["bench", "diagnose", "--rescore", str(moved), "--json", str(again)]) == 0
+    old = json.loads(again.read_text())
+    assert not any("fit_perfect" in r for r in old["cases"])
+    assert old["totals"]["wheel_attainable"] == old["totals"]["wheel_judged"] and not old["totals"]["wheel_unattainable"]
+    assert "(c " in capsys.readouterr().out
+    for truth in (moved / "answer_keys").glob("*.truth.gone"):
+        truth.rename(truth.with_suffix(".npz"))
     assert cli.main(["bench", "diagnose", "--rescore", str(moved), "--out", str(tmp_path / "new")]) == 2
     assert "give one of them" in capsys.readouterr().err
     first_key = moved / "answer_keys" / f"case_{report['seeds'][0]:04d}.answer.json"
