@@ -418,13 +418,11 @@ _OBJECTIVE: Objective | None = None  # what a fitting worker fits: select's, inh
 
 def _fit_in_worker(base: RobotParams, effects: list[Candidate], start: list[list[float]]) -> Model:
     assert _OBJECTIVE is not None
-    _OBJECTIVE.workers = None  # a worker works alone (its copy of the pool is the parent's)
     return fit_model(_OBJECTIVE, base, effects, start)
 
 
 def _residuals_in_worker(robots: list[RobotParams]) -> tuple[np.ndarray, np.ndarray]:
     assert _OBJECTIVE is not None
-    _OBJECTIVE.workers = None
     return _OBJECTIVE.residuals_here(robots)
 
 
@@ -436,12 +434,15 @@ def _fitting_pool(obj: Objective, workers: int) -> ProcessPoolExecutor | None:
         return None
     _OBJECTIVE = obj  # before the workers fork, so that each has it
     return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
-                               initializer=_leave_ctrl_c_to_the_parent)
+                               initializer=_worker_start)
 
 
-def _leave_ctrl_c_to_the_parent() -> None:
-    """A worker's start: a terminal's Ctrl-C reaches every process of its group, and a worker would print
-    its own traceback; the parent stops the workers instead (_stop_workers)."""
+def _worker_start() -> None:
+    """In each worker as it starts: it works alone (its copy of the pool is the parent's), and it leaves
+    Ctrl-C to the parent, which stops the workers (_stop_workers); a terminal's Ctrl-C reaches every process
+    of its group, and each worker would print its own traceback."""
+    assert _OBJECTIVE is not None
+    _OBJECTIVE.workers = None
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
@@ -466,7 +467,7 @@ def select(obj: Objective, base: RobotParams, cands: list[Candidate],
     fitters = _fitting_pool(obj, workers)
     obj.workers = fitters
     try:
-        return _select(obj, base, cands, progress, located, fitters)
+        return _select(obj, base, cands, progress, located)
     except BaseException:  # Ctrl-C above all: the workers' fits are dropped, not awaited
         if fitters is not None:
             _stop_workers(fitters)
@@ -478,7 +479,7 @@ def select(obj: Objective, base: RobotParams, cands: list[Candidate],
 
 
 def _select(obj: Objective, base: RobotParams, cands: list[Candidate], progress: Callable[[str], None] | None,
-            located: list[str] | None, fitters: Executor | None) -> list[Model]:
+            located: list[str] | None) -> list[Model]:
     say = progress or (lambda _t: None)
     r_train, r_test = obj.residuals([base])
     chain = [Model([], [], base, float(r_train[0] @ r_train[0]), float(r_test[0] @ r_test[0]), int(r_train.size),
@@ -493,6 +494,7 @@ def _select(obj: Objective, base: RobotParams, cands: list[Candidate], progress:
             break
         say(f"effect {step + 1}: screening {len(pool)} candidates")
         shortlist = screen(obj, base, current, pool, SHORTLIST)
+        fitters = obj.workers
         if fitters is None:
             tried = []
             for cand, start in shortlist:
