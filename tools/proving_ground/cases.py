@@ -34,6 +34,7 @@ from host_sim.sil import SilController
 from host_sim.world import BUILTIN_NAMES, World, builtin_world
 from tools.proving_ground import effects
 from tools.proving_ground.recorder import record
+from tools.proving_ground.scoring import truth_file
 from tools.proving_ground.robot_model import PlantSpec, nominal_spec
 
 CONTROL_SHARE = 0.15  # fraction of cases with no effect at all
@@ -113,11 +114,6 @@ def make_case(seed: int, out_dir: str | Path, duration: float = 90.0,
     key_path = key_dir / f"{name}.answer.json"
     key_path.write_text(json.dumps(key, indent=1) + "\n")
     return rec_path, key_path
-
-
-def truth_file(key_dir: str | Path, name: str) -> Path:
-    """Where make_case keeps what only the plant knows of case `name` (beside its answer key)."""
-    return Path(key_dir) / f"{name}.truth.npz"
 
 
 def _expected(concealed: list[dict[str, object]]) -> str:

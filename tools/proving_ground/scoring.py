@@ -25,7 +25,7 @@ puts a diagnosis (its JSON document, docs/diagnosis.md) beside the key:
   are those in 1 s blocks clear of every wall.
 
 The wheel-fit target is judged where it can be met: `perfect_twin_fit`
-scores the plant's own unrounded encoder positions (cases.truth_file) as a
+scores the plant's own unrounded encoder positions (truth_file) as a
 twin's prediction, on the windows the diagnosis judged its fit on.  No twin
 does better; where even it scores under the target, the encoders' rounding
 is most of what the wheels' counts vary by, and the case is listed apart.
@@ -111,11 +111,16 @@ def load_key(path: str | Path) -> dict[str, Any]:
     """The answer key, with the plant's unrounded encoder positions (n, 2) as "encoders" where
     cases.make_case kept them beside it (suites generated before session 28 have none)."""
     key: dict[str, Any] = json.loads(Path(path).read_text())
-    truth = Path(path).with_name(Path(path).name.replace(".answer.json", ".truth.npz"))
+    truth = truth_file(Path(path).parent, Path(path).name.removesuffix(".answer.json"))
     if truth.exists():
         with np.load(truth) as data:
             key["encoders"] = data["encoders"]
     return key
+
+
+def truth_file(key_dir: str | Path, name: str) -> Path:
+    """Where cases.make_case keeps what only the plant knows of case `name`, beside its answer key."""
+    return Path(key_dir) / f"{name}.truth.npz"
 
 
 def perfect_twin_fit(exact: np.ndarray, rec: Recording, judged: list[list[float]]) -> float | None:
