@@ -311,13 +311,16 @@ def test_the_wheel_fit_target_sets_apart_what_no_twin_could_meet() -> None:
     without the truth (a suite from before session 28) is counted."""
     base = {"kind": "control", "outcome": "right", "excitation": "firmware", "rule_set": 1, "fit_before": 80.0,
             "sindy": {"error": "not run"}, "seconds_per_90s": 1.0, "cpu_seconds_per_90s": 1.0}
-    rows = [{**base, "case": "case_0001", "fit_after": 95.0, "fit_perfect": 97.0},
+    rows = [{**base, "case": "case_0001", "fit_after": 95.0, "fit_perfect": 97.0, "fit_ceiling": 97.5},
             {**base, "case": "case_0002", "fit_after": 88.0, "fit_perfect": 89.0},  # apart
             {**base, "case": "case_0003", "fit_after": 85.0, "fit_perfect": 96.0},  # a miss
             {**base, "case": "case_0004", "fit_after": 92.0}]  # no truth: counted
     t = bench_diagnose.totals(rows)
     assert (t["wheel_attainable_ok"], t["wheel_attainable"], t["wheel_ok"], t["wheel_judged"]) == (2, 3, 2, 4)
     assert t["wheel_unattainable"] == [{"case": "case_0002", "fit_after": 88.0, "fit_perfect": 89.0}]
+    # the controls against their perfect twin: the twin under it, diagnosis's ceiling over it
+    assert t["perfect_twin_controls"] == {"firmware": {"cases": 3, "twin_under_median": 2.0, "twin_under_max": 11.0,
+                                                       "ceiling_over_median": 0.5, "ceiling_over_max": 0.5}}
     target = next(x for x in bench_diagnose.targets(t) if x["name"] == "wheel_fit")
     assert not target["met"] and "2/3" in target["text"] and "1 where it does not, apart; in all 2/4" in target["text"]
     assert bench_diagnose.case_row({**rows[1], "truth": "none (control)", "verdict": "match", "named": "-"})[7] == \

@@ -291,6 +291,7 @@ def totals(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "wheel_share": _share(len(attainable_ok), len(attainable)),
         "wheel_unattainable": [{"case": r["case"], "fit_after": r.get("fit_after"), "fit_perfect": r["fit_perfect"]}
                                for r in unattainable],
+        "perfect_twin_controls": _against_perfect_twin(controls),
         "wheel_fit_before_median": _median([r.get("fit_before") for r in judged]),
         "wheel_fit_after_median": _median([r.get("fit_after") for r in judged]),
         "seconds_median": statistics.median(secs), "seconds_max": max(secs),
@@ -305,6 +306,22 @@ def totals(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "seconds_median": _median([r["sindy"]["seconds"] for r in sindy_ok]),
         },
     }
+
+
+def _against_perfect_twin(controls: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Per drive, on the controls with a perfect twin: how far the twin's fit stands under it and diagnosis's
+    ceiling over it (percentage points: median, max, count)."""
+    out: dict[str, dict[str, Any]] = {}
+    for drive in sorted({str(r["excitation"]) for r in controls}):
+        rows = [r for r in controls if r["excitation"] == drive and r.get("fit_perfect") is not None
+                and r.get("fit_after") is not None]
+        if not rows:
+            continue
+        under = [r["fit_perfect"] - r["fit_after"] for r in rows]
+        over = [r["fit_ceiling"] - r["fit_perfect"] for r in rows if r.get("fit_ceiling") is not None]
+        out[drive] = {"cases": len(rows), "twin_under_median": statistics.median(under), "twin_under_max": max(under),
+                      "ceiling_over_median": _median(over), "ceiling_over_max": max(over) if over else None}
+    return out
 
 
 RULE_SETS = {0: "first", 1: "refined"}  # the firmware's fuzzy rule sets (protocol parameter 4)
@@ -387,6 +404,10 @@ def _f(x: float | None) -> str:
     return "-" if x is None else f"{x:.0f}"
 
 
+def _f2(x: float | None) -> str:
+    return "-" if x is None else f"{x:.2f}"
+
+
 def _clip(text: str, n: int) -> str:
     return text if len(text) <= n else text[:n - 1] + "~"
 
@@ -437,6 +458,10 @@ def print_report(report: dict[str, Any]) -> None:
         print(f"apart from the wheel-fit target, a perfect twin under {TARGET_WHEEL_FIT:.0f} % (the encoders' rounding "
               f"is most of what the wheels vary by; fitted / perfect): "
               + ", ".join(f"{r['case'].replace('case_', '')} {_f(r['fit_after'])}/{_f(r['fit_perfect'])}" for r in apart))
+    for drive, g in t.get("perfect_twin_controls", {}).items():
+        print(f"controls, {drive}: the twin's fit under the perfect twin's by {g['twin_under_median']:.2f} points "
+              f"(median of {g['cases']}; max {g['twin_under_max']:.2f}); diagnosis's ceiling over it by "
+              f"{_f2(g['ceiling_over_median'])} (max {_f2(g['ceiling_over_max'])})")
     s = t["sindy"]
     print(f"SINDy: median {_f(s['active_terms_median'])} active terms; a single term names the effect in "
           f"{s['named_excited']}/{s['excited']} excited in-library cases; silent on {s['silent_controls']}/"
