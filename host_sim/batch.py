@@ -234,6 +234,13 @@ class BatchSim:
         self._wall_force = np.zeros((2, self.n, max(world.n_walls, 1)))
         self._walls = world.n_walls > 0
 
+    def place(self, poses: Any) -> None:
+        """Put the robots at (x, y, phi) `poses` ((N, 3), q's first three) as they are otherwise (speeds,
+        gears, slides, commands on their way): a replayed window starts on its recorded pose."""
+        self.q[:, :3] = np.asarray(poses, dtype=float)
+        self._gap[:] = -1.0  # the broad phase measured its gaps where the robots were
+        self._warm[:] = False
+
     def start_sliding(self, slides: Any, body: Any) -> None:
         """Robots `slides` ((N,) bool) start sliding over the floor with body velocity (u, l, omega) of C
         `body` ((N, 3)), not rolling at their wheels' speeds: a replay from a row where the tracker saw the

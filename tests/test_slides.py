@@ -55,12 +55,19 @@ def test_a_replay_from_a_slide_follows_the_slide(runs):
     batch = replay_batch(ice, ICE, k, stop=k + rows, sensors=False)
     error = np.hypot(*(batch.pose[:, 0, :2] - ice.pose[k:k + rows, :2]).T)
     assert error.max() < 0.005, error  # 3 mm in 0.16 s; rolling from the wheels' speed, 14 mm
-    # the diagnosis's windows alike
-    windows = Windows(np.array([k]), rows, np.array([False]))
+    # the diagnosis's windows alike, started on the window's first row
+    windows = Windows(np.array([k]), rows, np.array([False]), lead=0)
     judge_slides(ice, windows, ICE, np.array([False]))
     assert windows.sliding is not None and windows.sliding[0]
     run = run_windows(ice, windows, ICE, ARENA)
-    assert np.hypot(*(run.pose[0, 0, :, :2] - ice.pose[k:k + rows, :2]).T).max() < 0.005
+    started = np.hypot(*(run.pose[0, 0, :, :2] - ice.pose[k:k + rows, :2]).T).max()
+    assert started < 0.005
+    # or LEAD_ROWS before it, rolling then: the twin slides into the window by itself and carries the slide on
+    windows = Windows(np.array([k]), rows, np.array([False]))
+    judge_slides(ice, windows, ICE, np.array([False]))
+    assert windows.sliding is not None and not windows.sliding[0] and sliding_rows(ice, ICE)[0][k]
+    run = run_windows(ice, windows, ICE, ARENA)
+    assert np.hypot(*(run.pose[0, 0, :, :2] - ice.pose[k:k + rows, :2]).T).max() < 0.25 * started  # 0.1 mm, 2.7
     one = replay(ice, ICE, ARENA, k, k + rows)
     np.testing.assert_allclose(one.pose, batch.pose[:, 0], atol=1e-6)
     # a robot with an effect steps through a BatchSim of one: it too starts sliding
