@@ -245,23 +245,24 @@ def test_an_odometry_sized_error_is_located_over_whole_windows(tmp_path, nominal
 
 
 def test_an_encoder_error_under_the_threshold_over_1_s_is_located_over_5_s(tmp_path):
-    """An encoder 1.8 % fine, under the manoeuvre's open-loop drive.  Each window starts the twin's wheels at
-    the speed the counts give at the nominal scale, and that start takes back half the error over 1 s
-    (0.8 % more counts, under the 1 % threshold) but little of it over 5 s (1.5 %): blind case 0086."""
+    """An encoder 1.5 % fine, under the manoeuvre's open-loop drive.  Each window's twin enters at the speed
+    the counts give at the nominal scale (its lead-in matches them), and that start takes back nearly half
+    the error over 1 s (0.8 % more counts, under the 1 % threshold) but little of it over 5 s (1.3 %):
+    blind case 0086's 1.8 % showed so before the lead-in (now 1.0 % over 1 s)."""
     from host_sim.diagnosis.compare import compare_all
 
     counts = ("count_l", "count_r")
-    rec = record_manoeuvre(tmp_path, E.apply(DEFAULT, "encoder_scale", "both", [22.0]), 60.0)
+    rec = record_manoeuvre(tmp_path, E.apply(DEFAULT, "encoder_scale", "both", [18.0]), 60.0)
     assert not [f for f in compare(rec, DEFAULT, ARENA).findings if f.channel in counts]
     found = {f.channel: f for f in compare_all(rec, DEFAULT, ARENA)[0].findings if f.channel in counts}
-    assert set(found) == set(counts) and all(0.012 < f.mean < 0.02 and f.z > 10 for f in found.values()), found
+    assert set(found) == set(counts) and all(0.011 < f.mean < 0.015 and f.z > 10 for f in found.values()), found
     nominal = record_manoeuvre(tmp_path, DEFAULT, 60.0)
     first, longer = compare_all(nominal, DEFAULT, ARENA)
     assert not first.findings and rule_margins(first, nominal, DEFAULT, ARENA, longer)["scale"][0] < 1
     d = diagnose(rec, DEFAULT, ARENA)
     assert d.verdict == "explained" and [e["name"] for e in d.effects] == ["encoder_scale"], d.summary()
     (param,) = d.effects[0]["params"].values()
-    assert param["value"] == pytest.approx(22.0, rel=0.15)
+    assert param["value"] == pytest.approx(18.0, rel=0.15)
 
 
 def test_json_html_and_parameter_file_from_the_command(tmp_path):
@@ -376,6 +377,27 @@ def test_no_window_starts_on_a_step_of_the_identification_manoeuvre(nominal_run)
         assert w.start[0] == 12 and (np.diff(w.start) == w.rows).all()
         for step in (1.0, 0.6):
             assert (np.abs(t / step - np.round(t / step)) * step > 0.03).all(), (seconds, step)
+
+
+def test_each_window_twin_enters_from_its_lead_in(tmp_path, monkeypatch):
+    """The twin replays LEAD_ROWS rows before each window and enters it at its wheel speeds set right by the
+    counts' residual there: on the twin's own manoeuvre its held-out wheel fit then stands at the rounding's
+    ceiling, and the forward motion's near a perfect 100.  Started on each window's first row instead (the
+    encoders' central difference, off at every command step) both fall short."""
+    from host_sim.diagnosis import windows
+
+    rec = record_manoeuvre(tmp_path, DEFAULT, 30.0)
+    led = compare(rec, DEFAULT, ARENA, locate=False)
+    assert led.windows.lead == windows.LEAD_ROWS > 0
+    for wheel in ("wheel_l", "wheel_r"):
+        assert led.fit[wheel] > led.ceiling[wheel] - 0.1, (led.fit, led.ceiling)
+    assert led.fit["forward"] > 99.5, led.fit
+    monkeypatch.setattr(windows, "LEAD_ROWS", 0)
+    cold = compare(rec, DEFAULT, ARENA, locate=False)
+    assert cold.windows.lead == 0
+    for wheel in ("wheel_l", "wheel_r"):
+        assert cold.fit[wheel] < led.fit[wheel] - 0.2, (cold.fit, led.fit)
+    assert cold.fit["forward"] < led.fit["forward"] - 0.2, (cold.fit, led.fit)
 
 
 def test_an_effect_seen_in_one_channel_is_judged_on_that_channels_held_out_residuals(tmp_path, nominal_run):

@@ -2,10 +2,10 @@
 
 A long open-loop replay drifts, and after a few seconds it says more about
 the drift than about the robot.  Windows restart the twin from what the
-recording says at their first row (tracker pose where there is one, wheel
-angles and speeds from the encoders) and drive it open loop with the
-recorded current references, so each window's residuals speak of the
-physics of those few seconds.  All windows run at once, one robot of a
+recording says (tracker pose where there is one, wheel angles and speeds
+from the encoders) LEAD_ROWS rows before their first, and drive it open
+loop with the recorded current references, so each window's residuals
+speak of the physics of those few seconds.  All windows run at once, one robot of a
 host_sim.batch.BatchSim each (host_sim/replay.replay_batch is the one-window
 case): the batch path does the heavy lifting.
 
