@@ -65,6 +65,7 @@ class Windows:
     sliding: np.ndarray | None = None  # (W,) bool: the window starts with the robot sliding (judge_slides)
     body: np.ndarray | None = None  # (W, 3) the tracked (u, l, omega) of C where each window's twin starts
     lead: int = LEAD_ROWS  # rows the twin replays before each window (0: it starts on the window's first row)
+    lead_slides: np.ndarray | None = None  # (W,) bool: the tracker sees the robot slide in the lead-in (judge_slides)
 
     def __post_init__(self) -> None:
         if len(self.start) and int(np.min(self.start)) < self.lead:
@@ -75,12 +76,18 @@ class Windows:
         """These windows only (keep: (W,) bool or indices), with what judge_slides found of each."""
         return Windows(self.start[keep], self.rows, self.held_out[keep], self.substeps,
                        None if self.sliding is None else self.sliding[keep],
-                       None if self.body is None else self.body[keep], self.lead)
+                       None if self.body is None else self.body[keep], self.lead,
+                       None if self.lead_slides is None else self.lead_slides[keep])
 
     @property
     def twin_start(self) -> np.ndarray:
         """(W,) the row each window's twin starts on: `lead` rows before the window."""
         return self.start - self.lead
+
+    @property
+    def lead_index(self) -> np.ndarray:
+        """(W, lead + 1) the rows of each window's lead-in and the window's first."""
+        return self.twin_start[:, None] + np.arange(self.lead + 1)[None, :]
 
     @property
     def index(self) -> np.ndarray:
@@ -124,6 +131,7 @@ def judge_slides(rec: Recording, windows: Windows, p: RobotParams, contact: np.n
     slides, body = sliding_rows(rec, p)
     windows.sliding = slides[windows.twin_start]  # windows start OFFSET_S in: never at a simulator run's rest
     windows.body = body[windows.twin_start]
+    windows.lead_slides = slides[windows.lead_index].any(axis=1)
     free = ~contact
     sliding = slides[windows.index].any(axis=1) & free
     windows.substeps = FINE_SUBSTEPS if free.any() and sliding.sum() >= SLIDING_SHARE * free.sum() else SUBSTEPS
@@ -211,10 +219,12 @@ def _run_windows(rec: Recording, windows: Windows, params: Any, world: World | N
     q = np.empty((n_win, n_sets, 5))
     v = np.empty((n_win, n_sets, 2))
     on_track = np.empty((n_win, n_sets, 3))  # where each window's twin stands on its first row
+    cold = np.empty((n_win, n_sets, 2))  # and its wheel speeds from the encoders there
     for s, p in enumerate(robots):
         q[:, s], v[:, s] = initial_states(rec, first, p)
         if windows.lead:
-            on_track[:, s] = initial_states(rec, windows.start, p)[0][:, :3]
+            q_k, cold[:, s] = initial_states(rec, windows.start, p)
+            on_track[:, s] = q_k[:, :3]
     per_robot = robots[0] if n_sets == 1 else [p for _w in range(n_win) for p in robots]
     sim = BatchSim(world if rec.pose is not None else None, per_robot, q=q.reshape(-1, 5), v=v.reshape(-1, 2),
                    base=base, substeps=substeps)
@@ -227,7 +237,7 @@ def _run_windows(rec: Recording, windows: Windows, params: Any, world: World | N
         sim.start_sliding(np.repeat(windows.sliding, n_sets), np.repeat(windows.body, n_sets, axis=0))
     tpr = _ticks_per_rev(robots, n_win)
     if windows.lead:
-        _lead_in(rec, windows, sim, inputs, n_sets, tpr, substeps)
+        _lead_in(rec, windows, sim, inputs, n_sets, tpr, substeps, world, robots[0], cold.reshape(-1, 2))
         sim.place(on_track.reshape(-1, 3))  # the window starts on the recorded pose, as without a lead-in
     cmd = np.repeat(inputs.cmd[idx.T][:, :, None, :], n_sets, axis=2).reshape(n_rows, n_win * n_sets, 2)
     res = sim.run_inputs(cmd, substeps=substeps, sensors=False, period=period)
@@ -239,25 +249,53 @@ def _run_windows(rec: Recording, windows: Windows, params: Any, world: World | N
 
 
 def _lead_in(rec: Recording, windows: Windows, sim: BatchSim, inputs: Any, n_sets: int, tpr: np.ndarray,
-             substeps: int) -> None:
+             substeps: int, world: World | None, p: RobotParams, cold: np.ndarray) -> None:
     """Replay the `lead` rows before every window (LEAD_ROWS), then set each twin's wheel speeds right by the
     least-squares slope of the counts' residual over them (the rows before the window and its first).  What
-    else the twin carries into the window (a gear's gap, a slide, the commands in a delay) it keeps."""
+    else the twin carries into the window (a gear's gap, a slide, the commands in a delay) it keeps.
+
+    The slope is a speed error the wheels carry on only where they roll free.  A wheel spinning on ice has
+    its speed set by the floor within milliseconds: where the recorded robot or its twin slides, the twin
+    enters as the lead-in leaves it (with the correction, ice 0046 fitted a delay it did not have).  A
+    lead-in at a wall starts the twin from a tracked pose that may be a millimetre into the wall, and its
+    contact throws the wheels: where the recorded robot comes within CONTACT_MARGIN of a wall, or its twin
+    touches one, the twin enters rolling at the wheel speeds the encoders give on the window's first row
+    (`cold`, (W * N, 2)), as without a lead-in (blind control 0075's firmware backed out of a stall at
+    39 counts a period, its twin at 67)."""
     lead = windows.lead
-    rows = windows.twin_start[:, None] + np.arange(lead)[None, :]  # (W, lead)
+    rows = windows.lead_index[:, :-1]  # (W, lead)
     n_win = len(windows)
     cmd = np.repeat(inputs.cmd[rows.T][:, :, None, :], n_sets, axis=2).reshape(lead, n_win * n_sets, 2)
     period = np.median(inputs.period[rows], axis=0)
-    res = sim.run_inputs(cmd, substeps=substeps, sensors=False, period=period)
-    assert res.theta is not None
-    twin = np.concatenate([res.theta, sim.encoder_angles()[None]]) * (tpr / (2 * np.pi))  # (lead + 1, W * N, 2)
-    seen = np.repeat(rec.enc[np.concatenate([rows, windows.start[:, None]], axis=1).T], n_sets, axis=1)
+    theta = np.empty((lead + 1, n_win * n_sets, 2))
+    slid = np.repeat(windows.lead_slides if windows.lead_slides is not None else np.zeros(n_win, bool), n_sets)
+    walled = np.repeat(_near_a_wall(rec, windows, world, p), n_sets)
+    for j in range(lead):
+        res = sim.run_inputs(cmd[j:j + 1], substeps=substeps, sensors=False, period=period[j:j + 1])
+        assert res.theta is not None
+        theta[j] = res.theta[0]
+        slid |= sim.slipping
+        walled |= sim.in_contact | (res.collisions > 0)
+    theta[lead] = sim.encoder_angles()
+    twin = theta * (tpr / (2 * np.pi))  # (lead + 1, W * N, 2)
+    seen = np.repeat(rec.enc[windows.lead_index.T], n_sets, axis=1)
     n = np.arange(lead + 1, dtype=float) - lead / 2
     slope = np.einsum("j,jrw->rw", n, seen - twin) / float(n @ n)  # counts per row, each robot and wheel
-    dv = slope * (2 * np.pi) / tpr / float(np.median(period))
-    sim.v = sim.v + dv
+    dv = np.where((slid | walled)[:, None], 0.0, slope * (2 * np.pi) / tpr / float(np.median(period)))
+    v = np.where(walled[:, None], cold, sim.v + dv)
     if sim.rotor_speed is not None:  # a gear's motor side turns on with its wheel
-        sim.rotor_speed = sim.rotor_speed + dv
+        sim.rotor_speed = np.where(walled[:, None], cold, sim.rotor_speed + dv)
+    sim.v = v
+    sim.slipping &= ~walled
+
+
+def _near_a_wall(rec: Recording, windows: Windows, world: World | None, p: RobotParams) -> np.ndarray:
+    """(W,) bool: the tracker sees the robot within CONTACT_MARGIN of a wall in the lead-in."""
+    if rec.pose is None or world is None or not world.n_walls:
+        return np.zeros(len(windows), dtype=bool)
+    idx = windows.lead_index
+    dist, _away = world.nearest_wall(rec.pose[idx.reshape(-1), :2])
+    return (dist.reshape(idx.shape) < p.body_radius + CONTACT_MARGIN).any(axis=1)
 
 
 def _last_push(cmd: np.ndarray, start: np.ndarray) -> np.ndarray:
