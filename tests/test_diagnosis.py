@@ -400,6 +400,31 @@ def test_each_window_twin_enters_from_its_lead_in(tmp_path, monkeypatch):
     assert cold.fit["forward"] < led.fit["forward"] - 0.2, (cold.fit, led.fit)
 
 
+def test_a_window_whose_lead_in_is_at_a_wall_starts_as_without_one(tmp_path):
+    """A lead-in at a wall starts the twin from a tracked pose that may be a millimetre into it, and its
+    contact throws the wheels (blind control 0075's firmware backed out of a stall at 39 counts a period, its
+    twin at 67: a false alarm).  So where the recorded robot comes within CONTACT_MARGIN of a wall in the
+    lead-in, the twin enters rolling at the encoders' speeds on the window's first row, as a window without a
+    lead-in starts; away from the walls it enters from its lead-in."""
+    from host_sim.diagnosis.windows import CONTACT_MARGIN, Windows, run_windows
+    from tools.proving_ground.recorder import ProgramController
+
+    back_off = ProgramController([(0.06, 0.065)] * 75 + [(0.45, 0.4)] * 50 + [(-0.02, -0.02)] * 60)
+    rec = record(tmp_path, DEFAULT, duration=8.0, name="back_off.csv", world=ARENA, pose=(1.4, 1.4, 5 * np.pi / 4),
+                 controller=back_off)
+    gap = ARENA.nearest_wall(rec.pose[:, :2])[0] - DEFAULT.body_radius
+    at_wall = np.flatnonzero(gap < CONTACT_MARGIN)
+    assert at_wall.size and at_wall[-1] < 150, "the robot never reached the wall, or never left it"
+    for k, walled in ((int(at_wall[-1]) + 3, True), (int(at_wall[-1]) + 40, False)):
+        window = Windows(np.array([k]), 10, np.array([False]))
+        assert (gap[k:k + 10] > CONTACT_MARGIN).all()  # the window itself is off the wall
+        led = np.diff(run_windows(rec, window, DEFAULT, ARENA).enc, axis=2)
+        cold = np.diff(run_windows(rec, Windows(np.array([k]), 10, np.array([False]), lead=0), DEFAULT, ARENA).enc,
+                       axis=2)
+        assert np.abs(cold).max() > 1.0  # the wheels turn
+        assert np.allclose(led, cold, atol=1e-9) == walled, (k, led[0, 0, :3], cold[0, 0, :3])
+
+
 def test_an_effect_seen_in_one_channel_is_judged_on_that_channels_held_out_residuals(tmp_path, nominal_run):
     """A track 4 % narrow shows in each window's turn, a few dozen held-out residuals among thousands of
     noise: the fit is judged on the located channel's part too.  Its columns are the held-out windows' turn

@@ -6,6 +6,8 @@ simulator's truth.
 """
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 
@@ -14,6 +16,7 @@ from host_sim.batch import SUBSTEPS
 from host_sim.diagnosis.compare import compare
 from host_sim.diagnosis.windows import FINE_SUBSTEPS, Windows, judge_slides, run_windows
 from host_sim.params import DEFAULT
+from host_sim.recording import Recording
 from host_sim.replay import replay, replay_batch, rolling_velocity, sliding_rows, tracked_velocity
 from tests.test_diagnosis import ARENA, record_manoeuvre
 
@@ -81,3 +84,30 @@ def test_windows_step_finer_where_the_robot_slides(runs):
     nominal, ice = runs
     assert compare(nominal, DEFAULT, ARENA, locate=False).windows.substeps == SUBSTEPS
     assert compare(ice, DEFAULT, ARENA, locate=False).windows.substeps == FINE_SUBSTEPS > SUBSTEPS
+
+
+def _lead_in_says_faster(rec, k: int) -> Recording:
+    """rec with the counts of window row k's lead-in bent to say the wheels turn faster (a slope of 6/28
+    counts a period over its seven rows), the rows the twin's start speeds are read from left alone."""
+    bent = copy.deepcopy(rec)
+    bent.enc[k - 4:k - 1] += np.array([-3, 0, 3])[:, None]
+    return bent
+
+
+def test_the_lead_in_counts_steer_the_twin_only_where_it_rolls(runs):
+    """A wheel that spins on ice has its speed set by the floor within milliseconds, so the speed error the
+    lead-in's counts show is not one it carries into the window: where the tracker sees a slide in the
+    lead-in, the twin (nominal: it rolls) enters as the lead-in leaves it.  Where the robot rolls, the same
+    counts set its speed."""
+    _nominal, ice = runs
+    slides = sliding_rows(ice, DEFAULT)[0]
+    k_slide = _slide_row(ice, ICE)
+    lead = Windows(np.array([k_slide]), 5, np.array([False])).lead
+    rolls = [k for k in range(40, len(ice) - 30) if not slides[k - lead - 1:k + 6].any()]
+    for k, steered in ((k_slide, False), (rolls[len(rolls) // 2], True)):
+        windows = Windows(np.array([k]), 5, np.array([False]))
+        judge_slides(ice, windows, DEFAULT, np.array([False]))
+        assert windows.lead_slides is not None and bool(windows.lead_slides[0]) != steered
+        run = run_windows(ice, windows, DEFAULT, None).enc
+        bent = run_windows(_lead_in_says_faster(ice, k), windows, DEFAULT, None).enc
+        assert np.allclose(np.diff(run, axis=2), np.diff(bent, axis=2), atol=1e-9) != steered, k

@@ -294,8 +294,8 @@ def _near_a_wall(rec: Recording, windows: Windows, world: World | None, p: Robot
     if rec.pose is None or world is None or not world.n_walls:
         return np.zeros(len(windows), dtype=bool)
     idx = windows.lead_index
-    dist, _away = world.nearest_wall(rec.pose[idx.reshape(-1), :2])
-    return (dist.reshape(idx.shape) < p.body_radius + CONTACT_MARGIN).any(axis=1)
+    dist = world.nearest_wall(rec.pose[idx.reshape(-1), :2])[0]
+    return np.asarray((dist.reshape(idx.shape) < p.body_radius + CONTACT_MARGIN).any(axis=1))
 
 
 def _last_push(cmd: np.ndarray, start: np.ndarray) -> np.ndarray:
