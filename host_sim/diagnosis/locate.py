@@ -43,7 +43,7 @@ import numpy as np
 from scipy import stats
 
 from host_sim.diagnosis.channels import ACCUMULATED, SENSOR_NAMES, WHEELS, Channel, sensor_channel
-from host_sim.diagnosis.windows import CONTACT_MARGIN, Windows
+from host_sim.diagnosis.windows import Windows, near_a_wall
 from host_sim.params import RobotParams
 from host_sim.recording import Recording
 from host_sim.world import World
@@ -257,12 +257,7 @@ def _timing_sensors(chans: list[Channel], resids: dict[str, np.ndarray], keep: n
 
 def contact_windows(rec: Recording, windows: Windows, p: RobotParams, world: World | None) -> np.ndarray:
     """(W,) bool: the recorded robot touches a wall somewhere in the window (tracker needed)."""
-    if rec.pose is None or world is None or world.n_walls == 0:
-        return np.zeros(len(windows), dtype=bool)
-    idx = windows.index
-    dist, _normal = world.nearest_wall(rec.pose[idx.reshape(-1), :2])
-    near = dist.reshape(idx.shape) < p.body_radius + CONTACT_MARGIN
-    return near.any(axis=1)
+    return near_a_wall(rec, windows.index, p, world)
 
 
 @dataclass

@@ -62,7 +62,7 @@ class Windows:
     rows: int  # T, rows per window
     held_out: np.ndarray  # (W,) bool: judged only, never fitted on
     substeps: int = SUBSTEPS  # the twin's steps per period in every window (judge_slides)
-    sliding: np.ndarray | None = None  # (W,) bool: the window starts with the robot sliding (judge_slides)
+    sliding: np.ndarray | None = None  # (W,) bool: the robot slides where the window's twin starts (judge_slides)
     body: np.ndarray | None = None  # (W, 3) the tracked (u, l, omega) of C where each window's twin starts
     lead: int = LEAD_ROWS  # rows the twin replays before each window (0: it starts on the window's first row)
     lead_slides: np.ndarray | None = None  # (W,) bool: the tracker sees the robot slide in the lead-in (judge_slides)
@@ -269,7 +269,7 @@ def _lead_in(rec: Recording, windows: Windows, sim: BatchSim, inputs: Any, n_set
     period = np.median(inputs.period[rows], axis=0)
     theta = np.empty((lead + 1, n_win * n_sets, 2))
     slid = np.repeat(windows.lead_slides if windows.lead_slides is not None else np.zeros(n_win, bool), n_sets)
-    walled = np.repeat(_near_a_wall(rec, windows, world, p), n_sets)
+    walled = np.repeat(near_a_wall(rec, windows.lead_index, p, world), n_sets)
     for j in range(lead):
         res = sim.run_inputs(cmd[j:j + 1], substeps=substeps, sensors=False, period=period[j:j + 1])
         assert res.theta is not None
@@ -289,13 +289,13 @@ def _lead_in(rec: Recording, windows: Windows, sim: BatchSim, inputs: Any, n_set
     sim.slipping &= ~walled
 
 
-def _near_a_wall(rec: Recording, windows: Windows, world: World | None, p: RobotParams) -> np.ndarray:
-    """(W,) bool: the tracker sees the robot within CONTACT_MARGIN of a wall in the lead-in."""
+def near_a_wall(rec: Recording, rows: np.ndarray, p: RobotParams, world: World | None) -> np.ndarray:
+    """(W,) bool: the tracker sees the robot within CONTACT_MARGIN of a wall in any of rows[w] ((W, K)
+    recording rows); False throughout without a tracker or walls."""
     if rec.pose is None or world is None or not world.n_walls:
-        return np.zeros(len(windows), dtype=bool)
-    idx = windows.lead_index
-    dist = world.nearest_wall(rec.pose[idx.reshape(-1), :2])[0]
-    return np.asarray((dist.reshape(idx.shape) < p.body_radius + CONTACT_MARGIN).any(axis=1))
+        return np.zeros(len(rows), dtype=bool)
+    dist = world.nearest_wall(rec.pose[rows.reshape(-1), :2])[0]
+    return np.asarray((dist.reshape(rows.shape) < p.body_radius + CONTACT_MARGIN).any(axis=1))
 
 
 def _last_push(cmd: np.ndarray, start: np.ndarray) -> np.ndarray:
