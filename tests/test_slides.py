@@ -14,7 +14,7 @@ import pytest
 from host_sim import effects as E
 from host_sim.batch import SUBSTEPS
 from host_sim.diagnosis.compare import compare
-from host_sim.diagnosis.windows import FINE_SUBSTEPS, Windows, judge_slides, run_windows
+from host_sim.diagnosis.windows import FINE_SUBSTEPS, LEAD_ROWS, Windows, judge_slides, run_windows
 from host_sim.params import DEFAULT
 from host_sim.recording import Recording
 from host_sim.replay import replay, replay_batch, rolling_velocity, sliding_rows, tracked_velocity
@@ -102,8 +102,7 @@ def test_the_lead_in_counts_steer_the_twin_only_where_it_rolls(runs):
     _nominal, ice = runs
     slides = sliding_rows(ice, DEFAULT)[0]
     k_slide = _slide_row(ice, ICE)
-    lead = Windows(np.array([k_slide]), 5, np.array([False])).lead
-    rolls = [k for k in range(40, len(ice) - 30) if not slides[k - lead - 1:k + 6].any()]
+    rolls = [k for k in range(40, len(ice) - 30) if not slides[k - LEAD_ROWS - 1:k + 6].any()]
     for k, steered in ((k_slide, False), (rolls[len(rolls) // 2], True)):
         windows = Windows(np.array([k]), 5, np.array([False]))
         judge_slides(ice, windows, DEFAULT, np.array([False]))
