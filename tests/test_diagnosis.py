@@ -248,7 +248,8 @@ def test_an_encoder_error_under_the_threshold_over_1_s_is_located_over_5_s(tmp_p
     """An encoder 1.5 % fine, under the manoeuvre's open-loop drive.  Each window's twin enters at the speed
     the counts give at the nominal scale (its lead-in matches them), and that start takes back nearly half
     the error over 1 s (0.8 % more counts, under the 1 % threshold) but little of it over 5 s (1.3 %):
-    blind case 0086's 1.8 % showed so before the lead-in (now 1.0 % over 1 s)."""
+    so was blind case 0086's 1.8 % located.  A 1.8 % encoder here showed as 0.8 % over 1 s before the
+    windows' lead-in, as 1.0 % since: located over 1 s."""
     from host_sim.diagnosis.compare import compare_all
 
     counts = ("count_l", "count_r")

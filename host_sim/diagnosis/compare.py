@@ -140,8 +140,9 @@ def _locate(cmp: Comparison, rec: Recording, p: RobotParams, world: World | None
 def _longer_scale(longer: Comparison | None, name: str, rec: Recording) -> Finding | None:
     """locate_scale on the longer windows' channel.  A proportional error grows with the window while what
     its start cannot say does not: a count 1.5 % off shows as 0.8 % over 1 s, as 1.3 % over 5 s (the twin
-    enters each window at the recorded ticks' nominal speed; blind 0086's finer encoder, 1.8 %, showed as
-    0.8 % over 1 s before the windows' lead-in, 1.0 % since)."""
+    enters each window at the recorded ticks' nominal speed).  Blind 0086's finer encoder, 1.8 %, was
+    located so; on the twin's own manoeuvre a 1.8 % encoder showed as 0.8 % over 1 s before the windows'
+    lead-in, as 1.0 % since."""
     if longer is None:
         return None
     return locate_scale(longer.channel(name), ~longer.contact, rec.t[longer.windows.index[:, :-1]])
