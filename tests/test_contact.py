@@ -168,14 +168,13 @@ def test_traction_scalar_and_batch_agree_and_a_full_current_start_slips():
     assert fast.pose[1] == pytest.approx(1.0, abs=1e-12)  # straight: it spins its wheels, no sideways drift
 
 
-def test_slip_step_scalar_and_batch_agree_function_by_function():
-    """contact.slip_step == contact.slip_step_batch on random states: slipping or rolling, zero to two
-    walls in reach (corners), with and without a warm start, per-robot parameters."""
+def random_slip_states(n, seed=11):
+    """n robots' states for one contact step: slipping or rolling, zero to two walls in reach (corners),
+    per-robot parameters, a previous step's forces (some axle torques beyond their bound)."""
     from host_sim.dynamics import ParamBatch
     from host_sim import motors
 
-    rng = np.random.default_rng(11)
-    n = 40
+    rng = np.random.default_rng(seed)
     params = [DEFAULT.replace(wheel_friction=float(rng.uniform(0.2, 1.0)), wall_friction=float(rng.uniform(0, 0.6)),
                               com_offset=float(rng.uniform(0, 0.03)), body_mass=float(rng.uniform(0.3, 0.8)))
               for _ in range(n)]
@@ -200,8 +199,24 @@ def test_slip_step_scalar_and_batch_agree_function_by_function():
     warm_walls = np.stack([rng.uniform(0, 3, (2, n)), rng.uniform(-0.1, 0.1, (2, n))])
     warm_walls[:, ~np.isfinite(gaps.T)] = 0.0
     tau, _c, slope = motors.wheel_torque_slope_batch(i_ref, v, pb)
+    body_b = np.where(slipping[:, None], body, np.column_stack(contact.body_velocity(v.T, pb)))
+    return dict(params=params, pb=pb, q=q, v=v, body=body, body_b=body_b, slipping=slipping, i_ref=i_ref,
+                n_walls=n_walls, gaps=gaps, normals=normals, warm_wheels=warm_wheels, warm_walls=warm_walls,
+                tau=tau, slope=slope)
+
+
+def test_slip_step_scalar_and_batch_agree_function_by_function():
+    """contact.slip_step == contact.slip_step_batch on random states: slipping or rolling, zero to two
+    walls in reach (corners), with and without a warm start, per-robot parameters."""
+    from host_sim import motors
+
+    n = 40
+    st = random_slip_states(n)
+    params, pb, q, v, body, body_b, slipping, i_ref = (st[k] for k in (
+        "params", "pb", "q", "v", "body", "body_b", "slipping", "i_ref"))
+    n_walls, gaps, normals, warm_wheels, warm_walls, tau, slope = (st[k] for k in (
+        "n_walls", "gaps", "normals", "warm_wheels", "warm_walls", "tau", "slope"))
     for warm in (False, True):
-        body_b = np.where(slipping[:, None], body, np.column_stack(contact.body_velocity(v.T, pb)))
         out = contact.slip_step_batch(q, v, body_b, tau, slope, 0.005, pb, gaps, normals, None,
                                       warm_wheels if warm else None, warm_walls if warm else None)
         for i in range(n):
@@ -220,6 +235,30 @@ def test_slip_step_scalar_and_batch_agree_function_by_function():
             assert np.allclose(out[5][:, :, i], forces[0], rtol=1e-8, atol=1e-8)  # with the axles' torques
             assert all(abs(f[2]) <= params[i].coulomb_friction * (1 + 1e-12) for f in forces[0])
     assert out[3].sum() > 0 and (~out[3]).sum() > 0 and out[4].sum() > 0  # gripping, slipping and pushed
+
+
+def test_the_batch_solve_goes_on_with_the_unsettled_robots_alone_and_the_same_numbers(monkeypatch):
+    """Once most robots' impulses have settled, _solve_batch's sweeps go on with the others alone: fewer
+    robots a sweep, and every figure of every robot exactly as when all of them are swept to the end."""
+    st = random_slip_states(300, seed=5)
+    swept = []
+    axle_row = contact._axle_row
+    monkeypatch.setattr(contact, "_axle_row", lambda nu, i, axle, active: (swept.append(len(active)),
+                                                                           axle_row(nu, i, axle, active)))
+    outs, below = {}, contact.COMPACT_BELOW
+    for compact in (below, 0.0):
+        monkeypatch.setattr(contact, "COMPACT_BELOW", compact)
+        swept.clear()
+        for warm in (False, True):
+            outs[compact, warm] = contact.slip_step_batch(
+                st["q"], st["v"], st["body_b"], st["tau"], st["slope"], 0.005, st["pb"], st["gaps"], st["normals"],
+                None, st["warm_wheels"] if warm else None, st["warm_walls"] if warm else None)
+        outs[compact] = list(swept)
+    assert min(outs[below]) < 300 / 4 and set(outs[0.0]) == {300}
+    assert sum(outs[below]) < sum(outs[0.0]) / 2
+    for warm in (False, True):
+        for a, b in zip(outs[below, warm], outs[0.0, warm]):
+            assert np.array_equal(a, b)
 
 
 def test_torque_slope_is_the_derivative_and_walls_in_reach_agree():
