@@ -703,7 +703,7 @@ def test_screening_tries_each_effect_about_twice_as_far_each_time_then_zooms_in_
     def cost(x):  # a dip at 0.052 rad, on a rough floor
         return 1.0 + 100 * (x - 0.052) ** 2 + 0.1 * np.cos(400 * x)
 
-    def residuals(robots):
+    def residuals(robots, part="both"):
         return np.array([[np.sqrt(cost(E.values(r, "backlash", "left")[0]))] for r in robots]), None
 
     obj = SimpleNamespace(residuals=residuals)
@@ -791,6 +791,27 @@ def test_robots_run_in_one_batch_per_machinery_as_they_would_together(nominal_ru
     np.testing.assert_allclose(grouped.enc[:, 4], alone.enc[:, 0], rtol=0, atol=1e-9)
 
 
+def test_a_fit_ends_once_its_steps_gain_little(tmp_path, monkeypatch):
+    """Each fit stops when a step lowers its cost by less than FIT_FTOL of it: a battery's resistance
+    injected into the twin is named and measured as before, with its four fits taking 10 runs of the
+    twin in all (26 at scipy's default tolerance)."""
+    from host_sim.diagnosis import fit
+
+    runs = []
+    least_squares = fit.optimize.least_squares
+
+    def counted(*args, **kwargs):
+        sol = least_squares(*args, **kwargs)
+        runs.append(sol.nfev)
+        return sol
+
+    monkeypatch.setattr(fit.optimize, "least_squares", counted)
+    d = diagnose(record(tmp_path, E.apply(DEFAULT, "battery_resistance", "both", [3.0])), DEFAULT, ROOM)
+    assert [e["name"] for e in d.effects] == ["battery_resistance"], d.summary()
+    assert d.effects[0]["params"]["resistance"]["value"] == pytest.approx(3.0, rel=0.15)
+    assert len(runs) == 4 and sum(runs) <= 14, runs
+
+
 def test_workers_fit_side_by_side_to_the_same_diagnosis(tmp_path):
     """diagnose(workers=2) screens and fits in two processes (the CLI's default on two cores): the
     verdict, the figures and the JSON are those of one process, number for number."""
@@ -833,6 +854,43 @@ def test_ctrl_c_while_workers_fit_exits_130_and_leaves_no_process(tmp_path):
     time.sleep(0.5)
     with pytest.raises(ProcessLookupError):  # nothing of the group is left
         os.killpg(proc.pid, 0)
+
+
+def test_the_training_or_held_out_windows_alone_give_their_residuals_of_all(nominal_run):
+    """The screening runs the training windows alone (it judges nothing held out): each window's twin
+    starts on its own, so each part's residuals are those of a run of all the windows, and the held-out
+    columns keep their places."""
+    from host_sim.diagnosis import fit as F
+
+    first = compare(nominal_run, DEFAULT, ROOM)
+    names = ["wheel_l", "wheel_r", "forward", "heading_rate", "ir_0"]
+    obj = F.Objective(nominal_run, first.windows, ROOM, names, {n: 1.0 for n in names + ["travel", "turn"]},
+                      first.contact, first.unjudged)
+    robots = [DEFAULT, E.apply(DEFAULT, "backlash", "left", [0.05]), E.apply(DEFAULT, "wheel_radius", "right", [1e-3])]
+    train, test = obj.residuals(robots)
+    columns = {k: v.copy() for k, v in obj.test_columns.items()}
+    ran = []
+    run_windows = F.run_windows
+    F.run_windows = lambda rec, windows, *a: (ran.append(len(windows)), run_windows(rec, windows, *a))[1]
+    try:
+        train_alone, none = obj.residuals(robots, part="train")
+        none2, test_alone = obj.residuals(robots, part="test")
+        n_train, n_test = int(obj.train.sum()), int(obj.test.sum())
+        assert ran == [n_train, n_test] and 0 < n_test < n_train
+        ran.clear()
+        current = F.Model([], [], DEFAULT, float(train[0] @ train[0]), float(test[0] @ test[0]), train.shape[1])
+        F.screen(obj, DEFAULT, current, [F.Candidate("wheel_radius", "right"), F.Candidate("backlash", "left")], 1)
+        play = F.Candidate("backlash", "left")
+        F.zoom(obj, current, [(play, [0.06], [(0.0, 9e9), (0.03, 9e9), (0.06, 9e9), (0.105, 9e9)])])
+        assert len(ran) >= 2 and set(ran) == {n_train}  # the screening and its zoom: the training windows alone
+    finally:
+        F.run_windows = run_windows
+    assert none.shape == (3, 0) and none2.shape == (3, 0)
+    np.testing.assert_allclose(train_alone, train, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(test_alone, test, rtol=0, atol=1e-9)
+    assert obj.test_columns.keys() == columns.keys()
+    assert all(np.array_equal(obj.test_columns[k], columns[k]) for k in columns)
+    assert np.abs(train[1] - train[0]).max() > 1 and np.abs(test[2] - test[0]).max() > 1  # the effects show
 
 
 def test_a_fit_on_the_sensors_alone_runs_no_physics(nominal_run, monkeypatch):

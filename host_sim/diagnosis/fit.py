@@ -66,6 +66,9 @@ P_MAX = 1e-4  # F test against the twin without the effect
 MIN_HELD_OUT_GAIN = 0.10  # relative drop of the held-out weighted sum of squares
 MIN_LOCATED_GAIN = 0.30  # or of the located channels' part of it alone
 START_INSIDE = 0.01  # of a parameter's range: how far inside its bounds a fit starts
+FIT_FTOL = 1e-4  # a fit ends when a step lowers its cost by less than this share of it: a BIC change of n 1e-4,
+# under TIE_BIC for the ~9000 residuals of a 90 s recording.  scipy's 1e-8 went on for twice the twin runs
+# (blind 0009's battery: the same 1.4989 ohm in 3 runs either way; its rival backlash fits 13-19 runs against 3-4)
 TIE_BIC = 2.0  # a BIC difference below this is no evidence either way (Kass & Raftery 1995)
 AMBIGUITY = 0.02  # held-out costs within 2 % of the chosen one: "explains it equally well"
 DRIVE_EFFECTS = ("dry_friction", "viscous_friction", "wheel_radius", "torque_constant", "encoder_scale", "backlash",
@@ -154,30 +157,42 @@ class Objective:
         self.workers: Executor | None = None  # processes that share the work (select's, while it runs)
         self.test_columns: dict[str, np.ndarray] = {}  # channel (or window total) -> its held-out residuals' columns
 
-    def residuals(self, robots: list[RobotParams]) -> tuple[np.ndarray, np.ndarray]:
+    def residuals(self, robots: list[RobotParams], part: str = "both") -> tuple[np.ndarray, np.ndarray]:
         """(train (N, n), test (N, m)) weighted residuals of N twins: with workers (select), the robots of
-        each machinery (windows.by_machinery) in a process of their own; they run apart anyway."""
+        each machinery (windows.by_machinery) in a process of their own; they run apart anyway.
+        part: "train" or "test" runs those windows alone (the other comes back with no columns): each
+        window's twin starts on its own, so its residuals are the same either way."""
         workers = self.workers
         groups = by_machinery(robots) if workers is not None and not self.sensors_only else []
         if workers is not None and len(groups) > 1:
             self.evaluations += len(robots)
-            parts = list(workers.map(_residuals_in_worker, [[robots[i] for i in ix] for ix in groups]))
+            parts = list(workers.map(_residuals_in_worker, [[robots[i] for i in ix] for ix in groups],
+                                     [part] * len(groups)))
             order = np.argsort(np.concatenate(groups))
             return (np.concatenate([train for train, _test in parts])[order],
                     np.concatenate([test for _train, test in parts])[order])
-        return self.residuals_here(robots)
+        return self.residuals_here(robots, part)
 
-    def residuals_here(self, robots: list[RobotParams]) -> tuple[np.ndarray, np.ndarray]:
+    def residuals_here(self, robots: list[RobotParams], part: str = "both") -> tuple[np.ndarray, np.ndarray]:
         """residuals, in this process."""
         self.evaluations += len(robots)
+        if part not in ("both", "train", "test"):
+            raise ValueError(f"part must be 'both', 'train' or 'test', not {part!r}")
+        run_these = np.ones(len(self.windows), dtype=bool) if part == "both" else (
+            self.train if part == "train" else self.test)
+        if not run_these.any():
+            return np.zeros((len(robots), 0)), np.zeros((len(robots), 0))
+        windows = self.windows.select(run_these)
+        unjudged = self.unjudged[run_these] if self.unjudged is not None else None
         if self.sensors_only:  # the sensors read the recorded track: the twin's motion does not enter them
             assert self.world is not None
-            chans = {c.name: c for c in sensor_channels(self.rec, self.windows.index[:, 1:], robots, self.world,
-                                                        self.unjudged)}
+            chans = {c.name: c for c in sensor_channels(self.rec, windows.index[:, 1:], robots, self.world,
+                                                        unjudged)}
         else:
-            run = run_windows(self.rec, self.windows, robots, self.world)
-            chans = {c.name: c for c in build_channels(self.rec, self.windows, run, robots,
-                                                        self.world if self.sensors else None, self.unjudged)}
+            run = run_windows(self.rec, windows, robots, self.world)
+            chans = {c.name: c for c in build_channels(self.rec, windows, run, robots,
+                                                        self.world if self.sensors else None, unjudged)}
+        train_w, test_w = self.train[run_these], self.test[run_these]
         train, test = [], []
         at = 0
         for name in self.names:
@@ -189,14 +204,15 @@ class Objective:
                 # noise in any one period and above it over a window (locate.locate_scale).
                 total = (c.y.sum(axis=-1)[:, None] - c.y_hat.sum(axis=-1)) / self.sigma[ACCUMULATED[name]]
                 r = np.concatenate([r, total[..., None]], axis=-1)
-            rows = self.rows[name]
-            train.append(r[self.train & rows].transpose(1, 0, 2).reshape(len(robots), -1))
-            test.append(r[self.test & rows].transpose(1, 0, 2).reshape(len(robots), -1))
-            cols = at + np.arange(test[-1].shape[1]).reshape(-1, r.shape[-1])  # (held-out windows, T' [+ 1])
-            self.test_columns[name] = cols[:, :periods].ravel()
-            if name in self.totals:
-                self.test_columns[ACCUMULATED[name]] = cols[:, periods]
-            at += test[-1].shape[1]
+            rows = self.rows[name][run_these]
+            train.append(r[train_w & rows].transpose(1, 0, 2).reshape(len(robots), -1))
+            test.append(r[test_w & rows].transpose(1, 0, 2).reshape(len(robots), -1))
+            if part != "train":
+                cols = at + np.arange(test[-1].shape[1]).reshape(-1, r.shape[-1])  # (held-out windows, T' [+ 1])
+                self.test_columns[name] = cols[:, :periods].ravel()
+                if name in self.totals:
+                    self.test_columns[ACCUMULATED[name]] = cols[:, periods]
+                at += test[-1].shape[1]
         return np.concatenate(train, axis=1), np.concatenate(test, axis=1)
 
     def located_gain(self, before: np.ndarray, after: np.ndarray, located: list[str]) -> float:
@@ -256,7 +272,7 @@ def fit_model(obj: Objective, base: RobotParams, effects: list[Candidate], start
         return cache[key]
 
     sol = optimize.least_squares(lambda x: evaluate(x)[0], x0, jac=lambda x: evaluate(x)[1], bounds=(lo, hi),
-                                 x_scale=hi - lo, max_nfev=30)
+                                 x_scale=hi - lo, max_nfev=30, ftol=FIT_FTOL)
     r_train, jac, r_test = evaluate(sol.x)
     model = Model(list(effects), unpack(sol.x), _apply_all(base, effects, unpack(sol.x)),
                   float(r_train @ r_train), float(r_test @ r_test), int(r_train.size), r_test=r_test)
@@ -321,7 +337,7 @@ def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candid
         trials = screen_trials(cand.name, float(x0[0]))
         robots += [E.apply(current.params, cand.name, cand.site, [x]) for x in trials]
         slots.append((first, x0, h, lo - x0, hi - x0, trials))
-    train, _test = obj.residuals(robots)
+    train, _test = obj.residuals(robots, part="train")
     predicted, starts, seen = [], [], []
     for first, x0, h, dlo, dhi, trials in slots:
         r0 = train[first]
@@ -360,7 +376,7 @@ def zoom(obj: Objective, current: Model, shortlist: list[tuple[Candidate, list[f
         robots += [E.apply(current.params, cand.name, cand.site, [x]) for x in grids[-1]]
     if not robots:
         return [(cand, start) for cand, start, _seen in shortlist]
-    train, _test = obj.residuals(robots)
+    train, _test = obj.residuals(robots, part="train")
     out, at = [], 0
     for (cand, start, seen), values in zip(shortlist, grids):
         costs = [float(r @ r) for r in train[at:at + len(values)]]
@@ -421,9 +437,9 @@ def _fit_in_worker(base: RobotParams, effects: list[Candidate], start: list[list
     return fit_model(_OBJECTIVE, base, effects, start)
 
 
-def _residuals_in_worker(robots: list[RobotParams]) -> tuple[np.ndarray, np.ndarray]:
+def _residuals_in_worker(robots: list[RobotParams], part: str) -> tuple[np.ndarray, np.ndarray]:
     assert _OBJECTIVE is not None
-    return _OBJECTIVE.residuals_here(robots)
+    return _OBJECTIVE.residuals_here(robots, part)
 
 
 def _fitting_pool(obj: Objective, workers: int) -> ProcessPoolExecutor | None:
