@@ -418,20 +418,7 @@ def _solve_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: 
             nu[2] += ew * de + lat_w * dn
             nu[3 + i] += er * de
             _axle_row(nu, i, axles[i], active)
-        for w, (gdt, ne, nn, nl, nw, tl, tw, inn, itt) in enumerate(contacts):
-            pn0, pt0 = pc[0, w].copy(), pc[1, w].copy()
-            pn = np.maximum(pn0 - (ne * nu[0] + nn * nu[1] + gdt) * inn, 0.0)
-            dn = np.where(active, pn - pn0, 0.0)
-            nu[0] += ne * ju * dn
-            nu[1] += nl * dn
-            nu[2] += nw * dn
-            bound = mu_w * (pn0 + dn)
-            pt = np.minimum(np.maximum(pt0 - (-nn * nu[0] + ne * nu[1] - rad * nu[2]) * itt, -bound), bound)
-            dt_ = np.where(active, pt - pt0, 0.0)
-            nu[0] -= nn * ju * dt_
-            nu[1] += tl * dt_
-            nu[2] += tw * dt_
-            pc[0, w], pc[1, w] = pn0 + dn, pt0 + dt_
+        _wall_rows(nu, contacts, pc, (ju, rad, mu_w), active)
         change = np.maximum(np.maximum(np.abs(nu[0] - before[0]), np.abs(nu[1] - before[1])),
                             np.maximum(np.abs(b * (nu[2] - before[2])),
                                        np.maximum(np.abs(r * (nu[3] - before[3])), np.abs(r * (nu[4] - before[4])))))
@@ -449,6 +436,27 @@ def _solve_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: 
             active = np.ones(len(keep), dtype=bool)
     if live is not None:
         _put_back(full, (nu, pw, pc, [held for _inv, _bound, held in axles]), live)
+
+
+def _wall_rows(nu: list[np.ndarray], contacts: list[tuple[Any, ...]], pc: np.ndarray, cs: tuple[Any, Any, Any],
+               active: np.ndarray) -> None:
+    """One sweep of the walls' rows (`_solve`'s, for K robots): each wall's normal impulse, clipped at 0,
+    then its tangent impulse, clipped at +-mu_w P_n.  cs: (1 / m, R, mu_w)."""
+    ju, rad, mu_w = cs
+    for w, (gdt, ne, nn, nl, nw, tl, tw, inn, itt) in enumerate(contacts):
+        pn0, pt0 = pc[0, w].copy(), pc[1, w].copy()
+        pn = np.maximum(pn0 - (ne * nu[0] + nn * nu[1] + gdt) * inn, 0.0)
+        dn = np.where(active, pn - pn0, 0.0)
+        nu[0] += ne * ju * dn
+        nu[1] += nl * dn
+        nu[2] += nw * dn
+        bound = mu_w * (pn0 + dn)
+        pt = np.minimum(np.maximum(pt0 - (-nn * nu[0] + ne * nu[1] - rad * nu[2]) * itt, -bound), bound)
+        dt_ = np.where(active, pt - pt0, 0.0)
+        nu[0] -= nn * ju * dt_
+        nu[1] += tl * dt_
+        nu[2] += tw * dt_
+        pc[0, w], pc[1, w] = pn0 + dn, pt0 + dt_
 
 
 def _take(x: Any, keep: np.ndarray) -> Any:
