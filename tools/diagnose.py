@@ -18,9 +18,9 @@ of 1 s away from the walls; a tracker's pose for the body's motion and the
 IR sensors.  Less is refused with a one-line reason and exit status 2.  The
 identification manoeuvre records all of it in 46 s:
 twinbot serial PORT --excite --record run.csv (twinbot sim --excite on the twin).
-A 90 s recording takes about 9 s on two cores (the median of twinbot
+A 90 s recording takes about 6 s on two cores (the median of twinbot
 bench diagnose --seed N --jobs 1 --workers 2 over eight suites of 40);
-a slippery floor up to three minutes.  --workers (default on Linux: one
+a slippery floor up to two minutes.  --workers (default on Linux: one
 process per core) screens the library and fits the shortlisted effects
 side by side: the same verdict and figures, sooner.  A progress line per
 step.
