@@ -68,7 +68,7 @@ MIN_LOCATED_GAIN = 0.30  # or of the located channels' part of it alone
 START_INSIDE = 0.01  # of a parameter's range: how far inside its bounds a fit starts
 FIT_FTOL = 1e-4  # a fit ends when a step lowers its cost by less than this share of it: a BIC change of n 1e-4,
 # under TIE_BIC for the ~9000 residuals of a 90 s recording.  scipy's 1e-8 went on for twice the twin runs
-# (blind 0009's battery: the same 1.4989 ohm in 3 runs either way; its rival backlash fits 13-19 runs against 3-4)
+# (blind 0009's battery: the same 1.4989 ohm in 3 runs either way; its rival backlash fits 10-19 runs against 3-4)
 TIE_BIC = 2.0  # a BIC difference below this is no evidence either way (Kass & Raftery 1995)
 AMBIGUITY = 0.02  # held-out costs within 2 % of the chosen one: "explains it equally well"
 DRIVE_EFFECTS = ("dry_friction", "viscous_friction", "wheel_radius", "torque_constant", "encoder_scale", "backlash",
