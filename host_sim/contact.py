@@ -43,6 +43,7 @@ GRAVITY = 9.81  # m/s^2
 PGS_TOL = 1e-10  # m/s: a sweep that moves no velocity by more than this ends the solve
 PGS_MAX_ITER = 100  # sweeps; past it (redundant contacts at a standstill) the next step goes on from here
 COMPACT_BELOW = 0.5  # share of a batch's robots still unsettled under which the sweeps go on with those alone
+ALONE_FROM = 16  # unsettled robots from which on each is swept to the end alone, in Python floats
 STICK_MARGIN = 1e-9  # a wheel impulse this far inside its cone (relative) is sticking
 NEWTON_STEPS = 6  # on a wheel's friction disc: the force within 1e-13 rad of opposite the slip
 REACH_MARGIN = 2e-3  # m: a wall closer than the step's travel + this is a contact candidate
@@ -175,18 +176,21 @@ def _on_disc(be: Any, bn: Any, lim: Any, eig: tuple[Any, Any, Any, Any]) -> tupl
     1/|P(lam)| - 1/lim, which converges monotonically from below (More and Sorensen), from the
     lower bound |b| / lim - mu1; a fixed number of steps, then scaled onto the disc.  Floats or arrays."""
     c, s, mu1, mu2 = eig
+    # square roots, not powers: numpy's x ** -0.5 is its own (SIMD) power, which differs from libm's in the
+    # last bit; a square root is exactly rounded everywhere, so a robot's figures are the same alone or in a batch
+    sqrt = np.sqrt if isinstance(be, np.ndarray) else math.sqrt
     b1, b2 = c * be + s * bn, c * bn - s * be
-    lam = (b1 * b1 + b2 * b2) ** 0.5 / lim - mu1
+    lam = sqrt(b1 * b1 + b2 * b2) / lim - mu1
     lam = lam * (lam > 0)
     for _ in range(NEWTON_STEPS):
         i1, i2 = 1.0 / (mu1 + lam), 1.0 / (mu2 + lam)
         q1, q2 = b1 * i1, b2 * i2
         size2 = q1 * q1 + q2 * q2
         # phi = size2^-1/2 - 1/lim, phi' = size2^-3/2 (q1^2 i1 + q2^2 i2)
-        inv = size2 ** -0.5
+        inv = 1.0 / sqrt(size2)
         lam = lam - (inv - 1.0 / lim) / (inv * inv * inv * (q1 * q1 * i1 + q2 * q2 * i2))
     q1, q2 = -b1 / (mu1 + lam), -b2 / (mu2 + lam)
-    scale = lim / (q1 * q1 + q2 * q2) ** 0.5
+    scale = lim / sqrt(q1 * q1 + q2 * q2)
     return (c * q1 - s * q2) * scale, (s * q1 + c * q2) * scale
 
 
@@ -398,26 +402,9 @@ def _solve_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: 
     full = (nu, pw, pc, [held for _inv, _bound, held in axles])
     live: np.ndarray | None = None  # the robots still solved, once fewer than all (their indices in full)
     active = np.ones(len(nu[0]), dtype=bool)
-    for _ in range(PGS_MAX_ITER):
+    for sweep in range(PGS_MAX_ITER):
         before = [x.copy() for x in nu]
-        for i, (sb, el, ew, er, a11, a12, a22, wee, wen, wnn, eig, ri) in enumerate(wheels):
-            ve = nu[0] - sb * nu[2] - ri * nu[3 + i]
-            pe0, pn0 = pw[i, 0].copy(), pw[i, 1].copy()
-            pe, pn = pe0 - (a11 * ve + a12 * nu[1]), pn0 - (a12 * ve + a22 * nu[1])
-            over = pe * pe + pn * pn > lim * lim
-            if over.any():
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    de, dn = _on_disc(ve - (wee * pe0 + wen * pn0), nu[1] - (wen * pe0 + wnn * pn0), lim, eig)
-                grip = lim > 0.0  # mu = 0: no grip at all
-                pe = np.where(over, np.where(grip, de, 0.0), pe)
-                pn = np.where(over, np.where(grip, dn, 0.0), pn)
-            de, dn = np.where(active, pe - pe0, 0.0), np.where(active, pn - pn0, 0.0)
-            pw[i, 0], pw[i, 1] = pe0 + de, pn0 + dn
-            nu[0] += ju * de
-            nu[1] += el * de + lat_l * dn
-            nu[2] += ew * de + lat_w * dn
-            nu[3 + i] += er * de
-            _axle_row(nu, i, axles[i], active)
+        _wheel_rows(nu, wheels, pw, axles, lim, (ju, lat_l, lat_w), active)
         _wall_rows(nu, contacts, pc, (ju, rad, mu_w), active)
         change = np.maximum(np.maximum(np.abs(nu[0] - before[0]), np.abs(nu[1] - before[1])),
                             np.maximum(np.abs(b * (nu[2] - before[2])),
@@ -425,17 +412,101 @@ def _solve_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: 
         active &= change >= PGS_TOL
         if not active.any():
             break
+        state = (nu, pw, pc, wheels, contacts, axles, lim, b, r, rad, ju, lat_l, lat_w, mu_w)
+        if active.sum() <= ALONE_FROM:
+            # A few robots that settle slowly (sliding on ice: 0.9 a sweep) would take a sweep's numpy
+            # calls each for a few numbers: each goes on alone, the same arithmetic in Python floats.
+            for one in np.flatnonzero(active):
+                _sweep_alone(state, int(one), PGS_MAX_ITER - 1 - sweep)
+            break
         if active.sum() < COMPACT_BELOW * active.size:
             # Most have settled (a tenth of the robots, over half the sweeps, in a slippery fit): go on with
             # the others alone.  Element by element the same arithmetic, so the same numbers, sooner.
             keep = np.flatnonzero(active)
             _put_back(full, (nu, pw, pc, [held for _inv, _bound, held in axles]), live)
             live = keep if live is None else live[keep]
-            nu, pw, pc, wheels, contacts, axles, lim, b, r, rad, ju, lat_l, lat_w, mu_w = _take(
-                (nu, pw, pc, wheels, contacts, axles, lim, b, r, rad, ju, lat_l, lat_w, mu_w), keep)
+            nu, pw, pc, wheels, contacts, axles, lim, b, r, rad, ju, lat_l, lat_w, mu_w = _take(state, keep)
             active = np.ones(len(keep), dtype=bool)
     if live is not None:
         _put_back(full, (nu, pw, pc, [held for _inv, _bound, held in axles]), live)
+
+
+def _wheel_rows(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], pw: np.ndarray,
+                axles: list[tuple[Any, Any, np.ndarray]], lim: Any, lat: tuple[Any, Any, Any],
+                active: np.ndarray) -> None:
+    """One sweep of the wheels' rows (`_solve`'s, for K robots): each wheel's friction impulse, on its
+    disc where it would leave it, then its axle's friction.  lat: (1 / m, j / D, -k / D)."""
+    ju, lat_l, lat_w = lat
+    for i, (sb, el, ew, er, a11, a12, a22, wee, wen, wnn, eig, ri) in enumerate(wheels):
+        ve = nu[0] - sb * nu[2] - ri * nu[3 + i]
+        pe0, pn0 = pw[i, 0].copy(), pw[i, 1].copy()
+        pe, pn = pe0 - (a11 * ve + a12 * nu[1]), pn0 - (a12 * ve + a22 * nu[1])
+        over = pe * pe + pn * pn > lim * lim
+        if over.any():
+            with np.errstate(divide="ignore", invalid="ignore"):
+                de, dn = _on_disc(ve - (wee * pe0 + wen * pn0), nu[1] - (wen * pe0 + wnn * pn0), lim, eig)
+            grip = lim > 0.0  # mu = 0: no grip at all
+            pe = np.where(over, np.where(grip, de, 0.0), pe)
+            pn = np.where(over, np.where(grip, dn, 0.0), pn)
+        de, dn = np.where(active, pe - pe0, 0.0), np.where(active, pn - pn0, 0.0)
+        pw[i, 0], pw[i, 1] = pe0 + de, pn0 + dn
+        nu[0] += ju * de
+        nu[1] += el * de + lat_l * dn
+        nu[2] += ew * de + lat_w * dn
+        nu[3 + i] += er * de
+        _axle_row(nu, i, axles[i], active)
+
+
+def _sweep_alone(state: tuple[Any, ...], one: int, sweeps: int) -> None:
+    """Robot `one` of _solve_batch's state (nu, pw, pc, wheels, contacts, axles, lim, b, r, rad, ju,
+    lat_l, lat_w, mu_w) swept until it settles, at most `sweeps` more times, in Python floats: each row
+    the batch's arithmetic, operation for operation (so the same numbers), written back at the end."""
+    nu_a, pw_a, pc_a, wheels, contacts, axles, lim, b, r, rad, ju, lat_l, lat_w, mu_w = _floats(_take(state, one))
+    nu = [float(x) for x in nu_a]
+    pw = [[float(pw_a[i, 0]), float(pw_a[i, 1])] for i in range(2)]
+    pc = [[float(pc_a[0, w]), float(pc_a[1, w])] for w in range(pc_a.shape[1])]
+    held = [float(h) for _inv, _bound, h in axles]
+    for _ in range(sweeps):
+        before = list(nu)
+        for i, (sb, el, ew, er, a11, a12, a22, wee, wen, wnn, eig, ri) in enumerate(wheels):
+            ve = nu[0] - sb * nu[2] - ri * nu[3 + i]
+            pe0, pn0 = pw[i]
+            pe, pn = pe0 - (a11 * ve + a12 * nu[1]), pn0 - (a12 * ve + a22 * nu[1])
+            if pe * pe + pn * pn > lim * lim:
+                pe, pn = _on_disc(ve - (wee * pe0 + wen * pn0), nu[1] - (wen * pe0 + wnn * pn0), lim, eig) \
+                    if lim > 0.0 else (0.0, 0.0)
+            de, dn = pe - pe0, pn - pn0
+            pw[i] = [pe0 + de, pn0 + dn]
+            nu[0] += ju * de
+            nu[1] += el * de + lat_l * dn
+            nu[2] += ew * de + lat_w * dn
+            nu[3 + i] += er * de
+            inv_iw, bound = axles[i][0], axles[i][1]
+            da = min(max(held[i] - nu[3 + i] / inv_iw, -bound), bound) - held[i]
+            nu[3 + i] += da * inv_iw
+            held[i] += da
+        for w, (gdt, ne, nn, nl, nw, tl, tw, inn, itt) in enumerate(contacts):
+            pn0, pt0 = pc[w]
+            dn = max(pn0 - (ne * nu[0] + nn * nu[1] + gdt) * inn, 0.0) - pn0
+            nu[0] += ne * ju * dn
+            nu[1] += nl * dn
+            nu[2] += nw * dn
+            bound = mu_w * (pn0 + dn)
+            dt_ = min(max(pt0 - (-nn * nu[0] + ne * nu[1] - rad * nu[2]) * itt, -bound), bound) - pt0
+            nu[0] -= nn * ju * dt_
+            nu[1] += tl * dt_
+            nu[2] += tw * dt_
+            pc[w] = [pn0 + dn, pt0 + dt_]
+        if max(abs(nu[0] - before[0]), abs(nu[1] - before[1]), abs(b * (nu[2] - before[2])),
+               abs(r * (nu[3] - before[3])), abs(r * (nu[4] - before[4]))) < PGS_TOL:
+            break
+    for k in range(5):
+        state[0][k][one] = nu[k]
+    state[1][:, :, one] = pw
+    for w, (pn, pt) in enumerate(pc):
+        state[2][0, w, one], state[2][1, w, one] = pn, pt
+    for i in range(2):
+        state[5][i][2][one] = held[i]
 
 
 def _wall_rows(nu: list[np.ndarray], contacts: list[tuple[Any, ...]], pc: np.ndarray, cs: tuple[Any, Any, Any],
@@ -465,6 +536,13 @@ def _take(x: Any, keep: np.ndarray) -> Any:
     if isinstance(x, (tuple, list)):
         return type(x)(_take(y, keep) for y in x)
     return x[..., keep] if isinstance(x, np.ndarray) and x.ndim else x
+
+
+def _floats(x: Any) -> Any:
+    """x with its numbers as Python floats (numpy's scalars are ten times slower), arrays as they are."""
+    if isinstance(x, (tuple, list)):
+        return type(x)(_floats(y) for y in x)
+    return x if isinstance(x, np.ndarray) and x.ndim else float(x)
 
 
 def _put_back(full: tuple[Any, ...], part: tuple[Any, ...], live: np.ndarray | None) -> None:

@@ -239,8 +239,10 @@ def test_slip_step_scalar_and_batch_agree_function_by_function():
 
 def test_the_batch_solve_goes_on_with_the_unsettled_robots_alone_and_the_same_numbers(monkeypatch):
     """Once most robots' impulses have settled, _solve_batch's sweeps go on with the others alone: fewer
-    robots a sweep, and every figure of every robot exactly as when all of them are swept to the end."""
+    robots a sweep, and every figure of every robot exactly as when all of them are swept to the end.
+    (The last few robots' going on alone is the next test's; here they stay in the batch.)"""
     st = random_slip_states(300, seed=5)
+    monkeypatch.setattr(contact, "ALONE_FROM", 0)
     swept = []
     axle_row = contact._axle_row
     monkeypatch.setattr(contact, "_axle_row", lambda nu, i, axle, active: (swept.append(len(active)),
@@ -259,6 +261,47 @@ def test_the_batch_solve_goes_on_with_the_unsettled_robots_alone_and_the_same_nu
     for warm in (False, True):
         for a, b in zip(outs[below, warm], outs[0.0, warm]):
             assert np.array_equal(a, b)
+
+
+def test_the_last_unsettled_robots_of_a_batch_solve_go_on_alone_with_the_same_numbers(monkeypatch):
+    """Once few robots are still unsettled, each is swept to the end alone in Python floats: every figure of
+    every robot exactly as when the batch sweeps them all (and as when every robot goes on alone from the
+    first sweep), and the batch's own sweeps end sooner."""
+    st = random_slip_states(300, seed=5)
+    swept = []
+    axle_row = contact._axle_row
+    monkeypatch.setattr(contact, "_axle_row", lambda nu, i, axle, active: (swept.append(len(active)),
+                                                                           axle_row(nu, i, axle, active)))
+    outs = {}
+    for alone in (0, contact.ALONE_FROM, 300):
+        monkeypatch.setattr(contact, "ALONE_FROM", alone)
+        swept.clear()
+        for warm in (False, True):
+            outs[alone, warm] = contact.slip_step_batch(
+                st["q"], st["v"], st["body_b"], st["tau"], st["slope"], 0.005, st["pb"], st["gaps"], st["normals"],
+                None, st["warm_wheels"] if warm else None, st["warm_walls"] if warm else None)
+        outs[alone] = len(swept)
+    assert outs[contact.ALONE_FROM] < outs[0] / 2 and outs[300] == 2 * 2  # one batch sweep (two wheels) a solve
+    assert outs[0, False][3].sum() < 300 and outs[0, False][4].any()  # some slip, some are pushed by a wall
+    for alone in (contact.ALONE_FROM, 300):
+        for warm in (False, True):
+            for a, b in zip(outs[alone, warm], outs[0, warm]):
+                assert np.array_equal(a, b)
+
+
+def test_a_wheels_friction_on_its_disc_is_the_same_alone_and_in_a_batch():
+    """contact._on_disc on Python floats gives, bit for bit, what it gives on arrays: square roots, which
+    are exactly rounded everywhere, not numpy's own powers (x ** -0.5 differs from libm's in the last bit)."""
+    rng = np.random.default_rng(3)
+    n = 5000
+    mu1, mu2 = rng.uniform(1, 50, n), rng.uniform(0.01, 1, n)
+    theta = rng.uniform(-np.pi, np.pi, n)
+    be, bn, lim = rng.normal(0, 1, n), rng.normal(0, 1, n), rng.uniform(0.01, 0.3, n)
+    eig = (np.cos(theta), np.sin(theta), mu1, mu2)
+    pe, pn = contact._on_disc(be, bn, lim, eig)
+    for i in range(n):
+        one = contact._on_disc(float(be[i]), float(bn[i]), float(lim[i]), tuple(float(x[i]) for x in eig))
+        assert one == (pe[i], pn[i])
 
 
 def test_torque_slope_is_the_derivative_and_walls_in_reach_agree():

@@ -69,6 +69,9 @@ START_INSIDE = 0.01  # of a parameter's range: how far inside its bounds a fit s
 FIT_FTOL = 1e-4  # a fit ends when a step lowers its cost by less than this share of it: a BIC change of n 1e-4,
 # under TIE_BIC for the ~9000 residuals of a 90 s recording.  scipy's 1e-8 went on for twice the twin runs
 # (blind 0009's battery: the same 1.4989 ohm in 3 runs either way; its rival backlash fits 10-19 runs against 3-4)
+FIT_XTOL = 1e-4  # and when the steps it tries shrink below this share of its parameters (in their ranges): on a
+# rough cost (a gear's play, a slippery twin) most steps are refused, each shrinking the next 4x, and scipy's
+# 1e-8 went on refusing a dozen times to move a value by under a millionth of its range
 TIE_BIC = 2.0  # a BIC difference below this is no evidence either way (Kass & Raftery 1995)
 AMBIGUITY = 0.02  # held-out costs within 2 % of the chosen one: "explains it equally well"
 DRIVE_EFFECTS = ("dry_friction", "viscous_friction", "wheel_radius", "torque_constant", "encoder_scale", "backlash",
@@ -272,7 +275,7 @@ def fit_model(obj: Objective, base: RobotParams, effects: list[Candidate], start
         return cache[key]
 
     sol = optimize.least_squares(lambda x: evaluate(x)[0], x0, jac=lambda x: evaluate(x)[1], bounds=(lo, hi),
-                                 x_scale=hi - lo, max_nfev=30, ftol=FIT_FTOL)
+                                 x_scale=hi - lo, max_nfev=30, ftol=FIT_FTOL, xtol=FIT_XTOL)
     r_train, jac, r_test = evaluate(sol.x)
     model = Model(list(effects), unpack(sol.x), _apply_all(base, effects, unpack(sol.x)),
                   float(r_train @ r_train), float(r_test @ r_test), int(r_train.size), r_test=r_test)
