@@ -20,7 +20,7 @@ identification manoeuvre records all of it in 46 s:
 twinbot serial PORT --excite --record run.csv (twinbot sim --excite on the twin).
 A 90 s recording takes about 6 s on two cores (the median of twinbot
 bench diagnose --seed N --jobs 1 --workers 2 over eight suites of 40);
-a slippery floor up to two minutes.  --workers (default on Linux: one
+a slippery floor up to a minute.  --workers (default on Linux: one
 process per core) screens the library and fits the shortlisted effects
 side by side: the same verdict and figures, sooner.  A progress line per
 step.
