@@ -237,56 +237,52 @@ def test_slip_step_scalar_and_batch_agree_function_by_function():
     assert out[3].sum() > 0 and (~out[3]).sum() > 0 and out[4].sum() > 0  # gripping, slipping and pushed
 
 
-def test_the_batch_solve_goes_on_with_the_unsettled_robots_alone_and_the_same_numbers(monkeypatch):
-    """Once most robots' impulses have settled, _solve_batch's sweeps go on with the others alone: fewer
-    robots a sweep, and every figure of every robot exactly as when all of them are swept to the end.
-    (The last few robots' going on alone is the next test's; here they stay in the batch.)"""
-    st = random_slip_states(300, seed=5)
-    monkeypatch.setattr(contact, "ALONE_FROM", 0)
-    swept = []
-    axle_row = contact._axle_row
-    monkeypatch.setattr(contact, "_axle_row", lambda nu, i, axle, active: (swept.append(len(active)),
-                                                                           axle_row(nu, i, axle, active)))
-    outs, below = {}, contact.COMPACT_BELOW
-    for compact in (below, 0.0):
-        monkeypatch.setattr(contact, "COMPACT_BELOW", compact)
-        swept.clear()
-        for warm in (False, True):
-            outs[compact, warm] = contact.slip_step_batch(
-                st["q"], st["v"], st["body_b"], st["tau"], st["slope"], 0.005, st["pb"], st["gaps"], st["normals"],
-                None, st["warm_wheels"] if warm else None, st["warm_walls"] if warm else None)
-        outs[compact] = list(swept)
-    assert min(outs[below]) < 300 / 4 and set(outs[0.0]) == {300}
-    assert sum(outs[below]) < sum(outs[0.0]) / 2
-    for warm in (False, True):
-        for a, b in zip(outs[below, warm], outs[0.0, warm]):
-            assert np.array_equal(a, b)
-
-
-def test_the_last_unsettled_robots_of_a_batch_solve_go_on_alone_with_the_same_numbers(monkeypatch):
-    """Once few robots are still unsettled, each is swept to the end alone in Python floats: every figure of
-    every robot exactly as when the batch sweeps them all (and as when every robot goes on alone from the
-    first sweep), and the batch's own sweeps end sooner."""
+def _solved_with(monkeypatch, setting, values):
+    """For each value of contact's `setting`: the outputs of one slip_step_batch on 300 random states, cold
+    and warm-started (keyed (value, warm)), and the sizes of the batch sweeps it took (keyed value; one per
+    wheel's axle row)."""
     st = random_slip_states(300, seed=5)
     swept = []
     axle_row = contact._axle_row
     monkeypatch.setattr(contact, "_axle_row", lambda nu, i, axle, active: (swept.append(len(active)),
                                                                            axle_row(nu, i, axle, active)))
     outs = {}
-    for alone in (0, contact.ALONE_FROM, 300):
-        monkeypatch.setattr(contact, "ALONE_FROM", alone)
+    for value in values:
+        monkeypatch.setattr(contact, setting, value)
         swept.clear()
         for warm in (False, True):
-            outs[alone, warm] = contact.slip_step_batch(
+            outs[value, warm] = contact.slip_step_batch(
                 st["q"], st["v"], st["body_b"], st["tau"], st["slope"], 0.005, st["pb"], st["gaps"], st["normals"],
                 None, st["warm_wheels"] if warm else None, st["warm_walls"] if warm else None)
-        outs[alone] = len(swept)
-    assert outs[contact.ALONE_FROM] < outs[0] / 2 and outs[300] == 2 * 2  # one batch sweep (two wheels) a solve
+        outs[value] = list(swept)
+    return outs
+
+
+def _same_figures(outs, value, reference):
+    return all(np.array_equal(a, b) for warm in (False, True) for a, b in zip(outs[value, warm], outs[reference, warm]))
+
+
+def test_the_batch_solve_goes_on_with_the_unsettled_robots_alone_and_the_same_numbers(monkeypatch):
+    """Once most robots' impulses have settled, _solve_batch's sweeps go on with the others alone: fewer
+    robots a sweep, and every figure of every robot exactly as when all of them are swept to the end.
+    (The last few robots' going on alone is the next test's; here they stay in the batch.)"""
+    monkeypatch.setattr(contact, "ALONE_FROM", 0)
+    below = contact.COMPACT_BELOW
+    outs = _solved_with(monkeypatch, "COMPACT_BELOW", (below, 0.0))
+    assert min(outs[below]) < 300 / 4 and set(outs[0.0]) == {300}
+    assert sum(outs[below]) < sum(outs[0.0]) / 2
+    assert _same_figures(outs, below, 0.0)
+
+
+def test_the_last_unsettled_robots_of_a_batch_solve_go_on_alone_with_the_same_numbers(monkeypatch):
+    """Once few robots are still unsettled, each is swept to the end alone in Python floats: every figure of
+    every robot exactly as when the batch sweeps them all (and as when every robot goes on alone from the
+    first sweep), and the batch's own sweeps end sooner."""
+    alone = contact.ALONE_FROM
+    outs = _solved_with(monkeypatch, "ALONE_FROM", (0, alone, 300))
+    assert len(outs[alone]) < len(outs[0]) / 2 and len(outs[300]) == 2 * 2  # one batch sweep (two wheels) a solve
     assert outs[0, False][3].sum() < 300 and outs[0, False][4].any()  # some slip, some are pushed by a wall
-    for alone in (contact.ALONE_FROM, 300):
-        for warm in (False, True):
-            for a, b in zip(outs[alone, warm], outs[0, warm]):
-                assert np.array_equal(a, b)
+    assert _same_figures(outs, alone, 0) and _same_figures(outs, 300, 0)
 
 
 def test_a_wheels_friction_on_its_disc_is_the_same_alone_and_in_a_batch():
