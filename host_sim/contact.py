@@ -41,9 +41,10 @@ from host_sim.params import RobotParams, cached_per_params
 
 GRAVITY = 9.81  # m/s^2
 PGS_TOL = 1e-10  # m/s: a sweep that moves no velocity by more than this ends the solve
-PGS_MAX_ITER = 100  # sweeps; past it (redundant contacts at a standstill) the next step goes on from here
+PGS_MAX_ITER = 100  # sweeps; past it (redundant contacts at a standstill, both wheels sliding on ice) the next
+# step goes on from here
 COMPACT_BELOW = 0.5  # share of a batch's robots still unsettled under which the sweeps go on with those alone
-ALONE_FROM = 16  # unsettled robots from which on each is swept to the end alone, in Python floats
+ALONE_FROM = 16  # at or under this many unsettled robots in a batch, each is swept to the end alone, in Python floats
 STICK_MARGIN = 1e-9  # a wheel impulse this far inside its cone (relative) is sticking
 NEWTON_STEPS = 6  # on a wheel's friction disc: the force within 1e-13 rad of opposite the slip
 REACH_MARGIN = 2e-3  # m: a wall closer than the step's travel + this is a contact candidate
@@ -474,7 +475,7 @@ def _sweep_alone(state: tuple[Any, ...], one: int, sweeps: int) -> None:
             pe, pn = pe0 - (a11 * ve + a12 * nu[1]), pn0 - (a12 * ve + a22 * nu[1])
             if pe * pe + pn * pn > lim * lim:
                 pe, pn = _on_disc(ve - (wee * pe0 + wen * pn0), nu[1] - (wen * pe0 + wnn * pn0), lim, eig) \
-                    if lim > 0.0 else (0.0, 0.0)
+                    if lim > 0.0 else (0.0, 0.0)  # mu = 0: no grip at all
             de, dn = pe - pe0, pn - pn0
             pw[i] = [pe0 + de, pn0 + dn]
             nu[0] += ju * de
@@ -500,13 +501,14 @@ def _sweep_alone(state: tuple[Any, ...], one: int, sweeps: int) -> None:
         if max(abs(nu[0] - before[0]), abs(nu[1] - before[1]), abs(b * (nu[2] - before[2])),
                abs(r * (nu[3] - before[3])), abs(r * (nu[4] - before[4]))) < PGS_TOL:
             break
+    nu_out, pw_out, pc_out, _wheels, _contacts, axles_out = state[:6]
     for k in range(5):
-        state[0][k][one] = nu[k]
-    state[1][:, :, one] = pw
+        nu_out[k][one] = nu[k]
+    pw_out[:, :, one] = pw
     for w, (pn, pt) in enumerate(pc):
-        state[2][0, w, one], state[2][1, w, one] = pn, pt
+        pc_out[0, w, one], pc_out[1, w, one] = pn, pt
     for i in range(2):
-        state[5][i][2][one] = held[i]
+        axles_out[i][2][one] = held[i]
 
 
 def _wall_rows(nu: list[np.ndarray], contacts: list[tuple[Any, ...]], pc: np.ndarray, cs: tuple[Any, Any, Any],
