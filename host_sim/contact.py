@@ -301,13 +301,8 @@ def _solve(nu: list[float], wheels: list[tuple[Any, ...]], contacts: list[tuple[
     for _ in range(PGS_MAX_ITER):
         before = (nu[0], nu[1], nu[2], nu[3], nu[4])
         for i, w in enumerate(wheels):
-            sb, _el, _ew, _er, a11, a12, a22, wee, wen, wnn, eig, ri = w
-            ve = nu[0] - sb * nu[2] - ri * nu[3 + i]
             pe0, pn0 = pw[i]
-            pe, pn = pe0 - (a11 * ve + a12 * nu[1]), pn0 - (a12 * ve + a22 * nu[1])
-            if pe * pe + pn * pn > lim * lim:
-                pe, pn = _on_disc(ve - (wee * pe0 + wen * pn0), nu[1] - (wen * pe0 + wnn * pn0), lim, eig) \
-                    if lim > 0.0 else (0.0, 0.0)  # mu = 0: no grip at all
+            pe, pn = _wheel_impulse(nu, i, w, pe0, pn0, lim)
             pw[i] = [pe, pn]
             _apply(nu, w, pe - pe0, pn - pn0, i, ju, lat_l, lat_w)
             inv_iw, bound, held = axles[i]
@@ -469,13 +464,10 @@ def _sweep_alone(state: tuple[Any, ...], one: int, sweeps: int) -> None:
     held = [float(h) for _inv, _bound, h in axles]
     for _ in range(sweeps):
         before = list(nu)
-        for i, (sb, el, ew, er, a11, a12, a22, wee, wen, wnn, eig, ri) in enumerate(wheels):
-            ve = nu[0] - sb * nu[2] - ri * nu[3 + i]
+        for i, w in enumerate(wheels):
+            _sb, el, ew, er = w[:4]
             pe0, pn0 = pw[i]
-            pe, pn = pe0 - (a11 * ve + a12 * nu[1]), pn0 - (a12 * ve + a22 * nu[1])
-            if pe * pe + pn * pn > lim * lim:
-                pe, pn = _on_disc(ve - (wee * pe0 + wen * pn0), nu[1] - (wen * pe0 + wnn * pn0), lim, eig) \
-                    if lim > 0.0 else (0.0, 0.0)  # mu = 0: no grip at all
+            pe, pn = _wheel_impulse(nu, i, w, pe0, pn0, lim)
             de, dn = pe - pe0, pn - pn0
             pw[i] = [pe0 + de, pn0 + dn]
             nu[0] += ju * de
@@ -557,6 +549,19 @@ def _put_back(full: tuple[Any, ...], part: tuple[Any, ...], live: np.ndarray | N
                 w[..., live] = s_
         else:
             whole[..., live] = some
+
+
+def _wheel_impulse(nu: list[float], i: int, w: tuple[Any, ...], pe0: float, pn0: float, lim: float
+                   ) -> tuple[float, float]:
+    """Wheel i's friction impulse (Python floats) after its row of a sweep, from (pe0, pn0): the block's
+    correction for the contact point's slip, onto the disc |P| <= lim where it would leave it."""
+    sb, _el, _ew, _er, a11, a12, a22, wee, wen, wnn, eig, ri = w
+    ve = nu[0] - sb * nu[2] - ri * nu[3 + i]
+    pe, pn = pe0 - (a11 * ve + a12 * nu[1]), pn0 - (a12 * ve + a22 * nu[1])
+    if pe * pe + pn * pn > lim * lim:
+        return _on_disc(ve - (wee * pe0 + wen * pn0), nu[1] - (wen * pe0 + wnn * pn0), lim, eig) \
+            if lim > 0.0 else (0.0, 0.0)  # mu = 0: no grip at all
+    return pe, pn
 
 
 def _axle_row(nu: list[np.ndarray], i: int, axle: tuple[Any, Any, np.ndarray], active: np.ndarray) -> None:
