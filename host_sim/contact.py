@@ -395,7 +395,7 @@ def _solve_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: 
             nu[3 + i] = nu[3 + i] + held * inv_iw
     lim = cap * dt
     b = np.abs(wheels[0][0])
-    full = (nu, pw, pc, [held for _inv, _bound, held in axles])
+    full = _solution(nu, pw, pc, axles)
     live: np.ndarray | None = None  # the robots still solved, once fewer than all (their indices in full)
     active = np.ones(len(nu[0]), dtype=bool)
     for sweep in range(PGS_MAX_ITER):
@@ -406,25 +406,26 @@ def _solve_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: 
                             np.maximum(np.abs(b * (nu[2] - before[2])),
                                        np.maximum(np.abs(r * (nu[3] - before[3])), np.abs(r * (nu[4] - before[4])))))
         active &= change >= PGS_TOL
-        if not active.any():
+        unsettled = int(active.sum())
+        if not unsettled:
             break
         state = (nu, pw, pc, wheels, contacts, axles, lim, b, r, rad, ju, lat_l, lat_w, mu_w)
-        if active.sum() <= ALONE_FROM:
+        if unsettled <= ALONE_FROM:
             # A few robots that settle slowly (sliding on ice: 0.9 a sweep) would take a sweep's numpy
             # calls each for a few numbers: each goes on alone, the same arithmetic in Python floats.
             for one in np.flatnonzero(active):
                 _sweep_alone(state, int(one), PGS_MAX_ITER - 1 - sweep)
             break
-        if active.sum() < COMPACT_BELOW * active.size:
-            # Most have settled (a tenth of the robots, over half the sweeps, in a slippery fit): go on with
-            # the others alone.  Element by element the same arithmetic, so the same numbers, sooner.
+        if unsettled < COMPACT_BELOW * active.size:
+            # Most have settled (a tenth of the robots, over half the sweeps, in a slippery fit): the batch goes
+            # on with the others only.  Element by element the same arithmetic, so the same numbers, sooner.
             keep = np.flatnonzero(active)
-            _put_back(full, (nu, pw, pc, [held for _inv, _bound, held in axles]), live)
+            _put_back(full, _solution(nu, pw, pc, axles), live)
             live = keep if live is None else live[keep]
             nu, pw, pc, wheels, contacts, axles, lim, b, r, rad, ju, lat_l, lat_w, mu_w = _take(state, keep)
             active = np.ones(len(keep), dtype=bool)
     if live is not None:
-        _put_back(full, (nu, pw, pc, [held for _inv, _bound, held in axles]), live)
+        _put_back(full, _solution(nu, pw, pc, axles), live)
 
 
 def _wheel_rows(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], pw: np.ndarray,
@@ -537,6 +538,12 @@ def _floats(x: Any) -> Any:
     if isinstance(x, (tuple, list)):
         return type(x)(_floats(y) for y in x)
     return x if isinstance(x, np.ndarray) and x.ndim else float(x)
+
+
+def _solution(nu: list[np.ndarray], pw: np.ndarray, pc: np.ndarray, axles: list[tuple[Any, Any, np.ndarray]]
+              ) -> tuple[Any, ...]:
+    """What a batch solve finds (nu, pw, pc, the axles' held impulses), as _put_back writes it."""
+    return nu, pw, pc, [held for _inv, _bound, held in axles]
 
 
 def _put_back(full: tuple[Any, ...], part: tuple[Any, ...], live: np.ndarray | None) -> None:
