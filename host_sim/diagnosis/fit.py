@@ -55,6 +55,8 @@ MAX_EFFECTS = 3
 # (fit_totals): a window's count carries its start's speed error, which the periods judge well enough.
 FITTED_TOTALS = ("forward", "heading_rate")
 SHORTLIST = 4  # candidates fitted in full after screening
+MIN_SHARE = 16  # robots: a batch's own cost (its steps in Python) is about that many robots' (blind ice case 0077:
+# 0.4 s for 1 robot, 3.3 s for 122), so workers share no smaller pieces of one
 WITHIN_NOISE = 1.0  # held-out cost per weighted residual below which no further effect is sought
 SCREEN_STEPS = (0.02, 0.05, 0.1, 0.2, 0.35, 0.6)  # of the span from a one-parameter effect's start to each bound:
 # the values the screening also tries outright, about 2x apart (a dry friction's cost has a valley 2x wide, blind
@@ -158,15 +160,18 @@ class Objective:
         self.sensors_only = bool(names) and all(sensor_channel(n) for n in names)  # then no physics to run
         self.evaluations = 0
         self.workers: Executor | None = None  # processes that share the work (select's, while it runs)
+        self.worker_count = 1  # how many
         self.test_columns: dict[str, np.ndarray] = {}  # channel (or window total) -> its held-out residuals' columns
 
     def residuals(self, robots: list[RobotParams], part: str = "both") -> tuple[np.ndarray, np.ndarray]:
         """(train (N, n), test (N, m)) weighted residuals of N twins: with workers (select), the robots of
-        each machinery (windows.by_machinery) in a process of their own; they run apart anyway.
+        each machinery (windows.by_machinery), cut into shares (worker_shares), in processes of their own;
+        a robot's figures do not depend on the others in its batch.
         part: "train" or "test" runs those windows alone (the other comes back with no columns): each
         window's twin starts on its own, so its residuals are the same either way."""
         workers = self.workers
-        groups = by_machinery(robots) if workers is not None and not self.sensors_only else []
+        groups = (worker_shares(by_machinery(robots), self.worker_count)
+                  if workers is not None and not self.sensors_only else [])
         if workers is not None and len(groups) > 1:
             self.evaluations += len(robots)
             parts = list(workers.map(_residuals_in_worker, [[robots[i] for i in ix] for ix in groups],
@@ -228,6 +233,18 @@ class Objective:
         return 1.0 - float(after[pick] @ after[pick]) / ss0 if ss0 > 0 else 0.0
 
 
+def worker_shares(groups: list[list[int]], workers: int) -> list[list[int]]:
+    """Groups of robots cut so that none holds more than its share of them all (1 / workers), largest first,
+    for the workers to take in turn: on a slippery floor or with a gear's play, the screening's robots are
+    mostly of one machinery (blind case 0020's second step: 311 of 319, 15 s on one worker while the other
+    had 1 s)."""
+    share = max(-(-sum(len(ix) for ix in groups) // max(workers, 1)), MIN_SHARE)
+    # in runs of neighbours, not every n-th robot: a batch steps as its dearest robot needs, and neighbours
+    # are one candidate's values (0020's second step: 11 s of CPU in runs, 17 s every other robot; 15 s whole)
+    pieces = [[int(i) for i in piece] for ix in groups for piece in np.array_split(ix, -(-len(ix) // share))]
+    return sorted(pieces, key=len, reverse=True)
+
+
 def fit_totals(located: list[str]) -> tuple[str, ...]:
     """The channels whose window totals a fit adds: the travel and the turn, and a wheel's count once
     located (an encoder 3.7 % fine showed as 1.4 % more counts a window, the firmware's loop taking back
@@ -245,12 +262,8 @@ def _apply_all(base: RobotParams, effects: list[Candidate], values: list[list[fl
 def fit_model(obj: Objective, base: RobotParams, effects: list[Candidate], start: list[list[float]]) -> Model:
     """Bounded least squares of the effects' parameters on the training windows."""
     sizes = [len(E.LIBRARY[c.name].params) for c in effects]
-    lo = np.concatenate([E.bounds(c.name)[0] for c in effects])
-    hi = np.concatenate([E.bounds(c.name)[1] for c in effects])
-    # Start a little inside the bounds: scipy's trust region starts with a radius in proportion to x0
-    # (scaled), so a start on a bound of 0 (an absent latency, backlash, drag...) would never leave it.
-    inside = START_INSIDE * (hi - lo)
-    x0 = np.clip(np.concatenate(start), lo + inside, hi - inside)
+    lo, hi = _bounds(effects)
+    x0 = fit_start(effects, start)
     step = 1e-3 * (hi - lo)
 
     def unpack(x: np.ndarray) -> list[list[float]]:
@@ -281,6 +294,20 @@ def fit_model(obj: Objective, base: RobotParams, effects: list[Candidate], start
                   float(r_train @ r_train), float(r_test @ r_test), int(r_train.size), r_test=r_test)
     model.ci95 = _intervals(sol.x, jac, r_train, sizes, lo, hi)
     return model
+
+
+def _bounds(effects: list[Candidate]) -> tuple[np.ndarray, np.ndarray]:
+    return (np.concatenate([E.bounds(c.name)[0] for c in effects]),
+            np.concatenate([E.bounds(c.name)[1] for c in effects]))
+
+
+def fit_start(effects: list[Candidate], start: list[list[float]]) -> np.ndarray:
+    """Where a fit of these effects from `start` really starts: a little inside the bounds.  scipy's trust
+    region starts with a radius in proportion to x0 (scaled), so a start on a bound of 0 (an absent latency,
+    backlash, drag...) would never leave it."""
+    lo, hi = _bounds(effects)
+    inside = START_INSIDE * (hi - lo)
+    return np.clip(np.concatenate(start), lo + inside, hi - inside)
 
 
 def _intervals(x: np.ndarray, jac: np.ndarray, r: np.ndarray, sizes: list[int], lo: np.ndarray,
@@ -356,26 +383,35 @@ def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candid
         # the values tried outright, with their actual costs, for zoom
         seen.append(sorted([(float(x0[0]), float(r0 @ r0))] + [(x, c) for x, c in zip(trials, costs[1:])]))
     order = [int(i) for i in np.argsort(predicted)[:keep]]
-    return zoom(obj, current, [(cands[i], starts[i], seen[i]) for i in order])
+    return zoom(obj, base, current, [(cands[i], starts[i], seen[i]) for i in order])
 
 
-def zoom(obj: Objective, current: Model, shortlist: list[tuple[Candidate, list[float], list[tuple[float, float]]]]
-         ) -> list[tuple[Candidate, list[float]]]:
+def zoom(obj: Objective, base: RobotParams, current: Model,
+         shortlist: list[tuple[Candidate, list[float], list[tuple[float, float]]]]) -> list[tuple[Candidate, list[float]]]:
     """Each shortlisted one-parameter effect whose best screening value was a trial starts its fit from the
     best of ZOOM_POINTS more values between that trial's neighbours (one batch run for all): a gear's play
     or a latency has a rough cost, and a fit stays in the dip it starts in (blind case 0165: a 0.052 rad
-    play fitted 0.060 from the trial at 0.060, 0.052 from one at 0.045)."""
+    play fitted 0.060 from the trial at 0.060, 0.052 from one at 0.045).
+
+    One whose start is the linear step's (a promise, not a cost) is tried where its fit would start, in the
+    same run.  If that costs no less than the twin without it, nor does any value the screening tried, it
+    is not fitted: its cost rises every way the screening looked, and a fit from there only climbs back
+    down towards absent (blind ice case 0077: a gear's play started at 0.003 rad, 3x the cost of none, and
+    its fit took a third of the diagnosis to end at 0.0032).  More parameters are fitted as screened: a
+    linear step along several can overshoot and still lead the fit to the value."""
     robots, grids = [], []
     for cand, start, seen in shortlist:
         xs = [x for x, _c in seen]
-        if len(start) != 1 or start[0] not in xs:  # a linear step's start, or more parameters: as screened
+        if len(start) != 1:
             grids.append([])
-            continue
-        k = xs.index(start[0])
-        lo, hi = xs[max(k - 1, 0)], xs[min(k + 1, len(xs) - 1)]
-        grid = (np.geomspace(lo, hi, ZOOM_POINTS + 2) if lo > 0 and E.bounds(cand.name)[0][0] > 0
-                else np.linspace(lo, hi, ZOOM_POINTS + 2))[1:-1]
-        grids.append([float(x) for x in grid if x != start[0]])
+        elif start[0] not in xs:  # a linear step's start
+            grids.append([float(fit_start([cand], [start])[0])])
+        else:
+            k = xs.index(start[0])
+            lo, hi = xs[max(k - 1, 0)], xs[min(k + 1, len(xs) - 1)]
+            grid = (np.geomspace(lo, hi, ZOOM_POINTS + 2) if lo > 0 and E.bounds(cand.name)[0][0] > 0
+                    else np.linspace(lo, hi, ZOOM_POINTS + 2))[1:-1]
+            grids.append([float(x) for x in grid if x != start[0]])
         robots += [E.apply(current.params, cand.name, cand.site, [x]) for x in grids[-1]]
     if not robots:
         return [(cand, start) for cand, start, _seen in shortlist]
@@ -384,7 +420,11 @@ def zoom(obj: Objective, current: Model, shortlist: list[tuple[Candidate, list[f
     for (cand, start, seen), values in zip(shortlist, grids):
         costs = [float(r @ r) for r in train[at:at + len(values)]]
         at += len(values)
-        if costs and min(costs) < dict(seen)[start[0]]:  # zoomed only round a trial, whose cost was seen
+        if len(start) == 1 and start[0] not in dict(seen):  # a linear step's start, now tried
+            without = dict(seen)[_start_values(base, cand)[0]]  # in the screening's batch, as the others
+            if min(costs + [c for _x, c in seen]) >= without:
+                continue
+        elif costs and min(costs) < dict(seen)[start[0]]:  # zoomed round a trial, whose cost was seen
             start = [values[int(np.argmin(costs))]]
         out.append((cand, start))
     return out
@@ -480,11 +520,11 @@ def select(obj: Objective, base: RobotParams, cands: list[Candidate],
            progress: Callable[[str], None] | None = None, located: list[str] | None = None,
            workers: int = 1) -> list[Model]:
     """Forward selection, then backward elimination: the chain of accepted models, nominal first.
-    workers > 1: each step's screening (by machinery) and its shortlist's fits run in that many processes
+    workers > 1: each step's screening (by machinery, in shares) and its shortlist's fits run in that many processes
     (forked: where a platform cannot fork, in this one)."""
     global _OBJECTIVE
     fitters = _fitting_pool(obj, workers)
-    obj.workers = fitters
+    obj.workers, obj.worker_count = fitters, workers
     try:
         return _select(obj, base, cands, progress, located)
     except BaseException:  # Ctrl-C above all: the workers' fits are dropped, not awaited
@@ -494,7 +534,8 @@ def select(obj: Objective, base: RobotParams, cands: list[Candidate],
     finally:
         if fitters is not None:
             fitters.shutdown(wait=True)
-        obj.workers = _OBJECTIVE = None  # the workers forked with their own copy: hold the recording no longer
+        obj.workers, obj.worker_count = None, 1
+        _OBJECTIVE = None  # the workers forked with their own copy: hold the recording no longer
 
 
 def _select(obj: Objective, base: RobotParams, cands: list[Candidate], progress: Callable[[str], None] | None,
