@@ -26,7 +26,8 @@ WITHIN_NOISE): a further effect would fit the noise.  Screening tries each
 candidate's one linear step from absent and, for one-parameter effects, a few
 values across its range outright (SCREEN_STEPS: threshold effects such as a
 gear's play barely move the residuals near absent; a range that spans orders
-of magnitude, a grip's or a current limit's, in even ratios, LOG_TRIALS).
+of magnitude, a grip's or a current limit's, in even ratios, LOG_TRIALS);
+one whose cost rose every way the screening looked is not fitted (zoom).
 Backward elimination then drops an effect that a later one made redundant
 (the refitted twin without it is as good by the same two tests).
 """
@@ -396,8 +397,8 @@ def zoom(obj: Objective, base: RobotParams, current: Model,
     One whose start is the linear step's (a promise, not a cost) is tried where its fit would start, in the
     same run.  If that costs no less than the twin without it, nor does any value the screening tried, it
     is not fitted: its cost rises every way the screening looked, and a fit from there only climbs back
-    down towards absent (blind ice case 0077: a gear's play started at 0.003 rad, 3x the cost of none, and
-    its fit took a third of the diagnosis to end at 0.0032).  More parameters are fitted as screened: a
+    down towards absent (blind ice case 0077: two gears' plays started at 0.003 rad, 3x the cost of none,
+    and their fits took over half the diagnosis's CPU to end at 0.0032).  More parameters are fitted as screened: a
     linear step along several can overshoot and still lead the fit to the value."""
     robots, grids = [], []
     for cand, start, seen in shortlist:
