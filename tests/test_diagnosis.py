@@ -711,7 +711,8 @@ def test_screening_tries_each_effect_about_twice_as_far_each_time_then_zooms_in_
     seen = sorted((x, cost(x)) for x in [0.0, 0.03, 0.06, 0.105])
     ((cand, start),) = zoom(obj, DEFAULT, current, [(play, [0.06], seen)])
     assert cand == play and 0.03 < start[0] < 0.06 and abs(start[0] - 0.052) < abs(0.06 - 0.052)
-    assert zoom(obj, DEFAULT, current, [(play, [0.0571], seen)]) == [(play, [0.0571])]  # a linear step's start: as it was
+    # a linear step's start, cheaper than none there: fitted from it
+    assert zoom(obj, DEFAULT, current, [(play, [0.0571], seen)]) == [(play, [0.0571])]
 
 
 def test_an_effect_whose_cost_rises_every_way_the_screening_looked_is_not_fitted():

@@ -388,7 +388,8 @@ def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candid
 
 
 def zoom(obj: Objective, base: RobotParams, current: Model,
-         shortlist: list[tuple[Candidate, list[float], list[tuple[float, float]]]]) -> list[tuple[Candidate, list[float]]]:
+         shortlist: list[tuple[Candidate, list[float], list[tuple[float, float]]]]
+         ) -> list[tuple[Candidate, list[float]]]:
     """Each shortlisted one-parameter effect whose best screening value was a trial starts its fit from the
     best of ZOOM_POINTS more values between that trial's neighbours (one batch run for all): a gear's play
     or a latency has a rough cost, and a fit stays in the dip it starts in (blind case 0165: a 0.052 rad
@@ -398,8 +399,8 @@ def zoom(obj: Objective, base: RobotParams, current: Model,
     same run.  If that costs no less than the twin without it, nor does any value the screening tried, it
     is not fitted: its cost rises every way the screening looked, and a fit from there only climbs back
     down towards absent (blind ice case 0077: two gears' plays started at 0.003 rad, 3x the cost of none,
-    and their fits took over half the diagnosis's CPU to end at 0.0032).  More parameters are fitted as screened: a
-    linear step along several can overshoot and still lead the fit to the value."""
+    and their fits took over half the diagnosis's CPU to end at 0.0032).  More parameters are fitted as
+    screened: a linear step along several can overshoot and still lead the fit to the value."""
     robots, grids = [], []
     for cand, start, seen in shortlist:
         xs = [x for x, _c in seen]
@@ -521,8 +522,8 @@ def select(obj: Objective, base: RobotParams, cands: list[Candidate],
            progress: Callable[[str], None] | None = None, located: list[str] | None = None,
            workers: int = 1) -> list[Model]:
     """Forward selection, then backward elimination: the chain of accepted models, nominal first.
-    workers > 1: each step's screening (by machinery, in shares) and its shortlist's fits run in that many processes
-    (forked: where a platform cannot fork, in this one)."""
+    workers > 1: each step's screening (by machinery, in shares) and its shortlist's fits run in that many
+    processes (forked: where a platform cannot fork, in this one)."""
     global _OBJECTIVE
     fitters = _fitting_pool(obj, workers)
     obj.workers, obj.worker_count = fitters, workers
