@@ -649,8 +649,7 @@ def machinery(p: RobotParams) -> tuple[bool, bool, bool]:
     """The optional parts of BatchSim's step a robot sets going: the drive with effects, a gear's play, an
     actuator delay.  A batch runs every robot through each part one of them needs (a gear's play is the
     dearest), so robots batched by their machinery run faster (diagnosis.windows.run_windows).  A robot's
-    figures do not depend on its batch but to rounding, and to the contact solve's tolerance where robots
-    slide (it iterates until the batch's slowest robot settles)."""
+    figures do not depend on its batch: each robot's contact solve stops where its own impulses settle."""
     return (drive_effects.active(p), bool(p.backlash_l or p.backlash_r), bool(p.actuator_delay))
 
 
