@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 from typing import Callable
 
-from host_sim.simulation import Simulation
+from host_sim.simulation import ControlGrid, Simulation
 
 
 class LiveStepper:
@@ -33,7 +33,7 @@ class LiveStepper:
         self.sim = sim
         self.before_control = before_control
         self.owed = 0.0  # fixed step: simulated seconds asked for but not yet a whole period
-        self.next_control = sim.robot.t  # real time: the next control instant on the 40 ms grid
+        self.grid = ControlGrid(sim.robot.t, sim.cycle_s)  # real time: the 40 ms control instants
         self.missed = 0  # real time: control instants skipped by passes longer than a period
         self.passes = 0
 
@@ -57,7 +57,7 @@ class LiveStepper:
                 robot.advance(dt)
             sim.steps += sim.substeps
         if periods:
-            self.next_control = robot.t  # a switch to real time continues the grid from here
+            self.grid.restart(robot.t)  # a switch to real time continues the grid from here
         return periods
 
     def step_period(self) -> None:
@@ -69,11 +69,10 @@ class LiveStepper:
         """One pass of the real-time loop with Dt = big_dt simulated seconds."""
         sim = self.sim
         robot, cycle = sim.robot, sim.cycle_s
-        if robot.t >= self.next_control:
+        behind = self.grid.due(robot.t)
+        if behind is not None:
             self._control()
-            behind = int((robot.t - self.next_control) // cycle)
             self.missed += behind
-            self.next_control += (behind + 1) * cycle
         if big_dt <= 0:
             return
         n = max(1, math.ceil(big_dt / (cycle / sim.substeps)))

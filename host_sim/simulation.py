@@ -70,6 +70,37 @@ class RunResult:
         return float(self.t[hit[0]]) if len(hit) else None
 
 
+GRID_SLACK = 1e-9  # of a period: substeps that add up to an instant may fall short of it by rounding
+
+
+class ControlGrid:
+    """The real-time loop's 40 ms control instants, origin + k * cycle, kept as a whole count k.
+
+    The instants are computed from the count, never summed: a sum drifts (98 periods of 0.04 s
+    make 3.9200000000000026), and a pass that lands on an instant would then find it a hair
+    ahead, or count one period too few as jumped over.  The simulated time is itself a sum of
+    substeps, so a time within GRID_SLACK of a period short of an instant has reached it.
+    """
+
+    def __init__(self, origin: float, cycle: float) -> None:
+        self.cycle = cycle
+        self.restart(origin)
+
+    def restart(self, origin: float) -> None:
+        """The next instant is `origin` and the grid continues from it."""
+        self.origin, self.next = origin, 0
+
+    def due(self, t: float) -> int | None:
+        """None while the next instant is ahead of t; else the instants jumped over, and the grid
+        moves on to the first instant after t."""
+        reached = math.floor((t - self.origin) / self.cycle + GRID_SLACK)
+        if reached < self.next:
+            return None
+        behind = reached - self.next
+        self.next = reached + 1
+        return behind
+
+
 class Simulation:
     def __init__(self, world: World, params: RobotParams, controller: object, *, seed: int | None = 0,
                  noise: bool = True, substeps: int = 8, cycle_s: float = CYCLE_S,
@@ -168,15 +199,14 @@ class Simulation:
         robot, cycle = self.robot, self.cycle_s
         h_max = cycle / self.substeps
         min_wall = min_step / speed
-        next_control = robot.t
+        grid = ControlGrid(robot.t, cycle)  # the 40 ms grid keeps its phase
         passes, missed, max_pass = 0, 0, 0.0
         start = last = time.perf_counter()
         while robot.t < duration and not (stop and stop()):
-            if robot.t >= next_control:  # the clock says a period has elapsed: sense and control here
+            behind = grid.due(robot.t)
+            if behind is not None:  # the clock says a period has elapsed: sense and control here
                 self.control()
-                behind = int((robot.t - next_control) // cycle)  # whole periods this pass jumped over
-                missed += behind
-                next_control += (behind + 1) * cycle  # the 40 ms grid keeps its phase
+                missed += behind  # whole periods this pass jumped over
                 if stop_at_exit and self.exit_time is not None:
                     break
             now = time.perf_counter()

@@ -46,3 +46,20 @@ def test_clock_passes_integrate_dt_and_control_on_the_40ms_grid() -> None:
         t += dt
     assert calls == pytest.approx(expected, abs=1e-12) and sim._t == calls
     assert live.missed == 3 and live.passes == len(passes)
+
+
+@pytest.mark.parametrize("periods", [1, 2, 3])
+def test_passes_that_land_on_the_instants_control_at_each_one_they_reach(periods: int) -> None:
+    """Passes of whole periods end on the grid's instants: each is reached, none is a hair ahead.
+
+    (With the instants summed, 0.04 + 0.04 + ..., which drifts above k x 0.04, or with no slack
+    for the substeps' own rounding, one period a pass controlled 239 times in 240.)"""
+    sim = Simulation(WORLD, DEFAULT, SilController(1), seed=3)
+    calls: list[float] = []
+    live = LiveStepper(sim, before_control=lambda: calls.append(sim.robot.t))
+    passes = 240 // periods
+    for _ in range(passes):
+        live.clock(periods * 0.040)
+    assert len(calls) == passes
+    assert live.missed == (passes - 1) * (periods - 1)  # the instants between controls, all counted
+    assert np.allclose(np.diff(calls), periods * 0.040, rtol=0, atol=1e-9)
