@@ -536,7 +536,8 @@ class BatchSim:
             self.current[s] = cur
             forces = drive_effects.body_forces(body[:, 0], body[:, 1], body[:, 2], fx)
             t_c = fx.t_c if self.gear_gap is None else np.where(self._gear_engaged[s], fx.t_c, 0.0)
-            return tau, slope, body, {"radii": fx.radius, "body_force": forces, "axle_friction": t_c}
+            return tau, slope, body, {"radii": fx.radius, "body_force": forces, "axle_friction": t_c,
+                                      "yaw_damping": drive_effects.yaw_damping(body[:, 2], fx)}
         tau, _cur, slope = motors.wheel_torque_slope_batch(i_s, vs, _SubParams(self._p_motors, s))
         if rolling.any():
             r, b = _sub(self._wheel_radius, s), _sub(self._half_axle, s)

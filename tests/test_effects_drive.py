@@ -321,6 +321,32 @@ def test_turning_resistance_resists_a_spin_not_a_straight_run():
     assert straight == pytest.approx([balance_speed(I_LOW)] * 2, rel=2e-3)
 
 
+@pytest.mark.parametrize("grip", ["rolling", "sliding"])
+def test_turning_resistance_holds_a_turn_below_it_to_the_creep_of_its_smoothing(grip):
+    """A yaw moment of about half the scrub torque: the body creeps at the rate where the smoothed torque
+    balances it, eps_w atanh(M / T_s) (4 mrad/s wide), rolling or with both wheels sliding on ice.  Taken
+    explicitly, a torque this sharp overshoots 0 at every substep: the mean rate came out 5x too fast
+    (rolling), and on ice 5x again unless the slide's step counts the wheels' moment (contact.slip_step_batch)."""
+    scrub = 0.01  # the upper bound: the sharpest the fit tries
+    if grip == "rolling":
+        p = FLAT.replace(turning_resistance=scrub)
+        moment = 0.5 * scrub  # each wheel pushes f = moment / 2b, beyond its axle's dry friction
+        i = (moment / (2 * P.half_axle) * P.wheel_radius + P.coulomb_friction) / ETA_N_KT
+    else:
+        p = FLAT.replace(turning_resistance=scrub, wheel_friction=0.02)
+        cap = p.wheel_friction * (p.body_mass + 2 * p.wheel_mass) * 9.81 / 2
+        moment, i = 2 * P.half_axle * cap, 0.3  # the wheels spin, each sliding at its full grip
+    sim = BatchSim(None, p, np.zeros((1, 3)))
+    heading = []
+    for _ in range(60):
+        sim.run_inputs(np.array([[-i, i]]), sensors=False)
+        heading.append(sim.q[0, 2])
+    assert bool(sim.slipping[0]) == (grip == "sliding")
+    eps = P.wheel_radius * drive_effects.SCRUB_SMOOTHING_SPEED / P.half_axle
+    rate = np.diff(heading[-11:]) / 0.04
+    assert rate == pytest.approx(eps * math.atanh(moment / scrub), rel=0.01)
+
+
 # --------------------------------------------------------------------------- #
 # SimRobot == BatchSim with each effect, walls and slip included
 # --------------------------------------------------------------------------- #
