@@ -895,6 +895,29 @@ def test_workers_fit_side_by_side_to_the_same_diagnosis(tmp_path):
     assert json.dumps(shared.to_json()) == json.dumps(alone.to_json())
 
 
+def test_once_the_fitted_twin_leaves_nothing_located_no_further_effect_is_sought(tmp_path, monkeypatch):
+    """Before each further step of the forward selection the diagnosis locates what the twin fitted so far
+    leaves: once nothing is, no more effects are screened, and that comparison is the verdict's.  On a
+    recording of the twin itself the held-out noise test stops first; here it is switched off, as it never
+    fires on a real robot whose twin is not perfect."""
+    from host_sim.diagnosis import fit as F
+    from host_sim.diagnosis import report as R
+
+    monkeypatch.setattr(F, "WITHIN_NOISE", 0.0)
+    judged: list[float] = []
+    compare_all = R.compare_all
+    monkeypatch.setattr(R, "compare_all", lambda rec, twin, *a, **kw: (
+        judged.append(twin.torque_constant_delta_r), compare_all(rec, twin, *a, **kw))[1])
+    rec = record(tmp_path, E.apply(DEFAULT, "torque_constant", "right", [-6e-4]))
+    said: list[str] = []
+    d = diagnose(rec, DEFAULT, ROOM, progress=said.append)
+    assert d.verdict == "explained" and [e["name"] for e in d.effects] == ["torque_constant"], d.summary()
+    assert "effect 2: locating what the fitted twin leaves" in said, said
+    assert not any(line.startswith("effect 2: screening") for line in said), said
+    # the nominal twin, then the fitted one once: the check's comparison is the verdict's
+    assert len(judged) == 2 and judged[0] == 0.0 and judged[1] == pytest.approx(-6e-4, rel=0.15)
+
+
 def test_ctrl_c_while_workers_fit_exits_130_and_leaves_no_process(tmp_path):
     """A terminal's Ctrl-C reaches the whole foreground group, the forked workers too: the command exits
     130 without a traceback and no worker is left running."""
@@ -963,6 +986,27 @@ def test_the_training_or_held_out_windows_alone_give_their_residuals_of_all(nomi
     assert obj.test_columns.keys() == columns.keys()
     assert all(np.array_equal(obj.test_columns[k], columns[k]) for k in columns)
     assert np.abs(train[1] - train[0]).max() > 1 and np.abs(test[2] - test[0]).max() > 1  # the effects show
+
+
+def test_a_twin_asked_for_twice_in_one_batch_runs_once(nominal_run):
+    """The screening asks for the current model again as each candidate's absent value: repeats run once and
+    each gets the residuals it would have had (a robot's figures do not depend on its batch).  A -0.0 is not
+    a 0.0: only twins equal to the last bit are one."""
+    from host_sim.diagnosis import fit as F
+
+    first = compare(nominal_run, DEFAULT, ROOM)
+    names = ["wheel_l", "wheel_r", "forward", "heading_rate"]
+    obj = F.Objective(nominal_run, first.windows, ROOM, names, {n: 1.0 for n in names + ["travel", "turn"]},
+                      first.contact, first.unjudged)
+    radius = E.apply(DEFAULT, "wheel_radius", "right", [1e-3])
+    signed_zero = DEFAULT.replace(wheel_radius_delta_r=-0.0)
+    robots = [DEFAULT, radius, E.apply(DEFAULT, "backlash", "left", [0.0]), radius, signed_zero]
+    train, test = obj.residuals(robots)
+    assert obj.evaluations == 3  # the nominal twin (twice, once as an absent play), the radius, the -0.0
+    alone = [obj.residuals([p]) for p in (DEFAULT, radius, signed_zero)]
+    for row, k in zip(range(5), (0, 1, 0, 1, 2)):
+        assert np.array_equal(train[row], alone[k][0][0]) and np.array_equal(test[row], alone[k][1][0])
+    assert np.abs(train[1] - train[0]).max() > 1
 
 
 def test_a_fit_on_the_sensors_alone_runs_no_physics(nominal_run, monkeypatch):

@@ -201,11 +201,20 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     if not result.located:
         result.fit_after = dict(first.fit)
         return result
-    chain = _fit(rec, params, world, first, say, workers)
+    judged: dict[str, list[Comparison]] = {}  # the last twin judged, by its parameters' repr
+
+    def judge(twin: RobotParams) -> list[Comparison]:
+        key = repr(twin)
+        if key not in judged:
+            judged.clear()
+            judged[key] = compare_all(rec, twin, world, seconds, held_out=first.windows.held_out)
+        return judged[key]
+
+    chain = _fit(rec, params, world, first, say, workers, settled=lambda model: not judge(model.params)[0].findings)
     final = chain[-1]
     result.model = final
     say("judging the fitted twin")
-    afters = compare_all(rec, final.params, world, seconds, held_out=first.windows.held_out)
+    afters = judge(final.params)
     after = result.after = afters[0]
     result.after_long = afters[-1]
     result.fit_after = dict(after.fit)
@@ -249,10 +258,11 @@ def _located(cmp: Comparison, f: Finding) -> dict[str, Any]:
 
 
 def _fit(rec: Recording, params: RobotParams, world: World | None, first: Comparison,
-         say: Callable[[str], None], workers: int = 1) -> list[Model]:
+         say: Callable[[str], None], workers: int = 1, settled: Callable[[Model], bool] | None = None
+         ) -> list[Model]:
     located = [f.channel for f in first.findings]
     return select(fit_objective(rec, world, first), params, candidates_for(located), progress=say, located=located,
-                  workers=workers)
+                  workers=workers, settled=settled)
 
 
 def fit_objective(rec: Recording, world: World | None, first: Comparison) -> Objective:
