@@ -34,8 +34,8 @@ from host_sim import friction
 
 SMOOTHING_SPEED = 0.1  # rad/s at the wheel: the caster's drag is smoothed over it
 SCRUB_SMOOTHING_SPEED = 0.01  # rad/s at the wheel: and the tyres' scrub over this, a near-Coulomb torque (stepped
-# linearly implicitly: yaw_damping).  Over 0.1 a fitted twin of MuJoCo's torsional friction stayed 6 points short of
-# a perfect one on the wheels (blind cases 0060 and 0080, 86-88 against 92-93); 0.03 gave 91, 0.01 92 (0060)
+# linearly implicitly: yaw_damping).  Over 0.1 a fitted twin of MuJoCo's torsional friction stayed 5-6 points short
+# of a perfect one on the wheels (blind cases 0060 and 0080: 86 and 88 against 92 and 93); over 0.01, 92 and 93
 CASTER_BEHIND = 0.045  # m: the caster sits on the body's axis this far behind C (3/4 of the body radius)
 MIN_ROTOR_SHARE = 0.05  # the motor side's inertia is at least this share of wheel_inertia (backlash)
 SUPPLY_NEWTON = 8  # Newton steps on the supply voltage (converged to 1e-12 V_bat once the limits in force are found)
@@ -201,8 +201,8 @@ def _scrub_eps(d: Drive) -> np.ndarray:
 
 def yaw_damping(om: np.ndarray, d: Drive) -> np.ndarray:
     """-dM_C/d omega of the scrub (N m s/rad, >= 0): the steps take it linearly implicitly, so that a torque
-    this sharp (T_s / eps_w, hundreds of times the body's yaw inertia over a step) holds a yaw rate of 0
-    rather than overshooting it at every step."""
+    this sharp (dt T_s / eps_w up to ten times the body's yaw inertia, at 5 ms and T_s's bound) holds a yaw
+    rate near 0 rather than overshooting it at every step."""
     eps = _scrub_eps(d)
     t = np.tanh(om / eps)
     return d.scrub * (1.0 - t * t) / eps

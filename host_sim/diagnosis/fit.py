@@ -22,7 +22,8 @@ all the held-out residuals, most of which are noise).  Candidates that
 explain the held-out data as well as the chosen one (within AMBIGUITY) are
 reported beside it.  Selection stops once the twin matches the held-out
 windows to within their noise (mean weighted squared residual below
-WITHIN_NOISE): a further effect would fit the noise.  Screening tries each
+WITHIN_NOISE), or once the twin fitted so far leaves nothing located
+(select's `settled`): a further effect would fit the noise.  Screening tries each
 candidate's one linear step from absent and, for one-parameter effects, a few
 values across its range outright (SCREEN_STEPS: threshold effects such as a
 gear's play barely move the residuals near absent; a range that spans orders
@@ -171,7 +172,7 @@ class Objective:
         part: "train" or "test" runs those windows alone (the other comes back with no columns): each
         window's twin starts on its own, so its residuals are the same either way.
         A twin asked for twice runs once: the screening asks for the current model again as each candidate's
-        absent value (27 of 330 robots a step)."""
+        start (blind case 0006's first screening: 327 robots, 291 distinct)."""
         distinct, where = _distinct(robots)
         if len(distinct) < len(robots):
             train, test = self.residuals(distinct, part)
