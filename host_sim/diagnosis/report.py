@@ -201,15 +201,7 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     if not result.located:
         result.fit_after = dict(first.fit)
         return result
-    judged: dict[str, list[Comparison]] = {}  # the last twin judged, by its parameters' repr
-
-    def judge(twin: RobotParams) -> list[Comparison]:
-        key = repr(twin)
-        if key not in judged:
-            judged.clear()
-            judged[key] = compare_all(rec, twin, world, seconds, held_out=first.windows.held_out)
-        return judged[key]
-
+    judge = _judge(rec, world, seconds, first.windows.held_out)
     chain = _fit(rec, params, world, first, say, workers, settled=lambda model: not judge(model.params)[0].findings)
     final = chain[-1]
     result.model = final
@@ -235,6 +227,23 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     else:
         result.verdict = "explained" if not remaining else "partly explained"
     return result
+
+
+def _judge(rec: Recording, world: World | None, seconds: tuple[float, ...], held_out: np.ndarray
+           ) -> Callable[[RobotParams], list[Comparison]]:
+    """compare_all of a twin against the recording on the first comparison's held-out windows, the last
+    twin's kept: the check before each further effect (fit.select's settled) and the verdict then judge
+    the same twin once."""
+    last: dict[str, list[Comparison]] = {}  # by the twin's parameters' repr
+
+    def judge(twin: RobotParams) -> list[Comparison]:
+        key = repr(twin)
+        if key not in last:
+            last.clear()
+            last[key] = compare_all(rec, twin, world, seconds, held_out=held_out)
+        return last[key]
+
+    return judge
 
 
 def judged_spans(rec: Recording, cmp: Comparison) -> list[list[float]]:
