@@ -334,7 +334,7 @@ def slip_step_batch(q: np.ndarray, v: np.ndarray, body: np.ndarray, tau: np.ndar
                     p: Any, gaps: np.ndarray, normals: np.ndarray, idx: np.ndarray | None = None,
                     warm_wheels: np.ndarray | None = None, warm_walls: np.ndarray | None = None,
                     radii: np.ndarray | None = None, body_force: tuple[Any, Any, Any] | None = None,
-                    axle_friction: np.ndarray | None = None, yaw_damping: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                    axle_friction: np.ndarray | None = None, yaw_damping: np.ndarray | float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """`slip_step` for K robots: q (K, 5), v (K, 2), body (K, 3) (u, l, omega; for rolling robots
     from v), tau, slope (K, 2), dt float or (K,), gaps (K, W) and normals (K, W, 2) as
     walls_in_reach_batch; p a RobotParams or a ParamBatch, of which robots idx are these K;
@@ -342,8 +342,8 @@ def slip_step_batch(q: np.ndarray, v: np.ndarray, body: np.ndarray, tau: np.ndar
     radii (K, 2): each wheel's radius (default wheel_radius); body_force: (F_e, F_n, M_C) (K,) each, forces
     on the body other than the wheels' and the walls' (the caster's drag, the tyres' scrub; host_sim/
     drive_effects.py), taken at the start of the step.  axle_friction (K, 2): each axle's dry friction T
-    (default coulomb_friction), as slip_step's.  yaw_damping (K,): -dM_C/d omega of the body forces, taken
-    linearly implicitly on the free body's yaw (the tyres' scrub, drive_effects.yaw_damping).
+    (default coulomb_friction), as slip_step's.  yaw_damping (K,) or 0.0: -dM_C/d omega of the body forces,
+    taken linearly implicitly on the free body's yaw (the tyres' scrub, drive_effects.yaw_damping).
     Returns (q, v, body, rolling (K,), pushed (K,), wheel forces (2, 2, K), wall forces (2, W, K))."""
     cs = consts(p)
     if idx is not None:
@@ -354,11 +354,12 @@ def slip_step_batch(q: np.ndarray, v: np.ndarray, body: np.ndarray, tau: np.ndar
     u, l, om = _free_body(body[:, 0], body[:, 1], body[:, 2], dt, m, k, j)
     if body_force is not None:  # M^-1 F: the heading row alone, (l, omega) coupled through k
         fe, fn, mc = body_force
-        if yaw_damping is not None:
+        if np.any(yaw_damping):
             # Linearly implicit: the step's change of omega is dt m/D (M_C + M_w - s d omega), M_w the wheels'
             # moment about C, taken from the warm start (F_e at +-b); so a steady slide balances M_C = -M_w.
+            # Robot by robot: one without it keeps its M_C to the bit, alone or in a batch.
             m_w = 0.0 if warm_wheels is None else b * (warm_wheels[1, 0] - warm_wheels[0, 0])
-            mc = (mc + m_w) / (1.0 + dt * yaw_damping * m / dd) - m_w
+            mc = np.where(yaw_damping > 0.0, (mc + m_w) / (1.0 + dt * yaw_damping * m / dd) - m_w, mc)
         u, l, om = u + dt * fe / m, l + dt * (j * fn - k * mc) / dd, om + dt * (m * mc - k * fn) / dd
     iwl, iwr = iw - dt * slope[:, 0], iw - dt * slope[:, 1]
     nu = [u, l, om, v[:, 0] + dt * tau[:, 0] / iwl, v[:, 1] + dt * tau[:, 1] / iwr]

@@ -199,10 +199,12 @@ def _scrub_eps(d: Drive) -> np.ndarray:
     return d.radius.mean(1) * SCRUB_SMOOTHING_SPEED / d.b
 
 
-def yaw_damping(om: np.ndarray, d: Drive) -> np.ndarray:
+def yaw_damping(om: np.ndarray, d: Drive) -> np.ndarray | float:
     """-dM_C/d omega of the scrub (N m s/rad, >= 0): the steps take it linearly implicitly, so that a torque
     this sharp (dt T_s / eps_w up to ten times the body's yaw inertia, at 5 ms and T_s's bound) holds a yaw
-    rate near 0 rather than overshooting it at every step."""
+    rate near 0 rather than overshooting it at every step.  0.0 when no robot has a scrub: no work on the step."""
+    if not d.scrub.any():
+        return 0.0
     eps = _scrub_eps(d)
     t = np.tanh(om / eps)
     return d.scrub * (1.0 - t * t) / eps
