@@ -569,12 +569,14 @@ def _select(obj: Objective, base: RobotParams, cands: list[Candidate], progress:
     n_test = int(r_test.size)
     for step in range(MAX_EFFECTS):
         current = chain[-1]
-        if current.effects and current.cost_test < WITHIN_NOISE * n_test:
-            break  # the twin already matches the held-out data to within its noise: more would fit the noise
         if current.effects and settled is not None:
+            # The locator, not the held-out cost, decides: a second effect seen in one channel (a sensor
+            # turned beside a battery's sag) leaves the cost of all channels within their noise.
             say(f"effect {step + 1}: locating what the fitted twin leaves")
             if settled(current):
                 break  # the mismatch located is gone: a further effect would fit what the locator calls noise
+        elif current.effects and current.cost_test < WITHIN_NOISE * n_test:
+            break  # no locator: the twin matches the held-out data to within its noise, more would fit the noise
         pool = [c for c in cands if c not in current.effects]
         if not pool:
             break
