@@ -20,10 +20,12 @@ channels' part of it by MIN_LOCATED_GAIN (an effect that shows in one
 channel, such as a track's in the turn of each window, is a small part of
 all the held-out residuals, most of which are noise).  Candidates that
 explain the held-out data as well as the chosen one (within AMBIGUITY) are
-reported beside it.  Selection stops once the twin matches the held-out
-windows to within their noise (mean weighted squared residual below
-WITHIN_NOISE), or once the twin fitted so far leaves nothing located
-(select's `settled`): a further effect would fit the noise.  Screening tries each
+reported beside it.  Selection stops once the twin fitted so far leaves
+nothing located (select's `settled`): a further effect would fit the
+noise.  Without a locator, once the twin matches the held-out windows to
+within their noise (mean weighted squared residual below WITHIN_NOISE);
+with one, that sum does not decide, since a second effect seen in one
+channel hides in it.  Screening tries each
 candidate's one linear step from absent and, for one-parameter effects, a few
 values across its range outright (SCREEN_STEPS: threshold effects such as a
 gear's play barely move the residuals near absent; a range that spans orders

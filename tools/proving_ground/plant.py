@@ -154,7 +154,11 @@ class Plant:
             self._drive()
             mujoco.mj_step(m, d)
             if self.spec.ir_latency > 0:
+                mujoco.mj_kinematics(m, d)
                 self._remember_pose()
+        # mj_step leaves the bodies' frames where the step began; the encoders read the joints where it ended.
+        # One instant for the pose, the tracker, the IR ring's rays and the encoders: the frames of now.
+        mujoco.mj_kinematics(m, d)
 
     def _drive(self) -> None:
         """The drivers and the battery: currents for this step, motor torques into data.ctrl."""
