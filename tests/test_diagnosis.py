@@ -622,21 +622,6 @@ def test_readings_in_proportion_to_their_change_give_the_rings_latency(nominal_r
     assert lags(unlike) == []
 
 
-@pytest.mark.parametrize("latency", [0.05, 0.07])
-def test_a_latency_between_two_rows_is_measured_through_a_noisy_tracker(tmp_path, latency):
-    """Read between two rows of a noisy tracker, a pose averages their noise, halved in variance half-way
-    (60 ms), which pulled a fitted latency towards it: 50 ms was fitted 53, 70 fitted 67 (blind 0297: 43 ms
-    fitted 52).  Read on the tracker steadied by the encoders (ring_pose), each is measured within 3 %."""
-    import dataclasses
-
-    rec = record(tmp_path, E.apply(DEFAULT, "ir_latency", "both", [latency]))
-    assert rec.pose is not None
-    noise = np.random.default_rng(7).standard_normal(rec.pose.shape) * [0.001, 0.001, np.radians(0.3)]
-    d = diagnose(dataclasses.replace(rec, pose=rec.pose + noise), DEFAULT, ROOM)
-    assert [e["name"] for e in d.effects] == ["ir_latency"], d.summary()
-    assert d.effects[0]["params"]["latency"]["value"] == pytest.approx(latency, rel=0.03)
-
-
 def test_pressed_against_walls_nearly_the_whole_time_is_refused(tmp_path):
     """Driven into a wall and held there: 2 of 19 windows are away from it, too few to judge anything on (a
     held-out window or none): a plain refusal, not a `match`."""
