@@ -107,6 +107,14 @@ def test_the_pose_the_ring_and_the_encoders_are_of_one_instant():
         mujoco.mj_kinematics(plant.model, plant.data)  # the frames of the joints as they are now
         moved.append(np.hypot(*np.subtract(plant.true_pose()[:2], before[:2])))
     assert max(moved) < 1e-12
+    # ... and the IR latency's record of past poses: each pose under the time it was at
+    late = Plant(effects.apply(EXACT, "ir_latency", 0.0105), ARENA, (1.0, 1.0, 0.0), 0)
+    late.actuate(Actuate(150, 100, 60))
+    seen = []
+    for _ in range(40):
+        late.advance(0.001)
+        seen.append(late.true_pose())
+    assert late._ir_pose() == pytest.approx(seen[-12], abs=1e-12)  # 11 ms ago: the last step 10.5 ms back
 
 
 # --------------------------------------------------------------------------- the twin replays it
