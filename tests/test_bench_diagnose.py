@@ -67,8 +67,10 @@ def test_a_right_diagnosis_scores_right(suite: dict[str, Any]) -> None:
     right = diag("explained", [("dry_friction", {"wheel": "left"}, "dry_friction", 0.0014)], located=("wheel_l",))
     row = scoring.score_case(key([DRY]), right, rec, DEFAULT)
     assert row["outcome"] == "right" and row["kind"] == "in library"
-    assert row["param"]["true"] == pytest.approx(0.0015)  # the library holds the delta from the nominal 1.5 mN m
-    assert row["param"]["error"] == pytest.approx(0.1 / 1.5)
+    (score,) = row["effects"]
+    assert score["named"] and score["truth"] == "dry_friction(left) coulomb_friction=0.003 -"
+    assert score["param"]["true"] == pytest.approx(0.0015)  # the library holds the delta from the nominal 1.5 mN m
+    assert score["param"]["error"] == pytest.approx(0.1 / 1.5)
     assert row["fit_before"] == 40.0 and row["fit_after"] == 96.0  # the worse wheel
 
 
@@ -85,15 +87,74 @@ def test_wrong_diagnoses_score_wrong(suite: dict[str, Any], answer: dict[str, An
     rec = load_recording(next((suite["out"] / "recordings").glob("*.csv")))
     row = scoring.score_case(key([DRY]), answer, rec, DEFAULT, None if answer else "error: boom")
     assert row["outcome"] == outcome
-    assert "param" not in row
+    assert not any(e["named"] or "param" in e for e in row["effects"])
 
 
 def test_a_total_read_as_a_delta_is_a_wrong_parameter(suite: dict[str, Any]) -> None:
     rec = load_recording(next((suite["out"] / "recordings").glob("*.csv")))
     row = scoring.score_case(key([DRY]), diag("explained", [("dry_friction", {"wheel": "left"}, "dry_friction",
                                                              0.0030)]), rec, DEFAULT)
-    assert row["outcome"] == "right" and row["param"]["error"] == pytest.approx(1.0)
-    assert row["param"]["error"] > scoring.PARAM_TOLERANCE
+    assert row["outcome"] == "right" and row["effects"][0]["param"]["error"] == pytest.approx(1.0)
+    assert row["effects"][0]["param"]["error"] > scoring.PARAM_TOLERANCE
+
+
+
+VISCOUS = concealed("viscous_friction", "viscous_friction", 4e-4, 2e-4, wheel="right")  # 0.2 beyond nominal
+DELAY = concealed("actuator_delay", "actuator_delay", 0.03, 0.0)
+
+
+@pytest.mark.parametrize("answer, outcome, named", [
+    # both among the first two, in either order; a third after them is not judged
+    (diag("explained", [("viscous_friction", {"wheel": "right"}, "viscous_friction", 1.8e-4),
+                        ("dry_friction", {"wheel": "left"}, "dry_friction", 0.0015)]), "right", [True, True]),
+    (diag("explained", [("dry_friction", {"wheel": "left"}, "dry_friction", 0.0015),
+                        ("viscous_friction", {"wheel": "right"}, "viscous_friction", 1.8e-4),
+                        ("mass", {}, "mass", 0.5)]), "right", [True, True]),
+    # one named: partly; the other named only third, after a wrong second: still partly
+    (diag("partly explained", [("dry_friction", {"wheel": "left"}, "dry_friction", 0.0015)]), "partly named",
+     [True, False]),
+    (diag("explained", [("dry_friction", {"wheel": "left"}, "dry_friction", 0.0015), ("mass", {}, "mass", 0.5),
+                        ("viscous_friction", {"wheel": "right"}, "viscous_friction", 1.8e-4)]), "partly named",
+     [True, False]),
+    (diag("explained", [("dry_friction", {"wheel": "right"}, "dry_friction", 0.0015),
+                        ("viscous_friction", {"wheel": "left"}, "viscous_friction", 1.8e-4)]), "wrong side",
+     [False, False]),
+    (diag("explained", [("mass", {}, "mass", 0.5)]), "wrong name", [False, False]),
+    (diag("unexplained", located=("wheel_l",)), "unexplained", [False, False]),
+])
+def test_two_concealed_effects_are_each_sought_among_the_first_two(
+        suite: dict[str, Any], answer: dict[str, Any], outcome: str, named: list[bool]) -> None:
+    rec = load_recording(next((suite["out"] / "recordings").glob("*.csv")))
+    row = scoring.score_case(key([DRY, VISCOUS]), answer, rec, DEFAULT)
+    assert row["outcome"] == outcome
+    assert [e["named"] for e in row["effects"]] == named
+    assert ["param" in e for e in row["effects"]] == named  # a parameter error only where named
+    if outcome == "right":
+        assert [e["param"]["error"] for e in row["effects"]] == pytest.approx([0.0, 0.1])
+    assert row["truth"] == "dry_friction(left) coulomb_friction=0.003 - + viscous_friction(right) " \
+                           "viscous_friction=0.0004 -"
+
+
+def test_a_pair_is_judged_on_what_the_recording_shows(suite: dict[str, Any]) -> None:
+    """A current limit the references never reach beside a shown delay: the case is right when the delay is
+    named, and the totals count the one excited effect."""
+    rec = load_recording(next((suite["out"] / "recordings").glob("*.csv")))
+    limit = concealed("current_limit", "current_limit", 1.01 * float(np.abs(rec.cmd).max()), 0.5)
+    row = scoring.score_case(key([limit, DELAY]), diag("explained", [("actuator_delay", {}, "delay", 0.031)]),
+                             rec, DEFAULT)
+    assert row["outcome"] == "right" and "not_excited" not in row
+    assert "not_excited" in row["effects"][0] and not row["effects"][0]["named"]
+    assert row["effects"][1]["named"] and row["effects"][1]["param"]["error"] == pytest.approx(1 / 30)
+    single = scoring.score_case(key([DRY]), diag("match"), rec, DEFAULT)
+    for r in (row, single):
+        r.update(excitation="firmware", rule_set=0, sindy={"error": "not run"}, seconds_per_90s=1.0,
+                 cpu_seconds_per_90s=1.0)
+    t = bench_diagnose.totals([row, single])
+    assert (t["in_library"], t["concealed"], t["not_excited"], t["excited"], t["named"]) == (2, 3, 1, 2, 1)
+    assert t["named_by_drive"] == {"exploration (first rules)": [1, 2]}
+    assert t["params_within"] == 1 and t["outcomes_excited"] == {"right": 1, "missed": 1}
+    row = scoring.score_case(key([limit, DELAY]), diag("match"), rec, DEFAULT)
+    assert row["outcome"] == "missed"
 
 
 @pytest.mark.parametrize("effect, fitted, error", [
@@ -193,6 +254,11 @@ def test_sindy_naming_criterion() -> None:
     assert not scoring.score_sindy(key([DRY]), [{"equation": "w_l", "term": "w_l", "coef": -1.0}])["named"]
     assert scoring.score_sindy(key([]), [])["named"]
     assert not scoring.score_sindy(key([concealed("mass", "body_mass", 0.5, 0.46)]), one)["named"]
+    # two effects: each one's signature term in its own wheel's equation, and nothing else
+    both = one + [{"equation": "w_r", "term": "w_r", "coef": -0.1}]
+    assert scoring.score_sindy(key([DRY, VISCOUS]), both)["named"]
+    assert not scoring.score_sindy(key([DRY, VISCOUS]), one)["named"]
+    assert not scoring.score_sindy(key([DRY, DELAY]), one)["named"]  # a delay has no term
 
 
 # --------------------------------------------------------------------------- #
@@ -205,7 +271,24 @@ def test_the_suite_holds_a_control_and_an_out_of_library_case() -> None:
     kinds = [concealed_names(s) for s in seeds]
     assert seeds[0] == SEED and [] in kinds and ["floor_tilt"] in kinds and ["dry_friction"] in kinds
     assert bench_diagnose.compose_suite(SEED, 1) == [SEED]
+    # --effects 2 adds a second in-library effect to the in-library case only
+    pairs = [concealed_names(s, 2) for s in seeds]
+    assert [] in pairs and ["floor_tilt"] in pairs
+    (pair,) = [p for p in pairs if len(p) == 2]
+    assert pair[0] == "dry_friction" and pair[1] != "dry_friction"
 
+
+
+def test_a_suite_of_pairs_conceals_two_effects_per_case(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--effects 2 reaches the generator: case 18's key holds its dry friction and a second effect, and the
+    scoreboard says so."""
+    out = tmp_path / "pairs"
+    assert cli.main(["bench", "diagnose", "--cases", "1", "--seed", str(SEED), "--duration", "10", "--effects", "2",
+                     "--jobs", "1", "--out", str(out), "--quiet"]) == 0
+    answer = json.loads((out / "answer_keys" / f"case_{SEED:04d}.answer.json").read_text())
+    assert [e["name"] for e in answer["effects"]][0] == "dry_friction" and len(answer["effects"]) == 2
+    printed = capsys.readouterr().out
+    assert "--effects 2" in printed and "1 with in-library effects (2 effects between them)" in printed
 
 def test_scoreboard_structure(suite: dict[str, Any], capsys: pytest.CaptureFixture[str]) -> None:
     report = suite["report"]
@@ -332,7 +415,8 @@ def test_a_case_is_labelled_by_what_drove_it() -> None:
     assert bench_diagnose.drive_label({"excitation": "firmware", "rule_set": 0}) == "exploration (first rules)"
     assert bench_diagnose.drive_label({"excitation": "firmware", "rule_set": 1}) == "exploration (refined rules)"
     rows = [{"kind": "in library", "outcome": o, "excitation": "firmware", "rule_set": rules,
-             "sindy": {"error": "not run"}, "param": {"error": 0.01}, "seconds_per_90s": 1.0,
+             "sindy": {"error": "not run"}, "seconds_per_90s": 1.0,
+             "effects": [{"named": True, "param": {"error": 0.01}} if o == "right" else {"named": False}],
              "cpu_seconds_per_90s": 1.0}
             for o, rules in (("right", 1), ("refused", 0), ("right", 0), ("missed", 0))]
     assert bench_diagnose.totals(rows)["named_by_drive"] == {"exploration (refined rules)": [1, 1],

@@ -319,6 +319,31 @@ def test_make_case_writes_a_recording_and_a_separate_answer_key(tmp_path):
     assert make_case(7, tmp_path / "again", duration=3.0)[0].read_text() == rec_path.read_text()
 
 
+
+def test_a_case_may_conceal_two_or_three_effects(tmp_path):
+    """n_effects adds other in-library effects, each of its own name, to the one-effect case of the same seed:
+    the same first effect, world, start and drive, and the plant carries every one of them."""
+    from tools.proving_ground.cases import case_rng, concealed_names, draw_effect, draw_more
+
+    one = json.loads(make_case(8, tmp_path / "one", duration=0.2)[1].read_text())
+    two = json.loads(make_case(8, tmp_path / "two", duration=0.2, n_effects=2)[1].read_text())
+    assert len(one["effects"]) == 1 and len(two["effects"]) == 2
+    assert two["effects"][0] == one["effects"][0]
+    assert all(two[k] == one[k] for k in ("world", "start", "excitation"))
+    assert two["effects"][1]["in_library"] and two["effects"][1]["name"] != one["effects"][0]["name"]
+    assert [e["name"] for e in two["effects"]] == concealed_names(8, 2)
+    changed = {k for k in one["plant"] if one["plant"][k] != two["plant"][k]}
+    assert changed and changed <= {effects.EFFECTS[two["effects"][1]["name"]].param, "body_inertia"}
+    for seed in range(40):
+        spec, hidden = draw_effect(case_rng(seed))
+        three = draw_more(spec, hidden, seed, 3)[1]
+        if not hidden or not hidden[0]["in_library"]:  # controls and the floor's tilt stay as they are
+            assert three == hidden
+        else:
+            names = [e["name"] for e in three]
+            assert len(set(names)) == 3 and all(e["in_library"] for e in three)
+            assert three[:2] == draw_more(spec, hidden, seed, 2)[1]
+
 def test_a_misaligned_pair_is_turned_on_its_mount():
     """Sensor 2 faces the arena's top wall 9 cm from its mount; turned by 0.3 rad on the mount it sees the
     wall 9 / cos 0.3 cm away at 0.3 rad of incidence (the plant's own IR law), and the other sensors read

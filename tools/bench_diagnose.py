@@ -3,7 +3,8 @@
   1. Generate: --cases blind cases on the proving ground's MuJoCo robot
      (tools/proving_ground/cases.make_case, seeds --seed, --seed + 1, ...):
      one random effect in its realistic range or none (the generator's
-     share of effect-free controls), a random world, start and excitation
+     share of effect-free controls; with --effects K, K effects at once in
+     each in-library case), a random world, start and excitation
      (the firmware's exploration, or an IR-guarded excitation program),
      --duration seconds each.  The suite holds at least one control and one
      effect outside the library (floor_tilt): if the seeds drew none, the
@@ -65,6 +66,9 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
     p.add_argument("--seed", type=int_range(0, 10**9), default=0, help="seed of the first case (default 0)")
     p.add_argument("--duration", type=float_range(10, 3600, unit="s"), default=90.0,
                    help="seconds per recording (default 90; diagnosis needs at least 6 windows of 1 s)")
+    p.add_argument("--effects", type=int_range(1, 3), default=1,
+                   help="effects concealed at once in each in-library case (default 1; 2 or 3 add others, each "
+                        "drawn apart, to the same cases: diagnosis selects up to 3)")
     p.add_argument("--jobs", type=int_range(1, 256), default=2, help="worker processes (default 2)")
     p.add_argument("--workers", type=int_range(1, 64), default=1,
                    help="processes per diagnosis, as twinbot diagnose --workers (default 1; with --jobs 1 "
@@ -82,7 +86,8 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
 # The suite
 # --------------------------------------------------------------------------- #
 def compose_suite(seed: int, n: int) -> list[int]:
-    """n case seeds from `seed` on, with at least one control and one out-of-library case (n >= 2)."""
+    """n case seeds from `seed` on, with at least one control and one out-of-library case (n >= 2; which
+    cases they are does not depend on --effects, which adds effects to the in-library cases only)."""
     from tools.proving_ground.cases import concealed_names
     from tools.proving_ground.effects import EFFECTS
 
@@ -103,11 +108,11 @@ def compose_suite(seed: int, n: int) -> list[int]:
     return sorted(seeds)
 
 
-def generate(seed: int, rec_dir: str, key_dir: str, duration: float) -> str:
+def generate(seed: int, rec_dir: str, key_dir: str, duration: float, n_effects: int = 1) -> str:
     """Worker: record case `seed` on the plant; returns the recording's path (its key goes to key_dir)."""
     from tools.proving_ground.cases import make_case
 
-    rec_path, _key = make_case(seed, rec_dir, duration=duration, key_dir=key_dir)
+    rec_path, _key = make_case(seed, rec_dir, duration=duration, key_dir=key_dir, n_effects=n_effects)
     return str(rec_path)
 
 
@@ -153,7 +158,7 @@ def diagnose_blind(rec_path: str, workers: int = 1) -> dict[str, Any]:
 
 
 def run_suite(seeds: list[int], out_dir: Path, duration: float, jobs: int, quiet: bool,
-              workers: int = 1) -> dict[int, dict[str, Any]]:
+              workers: int = 1, n_effects: int = 1) -> dict[int, dict[str, Any]]:
     """Generate and diagnose every case on `jobs` processes (each diagnosis on `workers`); each case is
     diagnosed once it is recorded."""
     from tqdm import tqdm  # type: ignore[import-untyped]
@@ -165,7 +170,8 @@ def run_suite(seeds: list[int], out_dir: Path, duration: float, jobs: int, quiet
             tqdm(total=2 * len(seeds), desc="generate + diagnose", unit="step", file=sys.stderr,
                  disable=quiet) as bar:
         pending: dict[Future[Any], tuple[str, int]] = {
-            pool.submit(generate, s, str(rec_dir), str(key_dir), duration): ("generate", s) for s in seeds}
+            pool.submit(generate, s, str(rec_dir), str(key_dir), duration, n_effects): ("generate", s)
+            for s in seeds}
         while pending:
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
             for fut in done:
@@ -252,9 +258,12 @@ def totals(rows: list[dict[str, Any]]) -> dict[str, Any]:
     from tools.proving_ground.scoring import PARAM_TOLERANCE
 
     listed = [r for r in rows if r["kind"] == "in library"]
-    excited = [r for r in listed if "not_excited" not in r]
-    named = [r for r in excited if r["outcome"] == "right"]
-    params_ok = [r for r in named if r["param"]["error"] <= PARAM_TOLERANCE]
+    # The named and parameter targets count concealed effects (one per case but with --effects K).
+    hidden = [(r, e) for r in listed for e in r["effects"]]
+    excited = [(r, e) for r, e in hidden if "not_excited" not in e]
+    named = [(r, e) for r, e in excited if e["named"]]
+    params_ok = [(r, e) for r, e in named if e["param"]["error"] <= PARAM_TOLERANCE]
+    showing = [r for r in listed if "not_excited" not in r]  # cases that show at least one of their effects
     controls = [r for r in rows if r["kind"] == "control"]
     alarms = [r for r in controls if r["outcome"] != "right"]
     unlisted = [r for r in rows if r["kind"] == "out of library"]
@@ -267,23 +276,24 @@ def totals(rows: list[dict[str, Any]]) -> dict[str, Any]:
     attainable = [r for r in judged if r not in unattainable]
     attainable_ok = [r for r in attainable if r in wheel_ok]
     outcomes: dict[str, int] = {}
-    for r in excited:
+    for r in showing:
         outcomes[r["outcome"]] = outcomes.get(r["outcome"], 0) + 1
-    by_drive: dict[str, list[int]] = {}  # drive -> [named, excited]
-    for r in excited:
+    by_drive: dict[str, list[int]] = {}  # drive -> [named, excited] effects
+    for r, e in excited:
         counts = by_drive.setdefault(drive_label(r), [0, 0])
-        counts[0] += r["outcome"] == "right"
+        counts[0] += e["named"]
         counts[1] += 1
     # Only diagnoses that ran to a verdict are timed: a crash or a refusal returns early.
     secs = [r["seconds_per_90s"] for r in rows if "fit_before" in r] or [float("nan")]
     cpu = [r["cpu_seconds_per_90s"] for r in rows if "fit_before" in r] or [float("nan")]
     sindy_ok = [r for r in rows if "error" not in r["sindy"]]
     return {
-        "cases": len(rows), "in_library": len(listed), "not_excited": len(listed) - len(excited),
-        "excited": len(excited), "outcomes_excited": outcomes, "named_by_drive": by_drive,
+        "cases": len(rows), "in_library": len(listed), "concealed": len(hidden),
+        "not_excited": len(hidden) - len(excited), "excited": len(excited), "showing": len(showing),
+        "outcomes_excited": outcomes, "named_by_drive": by_drive,
         "named": len(named), "named_share": _share(len(named), len(excited)),
         "params_within": len(params_ok), "params_share": _share(len(params_ok), len(named)),
-        "param_error_median": statistics.median([r["param"]["error"] for r in named]) if named else None,
+        "param_error_median": statistics.median([e["param"]["error"] for _r, e in named]) if named else None,
         "controls": len(controls), "false_alarms": len(alarms), "false_alarm_share": _share(len(alarms), len(controls)),
         "out_of_library": len(unlisted), "flagged": len(flagged), "flagged_share": _share(len(flagged), len(unlisted)),
         "wheel_judged": len(judged), "wheel_ok": len(wheel_ok), "wheel_share_all": _share(len(wheel_ok), len(judged)),
@@ -300,8 +310,8 @@ def totals(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "cases": len(sindy_ok),
             "wheel_fit_after_median": _median([r["sindy"]["wheel_fit_after"] for r in sindy_ok if r in judged]),
             "active_terms_median": _median([r["sindy"]["n_active"] for r in sindy_ok]),
-            "named_excited": sum(bool(r["sindy"].get("names_named")) for r in excited if r in sindy_ok),
-            "excited": len(excited),
+            "named_excited": sum(bool(r["sindy"].get("names_named")) for r in showing if r in sindy_ok),
+            "excited": len(showing),
             "silent_controls": sum(bool(r["sindy"].get("names_named")) for r in controls if r in sindy_ok),
             "seconds_median": _median([r["sindy"]["seconds"] for r in sindy_ok]),
         },
@@ -389,7 +399,7 @@ def case_row(r: dict[str, Any]) -> tuple[str, ...]:
     outcome = "not excited" if "not_excited" in r else r["outcome"]
     if "not_excited" in r and r["outcome"] == "right":
         outcome = "not excited (named)"
-    param = f"{100 * r['param']['error']:.0f} %" if "param" in r else "-"
+    param = ", ".join(f"{100 * e['param']['error']:.0f} %" if "param" in e else "-" for e in r.get("effects", [])) or "-"
     bound = (f"p {_f(r['fit_perfect'])}" if r.get("fit_perfect") is not None else f"c {_f(r.get('fit_ceiling'))}")
     fit = f"{_f(r.get('fit_before'))} -> {_f(r.get('fit_after'))} ({bound})" if "fit_before" in r else "-"
     s = r["sindy"]
@@ -426,8 +436,9 @@ def print_report(report: dict[str, Any]) -> None:
     print(f"python:      CPython {m['python']}, numpy {m['numpy']}, pysindy {m['pysindy']}, BLAS threads "
           f"{m['blas_threads']}; {report['jobs']} worker process{'es' if report['jobs'] != 1 else ''}, "
           f"{report.get('workers', 1)} per diagnosis")
-    print(f"suite:       {t['cases']} cases of {report['duration']:g} s: {t['in_library']} in-library effects, "
-          f"{t['controls']} controls, {t['out_of_library']} out of library; seeds {report['seeds']}")
+    held = "" if t["concealed"] == t["in_library"] else f" ({t['concealed']} effects between them)"
+    print(f"suite:       {t['cases']} cases of {report['duration']:g} s: {t['in_library']} with in-library "
+          f"effects{held}, {t['controls']} controls, {t['out_of_library']} out of library; seeds {report['seeds']}")
     print()
     print(format_table(HEADER, [case_row(r) for r in report["cases"]]))
     print()
@@ -436,12 +447,14 @@ def print_report(report: dict[str, Any]) -> None:
     print("SINDy fit: the same windows, nominal twin + SINDy's correction; terms: its active terms (of "
           f"{report['cases'][0]['sindy'].get('n_library', '?')}); SINDy names: tools/proving_ground/scoring.py")
     for r in report["cases"]:
-        if "not_excited" in r:
-            print(f"  {r['case']}: not excited: {r['not_excited']}")
+        for e in r.get("effects", []):
+            if "not_excited" in e:
+                which = f" {e['truth']}" if len(r["effects"]) > 1 else ""
+                print(f"  {r['case']}:{which} not excited: {e['not_excited']}")
         if str(r["verdict"]).startswith(("error", "refused")):
             print(f"  {r['case']}: {r['verdict']}")
     print()
-    print(f"outcomes of the {t['excited']} excited in-library cases: "
+    print(f"outcomes of the {t['showing']} in-library cases that show their effect: "
           + ", ".join(f"{k} {v}" for k, v in sorted(t["outcomes_excited"].items())))
     print("named, by what drove the robot: "
           + ", ".join(f"{k} {named}/{n}" for k, (named, n) in sorted(t["named_by_drive"].items())))
@@ -463,8 +476,8 @@ def print_report(report: dict[str, Any]) -> None:
               f"(median of {g['cases']}; max {g['twin_under_max']:.2f}); diagnosis's ceiling over it by "
               f"{_f2(g['ceiling_over_median'])} (max {_f2(g['ceiling_over_max'])})")
     s = t["sindy"]
-    print(f"SINDy: median {_f(s['active_terms_median'])} active terms; a single term names the effect in "
-          f"{s['named_excited']}/{s['excited']} excited in-library cases; silent on {s['silent_controls']}/"
+    print(f"SINDy: median {_f(s['active_terms_median'])} active terms; its signature terms alone name the effects "
+          f"in {s['named_excited']}/{s['excited']} in-library cases that show them; silent on {s['silent_controls']}/"
           f"{t['controls']} controls; {s['seconds_median'] or 0:.2f} s per case")
     print_targets(report["targets"])
     print(f"\nelapsed: {report['elapsed_s']:.1f} s")
@@ -492,10 +505,11 @@ def run(args: argparse.Namespace) -> int:
         seeds = compose_suite(args.seed, args.cases)
         with tempfile.TemporaryDirectory(prefix="twinbot-bench-diagnose-") as tmp:
             out_dir = Path(args.out) if args.out else Path(tmp)
-            results = run_suite(seeds, out_dir, args.duration, args.jobs, args.quiet, args.workers)
+            results = run_suite(seeds, out_dir, args.duration, args.jobs, args.quiet, args.workers, args.effects)
             rows = score_all(seeds, results, out_dir)
         command = (f"twinbot bench diagnose --cases {args.cases} --seed {args.seed} --duration {args.duration:g} "
-                   f"--jobs {args.jobs}" + (f" --workers {args.workers}" if args.workers > 1 else ""))
+                   f"--jobs {args.jobs}" + (f" --workers {args.workers}" if args.workers > 1 else "")
+                   + (f" --effects {args.effects}" if args.effects > 1 else ""))
     import pysindy  # type: ignore[import-untyped]
 
     report: dict[str, Any] = {

@@ -21,11 +21,14 @@ channel, such as a track's in the turn of each window, is a small part of
 all the held-out residuals, most of which are noise).  Candidates that
 explain the held-out data as well as the chosen one (within AMBIGUITY) are
 reported beside it.  Selection stops once the twin fitted so far leaves
-nothing located (select's `settled`): a further effect would fit the
-noise.  Without a locator, once the twin matches the held-out windows to
-within their noise (mean weighted squared residual below WITHIN_NOISE);
-with one, that sum does not decide, since a second effect seen in one
-channel hides in it.  Screening tries each
+nothing located (select's `still_located`): a further effect would fit the
+noise.  While something is left located, the next effect is judged on what
+is left, not on what the nominal twin showed: its located gain on those
+channels, and every residual weighed by the noise the twin fitted so far
+leaves (report.objective_sigma).  Without a locator, selection stops once
+the twin matches the held-out windows to within their noise (mean weighted
+squared residual below WITHIN_NOISE); with one, that sum does not decide,
+since a second effect seen in one channel hides in it.  Screening tries each
 candidate's one linear step from absent and, for one-parameter effects, a few
 values across its range outright (SCREEN_STEPS: threshold effects such as a
 gear's play barely move the residuals near absent; a range that spans orders
@@ -36,6 +39,7 @@ Backward elimination then drops an effect that a later one made redundant
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import multiprocessing
 import signal
@@ -185,7 +189,7 @@ class Objective:
         if workers is not None and len(groups) > 1:
             self.evaluations += len(robots)
             parts = list(workers.map(_residuals_in_worker, [[robots[i] for i in ix] for ix in groups],
-                                     [part] * len(groups)))
+                                     [part] * len(groups), [self.sigma] * len(groups)))
             order = np.argsort(np.concatenate(groups))
             return (np.concatenate([train for train, _test in parts])[order],
                     np.concatenate([test for _train, test in parts])[order])
@@ -497,13 +501,18 @@ def _plainest(tried: list[Model], cands: list[Candidate]) -> Model:
 _OBJECTIVE: Objective | None = None  # what a fitting worker fits: select's, inherited as the worker forks
 
 
-def _fit_in_worker(base: RobotParams, effects: list[Candidate], start: list[list[float]]) -> Model:
+# The weights travel with each call: select sets them again after the workers forked (still_located).
+def _fit_in_worker(base: RobotParams, effects: list[Candidate], start: list[list[float]],
+                   sigma: dict[str, float]) -> Model:
     assert _OBJECTIVE is not None
+    _OBJECTIVE.sigma = sigma
     return fit_model(_OBJECTIVE, base, effects, start)
 
 
-def _residuals_in_worker(robots: list[RobotParams], part: str) -> tuple[np.ndarray, np.ndarray]:
+def _residuals_in_worker(robots: list[RobotParams], part: str,
+                         sigma: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
     assert _OBJECTIVE is not None
+    _OBJECTIVE.sigma = sigma
     return _OBJECTIVE.residuals_here(robots, part)
 
 
@@ -540,17 +549,19 @@ def _stop_workers(pool: ProcessPoolExecutor) -> None:
 
 def select(obj: Objective, base: RobotParams, cands: list[Candidate],
            progress: Callable[[str], None] | None = None, located: list[str] | None = None,
-           workers: int = 1, settled: Callable[[Model], bool] | None = None) -> list[Model]:
+           workers: int = 1, still_located: Callable[[Model, Objective], list[str]] | None = None) -> list[Model]:
     """Forward selection, then backward elimination: the chain of accepted models, nominal first.
     workers > 1: each step's screening (by machinery, in shares) and its shortlist's fits run in that many
     processes (forked: where a platform cannot fork, in this one).
-    settled(model): True once that twin leaves nothing located (report.diagnose); no further effect is
-    then sought."""
+    still_located(model, obj): the channels the locator still finds with that twin (report.diagnose); none,
+    and no further effect is sought; some, and the next effect's located gain is taken on them.  It may set
+    obj.sigma, the weights of the next step (the noise that twin leaves): the twin's costs are then taken
+    again under them."""
     global _OBJECTIVE
     fitters = _fitting_pool(obj, workers)
     obj.workers, obj.worker_count = fitters, workers
     try:
-        return _select(obj, base, cands, progress, located, settled)
+        return _select(obj, base, cands, progress, located, still_located)
     except BaseException:  # Ctrl-C above all: the workers' fits are dropped, not awaited
         if fitters is not None:
             _stop_workers(fitters)
@@ -563,20 +574,26 @@ def select(obj: Objective, base: RobotParams, cands: list[Candidate],
 
 
 def _select(obj: Objective, base: RobotParams, cands: list[Candidate], progress: Callable[[str], None] | None,
-            located: list[str] | None, settled: Callable[[Model], bool] | None = None) -> list[Model]:
+            located: list[str] | None, still_located: Callable[[Model, Objective], list[str]] | None = None
+            ) -> list[Model]:
     say = progress or (lambda _t: None)
+    now_located = located or []  # what the next effect's located gain is taken on
     r_train, r_test = obj.residuals([base])
     chain = [Model([], [], base, float(r_train[0] @ r_train[0]), float(r_test[0] @ r_test[0]), int(r_train.size),
                    r_test=r_test[0])]
     n_test = int(r_test.size)
     for step in range(MAX_EFFECTS):
         current = chain[-1]
-        if current.effects and settled is not None:
+        if current.effects and still_located is not None:
             # The locator, not the held-out cost, decides: a second effect seen in one channel (a sensor
             # turned beside a battery's sag) leaves the cost of all channels within their noise.
             say(f"effect {step + 1}: locating what the fitted twin leaves")
-            if settled(current):
+            left = still_located(current, obj)
+            if not left:
                 break  # the mismatch located is gone: a further effect would fit what the locator calls noise
+            chain[-1] = current = _costs_again(obj, current)
+            # What is left and the fit can weigh; if the fit weighs none of it, what the nominal twin showed.
+            now_located = [c for c in left if c in obj.test_columns] or (located or [])
         elif current.effects and current.cost_test < WITHIN_NOISE * n_test:
             break  # no locator: the twin matches the held-out data to within its noise, more would fit the noise
         pool = [c for c in cands if c not in current.effects]
@@ -594,16 +611,23 @@ def _select(obj: Objective, base: RobotParams, cands: list[Candidate], progress:
             say(f"effect {step + 1}: fitting {', '.join(c.label() for c, _s in shortlist)} side by side")
             tried = list(fitters.map(_fit_in_worker, [base] * len(shortlist),
                                      [current.effects + [c] for c, _s in shortlist],
-                                     [current.values + [s] for _c, s in shortlist]))
+                                     [current.values + [s] for _c, s in shortlist], [obj.sigma] * len(shortlist)))
         # A value pinned at a fitting bound is a stand-in for something else, not a measurement.
         tried = [m for m in tried if not _pinned(base, m)]
-        best = choose(obj, current, tried, cands, located or [])
+        best = choose(obj, current, tried, cands, now_located)
         if best is None:
             break
         best.rivals = [m for m in tried if m is not best and m.cost_test <= best.cost_test * (1 + AMBIGUITY)]
         best.alternatives = [m.effects[-1].label() for m in best.rivals]
         chain.append(best)
     return backward(obj, base, chain, say, located or [])
+
+
+def _costs_again(obj: Objective, model: Model) -> Model:
+    """model with its training and held-out costs taken again under obj's weights as they are now."""
+    r_train, r_test = obj.residuals([model.params])
+    return dataclasses.replace(model, cost_train=float(r_train[0] @ r_train[0]),
+                               cost_test=float(r_test[0] @ r_test[0]), r_test=r_test[0])
 
 
 def choose(obj: Objective, current: Model, tried: list[Model], cands: list[Candidate],

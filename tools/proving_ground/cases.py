@@ -7,6 +7,10 @@ draws, from `seed` alone:
 - the effect: none (an effect-free control, probability CONTROL_SHARE) or
   one of effects.EFFECTS, with its site (wheel or sensor) and a value from
   its realistic ranges (floor_tilt also draws the downhill direction);
+  with `n_effects` 2 or 3, an in-library case conceals that many: each
+  effect after the first is another in-library one, drawn from a stream of
+  its own, so the first effect, the world, the start and the excitation
+  are those of the one-effect case of the same seed;
 - the world (a built-in one) and a start pose clear of the walls;
 - the excitation: the firmware in SIL (either rule set) exploring on its own, or
   driven through the identification manoeuvre in HOST mode
@@ -57,6 +61,29 @@ def draw_effect(rng: np.random.Generator) -> tuple[PlantSpec, list[dict[str, obj
     if rng.random() < CONTROL_SHARE:
         return spec, []
     effect = list(effects.EFFECTS.values())[int(rng.integers(len(effects.EFFECTS)))]
+    return _conceal(spec, effect, rng)
+
+
+def draw_more(spec: PlantSpec, concealed: list[dict[str, object]], seed: int,
+              count: int) -> tuple[PlantSpec, list[dict[str, object]]]:
+    """spec and its key entries with in-library effects added until `count` are concealed, each of a name not
+    yet concealed, drawn from its own stream.  Controls and out-of-library cases stay as they are: the
+    first is the absence of any effect, the second a mismatch the library must not explain away."""
+    if not concealed or not all(e["in_library"] for e in concealed):
+        return spec, concealed
+    concealed = list(concealed)
+    while len(concealed) < count:
+        rng = np.random.default_rng([seed, 2024, len(concealed)])
+        taken = {e["name"] for e in concealed}
+        pool = [e for e in effects.EFFECTS.values() if e.in_library and e.name not in taken]
+        spec, entry = _conceal(spec, pool[int(rng.integers(len(pool)))], rng)
+        concealed += entry
+    return spec, concealed
+
+
+def _conceal(spec: PlantSpec, effect: effects.Effect,
+             rng: np.random.Generator) -> tuple[PlantSpec, list[dict[str, object]]]:
+    """spec with `effect` at a drawn site and value, and its entry for the answer key."""
     sites = effect.sites()
     where = sites[int(rng.integers(len(sites)))]
     value = effect.draw(rng)
@@ -80,16 +107,17 @@ def case_rng(seed: int) -> np.random.Generator:
     return np.random.default_rng([seed, 2024])
 
 
-def concealed_names(seed: int) -> list[str]:
+def concealed_names(seed: int, n_effects: int = 1) -> list[str]:
     """The effects case `seed` will conceal, without recording it (for composing a suite)."""
-    return [str(e["name"]) for e in draw_effect(case_rng(seed))[1]]
+    return [str(e["name"]) for e in draw_more(*draw_effect(case_rng(seed)), seed, n_effects)[1]]
 
 
 def make_case(seed: int, out_dir: str | Path, duration: float = 90.0,
-              key_dir: str | Path | None = None) -> tuple[Path, Path]:
-    """Record one blind case; returns (recording path, answer key path)."""
+              key_dir: str | Path | None = None, n_effects: int = 1) -> tuple[Path, Path]:
+    """Record one blind case (an in-library one concealing `n_effects` effects); returns (recording path,
+    answer key path)."""
     rng = case_rng(seed)
-    spec, concealed = draw_effect(rng)
+    spec, concealed = draw_more(*draw_effect(rng), seed, n_effects)
     world = builtin_world(BUILTIN_NAMES[int(rng.integers(len(BUILTIN_NAMES)))])
     start = _start(world, rng)
     if rng.random() < 0.5:

@@ -7,7 +7,9 @@ puts a diagnosis (its JSON document, docs/diagnosis.md) beside the key:
 - the effect named correctly: the diagnosis's FIRST effect (forward
   selection's strongest) has the key's name (the plant and the library
   share effect names by design) and sits at the key's site (left / right /
-  both wheel, sensor index; robot-wide effects have no side);
+  both wheel, sensor index; robot-wide effects have no side); a case that
+  conceals k effects (bench diagnose --effects k) has each named when it
+  is among the diagnosis's first k, and is right when all are;
 - the parameter error: the fitted value against the true one, both in the
   library's terms (PARAMS below converts the plant's true physical value);
 - effect-free controls: any verdict but "match" is a false alarm;
@@ -288,14 +290,10 @@ def score_case(key: dict[str, Any], diagnosis: dict[str, Any] | None, rec: Recor
     if row["kind"] == "control":
         row["outcome"] = "right" if diagnosis and diagnosis["verdict"] == "match" else "false alarm"
         return row
-    effect = concealed[0]
     if row["kind"] == "out of library":
         row.update(_score_unlisted(diagnosis))
     else:
-        reason = not_excited(effect, key["plant"], rec)
-        if reason:
-            row["not_excited"] = reason
-        row.update(_score_listed(effect, key["plant"], diagnosis, nominal))
+        row.update(_score_listed(concealed, key["plant"], diagnosis, nominal, rec))
     if diagnosis is None and str(error).startswith("refused"):
         row["outcome"] = "refused"  # diagnosis declined the recording (too short, too still): a miss all the same
     return row
@@ -313,26 +311,46 @@ def _wheel_fit(fit: dict[str, float | None]) -> float | None:
     return float(min(vals)) if len(vals) == 2 else None
 
 
-def _score_listed(effect: dict[str, Any], plant: dict[str, Any], diagnosis: dict[str, Any] | None,
-                  nominal: RobotParams) -> dict[str, Any]:
+def _score_listed(concealed: list[dict[str, Any]], plant: dict[str, Any], diagnosis: dict[str, Any] | None,
+                  nominal: RobotParams, rec: Recording) -> dict[str, Any]:
+    """A case's k concealed in-library effects against the diagnosis's first k (forward selection's
+    strongest first): each is named when one of them has its name and its site, and then has a parameter
+    error.  Extra effects after the first k are not judged.  The case is "right" when every effect the
+    recording shows (not_excited) is named; "effects" holds each effect's score, and "not_excited" the
+    reasons when the recording shows none of them."""
+    scores: list[dict[str, Any]] = []
+    for effect in concealed:
+        score: dict[str, Any] = {"truth": describe_effect(effect), "named": False}
+        reason = not_excited(effect, plant, rec)
+        if reason:
+            score["not_excited"] = reason
+        scores.append(score)
+    out: dict[str, Any] = {"effects": scores}
+    if all("not_excited" in sc for sc in scores):
+        out["not_excited"] = "; ".join(sc["not_excited"] for sc in scores)
     if diagnosis is None:
-        return {"outcome": "error"}
+        out["outcome"] = "error"
+        return out
     found = diagnosis["effects"]
-    out: dict[str, Any] = {"named_among": any(e["name"] == effect["name"] and _site(e) == _site(effect)
-                                              for e in found)}
-    if not found:
+    leading = found[:len(concealed)]
+    for effect, score in zip(concealed, scores):
+        match = next((f for f in leading if f["name"] == effect["name"] and _site(f) == _site(effect)), None)
+        if match is not None:
+            score["named"] = True
+            fitted = float(match["params"][PARAMS[effect["name"]].library_param]["value"])
+            score["param"] = parameter_error(effect, plant, nominal, fitted)
+    judged = [sc for sc in scores if "not_excited" not in sc] or scores
+    missing = [e for e, sc in zip(concealed, scores) if sc in judged and not sc["named"]]
+    if not missing:
+        out["outcome"] = "right"
+    elif not found:
         out["outcome"] = "missed" if diagnosis["verdict"] == "match" else "unexplained"
-        return out
-    first = found[0]
-    if first["name"] != effect["name"]:
-        out["outcome"] = "wrong name"
-        return out
-    if _site(first) != _site(effect):
+    elif len(missing) < len(judged):
+        out["outcome"] = "partly named"
+    elif any(f["name"] == e["name"] for f in leading for e in missing):
         out["outcome"] = "wrong side"  # its value is another wheel's, or shared: no parameter error
-        return out
-    out["outcome"] = "right"
-    fitted = float(first["params"][PARAMS[effect["name"]].library_param]["value"])
-    out["param"] = parameter_error(effect, plant, nominal, fitted)
+    else:
+        out["outcome"] = "wrong name"
     return out
 
 
@@ -350,7 +368,11 @@ def _score_unlisted(diagnosis: dict[str, Any] | None) -> dict[str, Any]:
 def describe_truth(key: dict[str, Any]) -> str:
     if not key["effects"]:
         return "none (control)"
-    e = key["effects"][0]
+    return " + ".join(describe_effect(e) for e in key["effects"])
+
+
+def describe_effect(e: dict[str, Any]) -> str:
+    """One concealed effect in words: its name, site and (first) true value."""
     site = _site(e)
     name, (param, p) = e["name"], next(iter(e["params"].items()))
     return f"{name}{'' if site is None else f'({site})'} {param}={p['value']:.4g} {p['unit']}"
@@ -378,18 +400,17 @@ SINDY_SIGNATURE = {"dry_friction": "tanh(w_{w})", "viscous_friction": "w_{w}", "
 
 
 def score_sindy(key: dict[str, Any], terms: list[dict[str, Any]]) -> dict[str, Any]:
-    """Named: a control with no active term; or, for an effect with a signature term, exactly one active
-    term in each affected wheel's equation, that term, and none in the other wheel's."""
+    """Named: a control with no active term; or, when every concealed effect has a signature term, exactly
+    those terms active in the affected wheels' equations (each effect's in each of its wheels), no other."""
     active = [t for t in terms if t["coef"] != 0.0]
     if not key["effects"]:
         return {"named": not active, "why": "no term (right)" if not active else f"{len(active)} spurious terms"}
-    effect = key["effects"][0]
-    signature = SINDY_SIGNATURE.get(effect["name"])
-    if signature is None:
-        return {"named": False, "why": "no SINDy term can stand for it"}
-    wheels = {"left": ["l"], "right": ["r"], "both": ["l", "r"]}.get(effect.get("wheel", "both"), ["l", "r"])
-    ok = True
-    for w in ("l", "r"):
-        mine = [t["term"] for t in active if t["equation"] == f"w_{w}"]
-        ok &= mine == ([signature.format(w=w)] if w in wheels else [])
-    return {"named": ok, "why": "its one term" if ok else "not a single signature term"}
+    expected: dict[str, set[str]] = {"l": set(), "r": set()}
+    for effect in key["effects"]:
+        signature = SINDY_SIGNATURE.get(effect["name"])
+        if signature is None:
+            return {"named": False, "why": f"no SINDy term can stand for {effect['name']}"}
+        for w in {"left": ["l"], "right": ["r"]}.get(effect.get("wheel", "both"), ["l", "r"]):
+            expected[w].add(signature.format(w=w))
+    ok = all(sorted(t["term"] for t in active if t["equation"] == f"w_{w}") == sorted(expected[w]) for w in "lr")
+    return {"named": ok, "why": "its signature terms" if ok else "not the signature terms alone"}
