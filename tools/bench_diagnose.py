@@ -255,14 +255,8 @@ def _share(k: int, n: int) -> float | None:
 
 
 def totals(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    from tools.proving_ground.scoring import PARAM_TOLERANCE
-
     listed = [r for r in rows if r["kind"] == "in library"]
-    # The named and parameter targets count concealed effects (one per case but with --effects K).
-    hidden = [(r, e) for r in listed for e in r["effects"]]
-    excited = [(r, e) for r, e in hidden if "not_excited" not in e]
-    named = [(r, e) for r, e in excited if e["named"]]
-    params_ok = [(r, e) for r, e in named if e["param"]["error"] <= PARAM_TOLERANCE]
+    hidden, excited, named, params_ok = _concealed(listed)
     showing = [r for r in listed if "not_excited" not in r]  # cases that show at least one of their effects
     controls = [r for r in rows if r["kind"] == "control"]
     alarms = [r for r in controls if r["outcome"] != "right"]
@@ -316,6 +310,20 @@ def totals(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "seconds_median": _median([r["sindy"]["seconds"] for r in sindy_ok]),
         },
     }
+
+
+Pairs = list[tuple[dict[str, Any], dict[str, Any]]]  # (case row, one of its concealed effects' scores)
+
+
+def _concealed(listed: list[dict[str, Any]]) -> tuple[Pairs, Pairs, Pairs, Pairs]:
+    """The in-library cases' concealed effects: all, those excited, those named, those with the parameter
+    within tolerance.  The named and parameter targets count effects (one per case but with --effects K)."""
+    from tools.proving_ground.scoring import PARAM_TOLERANCE
+
+    hidden = [(r, e) for r in listed for e in r["effects"]]
+    excited = [(r, e) for r, e in hidden if "not_excited" not in e]
+    named = [(r, e) for r, e in excited if e["named"]]
+    return hidden, excited, named, [(r, e) for r, e in named if e["param"]["error"] <= PARAM_TOLERANCE]
 
 
 def _against_perfect_twin(controls: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:

@@ -202,13 +202,7 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
         result.fit_after = dict(first.fit)
         return result
     judge = _judge(rec, world, seconds, first.windows.held_out)
-
-    def still_located(model: Model, obj: Objective) -> list[str]:
-        cmp = judge(model.params)[0]
-        obj.sigma = objective_sigma(cmp, obj.names, obj.totals)  # the noise this twin leaves: the next step's weights
-        return [f.channel for f in cmp.findings]
-
-    chain = _fit(rec, params, world, first, say, workers, still_located=still_located)
+    chain = _fit(rec, params, world, first, say, workers, still_located=_relocate(judge))
     final = chain[-1]
     result.model = final
     say("judging the fitted twin")
@@ -250,6 +244,18 @@ def _judge(rec: Recording, world: World | None, seconds: tuple[float, ...], held
         return last[key]
 
     return judge
+
+
+def _relocate(judge: Callable[[RobotParams], list[Comparison]]) -> Callable[[Model, Objective], list[str]]:
+    """fit.select's still_located: what the locator still finds with a fitted twin, the weights of the next
+    step (objective_sigma) set from the same comparison, the noise that twin leaves."""
+
+    def still_located(model: Model, obj: Objective) -> list[str]:
+        cmp = judge(model.params)[0]
+        obj.sigma = objective_sigma(cmp, obj.names, obj.totals)
+        return [f.channel for f in cmp.findings]
+
+    return still_located
 
 
 def judged_spans(rec: Recording, cmp: Comparison) -> list[list[float]]:
