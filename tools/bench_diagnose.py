@@ -312,10 +312,10 @@ def totals(rows: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
-Pairs = list[tuple[dict[str, Any], dict[str, Any]]]  # (case row, one of its concealed effects' scores)
+EffectScores = list[tuple[dict[str, Any], dict[str, Any]]]  # (case row, one of its concealed effects' scores)
 
 
-def _concealed(listed: list[dict[str, Any]]) -> tuple[Pairs, Pairs, Pairs, Pairs]:
+def _concealed(listed: list[dict[str, Any]]) -> tuple[EffectScores, EffectScores, EffectScores, EffectScores]:
     """The in-library cases' concealed effects: all, those excited, those named, those with the parameter
     within tolerance.  The named and parameter targets count effects (one per case but with --effects K)."""
     from tools.proving_ground.scoring import PARAM_TOLERANCE

@@ -339,8 +339,8 @@ def _score_listed(concealed: list[dict[str, Any]], plant: dict[str, Any], diagno
             score["named"] = True
             fitted = float(match["params"][PARAMS[effect["name"]].library_param]["value"])
             score["param"] = parameter_error(effect, plant, nominal, fitted)
-    judged = [sc for sc in scores if "not_excited" not in sc] or scores
-    missing = [e for e, sc in zip(concealed, scores) if sc in judged and not sc["named"]]
+    judged = [i for i, sc in enumerate(scores) if "not_excited" not in sc] or list(range(len(scores)))
+    missing = [concealed[i] for i in judged if not scores[i]["named"]]
     if not missing:
         out["outcome"] = "right"
     elif not found:
