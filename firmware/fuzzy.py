@@ -19,7 +19,7 @@ robot in front of a wall it approaches head-on (it settles where "go back"
 balances "go ahead"), as the paper observed; the quick turns of S2 and S8
 are what get it past.
 
-Rule bases are data (RULES_FIRST, RULES_REFINED); tools/fuzzy_rules.py names
+Rule bases are data (RULES_FIRST, RULES_REFINED); tools/cli/fuzzy.py names
 them, prints them as IEC 61131-7 FCL text and draws the sets (docs/fuzzy.md).
 """
 from protocol.compat import const
@@ -32,7 +32,7 @@ NEAR_LO = const(40)
 NEAR_HI = const(700)
 
 # Only numbers live here (RAM is scarce on the robot); the names of terms,
-# actions and antecedents are in tools/fuzzy_rules.py, in the same order.
+# actions and antecedents are in tools/cli/fuzzy.py, in the same order.
 
 # Wheel-speed singletons, % of the max_speed parameter (Figs. 17 and 18).
 _FULL_BACK = const(0)

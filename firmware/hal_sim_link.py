@@ -29,7 +29,7 @@ class SimLinkHal(BufferedHal):
     """BufferedHal whose readings arrive as HW_SENSE frames and whose outputs leave as HW_ACTUATE.
 
     Its host link is stdin/stdout, the board's REPL port.  Its watchdog is on
-    the simulator's side (host_sim/pil.py): HW_ACTUATE overdue, motors off."""
+    the simulator's side (host_sim/board/pil.py): HW_ACTUATE overdue, motors off."""
 
     repl_link = True
 

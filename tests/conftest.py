@@ -16,11 +16,11 @@ def pty_pair():
 
 @pytest.fixture(scope="session")
 def wasm_micropython():
-    """The 32-bit MicroPython webassembly port, installed once by `npm ci` from host_sim/wasm/
+    """The 32-bit MicroPython webassembly port, installed once by `npm ci` from host_sim/board/wasm/
     (node_modules there is git-ignored).  Skipped only when Node.js itself is missing."""
     import shutil
 
-    from host_sim.micropython_tools import wasm_port
+    from host_sim.board.micropython_runner import wasm_port
 
     if not shutil.which("node") or not shutil.which("npm"):
         pytest.skip("node and npm are not installed: the 32-bit MicroPython (webassembly port) needs them")

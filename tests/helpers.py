@@ -47,7 +47,7 @@ class Pty:
 
 
 def twinbot_cmd(*args: str) -> list[str]:
-    return [sys.executable, "-m", "tools.cli", *args]
+    return [sys.executable, "-m", "tools.cli.main", *args]
 
 
 def run_twinbot(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:

@@ -1,4 +1,4 @@
-"""Batch mode (host_sim/batch.py): N robots at once agree with N single-robot runs.
+"""Batch mode (host_sim/robot/batch.py): N robots at once agree with N single-robot runs.
 
 Tolerances.  BatchSim runs the same physics in the same order as SimRobot,
 but dynamics.step_batch groups the floating-point operations of the closed
@@ -20,17 +20,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from host_sim.batch import BatchSim
-from host_sim.replay import replay_batch
-from host_sim.interface import Actuate
-from host_sim.sil import SilController
-from host_sim.dynamics import ParamBatch
-from host_sim.sim_robot import SimRobot
-from host_sim.params import DEFAULT
-from host_sim.recording import RecordingWriter, load_recording
-from host_sim.replay import replay
-from host_sim.simulation import Simulation
-from host_sim.world import World, builtin_world
+from host_sim.robot.batch import BatchSim
+from host_sim.recordings.replay import replay_batch
+from host_sim.controller.hardware_io import Actuate
+from host_sim.controller.sil import SilController
+from host_sim.physics.dynamics import ParamBatch
+from host_sim.robot.sim_robot import SimRobot
+from host_sim.physics.params import DEFAULT
+from host_sim.recordings.recording import RecordingWriter, load_recording
+from host_sim.recordings.replay import replay
+from host_sim.loops.simulation import Simulation
+from host_sim.physics.world import World, builtin_world
 
 ROOM = builtin_world("paper_room")
 EMPTY = World(name="empty", size=(10.0, 10.0), walls=[])
@@ -227,7 +227,7 @@ def test_replay_batch_follows_a_robots_own_timing(tmp_path):
 def test_a_robot_recording_that_starts_from_rest_starts_the_twin_near_rest(tmp_path):
     """The wheel speed at a recording's first row is the slope there (a three-row one-sided difference), not
     the first period's mean: a robot accelerating from rest must not start its twin already moving."""
-    from host_sim.replay import wheel_speeds_at
+    from host_sim.recordings.replay import wheel_speeds_at
 
     sim = _simulator_recording(tmp_path / "sim.csv", seed=None, noise=False, duration=1.0)
     path = tmp_path / "robot.csv"

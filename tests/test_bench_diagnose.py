@@ -15,12 +15,13 @@ from typing import Any
 import numpy as np
 import pytest
 
-from host_sim.params import DEFAULT
-from host_sim.recording import load_recording
-from host_sim.world import world_from_dict
-from tools import bench_diagnose, cli
-from tools.proving_ground import scoring
-from tools.proving_ground.robot_model import nominal_spec
+from host_sim.physics.params import DEFAULT
+from host_sim.recordings.recording import load_recording
+from host_sim.physics.world import world_from_dict
+from tools.bench import diagnose as bench_diagnose
+from tools.cli import main as cli
+from tools.bench import diagnose_scoring as scoring
+from tools.reference_plant.robot_model import nominal_spec
 
 pytest.importorskip("pysindy")
 
@@ -177,8 +178,8 @@ def test_the_parameter_table_converts_to_library_terms(effect: dict[str, Any], f
 
 def test_the_parameter_table_covers_both_libraries() -> None:
     """Every plant effect in the library has a row, naming the plant's parameter and the library's."""
-    from host_sim import effects as library
-    from tools.proving_ground import effects as plant
+    from host_sim.physics import effects as library
+    from tools.reference_plant import effects as plant
 
     listed = {name for name, e in plant.EFFECTS.items() if e.in_library}
     assert set(scoring.PARAMS) == listed == set(library.LIBRARY)
@@ -265,7 +266,7 @@ def test_sindy_naming_criterion() -> None:
 # The suite end to end
 # --------------------------------------------------------------------------- #
 def test_the_suite_holds_a_control_and_an_out_of_library_case() -> None:
-    from tools.proving_ground.cases import concealed_names
+    from tools.reference_plant.cases import concealed_names
 
     seeds = bench_diagnose.compose_suite(SEED, 3)
     kinds = [concealed_names(s) for s in seeds]

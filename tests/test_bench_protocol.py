@@ -8,7 +8,8 @@ import json
 
 import pytest
 
-from tools import bench_protocol, cli
+from tools.bench import protocol as bench_protocol
+from tools.cli import main as cli
 
 
 @pytest.fixture

@@ -9,7 +9,8 @@ import math
 
 import pytest
 
-from tools import bench_sim, cli
+from tools.bench import sim as bench_sim
+from tools.cli import main as cli
 
 pytest.importorskip("irsim")
 

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import socket
 
-from host_sim.interface import Sense
-from host_sim.pil import PilLink
+from host_sim.controller.hardware_io import Sense
+from host_sim.board.pil import PilLink
 from protocol import messages as M
 from protocol.framing import FrameEncoder
 

@@ -258,7 +258,7 @@ def run(args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
     # cwd is the row's folder (relative default outputs would land there); the checkout comes first on the path;
     # TMPDIR is private, so what the runs leave there is theirs, whatever else runs on the machine.
     env = dict(os.environ, PYTHONPATH=str(REPO), TMPDIR=str(PRIVATE_TMP))
-    return subprocess.run([sys.executable, "-m", "tools.cli", *args], cwd=cwd, env=env, capture_output=True,
+    return subprocess.run([sys.executable, "-m", "tools.cli.main", *args], cwd=cwd, env=env, capture_output=True,
                           text=True, timeout=60, check=False)
 
 
@@ -299,7 +299,7 @@ def outcomes(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[subpro
 
 
 def test_the_table_covers_every_subcommand():
-    from tools.cli import SUBCOMMANDS
+    from tools.cli.main import SUBCOMMANDS
 
     covered = {args[0] for _, args, _ in CASES if args}
     assert {name for name, _ in SUBCOMMANDS} <= covered

@@ -135,7 +135,7 @@ def test_a_pace_that_cannot_be_kept_is_warned_about():
 
 
 def test_one_collision_is_singular():
-    from tools.sim import plural
+    from tools.cli.sim import plural
 
     assert plural(1, "collision") == "1 collision" and plural(0, "collision") == "0 collisions"
 
@@ -175,7 +175,7 @@ def test_plot_recording_draws_it_beside_the_csv(recording):
 
 
 def test_worlds_too_big_for_their_grid_are_refused():
-    from host_sim.world import MAX_GRID_CELLS, WorldError, builtin_world, world_from_dict
+    from host_sim.physics.world import MAX_GRID_CELLS, WorldError, builtin_world, world_from_dict
 
     room = {"name": "r", "size": [1000, 1000], "walls": [], "start": {"x": 1, "y": 1, "phi": 0}}
     with pytest.raises(WorldError, match="1000 m x 1000 m is too big; the limit is 50 m a side"):
@@ -190,14 +190,14 @@ def test_worlds_too_big_for_their_grid_are_refused():
                                           ({"body_mass": 1e300}, "body_mass"),
                                           ({"com_offset": -0.07}, "com_offset"), ({"com_offset": 0.06}, "com_offset")])
 def test_parameter_files_out_of_range_are_refused(changes, name):
-    from host_sim.params import ParamsError, params_from_dict
+    from host_sim.physics.params import ParamsError, params_from_dict
 
     with pytest.raises(ParamsError, match=name):
         params_from_dict(changes)
 
 
 def test_parameter_files_in_range_are_accepted():
-    from host_sim.params import params_from_dict
+    from host_sim.physics.params import params_from_dict
 
     p = params_from_dict({"adc_bits": 10, "ticks_per_rev": 2048})
     assert p.adc_max == 1023 and p.ticks_per_rev == 2048

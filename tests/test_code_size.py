@@ -51,5 +51,5 @@ def test_the_walk_sees_the_packages() -> None:
     lengths = function_lengths()
     for package in PACKAGES:
         assert any(k.startswith(package + "/") for k in lengths), package
-    assert "host_sim/world.py::world_from_dict" in lengths
+    assert "host_sim/physics/world.py::world_from_dict" in lengths
     assert "firmware/fuzzy.py::direction_weight" in lengths

@@ -1,4 +1,4 @@
-"""Wall contact and wheel slip as physics (host_sim/contact.py; docs/dynamics.md "Contact").
+"""Wall contact and wheel slip as physics (host_sim/physics/contact.py; docs/dynamics.md "Contact").
 
 A robot driven into walls: the result does not depend on the step, it turns to face a wall it
 meets at an angle (friction at the rim), it stays out of both walls of a corner, contact never
@@ -11,12 +11,12 @@ import math
 import numpy as np
 import pytest
 
-from host_sim import contact, dynamics
-from host_sim.batch import BatchSim
-from host_sim.interface import Actuate
-from host_sim.params import DEFAULT
-from host_sim.sim_robot import SimRobot
-from host_sim.world import World
+from host_sim.physics import contact, dynamics
+from host_sim.robot.batch import BatchSim
+from host_sim.controller.hardware_io import Actuate
+from host_sim.physics.params import DEFAULT
+from host_sim.robot.sim_robot import SimRobot
+from host_sim.physics.world import World
 from tests import test_dynamics as reference  # the reference formulas (written out there)
 
 FLOOR = World(name="floor", size=(2.0, 2.0), walls=[{"segment": [-1.0, 0.0, 3.0, 0.0]}])
@@ -171,8 +171,8 @@ def test_traction_scalar_and_batch_agree_and_a_full_current_start_slips():
 def random_slip_states(n, seed=11):
     """n robots' states for one contact step: slipping or rolling, zero to two walls in reach (corners),
     per-robot parameters, a previous step's forces (some axle torques beyond their bound)."""
-    from host_sim.dynamics import ParamBatch
-    from host_sim import motors
+    from host_sim.physics.dynamics import ParamBatch
+    from host_sim.physics import motors
 
     rng = np.random.default_rng(seed)
     params = [DEFAULT.replace(wheel_friction=float(rng.uniform(0.2, 1.0)), wall_friction=float(rng.uniform(0, 0.6)),
@@ -208,7 +208,7 @@ def random_slip_states(n, seed=11):
 def test_slip_step_scalar_and_batch_agree_function_by_function():
     """contact.slip_step == contact.slip_step_batch on random states: slipping or rolling, zero to two
     walls in reach (corners), with and without a warm start, per-robot parameters."""
-    from host_sim import motors
+    from host_sim.physics import motors
 
     n = 40
     st = random_slip_states(n)
@@ -301,7 +301,7 @@ def test_a_wheels_friction_on_its_disc_is_the_same_alone_and_in_a_batch():
 
 
 def test_torque_slope_is_the_derivative_and_walls_in_reach_agree():
-    from host_sim import motors
+    from host_sim.physics import motors
 
     for i_ref in (0.0, 0.2, 0.5, -0.5):
         for w in (-35.0, -2.0, -0.05, 0.0, 0.03, 5.0, 30.0):

@@ -1,6 +1,6 @@
 """twinbot diagnose on recordings whose truth is known: the twin's own, with effects injected into it.
 
-The MuJoCo plant (tools/proving_ground) is the independent proof; these are
+The MuJoCo plant (tools/reference_plant) is the independent proof; these are
 the easy cases: a recording made by the twin with one parameter changed is
 diagnosed with the nominal twin, which must name the change, measure it and
 fit the held-out windows again.
@@ -12,17 +12,17 @@ import json
 import numpy as np
 import pytest
 
-from host_sim import effects as E
+from host_sim.physics import effects as E
 from host_sim.diagnosis import DiagnosisError, diagnose
 from host_sim.diagnosis import locate
 from host_sim.diagnosis.compare import compare, rule_margins
 from host_sim.diagnosis.report import check_excitation
-from host_sim.diagnosis.words import sentence
-from host_sim.params import DEFAULT, load_params
-from host_sim.recording import RecordingWriter, load_recording
-from host_sim.sil import SilController
-from host_sim.simulation import Simulation
-from host_sim.world import builtin_world, world_from_dict
+from host_sim.diagnosis.phrasing import sentence
+from host_sim.physics.params import DEFAULT, load_params
+from host_sim.recordings.recording import RecordingWriter, load_recording
+from host_sim.controller.sil import SilController
+from host_sim.loops.simulation import Simulation
+from host_sim.physics.world import builtin_world, world_from_dict
 from tests.helpers import run_twinbot
 
 ROOM = builtin_world("paper_room")
@@ -98,7 +98,7 @@ def test_the_rounding_ceiling_is_what_rounding_alone_costs_a_right_twin():
     ("ir_misalignment", 1, 0.2),  # S2 turned 11 degrees counter-clockwise
     ("ambient_leakage", 0, 0.2),  # S1's on-reading sees 20 % more of the ambient
     ("ir_latency", "both", 0.08),  # the ring reads the pose of two periods ago
-    # the drive effects, physics in the twin (host_sim/drive_effects.py, docs/effects.md)
+    # the drive effects, physics in the twin (host_sim/physics/drivetrain_effects.py, docs/effects.md)
     ("dry_friction", "left", 3e-3),  # coulomb_friction_delta_l
     ("viscous_friction", "right", 4e-4),
     ("wheel_radius", "left", 1.5e-3),
@@ -159,8 +159,8 @@ def test_a_blind_pair_is_named_in_full_on_the_proving_ground(tmp_path, monkeypat
     the turn), weighed by the noise it leaves; either change alone names this one.  Two processes give the
     same diagnosis as one: the weights travel to the workers."""
     from host_sim.diagnosis import fit as F
-    from tools.proving_ground import scoring
-    from tools.proving_ground.cases import make_case
+    from tools.bench import diagnose_scoring as scoring
+    from tools.reference_plant.cases import make_case
 
     rec_path, key_path = make_case(43, tmp_path, n_effects=2)
     key = scoring.load_key(key_path)
@@ -195,7 +195,7 @@ def test_a_blind_pair_is_named_in_full_on_the_proving_ground(tmp_path, monkeypat
 def record_manoeuvre(tmp_path, params, duration=30.0):
     """The identification manoeuvre's first 30 s (creep, steps, chirp, spins) in the arena, as
     `twinbot sim --excite` records it."""
-    from host_sim.excitation import ExcitedController
+    from host_sim.loops.excitation import ExcitedController
 
     return record(tmp_path, params, duration, name=f"excited_{len(list(tmp_path.iterdir()))}.csv", world=ARENA,
                   controller=ExcitedController(SilController(1)))
@@ -357,7 +357,7 @@ def test_too_short_or_too_still_is_said_plainly(tmp_path):
     short = record(tmp_path, duration=3.0, name="short.csv")
     with pytest.raises(DiagnosisError, match="too short"):
         diagnose(short, DEFAULT, ROOM)
-    from tools.proving_ground.recorder import ProgramController
+    from tools.reference_plant.recorder import ProgramController
 
     still = record(tmp_path, duration=10.0, name="still.csv", controller=ProgramController([]))  # never driven
     with pytest.raises(DiagnosisError, match=r"only 0\.0 % of the periods \(at least 20 % needed\): too little"):
@@ -472,7 +472,7 @@ def test_a_window_whose_lead_in_is_at_a_wall_starts_as_without_one(tmp_path):
     lead-in, the twin enters rolling at the encoders' speeds on the window's first row, as a window without a
     lead-in starts; away from the walls it enters from its lead-in."""
     from host_sim.diagnosis.windows import CONTACT_MARGIN, Windows, run_windows
-    from tools.proving_ground.recorder import ProgramController
+    from tools.reference_plant.recorder import ProgramController
 
     back_off = ProgramController([(0.06, 0.065)] * 75 + [(0.45, 0.4)] * 50 + [(-0.02, -0.02)] * 60)
     rec = record(tmp_path, DEFAULT, duration=8.0, name="back_off.csv", world=ARENA, pose=(1.4, 1.4, 5 * np.pi / 4),
@@ -669,7 +669,7 @@ def test_readings_in_proportion_to_their_change_give_the_rings_latency(nominal_r
 def test_pressed_against_walls_nearly_the_whole_time_is_refused(tmp_path):
     """Driven into a wall and held there: 2 of 19 windows are away from it, too few to judge anything on (a
     held-out window or none): a plain refusal, not a `match`."""
-    from tools.proving_ground.recorder import ProgramController
+    from tools.reference_plant.recorder import ProgramController
 
     pressed = record(tmp_path, duration=20.0, name="pressed.csv", world=ARENA, pose=(1.4, 1.4, 5 * np.pi / 4),
                      controller=ProgramController([(0.06, 0.065)] * 75 + [(0.45, 0.4)] * 425))
@@ -684,7 +684,7 @@ def test_the_ir_ring_of_a_robot_pressed_against_a_wall_is_judged_there(tmp_path)
     contact, not the IR law (the front corners ~1600 counts that a millimetre halves): left unjudged there;
     the back three are judged."""
     from host_sim.diagnosis.windows import unjudged_readings
-    from tools.proving_ground.recorder import ProgramController
+    from tools.reference_plant.recorder import ProgramController
 
     push = ProgramController([(0.06, 0.065)] * 75 + [(0.45, 0.4)] * 425)
     back = DEFAULT.replace(ir_offset=tuple(30.0 if k == 4 else 0.0 for k in range(8)))
@@ -709,7 +709,7 @@ def test_too_little_to_call_a_match_still_shows_a_mismatch_and_names_it_only_if_
     half as much again from 18 s on as well: the library fits a part of it; with so little data, no name."""
     import dataclasses
 
-    from tools.proving_ground.recorder import ProgramController
+    from tools.reference_plant.recorder import ProgramController
 
     bursts = ([(0.0, 0.0)] * 92 + [(0.06, 0.055)] * 4 + [(-0.06, -0.055)] * 4) * 9
 
@@ -829,8 +829,8 @@ def test_the_speed_rising_and_falling_are_regimes_apart(tmp_path):
     an open floor, every half second."""
     from host_sim.diagnosis.locate import _wheel_speeds, regimes
     from host_sim.diagnosis.windows import make_windows
-    from host_sim.world import World
-    from tools.proving_ground.recorder import ProgramController
+    from host_sim.physics.world import World
+    from tools.reference_plant.recorder import ProgramController
 
     floor = World(name="floor", size=(20.0, 20.0), walls=[])
     rec = record(tmp_path, duration=12.0, name="steps.csv", world=floor, pose=(10.0, 10.0, 0.0),
@@ -867,8 +867,8 @@ def test_an_effect_seen_in_two_fitted_windows_only_is_judged_on_one_of_them(tmp_
     """A driver limited to 0.1 A, on a robot that asks more only twice in 12 s (0.3 A for 0.4 s at 0.6 s
     and at 3.6 s, in windows 0 and 3, which make_windows would both fit on): the held-out windows get one
     of the two, so the fitted limit shows its gain there and is named (with every third held out: unexplained)."""
-    from host_sim.world import World
-    from tools.proving_ground.recorder import ProgramController
+    from host_sim.physics.world import World
+    from tools.reference_plant.recorder import ProgramController
 
     floor = World(name="floor", size=(20.0, 20.0), walls=[])
     cruise = [(0.03, 0.03)] * 5 + [(0.02, 0.035)] * 5

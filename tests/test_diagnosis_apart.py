@@ -1,13 +1,13 @@
-"""What would tell two effects apart: the manoeuvre run on both fitted twins (host_sim/diagnosis/apart.py)."""
+"""What would tell two effects apart: the manoeuvre run on both fitted twins (host_sim/diagnosis/tell_apart.py)."""
 from __future__ import annotations
 
 import pytest
 
-from host_sim.diagnosis import apart
+from host_sim.diagnosis import tell_apart
 from host_sim.diagnosis.fit import Candidate, Model
 from host_sim.diagnosis.report import _effect_entry
-from host_sim.excitation import SEGMENTS
-from host_sim.params import DEFAULT
+from host_sim.loops.excitation import SEGMENTS
+from host_sim.physics.params import DEFAULT
 
 RADIUS = DEFAULT.replace(wheel_radius_delta_l=0.0008)
 FRICTION = DEFAULT.replace(coulomb_friction_delta_l=0.0008)
@@ -15,7 +15,7 @@ FRICTION = DEFAULT.replace(coulomb_friction_delta_l=0.0008)
 
 @pytest.fixture(scope="module")
 def runs():
-    return {name: apart.run_manoeuvre(p) for name, p in
+    return {name: tell_apart.run_manoeuvre(p) for name, p in
             (("nominal", DEFAULT), ("radius", RADIUS), ("friction", FRICTION))}
 
 
@@ -26,28 +26,28 @@ def test_the_manoeuvre_run_covers_every_segment(runs):
 
 
 def test_identical_twins_are_not_separated(runs):
-    rows = apart.separation(runs["nominal"], runs["nominal"])
+    rows = tell_apart.separation(runs["nominal"], runs["nominal"])
     assert max(level for _s, level, _w in rows) == 0.0
 
 
 def test_a_drive_effect_is_separated_where_its_physics_shows(runs):
     # Extra dry friction on one wheel costs the same torque at every speed: the speed loop must push harder on
     # that wheel whenever it turns, most of all where it keeps starting and stopping.
-    seg, level, words = apart.separation(runs["nominal"], runs["friction"])[0]
-    assert level > apart.SEPARATION_MIN and "current references" in words
-    by_segment = {s: lv for s, lv, _w in apart.separation(runs["nominal"], runs["friction"])}
+    seg, level, words = tell_apart.separation(runs["nominal"], runs["friction"])[0]
+    assert level > tell_apart.SEPARATION_MIN and "current references" in words
+    by_segment = {s: lv for s, lv, _w in tell_apart.separation(runs["nominal"], runs["friction"])}
     assert by_segment["reversals"] > by_segment["creep"]
 
 
 def test_the_sentence_names_the_segment_and_the_command():
-    text = apart.tell_apart(("wheel_radius(left)", RADIUS), ("dry_friction(left)", FRICTION))
+    text = tell_apart.tell_apart(("wheel_radius(left)", RADIUS), ("dry_friction(left)", FRICTION))
     assert text.startswith("wheel_radius(left) and dry_friction(left) explain it equally well")
     assert any(f"manoeuvre's {name} would tell them apart" in text for name, _d, _f in SEGMENTS)
-    assert apart.COMMAND in text
+    assert tell_apart.COMMAND in text
 
 
 def test_ir_pairs_are_told_apart_by_their_physics():
-    text = apart.tell_apart(("ir_offset(3)", DEFAULT), ("ambient_leakage(3)", DEFAULT))
+    text = tell_apart.tell_apart(("ir_offset(3)", DEFAULT), ("ambient_leakage(3)", DEFAULT))
     assert "ambient light" in text and "leakage scales with the ambient" in text
 
 

@@ -1,4 +1,4 @@
-"""The coupled motor + dynamics step (host_sim/drive.py) is second order away from stick, scalar == batch.
+"""The coupled motor + dynamics step (host_sim/physics/drivetrain.py) is second order away from stick, scalar == batch.
 
 The reference is an RK4 of the full coupled system (the motor torque re-evaluated at every stage)
 at dt = 0.1 ms, with the axles' dry friction exact: each wheel slips under -T_c sign(w) or sticks
@@ -17,10 +17,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from host_sim import drive
-from host_sim import dynamics as dy
-from host_sim import motors as mo
-from host_sim.params import DEFAULT as P
+from host_sim.physics import drivetrain
+from host_sim.physics import dynamics as dy
+from host_sim.physics import motors as mo
+from host_sim.physics.params import DEFAULT as P
 from tests import test_dynamics as reference  # the reference formulas (written out there)
 
 DTS = (0.005, 0.0025, 0.00125, 0.000625)
@@ -117,11 +117,11 @@ def rk4_path(v0, i_ref, dt=1e-4):
 def start_of_step(q, v, i_ref, dt):
     """The former coupling: the torque at the start of the step (first order), the same dry friction."""
     tau = (mo.wheel_torque(i_ref[0], v[0], P)[0], mo.wheel_torque(i_ref[1], v[1], P)[0])
-    return drive.step(q, v, tau, dt, P)[:2]
+    return drivetrain.step(q, v, tau, dt, P)[:2]
 
 
 def midpoint(q, v, i_ref, dt):
-    return drive.drive_step(q, v, i_ref, dt, P)[:2]
+    return drivetrain.drive_step(q, v, i_ref, dt, P)[:2]
 
 
 def worst_error(stepper, v0, i_ref, dt, ref):
@@ -186,9 +186,9 @@ def test_batch_drive_step_equals_scalar():
     q = np.column_stack([rng.uniform(-1, 1, (n, 2)), rng.uniform(-3, 3, n), rng.uniform(-50, 50, (n, 2))])
     v = rng.uniform(-40, 40, (n, 2))
     i_ref = rng.uniform(-0.7, 0.7, (n, 2))
-    qb, vb, tb, cb = drive.drive_step_batch(q, v, i_ref, 0.005, P)
+    qb, vb, tb, cb = drivetrain.drive_step_batch(q, v, i_ref, 0.005, P)
     for i in range(n):
-        qs, vs, ts, cs = drive.drive_step(q[i], v[i], i_ref[i], 0.005, P)
+        qs, vs, ts, cs = drivetrain.drive_step(q[i], v[i], i_ref[i], 0.005, P)
         assert np.allclose(qb[i], qs, rtol=1e-12, atol=1e-12) and np.allclose(vb[i], vs, rtol=1e-12, atol=1e-10)
         assert np.allclose(tb[i], ts, rtol=1e-10, atol=1e-14) and np.allclose(cb[i], cs, rtol=1e-12, atol=1e-15)
 

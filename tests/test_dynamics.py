@@ -1,4 +1,4 @@
-"""The robot's dynamics and motors (host_sim/dynamics.py, host_sim/motors.py; docs/dynamics.md).
+"""The robot's dynamics and motors (host_sim/physics/dynamics.py, host_sim/physics/motors.py; docs/dynamics.md).
 
 The checks of issue 4, item 2-3:
 (a) symmetric torques -> straight line; (b) d = 0 is the textbook model; (c) no input,
@@ -17,10 +17,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from host_sim import drive
-from host_sim import dynamics as dy
-from host_sim import motors as mo
-from host_sim.params import DEFAULT, RobotParams
+from host_sim.physics import drivetrain
+from host_sim.physics import dynamics as dy
+from host_sim.physics import motors as mo
+from host_sim.physics.params import DEFAULT, RobotParams
 
 P = DEFAULT
 SETTINGS = settings(deadline=None, max_examples=150)
@@ -274,7 +274,7 @@ def test_symmetric_current_through_motors_goes_straight_at_any_heading():
 @SETTINGS
 @given(states, speeds, torques, robots())
 def test_d_zero_is_the_textbook_model(q, v, tau, p):
-    """With d = 0 (G on the axle) the textbook differential drive.
+    """With d = 0 (G on the axle) the textbook differential drivetrain.
 
     Newton-Euler on the robot with the wheel-ground traction forces F_l, F_r (forward):
         (m_c + 2 m_w) u' = F_l + F_r                  (no centripetal coupling: G on the axle)
@@ -517,7 +517,7 @@ def test_no_load_speed_emerges(friction):
         expect = p.battery_voltage / k
     for sign in (1, -1):
         w, dt = 0.0, 1e-3
-        for _ in range(1000):  # the axle's dry friction -T_c sign(w) on a turning wheel (host_sim/friction.py)
+        for _ in range(1000):  # the axle's dry friction -T_c sign(w) on a turning wheel (host_sim/physics/friction.py)
             w += dt * (mo.wheel_torque(sign * 10.0, w, p)[0] - p.coulomb_friction * np.sign(w)) / p.wheel_inertia
         assert w == pytest.approx(sign * expect, rel=1e-9)
     assert P.battery_voltage / (P.torque_constant * P.gear_ratio) == pytest.approx(38.9, abs=0.1)
@@ -530,25 +530,25 @@ def test_friction_opposes_motion(w):
         assert i == 0.0 and s * t < 0
     assert mo.wheel_torque(0.0, 0.0, P) == (0.0, 0.0)
     # below the no-load speed (39 rad/s) a zero reference is a zero current: friction alone, the viscous
-    # part in the motor's torque, the dry part -T_c sign(w) for turning wheels in the step (host_sim/friction.py)
+    # part in the motor's torque, the dry part -T_c sign(w) for turning wheels in the step (host_sim/physics/friction.py)
     assert mo.wheel_torque(0.0, 30.0, P)[0] == pytest.approx(-P.viscous_friction * 30)
     for s in (1, -1):
-        tau = drive.step((0.0,) * 5, (s * 30.0, s * 20.0), (0.0, 0.0), 1e-3, P)[2]
+        tau = drivetrain.step((0.0,) * 5, (s * 30.0, s * 20.0), (0.0, 0.0), 1e-3, P)[2]
         assert tau == (-s * P.coulomb_friction, -s * P.coulomb_friction)
 
 
 def _coast(v0, dt, n=400):
-    """The whole robot (motors, dry friction, dynamics: drive.drive_step), zero current, from wheel speeds v0."""
+    """The whole robot (motors, dry friction, dynamics: drivetrain.drive_step), zero current, from wheel speeds v0."""
     q, v, hist = (0.0,) * 5, v0, [v0]
     for _ in range(n):
-        q, v = drive.drive_step(q, v, (0.0, 0.0), dt, P)[:2]
+        q, v = drivetrain.drive_step(q, v, (0.0, 0.0), dt, P)[:2]
         hist.append(v)
     return q, np.array(hist)
 
 
 @pytest.mark.parametrize("dt", [1e-3, 5e-3, 0.02, 0.04])
 def test_no_chatter_at_rest_with_zero_reference(dt):
-    """The dry friction is solved in the step, stick and slip (host_sim/friction.py): at any step a
+    """The dry friction is solved in the step, stick and slip (host_sim/physics/friction.py): at any step a
     coasting robot comes to rest without overshooting zero speed back and forth, and then stays
     exactly at rest.  (The former smoothed Coulomb friction, T_c tanh(w / 0.1 rad/s), chattered
     above dt = 7.4 ms.)"""

@@ -1,4 +1,4 @@
-"""The library's drive effects are physics in the twin (host_sim/drive_effects.py, docs/effects.md).
+"""The library's drive effects are physics in the twin (host_sim/physics/drivetrain_effects.py, docs/effects.md).
 
 Each effect is checked on a case worked out by hand (a steady speed, a turning
 radius, a shifted response, an encoder count), on the batch path; SimRobot and
@@ -15,12 +15,12 @@ import math
 import numpy as np
 import pytest
 
-from host_sim import drive_effects, motors
-from host_sim.batch import BatchSim
-from host_sim.interface import Actuate
-from host_sim.params import DEFAULT, load_params
-from host_sim.sim_robot import SimRobot
-from host_sim.world import World, builtin_world
+from host_sim.physics import drivetrain_effects, motors
+from host_sim.robot.batch import BatchSim
+from host_sim.controller.hardware_io import Actuate
+from host_sim.physics.params import DEFAULT, load_params
+from host_sim.robot.sim_robot import SimRobot
+from host_sim.physics.world import World, builtin_world
 from tests.helpers import run_twinbot
 
 P = DEFAULT
@@ -46,7 +46,7 @@ def balance_speed(i: float, extra_torque: float = 0.0, c_v: float = P.viscous_fr
 # Each effect, by hand
 # --------------------------------------------------------------------------- #
 def test_absent_effects_take_the_nominal_path():
-    assert not drive_effects.active(P)
+    assert not drivetrain_effects.active(P)
     assert BatchSim(None, P)._fx is None and BatchSim(None, P)._delay is None
     assert SimRobot(World(name="e", size=(1.0, 1.0), walls=[]), P)._effects is None
 
@@ -306,7 +306,7 @@ def test_caster_drag_resists_a_spin_through_its_lever():
     drag = 0.05
     v, _ = steady_speeds(FLAT.replace(caster_drag=drag), -I_LOW, I_LOW)
     # the caster at a = CASTER_BEHIND behind C slides sideways at a omega: moment a F about C
-    a = drive_effects.CASTER_BEHIND
+    a = drivetrain_effects.CASTER_BEHIND
     w = balance_speed(I_LOW, extra_torque=drag * a * P.wheel_radius / (2 * P.half_axle))
     assert np.abs(v) == pytest.approx([w, w], rel=2e-3)
 
@@ -342,7 +342,7 @@ def test_turning_resistance_holds_a_turn_below_it_to_the_creep_of_its_smoothing(
         sim.run_inputs(np.array([[-i, i]]), sensors=False)
         heading.append(sim.q[0, 2])
     assert bool(sim.slipping[0]) == (grip == "sliding")
-    eps = P.wheel_radius * drive_effects.SCRUB_SMOOTHING_SPEED / P.half_axle
+    eps = P.wheel_radius * drivetrain_effects.SCRUB_SMOOTHING_SPEED / P.half_axle
     rate = np.diff(heading[-11:]) / 0.04
     assert rate == pytest.approx(eps * math.atanh(moment / scrub), rel=0.01)
 
@@ -462,10 +462,10 @@ def test_seeded_commands_continue_a_delayed_run_exactly():
 
 
 def test_a_replay_from_a_middle_row_has_the_delayed_commands_on_their_way(tmp_path, monkeypatch):
-    from host_sim import replay
-    from host_sim.recording import RecordingWriter, load_recording
-    from host_sim.sil import SilController
-    from host_sim.simulation import Simulation
+    from host_sim.recordings import replay
+    from host_sim.recordings.recording import RecordingWriter, load_recording
+    from host_sim.controller.sil import SilController
+    from host_sim.loops.simulation import Simulation
 
     p = P.replace(actuator_delay=0.1)
     world = builtin_world("paper_room")

@@ -1,4 +1,4 @@
-"""The IR effects of the library (host_sim/effects.py, docs/effects.md "IR sensor effects") as physics in the twin.
+"""The IR effects of the library (host_sim/physics/effects.py, docs/effects.md "IR sensor effects") as physics in the twin.
 
 Each effect on a case computed by hand (a wall straight ahead of S1, the
 emitters at 60 %, no noise), then the single-robot path (read_sensors,
@@ -14,13 +14,13 @@ import math
 import numpy as np
 import pytest
 
-from host_sim import effects as E
-from host_sim import ir_sensor as ir
-from host_sim.batch import IR_FIELDS, BatchSim
-from host_sim.params import DEFAULT as P
-from host_sim.params import load_params
-from host_sim.sim_robot import SimRobot
-from host_sim.world import Lamp, builtin_world
+from host_sim.physics import effects as E
+from host_sim.sensors import ir_sensor as ir
+from host_sim.robot.batch import IR_FIELDS, BatchSim
+from host_sim.physics.params import DEFAULT as P
+from host_sim.physics.params import load_params
+from host_sim.robot.sim_robot import SimRobot
+from host_sim.physics.world import Lamp, builtin_world
 from tests.test_batch import assert_adc_match, simrobot_run
 from tests.test_ir_sensor import R, ambient_reference, room, wall_ahead
 

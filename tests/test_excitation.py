@@ -8,8 +8,8 @@ import time
 
 import numpy as np
 
-from host_sim.excitation import CYCLE_S, SEGMENTS, Manoeuvre, schedule
-from host_sim.recording import load_recording
+from host_sim.loops.excitation import CYCLE_S, SEGMENTS, Manoeuvre, schedule
+from host_sim.recordings.recording import load_recording
 from protocol import messages as M
 from protocol.framing import FrameDecoder, FrameEncoder
 from tests.helpers import REPO, run_twinbot, twinbot_cmd

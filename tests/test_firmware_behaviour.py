@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from host_sim.micropython_tools import run_micropython
+from host_sim.board.micropython_runner import run_micropython
 
 MP_DIR = Path(__file__).resolve().parent / "mp"
 sys.path.insert(0, str(MP_DIR))

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from tools.bench_firmware import TARGET_HEAP_KB, compile_for_heap, heap_run, wasm_heap_run
-from host_sim.micropython_tools import run_micropython
+from tools.bench.firmware import TARGET_HEAP_KB, compile_for_heap, heap_run, wasm_heap_run
+from host_sim.board.micropython_runner import run_micropython
 
 MP_DIR = Path(__file__).resolve().parent / "mp"
 HEAP_BUDGET_KB_UNIX64 = 64

@@ -2,7 +2,7 @@
 
 The file holds the exact outputs of the integer control path (fuzzy
 controller, IR loop, odometry, wheel PI) for 12,500 input sequences,
-generated on CPython by tools/make_firmware_vectors.py.  Here: the file is
+generated on CPython by tests/data/make_firmware_vectors.py.  Here: the file is
 what the generator writes now (so a firmware change that moves any output
 fails until the file is regenerated on purpose), CPython and the real
 MicroPython reproduce every case, a wrong value is caught and named, and the
@@ -19,8 +19,8 @@ from pathlib import Path
 import pytest
 
 from firmware import fuzzy, ir, odometry
-from tools import make_firmware_vectors as gen
-from host_sim.micropython_tools import run_micropython
+from tests.data import make_firmware_vectors as gen
+from host_sim.board.micropython_runner import run_micropython
 
 HERE = Path(__file__).resolve().parent
 GOLDEN = HERE / "data" / "firmware_golden.jsonl"
@@ -51,7 +51,7 @@ def checker_module():
 
 def test_file_is_what_the_generator_writes() -> None:
     """The checked-in file equals the generator's output now: if a firmware output changes, this
-    fails until `python -m tools.make_firmware_vectors` is run on purpose."""
+    fails until `python -m tests.data.make_firmware_vectors` is run on purpose."""
     text = GOLDEN.read_text(encoding="ascii")
     fresh = gen.render(*gen.build())
     if text != fresh:

@@ -1,4 +1,4 @@
-"""Stick-slip dry friction at the axles (host_sim/friction.py, used by drive.py, drive_effects.py, contact.py).
+"""Stick-slip dry friction at the axles (host_sim/physics/friction.py, used by drivetrain.py, drive_effects.py, contact.py).
 
 The solve meets its conditions and is continuous in its data; scalar == batch; a wheel below
 breakaway holds exactly (SimRobot and BatchSim, nominal and effects paths, rolling and in the
@@ -13,11 +13,11 @@ import math
 import numpy as np
 import pytest
 
-from host_sim import drive, dynamics, friction
-from host_sim.batch import BatchSim
-from host_sim.params import DEFAULT as P
-from host_sim.sim_robot import SimRobot
-from host_sim.world import World
+from host_sim.physics import drivetrain, dynamics, friction
+from host_sim.robot.batch import BatchSim
+from host_sim.physics.params import DEFAULT as P
+from host_sim.robot.sim_robot import SimRobot
+from host_sim.physics.world import World
 
 OPEN = World(name="open", size=(20.0, 20.0), walls=[], start=(10.0, 10.0, 0.0))
 BREAKAWAY = P.coulomb_friction / (P.gear_efficiency * P.gear_ratio * P.torque_constant)  # A: 9.3 mA
@@ -83,9 +83,9 @@ def test_drive_step_batch_equals_scalar_near_rest():
     i_ref = rng.uniform(-2, 2, (n, 2)) * BREAKAWAY
     stuck = 0
     for dt in (0.005, 0.0002):
-        qb, vb, tb, cb = drive.drive_step_batch(q, v, i_ref, dt, P)
+        qb, vb, tb, cb = drivetrain.drive_step_batch(q, v, i_ref, dt, P)
         for i in range(n):
-            qs, vs, ts, cs = drive.drive_step(q[i], v[i], i_ref[i], dt, P)
+            qs, vs, ts, cs = drivetrain.drive_step(q[i], v[i], i_ref[i], dt, P)
             assert np.allclose(qb[i], qs, rtol=1e-12, atol=1e-13) and np.allclose(vb[i], vs, rtol=1e-10, atol=1e-12)
             assert np.allclose(tb[i], ts, rtol=1e-10, atol=1e-14) and np.allclose(cb[i], cs, rtol=1e-12, atol=1e-15)
             stuck += sum(x == 0.0 for x in vs)
@@ -100,7 +100,7 @@ def _hold(robot_factory, i_ma, seconds=2.0):
 
 
 def sim_robot(params, i_ma, pose=None, world=OPEN):
-    from host_sim.interface import Actuate
+    from host_sim.controller.hardware_io import Actuate
 
     robot = SimRobot(world, params, pose=pose, noise=False)
     robot.actuate(Actuate(i_left_ma=i_ma[0], i_right_ma=i_ma[1], emitter_pct=0))
@@ -130,7 +130,7 @@ def test_a_wheel_pressed_against_a_wall_holds_in_the_contact_step():
         for _ in range(200):  # driven into the wall: the wheels slip
             robot.advance(0.005)
         assert robot.slip is not None
-        from host_sim.interface import Actuate
+        from host_sim.controller.hardware_io import Actuate
 
         robot.actuate(Actuate(i_left_ma=8, i_right_ma=-8, emitter_pct=0))
         for _ in range(200):
@@ -144,7 +144,7 @@ def test_a_wheel_pressed_against_a_wall_holds_in_the_contact_step():
 def _from_rest(i_a, seconds=0.5, dt=0.001):
     q, v = (0.0,) * 5, (0.0, 0.0)
     for _ in range(round(seconds / dt)):
-        q, v = drive.drive_step(q, v, i_a, dt, P)[:2]
+        q, v = drivetrain.drive_step(q, v, i_a, dt, P)[:2]
     return q, v
 
 
@@ -170,7 +170,7 @@ def test_a_reversed_wheel_stops_once_and_restarts():
         q, v = _from_rest((0.2, 0.2), seconds=1.0, dt=dt)
         hist = [v]
         for _ in range(round(1.5 / dt)):
-            q, v = drive.drive_step(q, v, (-0.2, -0.2), dt, P)[:2]
+            q, v = drivetrain.drive_step(q, v, (-0.2, -0.2), dt, P)[:2]
             hist.append(v)
         h = np.array(hist)
         for j in range(2):
@@ -179,7 +179,7 @@ def test_a_reversed_wheel_stops_once_and_restarts():
         q, v = _from_rest((0.2, 0.2), seconds=1.0, dt=dt)
         hist = []
         for _ in range(round(2.0 / dt)):
-            q, v = drive.drive_step(q, v, (-0.008, -0.008), dt, P)[:2]
+            q, v = drivetrain.drive_step(q, v, (-0.008, -0.008), dt, P)[:2]
             hist.append(v)
         h = np.array(hist)
         first = np.flatnonzero((h == 0.0).all(1))[0]
@@ -231,7 +231,7 @@ if __name__ == "__main__":  # print the table for docs/dynamics.md
 def test_a_warm_start_with_the_axle_torques_gives_the_same_step():
     """The contact solve starts from the last step's impulses, the axles' friction torques among them: the
     step is the same (to the solve's tolerance) as from a cold start, and the held torque stays in its bound."""
-    from host_sim import contact, motors
+    from host_sim.physics import contact, motors
 
     q, v, dt = (0.5, 0.5, 0.0, 0.0, 0.0), (0.0, 0.0), 0.005
     walls = [(-1e-5, -1.0, 0.0, 0)]  # a wall just ahead, touched

@@ -37,10 +37,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from firmware import fuzzy as fz
-from host_sim import fuzzy_rulebase as rb
-from host_sim.fuzzy_rulebase import SENSOR_BEARINGS, circular_weight, singletons
-from tools import fuzzy_rules as fr
-from tools.bench_fuzzy import build_simpful, random_readings
+from host_sim.controller import fuzzy_rulebase as rb
+from host_sim.controller.fuzzy_rulebase import SENSOR_BEARINGS, circular_weight, singletons
+from tools.cli import fuzzy as fr
+from tools.bench.fuzzy import build_simpful, random_readings
 
 ROOT = Path(__file__).resolve().parents[1]
 N_VECTORS = 10_000
@@ -423,7 +423,7 @@ def test_docs_hold_the_current_tables_and_figure() -> None:
 
 
 def test_bench_inference_smoke() -> None:
-    from tools.bench_fuzzy import bench_inference, format_table
+    from tools.bench.fuzzy import bench_inference, format_table
 
     res = bench_inference(repeats=4)
     assert res["engines"]["twinbot"]["us"]["refined"] > 0

@@ -6,12 +6,12 @@ import json
 
 import numpy as np
 
-from host_sim.interface import firmware_geometry, setup_frames
-from host_sim.params import DEFAULT
-from host_sim.recording import RecordingWriter, load_recording
-from host_sim.sil import SilController
-from host_sim.simulation import Simulation
-from host_sim.world import builtin_world
+from host_sim.controller.hardware_io import firmware_geometry, setup_frames
+from host_sim.physics.params import DEFAULT
+from host_sim.recordings.recording import RecordingWriter, load_recording
+from host_sim.controller.sil import SilController
+from host_sim.loops.simulation import Simulation
+from host_sim.physics.world import builtin_world
 from protocol import messages as M
 from protocol.framing import FrameDecoder
 from tests.helpers import run_twinbot

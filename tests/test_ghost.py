@@ -1,10 +1,10 @@
-"""The late-signal twin (host_sim/ghost.py) against the simulator behind a late, jittery link."""
+"""The late-signal twin (host_sim/loops/late_signal_twin.py) against the simulator behind a late, jittery link."""
 from __future__ import annotations
 
 import numpy as np
 
-from host_sim.ghost import Ghost, odometry_pose
-from host_sim.late_link import run_late
+from host_sim.loops.late_signal_twin import Ghost, odometry_pose
+from host_sim.loops.late_signal_trial import run_late
 
 
 def test_ghost_beats_the_raw_late_pose_at_200_ms() -> None:

@@ -14,8 +14,8 @@ import pytest
 from cobs import cobs as ref
 
 from protocol import framing, messages
-from tools import make_golden_vectors
-from host_sim.micropython_tools import run_micropython
+from tests.data import make_golden_vectors
+from host_sim.board.micropython_runner import run_micropython
 
 HERE = Path(__file__).resolve().parent
 GOLDEN = HERE / "data" / "protocol_golden.json"
@@ -40,8 +40,8 @@ def _as_struct(fields: dict) -> dict:
 
 
 def test_file_is_what_the_generator_writes() -> None:
-    """The checked-in file equals tools/make_golden_vectors.py's output now (regenerate with
-    `python -m tools.make_golden_vectors` after a deliberate protocol change)."""
+    """The checked-in file equals tests/data/make_golden_vectors.py's output now (regenerate with
+    `python -m tests.data.make_golden_vectors` after a deliberate protocol change)."""
     assert GOLDEN.read_text() == make_golden_vectors.render(make_golden_vectors.build())
 
 

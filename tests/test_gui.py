@@ -19,14 +19,14 @@ os.environ["SDL_VIDEODRIVER"] = "dummy"
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 pygame = pytest.importorskip("pygame")
 
-from host_sim.params import DEFAULT  # noqa: E402
-from host_sim.recording import load_recording  # noqa: E402
-from host_sim.world import builtin_world, load_world  # noqa: E402
+from host_sim.physics.params import DEFAULT  # noqa: E402
+from host_sim.recordings.recording import load_recording  # noqa: E402
+from host_sim.physics.world import builtin_world, load_world  # noqa: E402
 from protocol import messages as M  # noqa: E402
 from protocol.framing import FrameDecoder, FrameEncoder  # noqa: E402
 from tests.helpers import run_twinbot  # noqa: E402
-from tools.gui_app import draw, loop  # noqa: E402
-from tools.gui_app.app import App, Settings  # noqa: E402
+from tools.gui import draw, loop  # noqa: E402
+from tools.gui.app import App, Settings  # noqa: E402
 
 WORLD = builtin_world("paper_room")
 
@@ -349,7 +349,7 @@ def test_the_real_robots_ghost_is_drawn_ahead_of_its_late_pose(make_app: Any, tm
     (the late-signal twin) is drawn where the robot is now, ahead of the raw late pose along the motion."""
     import time
 
-    from tools.bench_gui import start_board
+    from tools.bench.gui import start_board
 
     proc, port = start_board("--world", "arena", "--late", "250", "--jitter", "150")
     try:

@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from host_sim import ir_sensor as ir
-from host_sim.params import DEFAULT as P
-from host_sim.world import Lamp as ir_lamp
-from host_sim.world import builtin_world, world_from_dict
+from host_sim.sensors import ir_sensor as ir
+from host_sim.physics.params import DEFAULT as P
+from host_sim.physics.world import Lamp as ir_lamp
+from host_sim.physics.world import builtin_world, world_from_dict
 
 R = P.body_radius
 CEILING = P.adc_max  # 4095
@@ -244,7 +244,7 @@ def test_bad_parameters_are_refused():
 # --------------------------------------------------------------------------- tools
 def test_plot_sensor_cli_writes_the_figures(tmp_path):
     pytest.importorskip("matplotlib")
-    from tools import plot
+    from tools.cli import plot
 
     parser = argparse.ArgumentParser()
     plot.register(parser.add_subparsers(), "plot", "figures")
@@ -257,7 +257,7 @@ def test_plot_sensor_cli_writes_the_figures(tmp_path):
 
 
 def test_bench_reports_timings():
-    from tools.bench_sensors import bench
+    from tools.bench.sensors import bench
 
     out = bench(repeats=3, batch=50)
     assert out["read_us"] > 0 and out["batch_reads_per_s"] > 0 and out["ray_cast_us"] > 0

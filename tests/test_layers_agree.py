@@ -5,7 +5,7 @@ import math
 
 from firmware import config
 from firmware.odometry import Odometry
-from host_sim.params import DEFAULT, RobotParams, load_params, ParamsError
+from host_sim.physics.params import DEFAULT, RobotParams, load_params, ParamsError
 from protocol import messages as M
 
 import pytest

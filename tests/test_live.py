@@ -1,14 +1,14 @@
-"""host_sim/live.py: a Simulation stepped a frame at a time keeps run_fixed's and run_realtime's semantics."""
+"""host_sim/loops/live.py: a Simulation stepped a frame at a time keeps run_fixed's and run_realtime's semantics."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from host_sim.live import LiveStepper
-from host_sim.params import DEFAULT
-from host_sim.sil import SilController
-from host_sim.simulation import Simulation
-from host_sim.world import builtin_world
+from host_sim.loops.live import LiveStepper
+from host_sim.physics.params import DEFAULT
+from host_sim.controller.sil import SilController
+from host_sim.loops.simulation import Simulation
+from host_sim.physics.world import builtin_world
 
 WORLD = builtin_world("paper_room")
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from host_sim.micropython_tools import run_micropython, run_micropython_wasm, wasm_path
+from host_sim.board.micropython_runner import run_micropython, run_micropython_wasm, wasm_path
 
 HERE = Path(__file__).resolve().parent
 MP = HERE / "mp"

@@ -15,7 +15,7 @@ import pytest
 
 from protocol import messages
 
-from host_sim.micropython_tools import REPO_ROOT, mpy_cross_compile, run_micropython
+from host_sim.board.micropython_runner import REPO_ROOT, mpy_cross_compile, run_micropython
 
 SCRIPT = Path(__file__).resolve().parent / "mp" / "alloc_check.py"
 

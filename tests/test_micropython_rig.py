@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pytest
 
-from host_sim.micropython_tools import micropython_sources, mpy_cross_compile, run_micropython, typecheck_micropython
+from host_sim.board.micropython_runner import micropython_sources, mpy_cross_compile, run_micropython, typecheck_micropython
 
 
 @pytest.mark.parametrize("source", micropython_sources(), ids=lambda p: str(p.relative_to(p.parents[1])))

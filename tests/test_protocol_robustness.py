@@ -427,8 +427,8 @@ def test_fuzz_corruption_acceptance_rate(impl: str) -> None:
 def test_random_wire_bit_errors_measured() -> None:
     """1-, 2- and 3-bit corruptions anywhere in a frame (delimiters included), 3000 each, seeded:
     none is accepted as a wrong frame and the next frame always survives (SPEC.md section 1
-    quotes `python -m tools.fuzz_wire 200000`: 0 of 200,000 for each k)."""
-    from tools import fuzz_wire
+    quotes `python -m tools.bench.fuzz_wire 200000`: 0 of 200,000 for each k)."""
+    from tools.bench import fuzz_wire
 
     for k, (wrong, lost) in fuzz_wire.measure(3000, seed=7).items():
         assert wrong == 0 and lost == 0, (k, wrong, lost)

@@ -2,7 +2,7 @@
 
 The plant is the independent "real robot" that diagnosis (issue 9) is proved
 on, so the tests hold it to three things: (1) with no effect on, the twin
-(host_sim.replay) replays its recordings closely; (2) every named effect
+(host_sim.recordings.replay) replays its recordings closely; (2) every named effect
 changes the physics in the direction physics says; (3) it is deterministic
 and writes recordings in the project's one format, the answer key apart.
 """
@@ -15,17 +15,17 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from host_sim.interface import Actuate
-from host_sim.params import DEFAULT
-from host_sim.recording import load_recording
-from host_sim.sil import SilController
-from host_sim.world import builtin_world
-from tools.proving_ground import effects, excitation, ir_law
-from tools.proving_ground.agreement import compare
-from tools.proving_ground.cases import make_case
-from tools.proving_ground.plant import Plant
-from tools.proving_ground.recorder import ProgramController, record
-from tools.proving_ground.robot_model import PlantSpec, nominal_spec
+from host_sim.controller.hardware_io import Actuate
+from host_sim.physics.params import DEFAULT
+from host_sim.recordings.recording import load_recording
+from host_sim.controller.sil import SilController
+from host_sim.physics.world import builtin_world
+from tools.reference_plant import effects, excitation, ir_law
+from tools.reference_plant.agreement import compare
+from tools.reference_plant.cases import make_case
+from tools.reference_plant.plant import Plant
+from tools.reference_plant.recorder import ProgramController, record
+from tools.reference_plant.robot_model import PlantSpec, nominal_spec
 
 ARENA = builtin_world("arena")
 EXACT = nominal_spec().replace(tracker_noise_xy=0.0, tracker_noise_phi=0.0)  # a perfect tracker
@@ -323,7 +323,7 @@ def test_make_case_writes_a_recording_and_a_separate_answer_key(tmp_path):
 def test_a_case_may_conceal_two_or_three_effects(tmp_path):
     """n_effects adds other in-library effects, each of its own name, to the one-effect case of the same seed:
     the same first effect, world, start and drive, and the plant carries every one of them."""
-    from tools.proving_ground.cases import case_rng, concealed_names, draw_effect, draw_more
+    from tools.reference_plant.cases import case_rng, concealed_names, draw_effect, draw_more
 
     one = json.loads(make_case(8, tmp_path / "one", duration=0.2)[1].read_text())
     two = json.loads(make_case(8, tmp_path / "two", duration=0.2, n_effects=2)[1].read_text())

@@ -6,12 +6,12 @@ import math
 import numpy as np
 import pytest
 
-from host_sim.params import DEFAULT
-from host_sim.recording import COLUMNS, COLUMNS_V1, RecordingError, RecordingWriter, load_recording
-from host_sim.replay import replay_inputs
-from host_sim.sil import SilController
-from host_sim.simulation import Simulation
-from host_sim.world import builtin_world
+from host_sim.physics.params import DEFAULT
+from host_sim.recordings.recording import COLUMNS, COLUMNS_V1, RecordingError, RecordingWriter, load_recording
+from host_sim.recordings.replay import replay_inputs
+from host_sim.controller.sil import SilController
+from host_sim.loops.simulation import Simulation
+from host_sim.physics.world import builtin_world
 
 ROOM = builtin_world("paper_room")
 

@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from host_sim.sil import SilController
-from host_sim.params import DEFAULT
-from host_sim.repeatability import ForkScenario, first_turn, fixed_run, fork_heading, split_experiment
-from host_sim.simulation import Simulation
-from host_sim.world import builtin_world
+from host_sim.controller.sil import SilController
+from host_sim.physics.params import DEFAULT
+from host_sim.loops.repeatability import ForkScenario, first_turn, fixed_run, fork_heading, split_experiment
+from host_sim.loops.simulation import Simulation
+from host_sim.physics.world import builtin_world
 
 ROOM = builtin_world("paper_room")
 CYCLE = 0.040

@@ -21,13 +21,13 @@ import math
 import numpy as np
 import pytest
 
-from host_sim import dynamics as dy
-from host_sim import motors as mo
-from host_sim.batch import BatchSim
-from host_sim.interface import Actuate
-from host_sim.params import DEFAULT as P
-from host_sim.sim_robot import SimRobot
-from host_sim.world import World
+from host_sim.physics import dynamics as dy
+from host_sim.physics import motors as mo
+from host_sim.robot.batch import BatchSim
+from host_sim.controller.hardware_io import Actuate
+from host_sim.physics.params import DEFAULT as P
+from host_sim.robot.sim_robot import SimRobot
+from host_sim.physics.world import World
 from tests.test_batch import assert_ticks_match
 from tests.test_dynamics import accel_scale, random_params
 
@@ -52,7 +52,7 @@ def random_state(rng: np.random.Generator, n: int = N) -> tuple[np.ndarray, np.n
 
 
 # --------------------------------------------------------------------------- #
-# host_sim/dynamics.py
+# host_sim/physics/dynamics.py
 # --------------------------------------------------------------------------- #
 def test_reduced_accel_fast_and_batch_agree(robots) -> None:
     params, pb, rng = robots
@@ -92,7 +92,7 @@ def test_step_and_step_batch_agree(robots) -> None:
 
 
 # --------------------------------------------------------------------------- #
-# host_sim/motors.py
+# host_sim/physics/motors.py
 # --------------------------------------------------------------------------- #
 def test_wheel_torque_and_batch_agree_in_every_regime(robots) -> None:
     params, pb, rng = robots
@@ -136,7 +136,7 @@ def test_encoder_ticks_and_batch_agree_exactly(robots) -> None:
 
 
 # --------------------------------------------------------------------------- #
-# host_sim/sim_robot.py SimRobot vs host_sim/batch.py BatchSim
+# host_sim/robot/sim_robot.py SimRobot vs host_sim/robot/batch.py BatchSim
 # --------------------------------------------------------------------------- #
 def test_simrobot_and_batchsim_agree_driving_open_loop_away_from_walls(robots) -> None:
     """4 s (100 control periods, 8 substeps each) of changing current references, per-robot

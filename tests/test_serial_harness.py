@@ -18,7 +18,7 @@ import serial
 from protocol import messages as M
 from protocol.framing import FrameDecoder, FrameEncoder
 from tests.helpers import REPO, run_twinbot, twinbot_cmd
-from host_sim.frame_log import FrameLogError, read_frame_log
+from host_sim.board.frame_log import FrameLogError, read_frame_log
 
 
 def telemetry_frame(enc: FrameEncoder, k: int) -> bytes:
@@ -186,7 +186,7 @@ def test_demo_runs_and_catches_the_injected_faults(tmp_path):
 
 def test_record_csv_writes_the_recording_format(pty_pair, tmp_path):
     """`--record FILE.csv`: the robot's TELEMETRY as a recording the simulator's tools read."""
-    from host_sim.recording import load_recording
+    from host_sim.recordings.recording import load_recording
 
     path = tmp_path / "robot.csv"
     proc = subprocess.Popen(twinbot_cmd("serial", pty_pair.path, "--count", "6", "--duration", "20",
@@ -217,7 +217,7 @@ def test_host_abandons_a_stale_partial_frame_on_a_pty(pty_pair):
     """A sender that dies mid-frame: after IDLE_TIMEOUT_S of silence the host drops the half frame
     (counted in 'abandoned'), so its tail cannot glue onto what comes next; a frame that only
     pauses for less than that still arrives whole."""
-    from host_sim.serial_link import IDLE_TIMEOUT_S, SerialLink
+    from host_sim.board.serial_link import IDLE_TIMEOUT_S, SerialLink
 
     link = SerialLink.open(pty_pair.path)
     try:

@@ -10,13 +10,13 @@ import json
 import numpy as np
 import pytest
 
-from host_sim.pil import PilController
-from host_sim.sil import SilController
-from host_sim.params import DEFAULT
-from host_sim.recording import RecordingError, RecordingWriter, load_recording
-from host_sim.replay import ReplayError, replay
-from host_sim.simulation import Simulation
-from host_sim.world import builtin_world
+from host_sim.board.pil import PilController
+from host_sim.controller.sil import SilController
+from host_sim.physics.params import DEFAULT
+from host_sim.recordings.recording import RecordingError, RecordingWriter, load_recording
+from host_sim.recordings.replay import ReplayError, replay
+from host_sim.loops.simulation import Simulation
+from host_sim.physics.world import builtin_world
 from tests.helpers import run_twinbot
 
 ROOM = builtin_world("paper_room")

@@ -1,4 +1,4 @@
-"""A replay started where the robot slid over the floor starts it sliding (host_sim.replay.sliding_rows).
+"""A replay started where the robot slid over the floor starts it sliding (host_sim.recordings.replay.sliding_rows).
 
 The recordings are the twin's own identification manoeuvre on ice (a grip of 0.1: the wheels spin in
 the steps, and the body runs on when they stop) and on the nominal floor; the tracker is the
@@ -11,13 +11,13 @@ import copy
 import numpy as np
 import pytest
 
-from host_sim import effects as E
-from host_sim.batch import SUBSTEPS
+from host_sim.physics import effects as E
+from host_sim.robot.batch import SUBSTEPS
 from host_sim.diagnosis.compare import compare
 from host_sim.diagnosis.windows import FINE_SUBSTEPS, LEAD_ROWS, Windows, judge_slides, run_windows
-from host_sim.params import DEFAULT
-from host_sim.recording import Recording
-from host_sim.replay import replay, replay_batch, rolling_velocity, sliding_rows, tracked_velocity
+from host_sim.physics.params import DEFAULT
+from host_sim.recordings.recording import Recording
+from host_sim.recordings.replay import replay, replay_batch, rolling_velocity, sliding_rows, tracked_velocity
 from tests.test_diagnosis import ARENA, record_manoeuvre
 
 ICE = E.apply(DEFAULT, "traction_limit", "both", [0.1])

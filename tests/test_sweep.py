@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from host_sim import sweep
-from host_sim.simulation import RunResult
-from host_sim.world import builtin_world
+from host_sim.loops import sweep
+from host_sim.loops.simulation import RunResult
+from host_sim.physics.world import builtin_world
 from tests.helpers import REPO
 
 PERTURB = "wheel_radius=0.02,coulomb_friction=0.2"
@@ -26,7 +26,7 @@ TINY = ["sweep", "--rules", "first,refined", "--world", "paper_room", "--seeds",
 
 
 def twinbot(args: list[str]) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "tools.cli", *args], cwd=REPO, capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "tools.cli.main", *args], cwd=REPO, capture_output=True, text=True,
                           timeout=120)
 
 
@@ -123,7 +123,7 @@ def test_summary_rates_and_medians() -> None:
 
 
 def test_each_seed_starts_near_the_worlds_start_clear_of_the_walls() -> None:
-    from host_sim.params import DEFAULT
+    from host_sim.physics.params import DEFAULT
 
     maze = builtin_world("maze")  # its start is 15 cm from two walls: some draws must be refused
     starts = [sweep.draw_start(sweep.Case("refined", "maze", seed, 1.0, start_radius=0.05, start_heading_deg=15.0),
@@ -140,7 +140,7 @@ def test_each_seed_starts_near_the_worlds_start_clear_of_the_walls() -> None:
 
 
 def test_perturbed_parameters_are_drawn_within_their_range_and_drive_the_plant() -> None:
-    from host_sim.params import DEFAULT
+    from host_sim.physics.params import DEFAULT
 
     both = [sweep.draw_params(sweep.Case("first", "arena", s, 1.0, perturb=(("wheel_radius", 0.1),
                                                                            ("coulomb_friction", 0.5))))

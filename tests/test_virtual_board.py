@@ -13,11 +13,11 @@ import pytest
 
 from protocol import messages as M
 from tests.helpers import run_twinbot
-from host_sim.board_process import VirtualBoard, factory_image
-from tools.board import STANDIN_AMBIENT, STANDIN_REFLECTION, StandInHardware
-from tools.flash import BoardInfo, check_mpy_compatible, mpy_cross_version, probe
-from tools.cli import CliError
-from host_sim.serial_link import SerialLink
+from host_sim.board.virtual_board import VirtualBoard, factory_image
+from tools.cli.board import STANDIN_AMBIENT, STANDIN_REFLECTION, StandInHardware
+from tools.cli.flash import BoardInfo, check_mpy_compatible, mpy_cross_version, probe
+from tools.arguments import CliError
+from host_sim.board.serial_link import SerialLink
 
 
 @pytest.fixture
@@ -178,9 +178,9 @@ def test_mpy_version_mismatch_is_named(board):
 
 def test_board_attached_to_the_twin_explores(tmp_path):
     """`twinbot board`'s default: the simulator, in real time, is the board's hardware."""
-    from host_sim.params import DEFAULT
-    from host_sim.board_twin import BoardTwin
-    from host_sim.world import builtin_world
+    from host_sim.physics.params import DEFAULT
+    from host_sim.board.board_twin import BoardTwin
+    from host_sim.physics.world import builtin_world
 
     twin = BoardTwin(builtin_world("paper_room"), DEFAULT)
     twin.start()

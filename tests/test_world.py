@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from host_sim.world import (BUILTIN_NAMES, World, WorldError, builtin_world, load_world, save_world,
+from host_sim.physics.world import (BUILTIN_NAMES, World, WorldError, builtin_world, load_world, save_world,
                             world_by_name_or_path, world_from_dict)
 
 BOX = [{"segment": [0, 0, 4, 0]}, {"segment": [4, 0, 4, 4]}, {"segment": [4, 4, 0, 4]}, {"segment": [0, 4, 0, 0]}]

@@ -18,6 +18,10 @@ from typing import Callable, NoReturn
 ArgType = Callable[[str], object]
 
 
+class CliError(Exception):
+    """An error a user can act on: printed as one line, exit status 2."""
+
+
 class OneLineParser(argparse.ArgumentParser):
     """argparse, but a usage error is one line on stderr (no usage block) and exit status 2."""
 

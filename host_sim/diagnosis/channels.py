@@ -24,9 +24,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from host_sim.diagnosis.windows import WindowRun, Windows, sensors_on_track
-from host_sim.params import RobotParams
-from host_sim.recording import Recording
-from host_sim.world import World
+from host_sim.physics.params import RobotParams
+from host_sim.recordings.recording import Recording
+from host_sim.physics.world import World
 
 SENSOR_NAMES = ("S1 front", "S2 front-left", "S3 left", "S4 back-left", "S5 back", "S6 back-right",
                 "S7 right", "S8 front-right")

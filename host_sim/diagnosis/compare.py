@@ -24,9 +24,9 @@ from host_sim.diagnosis.locate import (Finding, bias_margin, contact_windows, in
                                       timing_margin)
 from host_sim.diagnosis.windows import (DEFAULT_SECONDS, Windows, judge_slides, make_windows, run_windows,
                                        stratified_held_out, unjudged_readings)
-from host_sim.params import RobotParams
-from host_sim.recording import Recording
-from host_sim.world import World
+from host_sim.physics.params import RobotParams
+from host_sim.recordings.recording import Recording
+from host_sim.physics.world import World
 
 
 @dataclass

@@ -50,13 +50,13 @@ from typing import Callable
 import numpy as np
 from scipy import optimize, stats
 
-from host_sim import effects as E
+from host_sim.physics import effects as E
 from host_sim.diagnosis.channels import (ACCUMULATED, AMBIENT, IR, MOTION, WHEELS, Channel, build_channels,
                                         drive_channel, judged_windows, sensor_channel, sensor_channels)
 from host_sim.diagnosis.windows import Windows, by_machinery, run_windows
-from host_sim.params import RobotParams
-from host_sim.recording import Recording
-from host_sim.world import World
+from host_sim.physics.params import RobotParams
+from host_sim.recordings.recording import Recording
+from host_sim.physics.world import World
 
 MAX_EFFECTS = 3
 # The channels whose window totals the fit adds (travel, turn).  A wheel's count only once located

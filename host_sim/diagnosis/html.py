@@ -19,7 +19,7 @@ from host_sim.diagnosis.channels import ACCUMULATED, judged_windows
 from host_sim.diagnosis.compare import Comparison
 from host_sim.diagnosis.locate import lag_blocks
 from host_sim.diagnosis.report import Diagnosis
-from host_sim.recording import Recording
+from host_sim.recordings.recording import Recording
 
 
 def _png(fig: Any) -> str:

@@ -44,9 +44,9 @@ from scipy import stats
 
 from host_sim.diagnosis.channels import ACCUMULATED, SENSOR_NAMES, WHEELS, Channel, sensor_channel
 from host_sim.diagnosis.windows import Windows, near_a_wall
-from host_sim.params import RobotParams
-from host_sim.recording import Recording
-from host_sim.world import World
+from host_sim.physics.params import RobotParams
+from host_sim.recordings.recording import Recording
+from host_sim.physics.world import World
 
 Z_MIN = 5.0
 EFFECT_MIN = 1.0  # noise levels: a smaller mean mismatch is within the noise of a single period

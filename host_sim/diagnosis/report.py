@@ -13,17 +13,17 @@ from typing import Any, Callable
 
 import numpy as np
 
-from host_sim import effects as E
-from host_sim.diagnosis.apart import tell_apart
+from host_sim.physics import effects as E
+from host_sim.diagnosis.tell_apart import tell_apart
 from host_sim.diagnosis.compare import Comparison, compare_all, stratify
 from host_sim.diagnosis.fit import Model, Objective, candidates_for, fit_totals, objective_channels, select
 from host_sim.diagnosis.channels import ACCUMULATED, WHEELS, judged_windows
 from host_sim.diagnosis.locate import Finding, noise_level, regimes, total_noise
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
-from host_sim.diagnosis.words import sentence
-from host_sim.params import RobotParams
-from host_sim.recording import Recording
-from host_sim.world import World
+from host_sim.diagnosis.phrasing import sentence
+from host_sim.physics.params import RobotParams
+from host_sim.recordings.recording import Recording
+from host_sim.physics.world import World
 
 MIN_WINDOWS = 6  # 1 s windows: fewer and the held-out judgement rests on one or two windows
 MIN_FREE_WINDOWS = MIN_WINDOWS  # of them away from the walls: the contact windows are judged apart

@@ -6,7 +6,7 @@ recording says (tracker pose where there is one, wheel angles and speeds
 from the encoders) LEAD_ROWS rows before their first, and drive it open
 loop with the recorded current references, so each window's residuals
 speak of the physics of those few seconds.  All windows run at once, one robot of a
-host_sim.batch.BatchSim each (host_sim/replay.replay_batch is the one-window
+host_sim.robot.batch.BatchSim each (host_sim/replay.replay_batch is the one-window
 case): the batch path does the heavy lifting.
 
 Without a tracker the twin starts every window at the origin of an empty
@@ -19,13 +19,14 @@ from typing import Any
 
 import numpy as np
 
-from host_sim import dynamics, ir_sensor, motors
-from host_sim.batch import SUBSTEPS, BatchSim, machinery, robot_params
-from host_sim.params import RobotParams
-from host_sim.recording import Recording
-from host_sim.replay import (SEED_ROWS, ReplayError, replay_inputs, sliding_rows, starts_at_rest, state_at,
+from host_sim.physics import dynamics, motors
+from host_sim.sensors import ir_sensor
+from host_sim.robot.batch import SUBSTEPS, BatchSim, machinery, robot_params
+from host_sim.physics.params import RobotParams
+from host_sim.recordings.recording import Recording
+from host_sim.recordings.replay import (SEED_ROWS, ReplayError, replay_inputs, sliding_rows, starts_at_rest, state_at,
                              wheel_speeds_at)
-from host_sim.world import World
+from host_sim.physics.world import World
 
 DEFAULT_SECONDS = (1.0, 5.0)
 # The windows start this far into the recording, so that none starts on a whole second.  The identification

@@ -1,6 +1,6 @@
 """Firmware golden vectors: micropython tests/mp/firmware_vectors_check.py tests/data/firmware_golden.jsonl
 
-Replays every case of the file written by tools/make_firmware_vectors.py
+Replays every case of the file written by tests/data/make_firmware_vectors.py
 through the firmware (fuzzy controller, IR loop on a replaying test HAL,
 odometry, wheel PI) and compares every output exactly.  Reads one line at a
 time, so a small heap is enough.  Prints 'firmware vectors: N cases ok (fz
@@ -65,7 +65,7 @@ def call(fn, a=None, b=None, c=None, what=""):
 
 
 class ReplayHal:
-    """Same behaviour as tools/make_firmware_vectors.ReplayHal: read_ir() gives
+    """Same behaviour as tests/data/make_firmware_vectors.ReplayHal: read_ir() gives
     the cycle's ambient readings while the emitters are off, 'on' ones while on."""
 
     def __init__(self):

@@ -1,0 +1,96 @@
+"""The robot's electrical interface as the host sees it, and the constants it shares with the firmware.
+
+Every controller of a simulated robot takes the hardware's readings for a
+control cycle (a `Sense`: what a HW_SENSE frame carries) and returns its
+outputs (an `Actuate`: what a HW_ACTUATE frame carries).  The robots that
+produce readings (host_sim.robot.sim_robot.SimRobot, or any other plant) and the
+controllers that consume them (host_sim.controller.sil, host_sim.board.pil, host_sim.recordings.replay)
+meet here and nowhere else, so this module imports no physics and no
+firmware runtime.
+
+The numbers the firmware defines (control period, tick mask, rule-set
+names) are taken from the firmware itself: one home each.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from firmware.config import DEFAULT_CYCLE_MS
+from firmware.fuzzy import RULE_SET_NAMES
+from firmware.hal import TICK_MASK
+from host_sim.physics.params import RobotParams
+from protocol import messages as M
+from protocol.framing import FrameEncoder
+
+CYCLE_S = DEFAULT_CYCLE_MS / 1000.0  # s, the firmware's control period
+RULE_SETS = {name: index for index, name in enumerate(RULE_SET_NAMES)}  # "first" -> 0, "refined" -> 1
+
+__all__ = ["CYCLE_S", "RULE_SETS", "TICK_MASK", "Actuate", "IdleController", "Sense", "setup_frames"]
+
+
+@dataclass
+class Sense:
+    """One cycle's readings: what a HW_SENSE frame carries."""
+
+    tick_ms: int  # the board's clock, modulo TICK_MASK + 1
+    adc_off: list[int]  # IR ADC counts, emitters off (ambient), S1..S8
+    adc_on: list[int]  # IR ADC counts, emitters on
+    enc_l: int  # cumulative encoder ticks
+    enc_r: int
+    vbat_mv: int
+
+
+@dataclass
+class Actuate:
+    """One cycle's outputs: what a HW_ACTUATE frame carries."""
+
+    i_left_ma: int  # current references
+    i_right_ma: int
+    emitter_pct: int  # IR emitter pulse width, the light power L
+
+
+def geometry_from_params(wheel_radius_m: float, half_axle_m: float, ticks_per_rev: int) -> tuple[int, int, int]:
+    """The firmware's geometry parameters (wheel_diameter_um, wheel_base_um, ticks_per_rev) of a
+    robot given as RobotParams does; protocol.messages.geometry_frames turns them into PARAM_SETs."""
+    return round(2 * wheel_radius_m * 1e6), round(2 * half_axle_m * 1e6), int(ticks_per_rev)
+
+
+def firmware_geometry(p: RobotParams) -> tuple[int, int, int]:
+    """(wheel_diameter_um, wheel_base_um, ticks_per_rev) of the robot p describes, as its firmware needs them.
+
+    The firmware knows one wheel diameter and one encoder: those of the mean wheel, when a fitted
+    parameter file gives the two wheels different radii or encoders."""
+    radius = p.wheel_radius + 0.5 * (p.wheel_radius_delta_l + p.wheel_radius_delta_r)
+    ticks = p.ticks_per_rev + 0.5 * (p.ticks_per_rev_delta_l + p.ticks_per_rev_delta_r)
+    return geometry_from_params(radius, p.half_axle, round(ticks))
+
+
+def setup_frames(rule_set: int, mode: int = M.MODE_AUTONOMOUS, params: RobotParams | None = None) -> list[bytes]:
+    """What the host says to the firmware before its first cycle: the robot's geometry (when the host
+    knows the robot's parameters), the rule set, then the mode.  ValueError: a geometry the firmware
+    cannot hold (outside its parameter ranges)."""
+    enc = FrameEncoder()
+    frames = M.geometry_frames(enc, *firmware_geometry(params)) if params is not None else []
+    return frames + [
+        enc.encode(M.PARAM_SET, M.pack_payload(M.PARAM_SET, {"param": M.param_by_name("rule_set")[0],
+                                                               "value": rule_set})),
+        enc.encode(M.COMMAND, M.pack_payload(M.COMMAND, {"mode": mode, "left": 0, "right": 0})),
+    ]
+
+
+def stall_guard_off() -> bytes:
+    """The PARAM_SET that leaves the paper's explorer alone: the firmware's stall guard off (stall_ms = 0)."""
+    return FrameEncoder().encode(M.PARAM_SET, M.pack_payload(M.PARAM_SET, {"param": M.param_by_name("stall_ms")[0],
+                                                                           "value": 0}))
+
+
+class IdleController:
+    """Zero currents, emitters off: a robot that is switched off."""
+
+    name = "idle"
+
+    def cycle(self, s: Sense) -> Actuate:
+        return Actuate(0, 0, 0)
+
+    def close(self) -> None:
+        pass

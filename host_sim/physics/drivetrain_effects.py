@@ -1,0 +1,361 @@
+"""The drive with the library's effects switched on (host_sim/physics/effects.py, docs/effects.md): N robots, numpy.
+
+The nominal twin's drive (host_sim/physics/drivetrain.py, motors.py, dynamics.py) is the
+fast path, and it stays exactly as it is while every drive effect holds its
+"absent" value.  When any of them is set, host_sim/batch.BatchSim takes this
+path instead, and host_sim/sim_robot.SimRobot runs its one robot through a
+BatchSim of one (so the single-robot and the batch twin are the same code
+and agree bit for bit).  The equations are the nominal ones, generalised:
+
+* per wheel i: radius r_i = r + dr_i, torque (= back-EMF) constant
+  k_i = k_t + dk_i, dry friction T_i = T_c + dT_i (stick-slip, solved in the step:
+  host_sim/physics/friction.py, as drive.drive_step), viscous c_i = c_v + dc_i;
+* the supply V = V_bat - R_int (|i_l| + |i_r|), solved with the currents it
+  allows (Newton on a piecewise-linear equation, `supply`);
+* body forces: a caster at C - a e (a = CASTER_BEHIND) dragged against its
+  velocity, F = -F_c tanh(|v_c| / eps_v) v_c / |v_c|; a scrub torque
+  M = -T_s tanh(omega / eps_w); as generalised forces on (u, omega);
+* the reduced dynamics in (u, omega) with H no longer diagonal when the
+  radii differ (docs/effects.md, "wheel_radius"), the same linearly implicit
+  midpoint step as dynamics.step and the same midpoint torque and dry friction
+  solve as drive.drive_step.
+
+With every delta at 0 these are the nominal formulas (equal to the fast path
+to rounding error): an effect's value enters continuously from "absent".
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from host_sim.physics import friction
+
+SMOOTHING_SPEED = 0.1  # rad/s at the wheel: the caster's drag is smoothed over it
+SCRUB_SMOOTHING_SPEED = 0.01  # rad/s at the wheel: and the tyres' scrub over this, a near-Coulomb torque (stepped
+# linearly implicitly: yaw_damping).  Over 0.1 a fitted twin of MuJoCo's torsional friction stayed 5-6 points short
+# of a perfect one on the wheels (blind cases 0060 and 0080: 86 and 88 against 92 and 93); over 0.01, 92 and 93
+CASTER_BEHIND = 0.045  # m: the caster sits on the body's axis this far behind C (3/4 of the body radius)
+MIN_ROTOR_SHARE = 0.05  # the motor side's inertia is at least this share of wheel_inertia (backlash)
+SUPPLY_NEWTON = 8  # Newton steps on the supply voltage (converged to 1e-12 V_bat once the limits in force are found)
+# RobotParams fields that switch this path on when any robot has them away from 0.
+FIELDS = ("coulomb_friction_delta_l", "coulomb_friction_delta_r", "viscous_friction_delta_l",
+          "viscous_friction_delta_r", "wheel_radius_delta_l", "wheel_radius_delta_r", "torque_constant_delta_l",
+          "torque_constant_delta_r", "battery_resistance", "caster_drag", "turning_resistance", "backlash_l",
+          "backlash_r")
+
+
+def active(p: Any) -> bool:
+    """True if any drive effect is present (p a RobotParams or a ParamBatch)."""
+    return any(np.any(np.asarray(getattr(p, f)) != 0.0) for f in FIELDS)
+
+
+def _pair(a: Any, b: Any) -> np.ndarray:
+    return np.stack([np.asarray(a, dtype=float), np.asarray(b, dtype=float)], axis=-1)
+
+
+@dataclass
+class Drive:
+    """Per-robot constants of the drive with effects: (N,) arrays, (N, 2) per wheel (left, right)."""
+
+    radius: np.ndarray  # (N, 2) m
+    kt: np.ndarray  # (N, 2) N m/A
+    t_c: np.ndarray  # (N, 2) N m
+    c_v: np.ndarray  # (N, 2) N m s/rad
+    lim: np.ndarray  # (N, 1) A
+    gear: np.ndarray  # (N, 1)
+    eta: np.ndarray  # (N, 1)
+    res: np.ndarray  # (N, 1) ohm, armature
+    v_bat: np.ndarray  # (N,) V
+    r_int: np.ndarray  # (N,) ohm
+    i_e: np.ndarray  # (N,) A the electronics draw
+    caster: np.ndarray  # (N,) N
+    scrub: np.ndarray  # (N,) N m
+    b: np.ndarray  # (N,) m
+    g: np.ndarray  # (N,) m_c d
+    iw: np.ndarray  # (N,)
+    m: np.ndarray  # (N,) m_c + 2 m_w
+    h: tuple[np.ndarray, np.ndarray, np.ndarray]  # H in (u, omega): A, B, C
+    cap: np.ndarray  # (N,) mu N per wheel
+    play: np.ndarray  # (N, 2) rad, half the backlash: the gear's gap is in [-play, play]
+    j_b: np.ndarray  # (N,) kg m^2, the body's yaw inertia about C without the wheels' spin (H's C = j_b + ...)
+    i_r: np.ndarray  # (N, 1) kg m^2, the motor side (rotor through the gear) at the wheel: gear_play.py
+
+    @classmethod
+    def of(cls, p: Any) -> Drive:
+        """From a ParamBatch (or anything with (N,) parameter arrays)."""
+        r = _pair(p.wheel_radius + p.wheel_radius_delta_l, p.wheel_radius + p.wheel_radius_delta_r)
+        col = (lambda a: np.asarray(a, dtype=float)[:, None])
+        b, iw = np.asarray(p.half_axle, dtype=float), np.asarray(p.wheel_inertia, dtype=float)
+        m = p.body_mass + 2 * p.wheel_mass
+        j_b = p.body_inertia + p.body_mass * p.com_offset ** 2 + 2 * p.wheel_mass * b * b + 2 * p.wheel_inertia_diam
+        il2, ir2 = 1.0 / r[:, 0] ** 2, 1.0 / r[:, 1] ** 2
+        h = (m + iw * (il2 + ir2), iw * b * (ir2 - il2), j_b + iw * b * b * (il2 + ir2))
+        # the rotor's share of wheel_inertia: all of it but the wheel's own spin inertia (2 I_m, a thin
+        # wheel's), at least MIN_ROTOR_SHARE of it (docs/effects.md, "backlash")
+        i_r = np.maximum(iw - 2.0 * np.asarray(p.wheel_inertia_diam, dtype=float), MIN_ROTOR_SHARE * iw)
+        return cls(radius=r,
+                   kt=_pair(p.torque_constant + p.torque_constant_delta_l, p.torque_constant + p.torque_constant_delta_r),
+                   t_c=_pair(p.coulomb_friction + p.coulomb_friction_delta_l,
+                             p.coulomb_friction + p.coulomb_friction_delta_r),
+                   c_v=_pair(p.viscous_friction + p.viscous_friction_delta_l,
+                             p.viscous_friction + p.viscous_friction_delta_r),
+                   lim=col(p.current_limit), gear=col(p.gear_ratio), eta=col(p.gear_efficiency),
+                   res=col(p.armature_resistance), v_bat=np.asarray(p.battery_voltage, dtype=float),
+                   r_int=np.asarray(p.battery_resistance, dtype=float),
+                   i_e=np.asarray(p.electronics_current, dtype=float), caster=np.asarray(p.caster_drag, dtype=float),
+                   scrub=np.asarray(p.turning_resistance, dtype=float), b=b,
+                   g=np.asarray(p.body_mass * p.com_offset, dtype=float), iw=iw, m=np.asarray(m, dtype=float),
+                   h=(np.asarray(h[0]), np.asarray(h[1]), np.asarray(h[2])),
+                   cap=np.asarray(p.wheel_friction * m * 9.81 / 2, dtype=float),
+                   play=0.5 * _pair(p.backlash_l, p.backlash_r), j_b=np.asarray(j_b, dtype=float),
+                   i_r=col(i_r))
+
+    def sub(self, s: np.ndarray) -> Drive:
+        """Robots s only."""
+        return Drive(**{k: (tuple(x[s] for x in v) if isinstance(v, tuple) else v[s])  # type: ignore[arg-type]
+                        for k, v in self.__dict__.items()})
+
+
+# --------------------------------------------------------------------------- #
+# Motors and supply
+# --------------------------------------------------------------------------- #
+def _currents(c: np.ndarray, emf: np.ndarray, volts: np.ndarray, res: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(current (N, 2), d current / d V (N, 2)): the driver's clipped reference c within what V allows."""
+    hi, lo = (volts[:, None] - emf) / res, (-volts[:, None] - emf) / res
+    i = np.minimum(np.maximum(c, lo), hi)
+    return i, np.where(c > hi, 1.0, np.where(c < lo, -1.0, 0.0)) / res
+
+
+def supply(i_ref: Any, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray]:
+    """(V (N,), currents (N, 2)): V = V_bat - R_int (i_e + sum(u i) / V), with the currents V allows.
+
+    The drivers switch (PWM): each bridge passes the motor's power u i (u = R i + k_e N w, its
+    terminal voltage) to the battery side, so the battery delivers i_e + sum(u i) / V, not
+    i_e + |i_l| + |i_r| (the two agree only at full duty, u = V).  Newton on V from V_bat: the
+    currents are piecewise linear in V, so it is exact once the limits in force are found."""
+    c = np.minimum(np.maximum(np.asarray(i_ref, dtype=float), -d.lim), d.lim)
+    emf = d.kt * d.gear * w
+    volts = d.v_bat.copy()
+    i, di = _currents(c, emf, volts, d.res)
+    if not np.any(d.r_int):
+        return volts, i
+    for _ in range(SUPPLY_NEWTON):
+        u = d.res * i + emf
+        power = (u * i).sum(1)
+        gv = volts - d.v_bat + d.r_int * (d.i_e + power / volts)
+        if not np.any(np.abs(gv) > 1e-12 * d.v_bat):  # the limits in force were found: exact
+            break
+        d_power = ((d.res * i + u) * di).sum(1)  # d(sum u i)/dV through the clipped currents
+        slope = np.maximum(1.0 + d.r_int * (d_power / volts - power / volts ** 2), 0.5)
+        volts = np.clip(volts - gv / slope, 0.05 * d.v_bat, d.v_bat)
+        i, di = _currents(c, emf, volts, d.res)
+    return volts, i
+
+
+def wheel_torque(i_ref: Any, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(torque on each wheel (N, 2), current (N, 2), supply V (N,)): motors.wheel_torque per wheel (the motor
+    less the viscous friction; the dry friction is the step's)."""
+    volts, i = supply(i_ref, w, d)
+    tau = d.eta * d.gear * d.kt * i - d.c_v * w
+    return tau, i, volts
+
+
+def wheel_torque_slope(i_ref: Any, w: np.ndarray, d: Drive
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(torque, current, d torque / d w at fixed V) per wheel (N, 2), motors.wheel_torque_slope's, and
+    the supply V (N,)."""
+    volts, i = supply(i_ref, w, d)
+    c = np.minimum(np.maximum(np.asarray(i_ref, dtype=float), -d.lim), d.lim)
+    n_kt = d.kt * d.gear
+    limited = c != i
+    tau = d.eta * n_kt * i - d.c_v * w
+    slope = -d.c_v - np.where(limited, d.eta * n_kt * n_kt / d.res, 0.0)
+    return tau, i, slope, volts
+
+
+# --------------------------------------------------------------------------- #
+# Body forces and the reduced dynamics in (u, omega)
+# --------------------------------------------------------------------------- #
+def body_forces(u: np.ndarray, lat: np.ndarray, om: np.ndarray, d: Drive) -> tuple[np.ndarray, ...]:
+    """(F_e, F_n, M_C): caster drag and scrub torque on the body, along e, n and about C.
+
+    The caster at C - a e moves at (u, l - a omega); its drag opposes that, smoothed like the axles'
+    Coulomb friction (eps_v = r w_eps at the rim), the scrub torque opposes omega (eps_w, _scrub_eps)."""
+    r = d.radius.mean(1)
+    eps_v = r * SMOOTHING_SPEED
+    ve, vn = u, lat - CASTER_BEHIND * om
+    speed = np.hypot(ve, vn)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        k = np.where(speed > 0.0, d.caster * np.tanh(speed / eps_v) / speed, 0.0)
+    f_e, f_n = -k * ve, -k * vn
+    m_c = -CASTER_BEHIND * f_n - d.scrub * np.tanh(om / _scrub_eps(d))  # (-a e) x (F_n n) = -a F_n
+    return f_e, f_n, m_c
+
+
+def _scrub_eps(d: Drive) -> np.ndarray:
+    """eps_w = r w_eps / b: the yaw rate over which the scrub torque is smoothed (its rim speed r w_eps)."""
+    return d.radius.mean(1) * SCRUB_SMOOTHING_SPEED / d.b
+
+
+def yaw_damping(om: np.ndarray, d: Drive) -> np.ndarray | float:
+    """-dM_C/d omega of the scrub (N m s/rad, >= 0): the steps take it linearly implicitly, so that a torque
+    this sharp (dt T_s / eps_w up to ten times the body's yaw inertia, at 5 ms and T_s's bound) holds a yaw
+    rate near 0 rather than overshooting it at every step.  0.0 when no robot has a scrub: no work on the step."""
+    if not d.scrub.any():
+        return 0.0
+    eps = _scrub_eps(d)
+    t = np.tanh(om / eps)
+    return d.scrub * (1.0 - t * t) / eps
+
+
+def _uw(v: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray]:
+    rl, rr = d.radius[:, 0] * v[:, 0], d.radius[:, 1] * v[:, 1]
+    return 0.5 * (rl + rr), 0.5 * (rr - rl) / d.b
+
+
+def _gen_forces(tau: np.ndarray, u: np.ndarray, om: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray]:
+    """The generalised forces on (u, omega): wheel torques through the radii, plus the body forces."""
+    fl, fr = tau[:, 0] / d.radius[:, 0], tau[:, 1] / d.radius[:, 1]
+    f_e, _f_n, m_c = body_forces(u, 0.0 * u, om, d)
+    return fl + fr + f_e, d.b * (fr - fl) + m_c
+
+
+def _solve_x(v: np.ndarray, tau: np.ndarray, d: Drive, h: tuple[np.ndarray, ...] | None = None
+             ) -> tuple[np.ndarray, ...]:
+    """(u, omega, and H^-1 (f + gyroscopic terms) in (u, omega)) at wheel speeds v under wheel torques tau."""
+    u, om = _uw(v, d)
+    fu, fw = _gen_forces(tau, u, om, d)
+    fu, fw = fu + d.g * om * om, fw - d.g * u * om
+    a, bb, c = d.h if h is None else h
+    det = a * c - bb * bb
+    return u, om, (c * fu - bb * fw) / det, (a * fw - bb * fu) / det
+
+
+def _wheels(x_u: Any, x_w: Any, d: Drive) -> tuple[Any, Any]:
+    """Wheel speeds (left, right) of a motion (u, omega): (u -+ b omega) / r_i."""
+    return (x_u - d.b * x_w) / d.radius[:, 0], (x_u + d.b * x_w) / d.radius[:, 1]
+
+
+def _response(i11: Any, i12: Any, i21: Any, i22: Any, d: Drive) -> tuple[Any, Any, Any, Any]:
+    """W (w11, w12, w21, w22): the wheel speeds' response to wheel torques through the inverse (i..) of a
+    system matrix in (u, omega): a torque f_i gives the generalised forces (f_i / r_i)(1, -+ b)."""
+    el, er = 1.0 / d.radius[:, 0], 1.0 / d.radius[:, 1]
+    w11, w21 = _wheels(el * (i11 - d.b * i12), el * (i21 - d.b * i22), d)
+    w12, w22 = _wheels(er * (i11 + d.b * i12), er * (i21 + d.b * i22), d)
+    return w11, w12, w21, w22
+
+
+def accel(v: np.ndarray, tau: np.ndarray, d: Drive) -> np.ndarray:
+    """v' (N, 2): H (u', omega') = f + (g omega^2, -g u omega), then the wheels' (u' -+ b omega') / r_i."""
+    _u, _om, ud, wd = _solve_x(v, tau, d)
+    return np.stack(_wheels(ud, wd, d), 1)
+
+
+def inertia(d: Drive, iw: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """H in (u, omega), (A, B, C), with each wheel's own spin inertia iw (N, 2) (Drive.h has d.iw for both)."""
+    kl, kr = iw[:, 0] / d.radius[:, 0] ** 2, iw[:, 1] / d.radius[:, 1] ** 2
+    return d.m + kl + kr, d.b * (kr - kl), d.j_b + d.b * d.b * (kl + kr)
+
+
+def drive_step(q: np.ndarray, v: np.ndarray, i_ref: Any, dt: Any, d: Drive, dc: Any, torque: Any = None,
+               h: tuple[np.ndarray, ...] | None = None, t_c: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """drive.drive_step_batch with the effects: (q_next, v_next, wheel torques (dry friction included),
+    currents, supply V).  The same predictor with the half step's dry friction, then the linearly implicit
+    midpoint step in (u, omega) and the step's dry friction (friction.solve_batch).
+
+    torque(w) -> (wheel torques, currents, V) at wheel speeds w (default wheel_torque), h the inertia in
+    (u, omega) (default d.h) and t_c (N, 2) the dry friction on the wheels (default d.t_c): the backlash's
+    open gear (gear_play.py) drives a wheel with none of them."""
+    torque = torque or (lambda w: wheel_torque(i_ref, w, d))
+    a, bb, c = d.h if h is None else h
+    t_c = d.t_c if t_c is None else t_c
+    hdt = 0.5 * dt if np.ndim(dt) == 0 else 0.5 * np.asarray(dt)
+    tau, _i, _v = torque(v)
+    # the scrub's damping, linearly implicit: each (half) step's yaw inertia c grows by its step times it
+    damp = yaw_damping(_uw(v, d)[1], d)
+    ch = c + hdt * damp
+    u, om, ud, wd = _solve_x(v, tau, d, (a, bb, ch))
+    det = a * ch - bb * bb
+    hr = _response(hdt * ch / det, -hdt * bb / det, -hdt * bb / det, hdt * a / det, d)
+    vl, vr = v[:, 0] + hdt * (ud - d.b * wd) / d.radius[:, 0], v[:, 1] + hdt * (ud + d.b * wd) / d.radius[:, 1]
+    fl, fr, sl, sr = friction.solve_batch(vl, vr, *hr, t_c[:, 0], t_c[:, 1], v)
+    v_mid = np.stack(friction.end_speeds_batch(vl, vr, *hr, fl, fr, sl, sr), 1)
+    tau, cur, volts = torque(v_mid)
+    # the step without dry friction; its gyroscopic coefficient from the yaw rate the predictor reached
+    fu, fw = _gen_forces(tau, u, om, d)
+    fh_u, fh_w = fl / d.radius[:, 0] + fr / d.radius[:, 1], d.b * (fr / d.radius[:, 1] - fl / d.radius[:, 0])
+    wd = (a * (fw + fh_w - d.g * u * om) - bb * (fu + fh_u + d.g * om * om)) / det
+    al = hdt * d.g * (om + hdt * wd)
+    cs = c + dt * damp
+    r1 = a * u + (bb + al) * om + dt * fu
+    r2 = (bb - al) * u + cs * om + dt * fw
+    idet = 1.0 / (a * cs - bb * bb + al * al)
+    u1, w1 = (cs * r1 - (bb - al) * r2) * idet, (a * r2 - (bb + al) * r1) * idet
+    vl, vr = _wheels(u1, w1, d)
+    k = dt * idet  # the inverse of [[a, bb - al], [bb + al, cs]], times dt
+    w = _response(k * cs, -k * (bb - al), -k * (bb + al), k * a, d)
+    fl, fr, sl, sr = friction.solve_batch(vl, vr, *w, t_c[:, 0], t_c[:, 1], v)
+    v1 = np.stack(friction.end_speeds_batch(vl, vr, *w, fl, fr, sl, sr), 1)
+    q1 = _advance(q, v, v1, u, om, dt, d, dc)
+    return q1, v1, tau + np.stack([fl, fr], 1), cur, volts
+
+
+def _advance(q: np.ndarray, v: np.ndarray, v1: np.ndarray, u: np.ndarray, om: np.ndarray, dt: Any, d: Drive,
+             dc: Any) -> np.ndarray:
+    """q_next from the end speeds v1: the pose at the mean velocities (dynamics.step_batch)."""
+    hdt = 0.5 * dt
+    u1, w1 = _uw(v1, d)
+    sb, wb = hdt * (u + u1), 0.5 * (om + w1)
+    ph = q[:, 2] + hdt * wb
+    cs, sn = np.cos(ph), np.sin(ph)
+    dwb = dt * dc * wb
+    qn = np.empty_like(q)
+    qn[:, 0] = q[:, 0] + (sb * cs - dwb * sn)
+    qn[:, 1] = q[:, 1] + (sb * sn + dwb * cs)
+    qn[:, 2] = q[:, 2] + dt * wb
+    qn[:, 3:5] = q[:, 3:5] + (hdt if np.ndim(dt) == 0 else hdt[:, None]) * (v + v1)
+    return qn
+
+
+def traction_ok(v0: np.ndarray, v1: np.ndarray, tau: np.ndarray, dt: Any, d: Drive, iw: Any = None) -> np.ndarray:
+    """contact.traction_ok_batch with per-wheel radii; the caster carries its own sideways force.  tau: the
+    torques on the wheels as iw (default d.iw, both) turn with them (gear_play.py: the gear's, on the wheel's own)."""
+    iw = d.iw[:, None] if iw is None else iw
+    f = (tau - iw * (v1 - v0) / (dt if np.ndim(dt) == 0 else np.asarray(dt)[:, None])) / d.radius
+    u0, w0 = _uw(v0, d)
+    u1, w1 = _uw(v1, d)
+    ub, wb = 0.5 * (u0 + u1), 0.5 * (w0 + w1)
+    _fe, f_cn, _m = body_forces(ub, 0.0 * ub, wb, d)
+    f_n = d.m * ub * wb + d.g * (w1 - w0) / dt - f_cn
+    cap2 = d.cap * d.cap
+    with np.errstate(invalid="ignore"):
+        room = np.sqrt(cap2 - f[:, 0] ** 2) + np.sqrt(cap2 - f[:, 1] ** 2)
+    return (np.abs(f[:, 0]) <= d.cap) & (np.abs(f[:, 1]) <= d.cap) & (np.abs(f_n) <= room)
+
+
+def body_velocity(v: np.ndarray, d: Drive) -> np.ndarray:
+    """(N, 3) (u, l, omega) of rolling robots."""
+    u, om = _uw(v, d)
+    return np.stack([u, 0.0 * u, om], 1)
+
+
+def ticks_per_rev(p: Any) -> np.ndarray:
+    """(N, 2) encoder counts per wheel turn, each wheel's own."""
+    return _pair(p.ticks_per_rev + p.ticks_per_rev_delta_l, p.ticks_per_rev + p.ticks_per_rev_delta_r)
+
+
+def delayed_reference(hist_t: list[float], hist_i: list[np.ndarray], t: float, dt: float,
+                      delay: np.ndarray) -> np.ndarray:
+    """(N, 2): the mean over [t, t + dt] of the commands as they reach the drivers `delay` (N,) late.
+
+    hist_t / hist_i: issue times (ascending) and commands (N, 2); before the first, no current."""
+    a, b = t - delay, t + dt - delay
+    out = np.zeros(hist_i[0].shape) if hist_i else np.zeros((len(delay), 2))
+    for k, (tk, ik) in enumerate(zip(hist_t, hist_i)):
+        end = hist_t[k + 1] if k + 1 < len(hist_t) else np.inf
+        w = np.clip(np.minimum(end, b) - np.maximum(tk, a), 0.0, None) / dt
+        out += w[:, None] * ik
+    return out

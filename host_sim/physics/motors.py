@@ -1,0 +1,176 @@
+"""Current-regulated DC gear motors and wheel encoders (paper §3.2).  Derivation: docs/dynamics.md.
+
+The firmware gives each wheel a current reference i_ref (A).  The driver's current
+regulator is much faster than the robot, so the current it delivers is taken as
+instantaneous:
+
+    i = clip(clip(i_ref, -I_lim, I_lim), (-V_bat - k_e N w) / R, (V_bat - k_e N w) / R)
+
+first the driver's limit, then what the battery can push against the back-EMF
+(the bridge applies a voltage in [-V_bat, V_bat]; the motor turns at N w).  If the
+two ranges do not overlap (the wheel is driven faster than V_bat allows), the
+bridge does its best, the nearest feasible current.  k_e = k_t (SI units).
+
+Torque on the wheel about its axle from the motor and the viscous friction:
+
+    tau = eta N k_t i - c_v w
+
+eta the gear efficiency (one value for both directions of power flow), c_v viscous
+friction at the wheel axle.  The dry friction T_c at the axle is not a function of
+the speed alone: a wheel at rest holds under any torque below T_c (stick) and turns
+against -T_c sign(w) above it (slip).  It is solved inside the step, at the velocity
+level, with the two wheels coupled through the robot's inertia (host_sim/physics/friction.py,
+used by host_sim/physics/drivetrain.py and host_sim/physics/contact.py).
+
+Encoders: cumulative ticks = floor(theta / (2 pi) * ticks_per_rev), floor toward
+-inf, so tick k covers [k, k+1) * 2 pi / ticks_per_rev whatever the sign of theta
+(a counter that starts at 0 with the wheel at angle 0 counts -1 as soon as it
+turns backwards by any amount).  `encoder_angle(k)` is the centre of tick k,
+the best guess of the angle from a count and safe from rounding at the edges.
+
+Scalar functions are pure Python floats (one robot, hot path); the *_batch
+versions take numpy arrays of shape (N,) or (N, 2) (left, right) with parameters
+a RobotParams (shared) or a ParamBatch (one value per robot, broadcast along
+axis 0).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from host_sim.physics.params import RobotParams, cached_per_params
+
+TWO_PI = 2.0 * math.pi
+
+
+def current(i_ref: float, w: float, p: RobotParams) -> float:
+    """The current (A) the driver delivers for a reference i_ref (A) at wheel speed w (rad/s)."""
+    lim = p.current_limit
+    i = lim if i_ref > lim else (-lim if i_ref < -lim else i_ref)
+    emf = p.torque_constant * p.gear_ratio * w
+    r = p.armature_resistance
+    hi = (p.battery_voltage - emf) / r
+    if i > hi:
+        return hi
+    lo = (-p.battery_voltage - emf) / r
+    return lo if i < lo else i
+
+
+@cached_per_params
+def _consts(p: RobotParams) -> tuple[float, ...]:
+    """(I_lim, k_e N, eta k_t N, V_bat / R, 1 / R, c_v, T_c), cached for the last RobotParams (frozen)."""
+    n_kt = float(p.gear_ratio * p.torque_constant)
+    c = (float(p.current_limit), n_kt, float(p.gear_efficiency) * n_kt,
+         float(p.battery_voltage / p.armature_resistance), 1.0 / float(p.armature_resistance),
+         float(p.viscous_friction), float(p.coulomb_friction))
+    return c
+
+
+def wheel_torque(i_ref: float, w: float, p: RobotParams) -> tuple[float, float]:
+    """(torque on the wheel (N m) from the motor less the viscous friction, motor current (A)) for a current
+    reference i_ref at wheel speed w.  The axle's dry friction is the step's (host_sim/physics/friction.py)."""
+    lim, n_kt, eta_n_kt, v_r, inv_r, c_v, _t_c = _consts(p)
+    i = lim if i_ref > lim else (-lim if i_ref < -lim else i_ref)
+    emf_r = n_kt * w * inv_r
+    if i > v_r - emf_r:
+        i = v_r - emf_r
+    elif i < -v_r - emf_r:
+        i = -v_r - emf_r
+    return eta_n_kt * i - c_v * w, i
+
+
+def wheel_torque_slope(i_ref: float, w: float, p: RobotParams) -> tuple[float, float, float]:
+    """(torque (N m), current (A), d torque / d w (N m s, <= 0)) at wheel speed w: wheel_torque and its
+    slope, for a linearly implicit step of a wheel that spins freely (host_sim/physics/contact.py)."""
+    lim, n_kt, eta_n_kt, v_r, inv_r, c_v, _t_c = _consts(p)
+    i = lim if i_ref > lim else (-lim if i_ref < -lim else i_ref)
+    emf_r = n_kt * w * inv_r
+    slope = -c_v
+    if i > v_r - emf_r:  # the battery, not the driver, sets the current: back-EMF damping
+        i = v_r - emf_r
+        slope -= eta_n_kt * n_kt * inv_r
+    elif i < -v_r - emf_r:
+        i = -v_r - emf_r
+        slope -= eta_n_kt * n_kt * inv_r
+    return eta_n_kt * i - c_v * w, i, slope
+
+
+def _axis0(a: Any, ndim: int) -> Any:
+    """Per-robot parameter arrays (N,) broadcast against data of shape (N, ...)."""
+    if isinstance(a, np.ndarray) and a.ndim == 1 and ndim > 1:
+        return a.reshape((-1,) + (1,) * (ndim - 1))
+    return a
+
+
+def wheel_torque_batch(i_ref: Any, w: Any, p: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(torque, current) for arrays i_ref, w of shape (N,) or (N, 2); p RobotParams or ParamBatch."""
+    w, nd, n_kt, _inv_r, i, _limited = _driver_batch(i_ref, w, p)
+    torque = _axis0(p.gear_efficiency, nd) * n_kt * i - _axis0(p.viscous_friction, nd) * w
+    return torque, i
+
+
+def _driver_batch(i_ref: Any, w: Any, p: Any) -> tuple[np.ndarray, int, Any, Any, np.ndarray, np.ndarray]:
+    """(w, its ndim, k_e N, 1 / R, the current the driver delivers, where the battery limits it): arrays."""
+    i_ref = np.asarray(i_ref, dtype=float)
+    w = np.asarray(w, dtype=float)
+    nd = w.ndim
+    lim = _axis0(p.current_limit, nd)
+    n_kt = _axis0(p.gear_ratio * p.torque_constant, nd)
+    inv_r = _axis0(1.0 / p.armature_resistance, nd)
+    vb = _axis0(p.battery_voltage, nd)
+    emf = n_kt * w
+    i = np.minimum(np.maximum(i_ref, -lim), lim)
+    hi, lo = (vb - emf) * inv_r, (-vb - emf) * inv_r
+    limited = (i > hi) | (i < lo)
+    return w, nd, n_kt, inv_r, np.minimum(np.maximum(i, lo), hi), limited
+
+
+def wheel_torque_slope_batch(i_ref: Any, w: Any, p: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """wheel_torque_slope for arrays i_ref, w of shape (N,) or (N, 2): (torque, current, slope)."""
+    w, nd, n_kt, inv_r, i, limited = _driver_batch(i_ref, w, p)
+    eta_n_kt = _axis0(p.gear_efficiency, nd) * n_kt
+    c_v = _axis0(p.viscous_friction, nd)
+    torque = eta_n_kt * i - c_v * w
+    slope = -c_v - np.where(limited, eta_n_kt * n_kt * inv_r, 0.0)
+    return torque, i, slope
+
+
+def ticks_per_rev(p: RobotParams, wheel: int | None = None) -> float:
+    """Encoder counts per wheel turn: the nominal, or wheel 0 (left) / 1 (right)'s own (the encoder_scale effect)."""
+    if wheel is None:
+        return p.ticks_per_rev
+    return p.ticks_per_rev + (p.ticks_per_rev_delta_l if wheel == 0 else p.ticks_per_rev_delta_r)
+
+
+def encoder_ticks(theta: float, p: RobotParams, wheel: int | None = None) -> int:
+    """Cumulative encoder count for a wheel angle theta (rad): floor(theta / (2 pi) * ticks_per_rev),
+    with wheel 0 / 1 that wheel's own counts per turn."""
+    return math.floor(theta / TWO_PI * ticks_per_rev(p, wheel))
+
+
+def encoder_ticks_batch(theta: Any, p: Any, wheels: bool = False) -> np.ndarray:
+    """encoder_ticks for an array of angles (N,) or (N, 2) -> int64 array of the same shape.
+
+    wheels: theta is (N, 2) (left, right), each wheel counted with its own counts per turn."""
+    theta = np.asarray(theta, dtype=float)
+    if wheels:
+        tpr = np.stack([np.asarray(p.ticks_per_rev + p.ticks_per_rev_delta_l, dtype=float),
+                        np.asarray(p.ticks_per_rev + p.ticks_per_rev_delta_r, dtype=float)], -1)
+        return np.floor(theta / TWO_PI * tpr).astype(np.int64)
+    return np.floor(theta / TWO_PI * _axis0(p.ticks_per_rev, theta.ndim)).astype(np.int64)
+
+
+def encoder_angle(ticks: int, p: RobotParams, wheel: int | None = None) -> float:
+    """The centre (rad) of tick `ticks`: encoder_ticks(encoder_angle(k)) == k for every k.
+
+    The centre, not the lower edge: k * 2 pi / tpr, divided back by 2 pi / tpr,
+    rounds to just below k for about one k in six, and floor then gives k - 1."""
+    return (ticks + 0.5) * TWO_PI / ticks_per_rev(p, wheel)
+
+
+def encoder_angle_batch(ticks: Any, p: Any) -> np.ndarray:
+    """encoder_angle for an array of counts (N,) or (N, 2) -> float array of the same shape."""
+    ticks = np.asarray(ticks, dtype=float)
+    return (ticks + 0.5) * (TWO_PI / _axis0(p.ticks_per_rev, ticks.ndim))

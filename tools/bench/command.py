@@ -1,0 +1,77 @@
+"""`twinbot bench`: the benchmarks behind the README's figures.
+
+Each benchmark is a module with a `register(subparsers, name, summary)`
+function, like the top-level subcommands; adding one is one line in
+BENCHMARKS.  Modules are imported when the parser is built, so they keep
+heavy imports (numpy, pymavlink) inside their functions.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import textwrap
+from typing import Any
+
+from tools.arguments import help_and_error
+
+# (name, module, what it measures).
+BENCHMARKS = (
+    ("protocol", "tools.bench.protocol",
+     "serial protocol: encode/decode frames/s and MB/s on CPython (against pymavlink) and "
+     "MicroPython, framing overhead, allocation per received byte"),
+    ("firmware", "tools.bench.firmware",
+     "firmware: control-cycle time and allocations under MicroPython, heap of the loaded firmware, "
+     "one fuzzy inference on CPython against peer fuzzy libraries"),
+    ("sim", "tools.bench.sim",
+     "host simulator: real-time factor of one robot replaying a recording and with the firmware in SIL, "
+     "batch robot-steps/s at N = 1000, and IR-SIM on the same room"),
+    ("gui", "tools.bench.gui",
+     "twinbot gui: frame time with the simulated, user and real (virtual board) robots, rays and coverage on"),
+    ("diagnose", "tools.bench.diagnose",
+     "diagnosis proven blind: a suite of MuJoCo recordings with concealed effects, diagnosed, scored against "
+     "the answer keys (names, sides, parameters, held-out fit, false alarms, out-of-library, seconds), with "
+     "PySINDy beside it"),
+    ("margins", "tools.bench.margins",
+     "the diagnosis's locate rules on a blind suite: how far below its threshold each stays on the "
+     "effect-free controls, and how many of the cases it is there to find it reaches"),
+    ("ghost", "tools.bench.late_signal",
+     "late-signal twin: the ghost's pose error against the raw late pose behind a 0-300 ms late link, "
+     "and its latency estimate"),
+)
+
+
+def _description() -> str:
+    lines = [
+        "Benchmarks that produce the README's figures.  Each prints the machine, the exact",
+        "command, one table and the targets with whether each is met; --json FILE keeps",
+        "every figure.  Timings are medians over repeated runs.",
+        "",
+        "benchmarks (what each measures):",
+    ]
+    for name, _module, summary in BENCHMARKS:
+        lines += textwrap.wrap(summary, 78, initial_indent=f"  {name:<10} ", subsequent_indent=" " * 13)
+    lines += ["", "Run 'twinbot bench BENCHMARK --help' for the details of one."]
+    return "\n".join(lines)
+
+
+def register(subparsers: Any, name: str, summary: str) -> None:
+    parser = subparsers.add_parser(
+        name, help=summary, description=_description(), formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    sub = parser.add_subparsers(dest="benchmark", metavar="BENCHMARK")
+    for bench_name, module_name, bench_summary in BENCHMARKS:
+        importlib.import_module(module_name).register(sub, bench_name, bench_summary)
+
+    def no_benchmark(args: argparse.Namespace) -> int:
+        return help_and_error(parser, "BENCHMARK", [b[0] for b in BENCHMARKS])
+
+    parser.set_defaults(func=no_benchmark)
+
+
+def print_targets(targets: list[dict[str, Any]]) -> None:
+    """The targets block every benchmark ends with: a blank line, 'targets:', one marked line each."""
+    print()
+    print("targets:")
+    for target in targets:
+        mark = "[NOT RUN]" if target["met"] is None else ("[MET]   " if target["met"] else "[MISSED]")
+        print(f"  {mark} {target['text']}")

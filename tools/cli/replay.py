@@ -1,0 +1,113 @@
+"""`twinbot replay REC.csv`: a recording's commands, open loop, through the twin.
+
+The twin starts in the state recorded at --start (row 0 by default: the
+tracker pose, the encoder angles, wheel speeds from the encoder counts),
+is fed the recorded current references cycle after cycle, and the command
+prints how far its encoders and pose end from the recorded ones, and the
+largest gap on the way.  A simulator recording replays exactly (0 ticks,
+0 mm); a real robot's shows how far the twin is from the robot.
+
+The robot parameters and the world come from the recording's sidecar
+unless --params / --world say otherwise (a real robot's recording has no
+world: give --world).  --png draws the recording with the twin's track.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+from typing import Any
+
+from tools.arguments import image_file, input_file, int_range, non_negative_int
+from tools.arguments import CliError
+
+EXAMPLES = """\
+examples:
+  twinbot sim --world maze --duration 30 --record run.csv && twinbot replay run.csv
+  twinbot replay robot.csv --world paper_room --params robot.json --png replay.png
+  twinbot replay run.csv --start 250                 from the state recorded at row 250
+"""
+
+
+def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
+    p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1], epilog=EXAMPLES,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("recording", metavar="REC.csv", type=input_file, help="a recording (CSV + JSON sidecar)")
+    add_source_arguments(p)
+    p.add_argument("--start", type=non_negative_int, default=0, metavar="ROW",
+                   help="replay from the state recorded at this row (default 0)")
+    p.add_argument("--substeps", type=int_range(1, 1000), default=None,
+                   help="physics substeps per control period (default: the recording's, else 8)")
+    p.add_argument("--png", metavar="FILE", type=image_file, help="draw the recording and the twin's track")
+    p.set_defaults(func=run)
+
+
+def add_source_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--world", help="built-in world or world JSON file (default: the recording's)")
+    p.add_argument("--params", metavar="FILE", type=input_file,
+                   help="robot parameters JSON (default: the recording's)")
+
+
+def load_inputs(args: argparse.Namespace, need_world: bool) -> tuple[Any, Any, Any]:
+    """(recording, robot parameters, world or None): each from its option, else from the sidecar."""
+    from host_sim.physics.params import DEFAULT, ParamsError, load_params, params_from_dict
+    from host_sim.recordings.recording import RecordingError, load_recording, sidecar_path
+    from host_sim.physics.world import WorldError, world_by_name_or_path, world_from_dict
+
+    try:
+        rec = load_recording(args.recording)
+        side = str(sidecar_path(args.recording))
+        robot = rec.meta.get("robot")
+        if args.params:
+            params = load_params(args.params)
+        else:
+            params = params_from_dict(robot, f"{side}: robot") if robot else DEFAULT
+        world = None
+        if args.world:
+            world = world_by_name_or_path(args.world, params.body_radius)
+        elif rec.meta.get("world"):
+            world = world_from_dict(rec.meta["world"], f"{side}: world", params.body_radius)
+    except (RecordingError, ParamsError, WorldError) as exc:
+        raise CliError(str(exc)) from None
+    if need_world and world is None:
+        raise CliError(f"{args.recording}: the recording holds no world (a robot's recording); give --world")
+    if not len(rec):
+        raise CliError(f"{args.recording}: the recording has no rows")
+    return rec, params, world
+
+
+def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from host_sim.recordings.replay import ReplayError, replay
+
+    rec, params, world = load_inputs(args, need_world=True)
+    if args.start >= len(rec):
+        raise CliError(f"--start {args.start}: the recording has rows 0..{len(rec) - 1}")
+    substeps = args.substeps or int(rec.meta.get("substeps") or 8)  # type: ignore[call-overload]
+    try:
+        result = replay(rec, params, world, start=args.start, substeps=substeps)
+    except ReplayError as exc:
+        raise CliError(f"{args.recording}: {exc}") from None
+    rows = slice(args.start, len(rec))
+    enc_gap = result.enc - rec.enc[rows]
+    duration = float(rec.t[-1] - rec.t[args.start])
+    print(f"replayed {args.recording}: rows {args.start}..{len(rec) - 1} ({duration:.2f} s), open loop through "
+          f"the twin in {world.name}")
+    print(f"  encoders at the end: twin {result.enc[-1, 0]}/{result.enc[-1, 1]}, recorded "
+          f"{rec.enc[-1, 0]}/{rec.enc[-1, 1]} ticks (left/right): {_ticks(enc_gap[-1])} apart; "
+          f"largest gap on the way {int(np.abs(enc_gap).max())} ticks")
+    if rec.pose is not None:
+        gap = np.hypot(*(result.pose[:, :2] - rec.pose[rows, :2]).T)
+        dphi = float(np.angle(np.exp(1j * (result.pose[-1, 2] - rec.pose[-1, 2]))))
+        print(f"  pose at the end: {1000 * gap[-1]:.1f} mm and {math.degrees(dphi):+.2f} degrees from the "
+              f"recorded one; largest gap on the way {1000 * gap.max():.1f} mm")
+    if args.png:
+        from host_sim.figures.runs import save_recording
+
+        print(f"  picture: {save_recording(args.png, rec, params, world, replayed=result)}")
+    return 0
+
+
+def _ticks(gap: Any) -> str:
+    return f"{int(gap[0]):+d}/{int(gap[1]):+d}"
+

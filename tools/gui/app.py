@@ -1,0 +1,299 @@
+"""The application's state and its frame: step the robots, then draw everything.
+
+One `App` per window.  `frame(dt)` is one pass of the loop: the user's
+orders go to the robots that take them, the simulated robots catch up by
+dt x speed simulated seconds (fixed step: whole 40 ms periods; real time:
+one pass of the paper's clock loop with Dt = dt x speed, see
+host_sim/loops/live.py), the real robot's frames are read, and the window is
+drawn.  Events go through `handle(event)` (tools/gui/controls.py maps
+keys, buttons and the mouse to the methods here).
+"""
+from __future__ import annotations
+
+import collections
+import datetime
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pygame
+
+from host_sim.controller.hardware_io import RULE_SETS
+from host_sim.physics.params import RobotParams
+from host_sim.recordings.recording import RecordingWriter
+from host_sim.physics.world import World, WorldError
+from protocol import messages as M
+from tools.gui.robots import RealBot, SimBot
+from tools.gui.user_input import UserControl
+from tools.gui.view import Viewport
+from tools.gui.world_edit import WallEditor
+
+SIZE = (1280, 780)
+ROOM_RECT = (0, 0, 900, 740)
+SPEEDS = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0)
+TOOLS = ("wall", "box", "polygon")
+MAX_CATCH_UP = 0.1  # s of wall time a fixed-step frame makes up at most: a slow frame must not snowball
+MAX_SPEED = M.param_by_name("max_speed")[4]  # mm/s, the firmware's default wheel-speed limit
+
+
+@dataclass
+class Settings:
+    world: World
+    params: RobotParams
+    rules: str = "refined"
+    port: str | None = None
+    pil: bool = False  # the simulated robot's firmware on a virtual board (MicroPython) instead of in process
+    speed: float = 1.0
+    realtime: bool = False
+    noise: bool = True
+    emitter_pct: int = 60
+    seed: int = 0
+    world_file: Path = Path("world.json")  # where save and load go
+    out_dir: Path = Path(".")  # recordings and screenshots
+    grid: float = 0.05  # m, the snapping grid
+    link_floor_s: float = 0.0  # the real robot's link: its fastest delivery (the ghost's latency floor)
+
+
+@dataclass
+class Clock:
+    """Simulated seconds against wall seconds over the last second: the real-time factor."""
+
+    samples: collections.deque[tuple[float, float]] = field(default_factory=lambda: collections.deque(maxlen=240))
+
+    def tick(self, sim_t: float) -> None:
+        self.samples.append((time.perf_counter(), sim_t))
+
+    def factor(self) -> float | None:
+        if len(self.samples) < 2:
+            return None
+        (w0, s0), (w1, s1) = self.samples[0], self.samples[-1]
+        while len(self.samples) > 2 and w1 - self.samples[0][0] > 1.0:
+            self.samples.popleft()
+        return (s1 - s0) / (w1 - w0) if w1 > w0 else None
+
+
+class App:
+    def __init__(self, settings: Settings, surface: pygame.Surface) -> None:
+        from tools.gui.controls import Controls
+        from tools.gui.render import Renderer
+
+        self.s = settings
+        self.surface = surface
+        self.editor = WallEditor(settings.world, settings.grid)
+        self.view = Viewport(ROOM_RECT)
+        self.view.fit(*settings.world.size)
+        self.user_control = UserControl(MAX_SPEED)
+        self.running = True
+        self.show_help = False
+        self.show_coverage = True
+        self.show_ghost = True  # the real robot's ghost (the late-signal twin) beside its raw late pose
+        self.tool = "wall"  # what the mouse draws: "wall", "box" or "polygon"
+        self.user_drives_sim = False
+        self.user_drives_real = False
+        self.recording: list[Path] = []
+        self.message = ""
+        self.frames = 0
+        self.clock = Clock()
+        self.real: RealBot | None = None
+        self.real_error = "absent (start with --port PORT)"
+        if settings.port:  # first: a bad port fails before a virtual board (--pil) is started
+            self._open_real(settings.port)
+        self._make_bots()
+        self._world_version = self.editor.version
+        self.controls = Controls(self)
+        self.renderer = Renderer(self)
+
+    # -- robots -----------------------------------------------------------------
+    def _make_bots(self) -> None:
+        s, world = self.s, self.editor.world
+        rule_set = RULE_SETS[s.rules]
+        common = dict(seed=s.seed, noise=s.noise, emitter_pct=s.emitter_pct)
+        for old in (getattr(self, "sim", None), getattr(self, "user", None)):
+            if old is not None:
+                old.close()
+        self.sim = SimBot("simulated", world, s.params, rule_set, user=False, pil=s.pil, **common)  # type: ignore[arg-type]
+        self.user = SimBot("user", world, s.params, rule_set, user=True, **common)  # type: ignore[arg-type]
+
+    def _open_real(self, port: str) -> None:
+        from host_sim.board.serial_link import LinkError
+
+        try:
+            self.real = RealBot.open(port, self.editor.world.start, self.s.params, self.s.link_floor_s)
+        except LinkError as exc:
+            self.real_error = f"absent: {exc}"
+            raise
+
+    @property
+    def sim_bots(self) -> tuple[SimBot, SimBot]:
+        return (self.sim, self.user)
+
+    # -- one frame -----------------------------------------------------------------
+    def frame(self, dt: float) -> None:
+        """One pass: orders, physics (if running), the real robot's frames, drawing."""
+        self.sync_world()
+        orders = self.user_control.wheels()
+        self.user.orders = orders
+        self.sim.orders = orders if self.user_drives_sim else None
+        if self.running:
+            self.advance((dt if self.s.realtime else min(dt, MAX_CATCH_UP)) * self.s.speed)
+        if self.real is not None:
+            self.real.orders = orders if self.user_drives_real else None
+            self.real.poll()
+        for bot in self.sim_bots:
+            bot.after_frame()
+        self.clock.tick(self.sim.sim.robot.t)
+        self.renderer.draw()
+        self.frames += 1
+
+    def sync_world(self) -> None:
+        """The simulated robots move into the room as edited (before any step, and before drawing)."""
+        if self.editor.version != self._world_version:
+            for bot in self.sim_bots:
+                bot.set_world(self.editor.world)
+            self._world_version = self.editor.version
+
+    def advance(self, sim_seconds: float) -> None:
+        """Fixed step: whole periods worth sim_seconds.  Real time: the frame's Dt in passes of at most
+        one control period (the window's loop is slower than run_realtime's, whose passes are ~2 ms:
+        one pass per frame at a high speed factor would skip control periods that run_realtime runs)."""
+        self.sync_world()
+        passes = max(1, math.ceil(sim_seconds / self.sim.sim.cycle_s - 1e-9))
+        for bot in self.sim_bots:
+            if self.s.realtime:
+                for _ in range(passes):
+                    bot.stepper.clock(sim_seconds / passes)
+            else:
+                bot.stepper.fixed(sim_seconds)
+
+    def single_step(self) -> None:
+        """One 40 ms control period of both simulated robots (pauses the run)."""
+        self.running = False
+        self.sync_world()
+        for bot in self.sim_bots:
+            bot.stepper.step_period()
+        self.say(f"one step: t = {self.sim.sim.robot.t:.2f} s")
+
+    # -- settings the user changes -------------------------------------------------
+    def say(self, text: str) -> None:
+        self.message = text
+
+    def toggle_run(self) -> None:
+        self.running = not self.running
+        self.say("running" if self.running else "paused")
+
+    def change_speed(self, direction: int) -> None:
+        k = min(range(len(SPEEDS)), key=lambda i: abs(SPEEDS[i] - self.s.speed))
+        self.s.speed = SPEEDS[max(0, min(len(SPEEDS) - 1, k + direction))]
+        self.say(f"speed {self.s.speed:g}x real time")
+
+    def toggle_realtime(self) -> None:
+        self.s.realtime = not self.s.realtime
+        self.say("real time: the step is the clock's Dt" if self.s.realtime else "fixed step: 40 ms / 8, repeatable")
+
+    def toggle_noise(self) -> None:
+        self.s.noise = not self.s.noise
+        for bot in self.sim_bots:
+            bot.set_noise(self.s.noise)
+        self.say(f"sensor noise {'on' if self.s.noise else 'off'}")
+
+    def toggle_rules(self) -> None:
+        self.s.rules = "first" if self.s.rules == "refined" else "refined"
+        self._set_param("rule_set", RULE_SETS[self.s.rules])
+        self.say(f"rule set: {self.s.rules}")
+
+    def change_emitter(self, delta: int) -> None:
+        self.s.emitter_pct = max(0, min(100, self.s.emitter_pct + delta))
+        self._set_param("emitter_pct", self.s.emitter_pct)
+        self.say(f"emitter power L = {self.s.emitter_pct} %")
+
+    def _set_param(self, name: str, value: int) -> None:
+        for bot in self.sim_bots:
+            bot.set_param(name, value)
+        if self.real is not None:
+            self.real.set_param(name, value)
+
+    def next_tool(self) -> None:
+        self.tool = TOOLS[(TOOLS.index(self.tool) + 1) % len(TOOLS)]
+        self.controls.corners = []
+        self.say({"wall": "wall tool: drag on the floor draws a wall",
+                  "box": "box tool: drag draws a rectangular obstacle",
+                  "polygon": "polygon tool: click the corners, Enter closes (convex only)"}[self.tool])
+
+    def toggle_user_drives_sim(self) -> None:
+        self.user_drives_sim = not self.user_drives_sim
+        self.say("the user's orders drive the simulated robot too (HOST mode)" if self.user_drives_sim
+                 else "the simulated robot explores on its own (AUTONOMOUS)")
+
+    def toggle_user_drives_real(self) -> None:
+        if self.real is None:
+            self.say("no real robot: start with --port PORT")
+            return
+        self.user_drives_real = not self.user_drives_real
+        if not self.user_drives_real:
+            self.real.release()
+        self.say("the user's orders drive the real robot (HOST mode)" if self.user_drives_real
+                 else "the real robot is released (STOP)")
+
+    def reset(self) -> None:
+        """Both simulated robots back at the room's start, fresh firmware; the real robot shown at the start."""
+        if self.recording:
+            self.toggle_record()
+        self._make_bots()
+        self._world_version = self.editor.version
+        if self.real is not None:
+            self.real.reset(self.editor.world.start)
+        self.say("reset to the start pose")
+
+    # -- files -------------------------------------------------------------------
+    def toggle_record(self) -> None:
+        """Start or stop recording each robot's trajectory, sensors and orders (docs/recordings.md)."""
+        bots: list[SimBot | RealBot] = [*self.sim_bots, *([self.real] if self.real is not None else [])]
+        if self.recording:
+            for bot in bots:
+                bot.record(None)
+            self.say(f"recorded: {', '.join(str(p) for p in self.recording)}")
+            self.recording = []
+            return
+        stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
+        world, params = self.editor.world, self.s.params
+        for bot, name in zip(bots, ("simulated", "user", "real")):
+            path = self.s.out_dir / f"gui-{stamp}-{name}.csv"
+            writer = RecordingWriter(path, source="robot" if name == "real" else "simulator", sample_period=0.04,
+                                     robot=params.to_json(), world=world.to_dict(),
+                                     extra={"controller": "SIL" if name != "real" else "serial", "which": name,
+                                            "rules": self.s.rules, "noise": self.s.noise,
+                                            "emitter_pct": self.s.emitter_pct})
+            bot.record(writer)
+            self.recording.append(path)
+        self.say(f"recording {len(bots)} robots to {self.s.out_dir}/gui-{stamp}-*.csv")
+
+    def screenshot(self, path: str | Path | None = None) -> Path:
+        if path is None:
+            path = self.s.out_dir / f"gui-{datetime.datetime.now().strftime('%Y%m%d-%H%M%S-%f')}.png"
+        path = Path(path)
+        pygame.image.save(self.surface, str(path))
+        self.say(f"screenshot: {path}")
+        return path
+
+    def save_world(self) -> None:
+        self.editor.save(self.s.world_file)
+        self.say(f"world saved: {self.s.world_file}")
+
+    def load_world(self) -> None:
+        try:
+            self.editor.load(self.s.world_file, self.s.params.body_radius)
+        except WorldError as exc:
+            self.say(f"not loaded: {exc}")
+            return
+        self.view.fit(*self.editor.world.size)
+        self.reset()
+        self.say(f"world loaded: {self.s.world_file}")
+
+    def close(self) -> None:
+        if self.recording:
+            self.toggle_record()
+        for bot in self.sim_bots:
+            bot.close()
+        if self.real is not None:
+            self.real.close()

@@ -1,0 +1,207 @@
+"""Keys, buttons and the mouse: every control is one `Action`, reachable by a key and most by a button.
+
+The mouse edits the room with the current tool (o cycles them): *wall*,
+drag on empty floor draws a wall (both ends snap to the grid); *box*, drag
+draws a rectangular obstacle; *polygon*, each click adds a corner and
+Enter closes the convex obstacle (Backspace takes back a corner, Esc drops
+it).  With any tool, press on a wall selects it and dragging moves it (by whole
+grid steps); right click deletes the wall under the cursor; the wheel
+zooms about the cursor; the middle button, or shift + drag, pans.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Callable
+
+import pygame
+
+if TYPE_CHECKING:
+    from tools.gui.app import App
+
+PANEL_X = 900
+BUTTON_TOP = 470
+BUTTON_SIZE = (88, 26)
+PICK_PX = 7  # a wall within this many pixels of the cursor is under it
+
+
+@dataclass
+class Action:
+    keys: tuple[int, ...]
+    key_label: str
+    label: str  # button text ("" = key only)
+    help: str
+    do: Callable[[], Any]
+    on: Callable[[], bool] | None = None  # lit button when true
+    caption: Callable[[], str] | None = None  # the button's text when it changes with the state
+
+
+def actions(app: App) -> list[Action]:
+    k = pygame
+    return [
+        Action((k.K_SPACE,), "space", "run/pause", "run / pause", app.toggle_run, lambda: app.running),
+        Action((k.K_PERIOD,), ".", "step", "one 40 ms control period (pauses)", app.single_step),
+        Action((k.K_MINUS, k.K_KP_MINUS), "-", "slower", "speed factor down", lambda: app.change_speed(-1)),
+        Action((k.K_EQUALS, k.K_PLUS, k.K_KP_PLUS), "+", "faster", "speed factor up", lambda: app.change_speed(1)),
+        Action((k.K_t,), "t", "real time", "real time (step = clock Dt) / fixed step", app.toggle_realtime,
+               lambda: app.s.realtime),
+        Action((k.K_n,), "n", "noise", "sensor noise on / off", app.toggle_noise, lambda: app.s.noise),
+        Action((k.K_f,), "f", "rules", "rule set: first / refined", app.toggle_rules,
+               lambda: app.s.rules == "refined"),
+        Action((k.K_LEFTBRACKET,), "[", "L -10", "emitter power L down 10 %", lambda: app.change_emitter(-10)),
+        Action((k.K_RIGHTBRACKET,), "]", "L +10", "emitter power L up 10 %", lambda: app.change_emitter(10)),
+        Action((k.K_r,), "r", "reset", "reset the robots to the start", app.reset),
+        Action((k.K_c,), "c", "record", "record all robots (CSV + JSON, docs/recordings.md)", app.toggle_record,
+               lambda: bool(app.recording)),
+        Action((k.K_p, k.K_F12), "p", "screenshot", "screenshot (PNG)", lambda: app.screenshot()),
+        Action((k.K_u,), "u", "user->sim", "the user's orders drive the simulated robot too", app.toggle_user_drives_sim,
+               lambda: app.user_drives_sim),
+        Action((k.K_i,), "i", "user->real", "the user's orders drive the real robot too", app.toggle_user_drives_real,
+               lambda: app.user_drives_real),
+        Action((k.K_v,), "v", "coverage", "coverage overlay on / off", app_toggle(app, "show_coverage"),
+               lambda: app.show_coverage),
+        Action((k.K_g,), "g", "ghost", "the real robot's ghost (where it is now, its signal being late) on / off",
+               app_toggle(app, "show_ghost"), lambda: app.show_ghost),
+        Action((k.K_o,), "o", "tool", "drawing tool: wall / box / convex polygon", app.next_tool,
+               lambda: app.tool != "wall", lambda: f"tool: {app.tool}"),
+        Action((k.K_s,), "s", "save", "save the world file", app.save_world),
+        Action((k.K_l,), "l", "load", "load the world file", app.load_world),
+        Action((k.K_z,), "z", "undo", "undo the last change to the walls", lambda: app.editor.undo()),
+        Action((k.K_DELETE, k.K_BACKSPACE), "del", "delete", "delete the selected wall", lambda: app.editor.delete()),
+        Action((k.K_0,), "0", "fit", "fit the room in the view", lambda: app.view.fit(*app.editor.world.size)),
+        Action((k.K_h,), "h", "help", "this help", app_toggle(app, "show_help"), lambda: app.show_help),
+    ]
+
+
+def app_toggle(app: App, name: str) -> Callable[[], None]:
+    def flip() -> None:
+        setattr(app, name, not getattr(app, name))
+
+    return flip
+
+
+class Controls:
+    def __init__(self, app: App) -> None:
+        self.app = app
+        self.actions = actions(app)
+        self.by_key = {key: a for a in self.actions for key in a.keys}
+        self.buttons: list[tuple[pygame.Rect, Action]] = []
+        for i, a in enumerate(x for x in self.actions if x.label):
+            col, row = i % 4, i // 4
+            rect = pygame.Rect(PANEL_X + 10 + col * (BUTTON_SIZE[0] + 4), BUTTON_TOP + row * (BUTTON_SIZE[1] + 4),
+                               *BUTTON_SIZE)
+            self.buttons.append((rect, a))
+        self.drag: tuple[Any, ...] | None = None  # ("draw", a, b) | ("move", i, wall, start) | ("pan", pos)
+        self.corners: list[tuple[float, float]] = []  # the polygon being drawn
+        self.pointer = (0.0, 0.0)  # world point under the mouse
+        self.quit = False
+
+    def handle(self, event: pygame.event.Event) -> None:
+        app = self.app
+        if app.user_control.handle(event):
+            return
+        if event.type == pygame.QUIT:
+            self.quit = True
+        elif event.type == pygame.KEYDOWN:
+            self.key(event)
+        elif event.type == pygame.MOUSEBUTTONDOWN:
+            self.press(event.pos, event.button)
+        elif event.type == pygame.MOUSEMOTION:
+            self.motion(event.pos, event.rel)
+        elif event.type == pygame.MOUSEBUTTONUP:
+            self.release(event.pos, event.button)
+        elif event.type == pygame.MOUSEWHEEL:
+            pos = pygame.mouse.get_pos()
+            if app.view.contains(*pos):
+                app.view.zoom(1.15 ** event.y, pos)
+
+    def key(self, event: pygame.event.Event) -> None:
+        if self.corners and event.key in (pygame.K_RETURN, pygame.K_KP_ENTER, pygame.K_BACKSPACE, pygame.K_ESCAPE):
+            self.polygon_key(event.key)
+            return
+        if event.key in (pygame.K_ESCAPE, pygame.K_q):
+            self.quit = True
+            return
+        action = self.by_key.get(event.key)
+        if action is not None:
+            action.do()
+
+    def press(self, pos: tuple[int, int], button: int) -> None:
+        app = self.app
+        for rect, action in self.buttons:
+            if rect.collidepoint(pos) and button == 1:
+                action.do()
+                return
+        if not app.view.contains(*pos):
+            return
+        world_pt = app.view.to_world(*pos)
+        shift = bool(pygame.key.get_mods() & pygame.KMOD_SHIFT)
+        if button == 2 or (button == 1 and shift):
+            self.drag = ("pan", pos)
+            return
+        picked = app.editor.pick(*world_pt, PICK_PX / app.view.scale)
+        if button == 3:
+            if picked is not None:
+                app.editor.delete(picked)
+                app.say("wall deleted")
+            return
+        if button != 1:
+            return
+        if app.tool == "polygon":
+            self.corners.append(app.editor.snap(*world_pt))
+            return
+        if picked is not None:
+            app.editor.selected = picked
+            app.editor.begin_move()
+            self.drag = ("move", picked, dict(app.editor.walls[picked]), world_pt, app.editor.version)
+        else:
+            app.editor.selected = None
+            start = app.editor.snap(*world_pt)
+            self.drag = ("box" if app.tool == "box" else "draw", start, start)
+
+    def polygon_key(self, k: int) -> None:
+        app = self.app
+        if k == pygame.K_BACKSPACE:
+            self.corners.pop()
+        elif k == pygame.K_ESCAPE:
+            self.corners = []
+        else:
+            error = app.editor.add_polygon(self.corners)
+            app.say(error or f"obstacle {len(app.editor.walls) - 1}: polygon of {len(self.corners)} corners")
+            if error is None:
+                self.corners = []
+
+    def motion(self, pos: tuple[int, int], rel: tuple[int, int]) -> None:
+        app, drag = self.app, self.drag
+        self.pointer = app.view.to_world(*pos)
+        if drag is None:
+            return
+        if drag[0] == "pan":
+            app.view.pan(pos[0] - drag[1][0], pos[1] - drag[1][1])
+            self.drag = ("pan", pos)
+        elif drag[0] in ("draw", "box"):
+            self.drag = (drag[0], drag[1], app.editor.snap(*app.view.to_world(*pos)))
+        elif drag[0] == "move":
+            x, y = app.view.to_world(*pos)
+            app.editor.move_to(drag[1], drag[2], x - drag[3][0], y - drag[3][1])
+
+    def release(self, pos: tuple[int, int], button: int) -> None:
+        app, drag = self.app, self.drag
+        self.drag = None
+        if drag is None:
+            return
+        if drag[0] == "draw" and button == 1:
+            end = app.editor.snap(*app.view.to_world(*pos))
+            if app.editor.add_segment(drag[1], end):
+                app.say(f"wall {len(app.editor.walls) - 1}: {drag[1]} -> {end}")
+        elif drag[0] == "box" and button == 1:
+            end = app.editor.snap(*app.view.to_world(*pos))
+            if app.editor.add_box(drag[1], end):
+                app.say(f"obstacle {len(app.editor.walls) - 1}: box {drag[1]} - {end}")
+        elif drag[0] == "move" and app.editor.version == drag[4]:
+            app.editor.drop_undo()  # a click that selected without moving: nothing to undo
+
+    def preview(self) -> tuple[str, tuple[float, float], tuple[float, float]] | None:
+        """The wall or box being drawn: (kind, a, b)."""
+        if self.drag is not None and self.drag[0] in ("draw", "box") and self.drag[1] != self.drag[2]:
+            return self.drag[0], self.drag[1], self.drag[2]
+        return None

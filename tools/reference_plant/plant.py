@@ -1,0 +1,252 @@
+"""The plant: the MuJoCo robot stepped with its motors, battery, encoders, IR ring and tracker.
+
+Each MuJoCo step (1 ms) the plant's own drivers turn the current references
+into wheel torques:
+
+    i   = clip(i_ref, -I_lim, I_lim), then clip to [(-V - k_e N w) / R, (V - k_e N w) / R]
+    tau = eta N k_t i            (data.ctrl of the motor on the drive joint)
+
+w the drive joint's speed (the wheel's, or its rotor's when the gear has
+play), k_e = k_t per wheel, V the battery's terminal voltage
+V_oc - R_int * I_batt, I_batt = I_q + sum(u i) / V_oc from the step before
+(u = R i + k_e N w, the motor's terminal voltage).  The axle friction is
+MuJoCo's own: frictionloss (dry) and damping (viscous) on the drive joint.
+A new current reference reaches the driver actuator_delay seconds late.
+
+`sense()` and `actuate()` speak host_sim's Sense / Actuate, so any of the
+twin's controllers (SilController = the firmware in-process, a replay of
+current references) drives the plant as it drives the twin's SimRobot:
+
+- encoders: floor(theta * ticks_per_rev / 2 pi) of the drive joint's angle
+  (on the motor shaft: behind any gear play);
+- IR: a ray per sensor along its axis, mujoco.mj_ray against the walls' IR
+  surfaces; a misalignment turns the pair about its mount on the rim (the
+  ray starts one body radius behind the mount, at C when it is aligned), the hit's face normal for the
+  incidence angle; ir_law for the light; ambient (global + visible lamps,
+  flicker) at t for the emitter-off and t + on_delay for the emitter-on
+  reading; per-sensor gain, offset, ambient leakage; Gaussian noise; the
+  ADC's rounding and ceiling; readings of the pose ir_latency seconds old;
+- battery: the terminal voltage plus measurement noise, in mV;
+- tracker (`tracker_pose()`): the pose of C with Gaussian noise.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import mujoco  # type: ignore[import-untyped]
+import numpy as np
+
+from host_sim.controller.hardware_io import TICK_MASK, Actuate, Sense
+from host_sim.physics.world import World
+from tools.reference_plant import ir_law
+from tools.reference_plant.robot_model import PlantSpec, build_model, drive_joint, ir_group_mask
+
+N_SENSORS = 8
+RAY_HEIGHT = 0.03  # m above the floor: the IR surfaces' mid-height
+SETTLE_S = 0.3  # s the robot rests on the floor before t = 0
+
+
+class Plant:
+    """One MuJoCo robot in a world; the same sense/actuate interface as host_sim's SimRobot."""
+
+    def __init__(self, spec: PlantSpec, world: World | None, pose: tuple[float, float, float] | None = None,
+                 seed: int = 0, timestep: float = 0.001) -> None:
+        self.spec = spec
+        self.world = world
+        self.model = build_model(spec, world, timestep)
+        self.data = mujoco.MjData(self.model)
+        self.dt = timestep
+        self.rng = np.random.default_rng([seed, 0])  # IR and battery measurement noise
+        self.tracker_rng = np.random.default_rng([seed, 1])
+        m = self.model
+        self._drive_q = [m.joint(drive_joint(spec, k)).qposadr[0] for k in range(2)]
+        self._drive_v = [m.joint(drive_joint(spec, k)).dofadr[0] for k in range(2)]
+        self._wheel_q = [m.joint(f"wheel_{s}").qposadr[0] for s in "lr"]
+        self._chassis = m.body("chassis").id
+        self._ray_mask = ir_group_mask()
+        self._geomid = np.zeros(1, dtype=np.int32)
+        self._normal = np.zeros(3)
+        self.i_ref = (0.0, 0.0)  # A, what the driver regulates to now
+        self.current = (0.0, 0.0)  # A flowing
+        self._pending: deque[tuple[float, tuple[float, float]]] = deque()
+        self.emitter_pct = 0
+        self.v_term = spec.battery_voltage
+        self._phi = 0.0
+        self._history: deque[tuple[float, float, float, float]] = deque()  # (t, x, y, phi) for IR latency
+        self._place(pose if pose is not None else (world.start if world is not None else (0.0, 0.0, 0.0)))
+
+    # ------------------------------------------------------------------ set-up
+    def _place(self, pose: tuple[float, float, float]) -> None:
+        """Put C at pose, let the robot settle on its wheels and caster, then zero the encoders and the clock."""
+        x, y, phi = (float(v) for v in pose)
+        d = self.data
+        d.qpos[0:2] = (x, y)
+        d.qpos[3:7] = (math.cos(phi / 2), 0.0, 0.0, math.sin(phi / 2))
+        mujoco.mj_forward(self.model, d)
+        for _ in range(int(round(SETTLE_S / self.dt))):
+            mujoco.mj_step(self.model, d)
+        for k in range(2):  # the encoders count from 0, mid-tick (no count from a micro-motion at rest)
+            zero = float(d.qpos[self._drive_q[k]]) - math.pi / self.spec.ticks_per_rev[k]
+            d.qpos[self._wheel_q[k]] -= zero
+            if self._drive_q[k] != self._wheel_q[k]:
+                d.qpos[self._drive_q[k]] -= zero
+        d.time = 0.0
+        mujoco.mj_forward(self.model, d)
+        self._phi = phi
+        self._phi = self.true_pose()[2]
+        self._history.append((0.0, *self.true_pose()))
+
+    # ------------------------------------------------------------------ state
+    @property
+    def t(self) -> float:
+        return float(self.data.time)
+
+    def true_pose(self) -> tuple[float, float, float]:
+        """(x, y, phi) of C, phi continuous (not wrapped)."""
+        d = self.data
+        x, y = float(d.xpos[self._chassis, 0]), float(d.xpos[self._chassis, 1])
+        mat = d.xmat[self._chassis]
+        yaw = math.atan2(float(mat[3]), float(mat[0]))
+        self._phi += (yaw - self._phi + math.pi) % (2 * math.pi) - math.pi
+        return x, y, self._phi
+
+    def tracker_pose(self) -> tuple[float, float, float]:
+        """What an overhead camera reports: the pose of C with Gaussian noise."""
+        x, y, phi = self.true_pose()
+        s = self.spec
+        n = self.tracker_rng.standard_normal(3)
+        return x + s.tracker_noise_xy * n[0], y + s.tracker_noise_xy * n[1], phi + s.tracker_noise_phi * n[2]
+
+    def wheel_speeds(self) -> tuple[float, float]:
+        """Drive joint speeds (rad/s)."""
+        return float(self.data.qvel[self._drive_v[0]]), float(self.data.qvel[self._drive_v[1]])
+
+    def encoder_position(self) -> tuple[float, float]:
+        """Each encoder's position in ticks, not rounded: what a perfect twin would predict of its counts."""
+        d, s = self.data, self.spec
+        return tuple(float(d.qpos[self._drive_q[k]]) * s.ticks_per_rev[k] / (2 * math.pi)
+                     for k in range(2))  # type: ignore[return-value]
+
+    def encoder_ticks(self) -> tuple[int, int]:
+        left, right = self.encoder_position()
+        return math.floor(left), math.floor(right)
+
+    # ------------------------------------------------------------------ I/O
+    def actuate(self, a: Actuate) -> None:
+        ref = (a.i_left_ma / 1000.0, a.i_right_ma / 1000.0)
+        self._pending.append((self.t + self.spec.actuator_delay - 1e-9, ref))
+        self.emitter_pct = a.emitter_pct
+
+    def sense(self) -> Sense:
+        off, on = self.read_ir()
+        enc_l, enc_r = self.encoder_ticks()
+        vbat = self.v_term + self.spec.vbat_noise * float(self.rng.standard_normal())
+        return Sense(int(round(self.t * 1000)) & TICK_MASK, off, on, enc_l, enc_r, int(round(vbat * 1000)))
+
+    # ------------------------------------------------------------------ physics
+    def advance(self, duration: float) -> None:
+        """Step the physics for `duration` seconds (a whole number of MuJoCo steps)."""
+        m, d = self.model, self.data
+        for _ in range(int(round(duration / self.dt))):
+            while self._pending and self._pending[0][0] <= d.time:
+                self.i_ref = self._pending.popleft()[1]
+            self._drive()
+            mujoco.mj_step(m, d)
+            if self.spec.ir_latency > 0:
+                mujoco.mj_kinematics(m, d)
+                self._remember_pose()
+        # mj_step leaves the bodies' frames where the step began; the encoders read the joints where it ended.
+        # One instant for the pose, the tracker, the IR ring's rays and the encoders: the frames of now.
+        mujoco.mj_kinematics(m, d)
+
+    def _drive(self) -> None:
+        """The drivers and the battery: currents for this step, motor torques into data.ctrl."""
+        s, d = self.spec, self.data
+        v_bat = self.v_term
+        power = 0.0
+        currents = []
+        for k in range(2):
+            w = float(d.qvel[self._drive_v[k]])
+            emf = s.torque_constant[k] * s.gear_ratio * w
+            i = min(max(self.i_ref[k], -s.current_limit), s.current_limit)
+            i = min(max(i, (-v_bat - emf) / s.armature_resistance), (v_bat - emf) / s.armature_resistance)
+            d.ctrl[k] = s.gear_efficiency * s.gear_ratio * s.torque_constant[k] * i
+            power += (s.armature_resistance * i + emf) * i
+            currents.append(i)
+        self.current = (currents[0], currents[1])
+        i_batt = s.quiescent_current + power / s.battery_voltage
+        self.v_term = s.battery_voltage - s.battery_resistance * i_batt
+
+    def _remember_pose(self) -> None:
+        h = self._history
+        h.append((self.t, *self.true_pose()))
+        while len(h) > 2 and h[1][0] <= self.t - self.spec.ir_latency:
+            h.popleft()
+
+    # ------------------------------------------------------------------ IR ring
+    def _ir_pose(self) -> tuple[float, float, float]:
+        if self.spec.ir_latency <= 0:
+            return self.true_pose()
+        return self._history[0][1:]
+
+    def _ray(self, origin: np.ndarray, direction: np.ndarray) -> tuple[float, float]:
+        """(distance, |cos| between ray and surface normal) to the nearest IR surface; distance inf if none."""
+        dist = mujoco.mj_ray(self.model, self.data, origin, direction, self._ray_mask, 1, -1, self._geomid,
+                             self._normal)
+        if dist < 0:
+            return math.inf, 0.0
+        return dist, abs(float(direction @ self._normal))
+
+    def read_ir(self) -> tuple[list[int], list[int]]:
+        """(emitter-off, emitter-on) ADC counts of the eight sensors now."""
+        s, c = self.spec, self.spec.ir
+        x, y, phi = self._ir_pose()
+        origin = np.array([x, y, RAY_HEIGHT])
+        noise = self.rng.standard_normal(2 * N_SENSORS) * float(c["noise"])
+        amb_off = self._ambient(x, y, phi, self.t)
+        amb_on = self._ambient(x, y, phi, self.t + float(c["on_delay"]))
+        adc_max = float(c["adc_max"])
+        off, on = [], []
+        r = s.body_radius
+        for i in range(N_SENSORS):
+            mount = phi + i * math.pi / 4  # where the pair sits on the rim; a misaligned one looks elsewhere
+            bearing = mount + s.ir_misalignment[i]
+            direction = np.array([math.cos(bearing), math.sin(bearing), 0.0])
+            behind = origin + r * np.array([math.cos(mount) - direction[0], math.sin(mount) - direction[1], 0.0])
+            dist, cos = self._ray(behind, direction)
+            gap = max(0.0, dist - r)  # from the mount, along the turned axis
+            angle = math.acos(min(1.0, cos))
+            light = ir_law.reflected(gap, angle, self.emitter_pct, float(c["gain"]) * s.ir_gain_scale[i], c)
+            if self.emitter_pct > 0:
+                light += s.ir_offset[i]  # the emitter pulse couples into the receiver
+            v_off = amb_off[i] + noise[i]
+            v_on = amb_on[i] * (1.0 + s.ambient_leakage[i]) + light + noise[N_SENSORS + i]
+            off.append(int(min(max(round(v_off), 0), adc_max)))
+            on.append(int(min(max(round(v_on), 0), adc_max)))
+        return off, on
+
+    def _ambient(self, x: float, y: float, phi: float, t: float) -> list[float]:
+        """Ambient light (counts) at each sensor: the global level plus the lamps C can see."""
+        w = self.world
+        base = float(self.spec.ir["ambient"]) if w is None or w.ambient is None else w.ambient
+        levels = [base] * N_SENSORS
+        if w is None:
+            return levels
+        r = self.spec.body_radius
+        for lamp in w.lamps:
+            level = lamp.level * (1.0 + lamp.flicker_depth * math.sin(2 * math.pi * lamp.flicker_hz * t)) \
+                if lamp.flicker_hz else lamp.level
+            to_lamp = np.array([lamp.x - x, lamp.y - y, 0.0])
+            d_lamp = float(np.linalg.norm(to_lamp))
+            if d_lamp > 0:
+                hit, _ = self._ray(np.array([x, y, RAY_HEIGHT]), to_lamp / d_lamp)
+                if hit < d_lamp:
+                    continue  # a wall hides it
+            for i in range(N_SENSORS):
+                mount = phi + i * math.pi / 4
+                b = mount + self.spec.ir_misalignment[i]
+                axis = (math.cos(b), math.sin(b))
+                at = (x + r * math.cos(mount), y + r * math.sin(mount))
+                levels[i] += ir_law.lamp_light(level, at, axis, (lamp.x, lamp.y))
+        return levels

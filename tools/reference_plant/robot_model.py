@@ -1,0 +1,275 @@
+"""The robot as MuJoCo sees it: PlantSpec (true physical values) -> MJCF -> MjModel.
+
+PlantSpec holds every value the plant's physics uses, in SI units, per wheel
+((left, right) tuples) and per IR sensor (8-tuples) where a real robot's
+parts differ.  `nominal_spec()` fills it from host_sim.physics.params.DEFAULT - read
+as numbers, no host_sim physics is called - plus what the twin does not
+describe (heights, the caster, the floor and wall contacts), chosen so that
+the nominal plant behaves like the twin's ideal model: wheels that roll
+without slip, a frictionless caster, a level floor.
+
+The bodies:
+
+- chassis: free body, frame origin at C (the centre of the wheel axle, at
+  axle height), centre of mass G a distance d ahead of C, yaw inertia I_c
+  about G; a front caster ball carries part of its weight (frictionless
+  when nominal) and a rear skid 1 mm off the floor stops it tipping back;
+  a vertical capsule of radius body_radius is what touches walls;
+- two wheels at C +- b (left = +y), spheres of radius r on hinge joints
+  about y (positive = forward), mass m_w, spin inertia about the axle, the
+  motor rotor's reflected inertia as the joint's armature;
+- with backlash on a wheel, the rotor becomes its own body on a coaxial
+  hinge, coupled to the wheel through a fixed tendon whose limits are the
+  gear's play (a deadband), and the motor and the gear friction act on it.
+
+Walls come from a host_sim world file (segments and convex polygons):
+each wall segment is a capsule of radius WALL_RADIUS for contacts (the
+robot's capsule is body_radius - WALL_RADIUS, so contact starts when C is
+body_radius from the wall line, as in the twin's world) and a thin box
+whose face lies on the wall line for the IR rays (geom group IR_GROUP).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import mujoco  # type: ignore[import-untyped]
+import numpy as np
+
+from host_sim.physics.params import DEFAULT
+from host_sim.physics.world import World
+
+WALL_RADIUS = 0.01  # m, contact capsule around each wall line
+WALL_HEIGHT = 0.025  # m above the floor: the contact capsules' axis and the IR rays
+IR_GROUP = 3  # geom group of the IR reflecting surfaces (no contacts)
+IR_SKIN = 1e-4  # m, half-thickness of the IR surfaces
+CASTER_RADIUS = 0.006  # m
+CASTER_X = 0.045  # m ahead of C
+SKID_X = -0.045  # m, rear skid, behind C
+SKID_GAP = 0.001  # m between the rear skid and a level floor
+CONTACT_TIMECONST = 0.002  # s, stiffness of every contact (>= 2 timesteps)
+
+
+Pair = tuple[float, float]
+Eight = tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class PlantSpec:
+    """True physical values of one robot (SI units; pairs are (left, right))."""
+
+    # geometry
+    wheel_radius: Pair  # m
+    half_axle: float  # m, b: C to each wheel's mid-plane
+    com_offset: float  # m, d: G ahead of C
+    com_height: float  # m, G above the floor
+    body_radius: float  # m
+    # masses and inertias
+    body_mass: float  # kg, without wheels
+    body_inertia: float  # kg m^2, yaw, about G
+    wheel_mass: float  # kg, each
+    wheel_inertia: float  # kg m^2, each wheel about its axle, rotor reflected included
+    rotor_inertia: float  # kg m^2, the rotor's share of wheel_inertia (reflected through the gear)
+    wheel_inertia_diam: float  # kg m^2, each wheel about a diameter
+    # drive train (per wheel)
+    torque_constant: Pair  # N m/A (= back-EMF constant, V s/rad)
+    armature_resistance: float  # ohm
+    gear_ratio: float  # -
+    gear_efficiency: float  # -
+    coulomb_friction: Pair  # N m, dry friction at the axle
+    viscous_friction: Pair  # N m s/rad
+    backlash: Pair  # rad of play at the wheel, 0 = rigid gear
+    current_limit: float  # A, the driver's limit
+    actuator_delay: float  # s from a new current reference to the driver applying it
+    # battery
+    battery_voltage: float  # V, open circuit
+    battery_resistance: float  # ohm, internal
+    quiescent_current: float  # A drawn by the electronics
+    vbat_noise: float  # V, sd of the battery voltage measurement
+    # contacts and floor
+    floor_friction: float  # -, wheel/floor (traction)
+    torsional_friction: float  # m, wheel/floor spin friction (scrub), 0 = none
+    caster_friction: float  # -, caster/floor, 0 = frictionless ball
+    wall_friction: float  # -, body/wall
+    floor_tilt: float  # rad, floor's slope (gravity off vertical)
+    floor_tilt_direction: float  # rad, world direction of the downhill slope
+    # encoders
+    ticks_per_rev: Pair  # counts per wheel turn
+    # IR ring
+    ir: dict[str, Any] = field(default_factory=dict)  # the law's constants (ir_law.IrConstants fields)
+    ir_gain_scale: Eight = (1.0,) * 8  # -, per sensor
+    ir_misalignment: Eight = (0.0,) * 8  # rad, per sensor, counter-clockwise
+    ir_offset: Eight = (0.0,) * 8  # counts added to the emitter-on reading
+    ambient_leakage: Eight = (0.0,) * 8  # fraction of ambient added to the emitter-on reading
+    ir_latency: float = 0.0  # s, age of the pose the IR readings see
+    # tracker
+    tracker_noise_xy: float = 0.001  # m, sd
+    tracker_noise_phi: float = math.radians(0.3)  # rad, sd
+
+    def replace(self, **changes: object) -> PlantSpec:
+        return dataclasses.replace(self, **changes)  # type: ignore[arg-type]
+
+
+def nominal_spec() -> PlantSpec:
+    """The robot the twin describes (host_sim.physics.params.DEFAULT, as numbers), in the plant's terms."""
+    p = DEFAULT
+    two = lambda v: (float(v), float(v))  # noqa: E731 - per-wheel pair
+    # A rigid wheel's spin inertia is at most twice its diametral one (the
+    # triangle inequality of inertias); the rest of the twin's wheel_inertia is
+    # the rotor seen through the gear.
+    wheel_own = 2.0 * p.wheel_inertia_diam
+    return PlantSpec(
+        wheel_radius=two(p.wheel_radius), half_axle=p.half_axle, com_offset=p.com_offset, com_height=0.02,
+        body_radius=p.body_radius, body_mass=p.body_mass, body_inertia=p.body_inertia, wheel_mass=p.wheel_mass,
+        wheel_inertia=p.wheel_inertia, rotor_inertia=p.wheel_inertia - wheel_own,
+        wheel_inertia_diam=p.wheel_inertia_diam, torque_constant=two(p.torque_constant),
+        armature_resistance=p.armature_resistance, gear_ratio=p.gear_ratio, gear_efficiency=p.gear_efficiency,
+        coulomb_friction=two(p.coulomb_friction), viscous_friction=two(p.viscous_friction), backlash=(0.0, 0.0),
+        current_limit=p.current_limit, actuator_delay=0.0, battery_voltage=p.battery_voltage,
+        battery_resistance=0.0, quiescent_current=0.08, vbat_noise=0.005, floor_friction=1.0,
+        torsional_friction=0.0, caster_friction=0.0, wall_friction=0.3, floor_tilt=0.0, floor_tilt_direction=0.0,
+        ticks_per_rev=two(p.ticks_per_rev),
+        ir={"gain": p.ir_gain, "near_peak": p.ir_near_peak, "blend": p.ir_blend, "saturation": p.ir_saturation,
+            "range": p.sensor_range, "ambient": p.ir_ambient, "noise": p.ir_noise, "on_delay": p.ir_on_delay,
+            "adc_max": float((1 << int(p.adc_bits)) - 1), "big_dome": tuple(p.ir_big_dome),
+            "small_dome": tuple(p.ir_small_dome), "angle_blend": tuple(p.ir_angle_blend)},
+    )
+
+
+def _f(*v: float) -> str:
+    return " ".join(f"{x:.9g}" for x in v)
+
+
+def _wheel_xml(spec: PlantSpec, side: str, k: int) -> str:
+    """One wheel (and its separate rotor when the gear has play), as children of the chassis."""
+    y = spec.half_axle if side == "l" else -spec.half_axle
+    r = spec.wheel_radius[k]
+    own = spec.wheel_inertia - spec.rotor_inertia  # the wheel's own spin inertia
+    # Axle friction: MuJoCo's dry friction (a stiff constraint: no creep below
+    # breakaway) and viscous damping, on the joint the motor drives.
+    friction = (f'frictionloss="{spec.coulomb_friction[k]:.9g}" solreffriction="{CONTACT_TIMECONST} 1" '
+                f'damping="{spec.viscous_friction[k]:.9g}" armature="{spec.rotor_inertia:.9g}"')
+    rigid = spec.backlash[k] <= 0
+    wheel = f"""
+      <body name="wheel_{side}" pos="0 {y:.9g} 0">
+        <joint name="wheel_{side}" type="hinge" axis="0 1 0" {friction if rigid else ''}/>
+        <inertial pos="0 0 0" mass="{spec.wheel_mass:.9g}"
+                  diaginertia="{_f(spec.wheel_inertia_diam, own, spec.wheel_inertia_diam)}"/>
+        <geom name="tyre_{side}" class="tyre" type="sphere" size="{r:.9g}"/>
+      </body>"""
+    if rigid:
+        return wheel
+    rotor = f"""
+      <body name="rotor_{side}" pos="0 {y:.9g} 0">
+        <joint name="rotor_{side}" type="hinge" axis="0 1 0" {friction}/>
+        <inertial pos="0 0 0" mass="1e-4" diaginertia="1e-10 1e-10 1e-10"/>
+      </body>"""
+    return wheel + rotor
+
+
+def drive_joint(spec: PlantSpec, k: int) -> str:
+    """The joint the motor turns and the encoder reads: the wheel, or its rotor when the gear has play."""
+    side = "lr"[k]
+    return f"wheel_{side}" if spec.backlash[k] <= 0 else f"rotor_{side}"
+
+
+def _walls_xml(world: World | None) -> str:
+    if world is None:
+        return ""
+    parts = []
+    z = WALL_HEIGHT
+    for k, (x1, y1, x2, y2) in enumerate(world.segments):
+        length = math.hypot(x2 - x1, y2 - y1)
+        yaw = math.atan2(y2 - y1, x2 - x1)
+        parts.append(f'<geom name="wall{k}" class="wall" type="capsule" size="{WALL_RADIUS}" '
+                     f'fromto="{_f(x1, y1, z, x2, y2, z)}"/>')
+        parts.append(f'<geom name="ir_wall{k}" class="ir_surface" type="box" size="{_f(length / 2, IR_SKIN, 0.03)}" '
+                     f'pos="{_f((x1 + x2) / 2, (y1 + y2) / 2, 0.03)}" euler="0 0 {yaw:.9g}"/>')
+    return "\n    ".join(parts)
+
+
+def build_mjcf(spec: PlantSpec, world: World | None = None, timestep: float = 0.001) -> str:
+    """The MJCF text of the robot on a floor among the world's walls (robot at the origin, heading +x)."""
+    g = 9.81
+    tilt, direction = spec.floor_tilt, spec.floor_tilt_direction
+    gravity = (g * math.sin(tilt) * math.cos(direction), g * math.sin(tilt) * math.sin(direction),
+               -g * math.cos(tilt))
+    r0 = 0.5 * (spec.wheel_radius[0] + spec.wheel_radius[1])  # axle height
+    zc = WALL_HEIGHT - r0  # robot's wall capsule centre, relative to C
+    caster_condim = 1 if spec.caster_friction <= 0 else 3
+    tyre_condim = 3 if spec.torsional_friction <= 0 else 4
+    i_pitch = 0.55 * spec.body_inertia  # a disc with some height: a little over half the yaw inertia
+    return f"""
+<mujoco model="twinbot_plant">
+  <compiler angle="radian" autolimits="true"/>
+  <option timestep="{timestep}" gravity="{_f(*gravity)}" integrator="implicitfast" cone="elliptic"
+          impratio="10" noslip_iterations="8" solver="Newton" iterations="50" tolerance="1e-10"/>
+  <default>
+    <geom solref="{CONTACT_TIMECONST} 1" solimp="0.95 0.99 0.001"/>
+    <default class="tyre">
+      <geom contype="0" conaffinity="1" condim="{tyre_condim}"
+            friction="{_f(spec.floor_friction, max(spec.torsional_friction, 1e-5), 1e-5)}"/>
+    </default>
+    <default class="caster">
+      <geom contype="0" conaffinity="1" condim="{caster_condim}"
+            friction="{_f(max(spec.caster_friction, 1e-5), 1e-5, 1e-5)}"/>
+    </default>
+    <default class="hull">
+      <geom contype="0" conaffinity="2" condim="3" friction="{_f(spec.wall_friction, 1e-5, 1e-5)}"/>
+    </default>
+    <default class="wall">
+      <geom contype="2" conaffinity="0" condim="3" group="2" friction="{_f(spec.wall_friction, 1e-5, 1e-5)}"/>
+    </default>
+    <default class="ir_surface">
+      <geom contype="0" conaffinity="0" group="{IR_GROUP}"/>
+    </default>
+  </default>
+  <worldbody>
+    <geom name="floor" type="plane" size="0 0 1" contype="1" conaffinity="0" condim="3" friction="1e-5 1e-5 1e-5"/>
+    {_walls_xml(world)}
+    <body name="chassis" pos="0 0 {r0:.9g}">
+      <freejoint name="chassis"/>
+      <inertial pos="{_f(spec.com_offset, 0, spec.com_height - r0)}" mass="{spec.body_mass:.9g}"
+                diaginertia="{_f(i_pitch, i_pitch, spec.body_inertia)}"/>
+      <geom name="hull" class="hull" type="capsule" size="{spec.body_radius - WALL_RADIUS:.9g} 0.002"
+            pos="0 0 {zc:.9g}"/>
+      <geom name="caster" class="caster" type="sphere" size="{CASTER_RADIUS}"
+            pos="{_f(CASTER_X, 0, CASTER_RADIUS - r0)}"/>
+      <geom name="skid" class="caster" type="sphere" size="{CASTER_RADIUS}"
+            pos="{_f(SKID_X, 0, CASTER_RADIUS + SKID_GAP - r0)}"/>
+      {_wheel_xml(spec, "l", 0)}
+      {_wheel_xml(spec, "r", 1)}
+    </body>
+  </worldbody>
+  <actuator>
+    <motor name="motor_l" joint="{drive_joint(spec, 0)}"/>
+    <motor name="motor_r" joint="{drive_joint(spec, 1)}"/>
+  </actuator>
+  {_tendons_xml(spec)}
+</mujoco>
+"""
+
+
+def _tendons_xml(spec: PlantSpec) -> str:
+    """The gear play: rotor angle minus wheel angle confined to [-play/2, play/2]."""
+    lines = []
+    for k, side in enumerate("lr"):
+        gap = spec.backlash[k]
+        if gap > 0:
+            lines.append(f'<fixed name="play_{side}" limited="true" range="{_f(-gap / 2, gap / 2)}" '
+                         f'solreflimit="{CONTACT_TIMECONST} 1">'
+                         f'<joint joint="rotor_{side}" coef="1"/><joint joint="wheel_{side}" coef="-1"/></fixed>')
+    return f"<tendon>{''.join(lines)}</tendon>" if lines else ""
+
+
+def build_model(spec: PlantSpec, world: World | None = None, timestep: float = 0.001) -> mujoco.MjModel:
+    return mujoco.MjModel.from_xml_string(build_mjcf(spec, world, timestep))
+
+
+def ir_group_mask() -> np.ndarray:
+    """geomgroup for mujoco.mj_ray: the IR surfaces only."""
+    mask = np.zeros(6, dtype=np.uint8)
+    mask[IR_GROUP] = 1
+    return mask
