@@ -27,25 +27,26 @@ from protocol.framing import FrameDecoder, FrameEncoder  # noqa: E402
 from tests.helpers import run_twinbot  # noqa: E402
 from tools.gui import draw, loop  # noqa: E402
 from tools.gui.app import App, Settings  # noqa: E402
+from tools.gui.window import Window  # noqa: E402
 
 WORLD = builtin_world("paper_room")
 
 
 @pytest.fixture
-def make_app(tmp_path: Path) -> Iterator[Any]:
-    apps: list[App] = []
+def make_window(tmp_path: Path) -> Iterator[Any]:
+    windows: list[Window] = []
 
-    def make(**changes: Any) -> App:
+    def make(**changes: Any) -> Window:
         s = Settings(world=WORLD, params=DEFAULT, world_file=tmp_path / "room.json", out_dir=tmp_path)
         for k, v in changes.items():
             setattr(s, k, v)
-        app = loop.open_window(s, headless=True)
-        apps.append(app)
-        return app
+        window = loop.open_window(s, headless=True)
+        windows.append(window)
+        return window
 
     yield make
-    for app in apps:
-        app.close()
+    for window in windows:
+        window.app.close()
     loop.close()
 
 
@@ -66,70 +67,74 @@ def drag(app: App, a: tuple[float, float], b: tuple[float, float], button: int =
     post(pygame.MOUSEBUTTONUP, pos=sb, button=button)
 
 
-def test_draw_a_wall_with_the_mouse_then_move_delete_undo_save_and_load(make_app: Any, tmp_path: Path) -> None:
-    app = make_app()
+def test_draw_a_wall_with_the_mouse_then_move_delete_undo_save_and_load(make_window: Any, tmp_path: Path) -> None:
+    window = make_window()
+    app = window.app
     n0 = len(app.editor.walls)
     drag(app, (1.012, 1.188), (1.41, 1.205))  # ends snap to the 5 cm grid
-    loop.run(app, 2)
+    loop.run(window, 2)
     assert len(app.editor.walls) == n0 + 1
     assert app.editor.walls[-1] == {"segment": [1.0, 1.2, 1.4, 1.2]}
     assert app.sim.sim.world is app.editor.world  # the robots live in the edited room
     shot = pygame.image.load(str(app.screenshot(tmp_path / "wall.png")))
     assert tuple(shot.get_at(app.view.to_screen(1.2, 1.2)))[:3] == draw.SELECTED  # drawn, and selected
     key(pygame.K_s)  # save
-    loop.run(app, 1)
+    loop.run(window, 1)
     assert load_world(tmp_path / "room.json").walls[-1] == {"segment": [1.0, 1.2, 1.4, 1.2]}
 
     drag(app, (1.2, 1.2), (1.2, 1.31))  # grab the wall, move it up by two grid steps
-    loop.run(app, 2)
+    loop.run(window, 2)
     assert app.editor.walls[-1]["segment"] == pytest.approx([1.0, 1.3, 1.4, 1.3])
     sx, sy = app.view.to_screen(1.2, 1.3)
     post(pygame.MOUSEBUTTONDOWN, pos=(sx, sy), button=3)  # right click deletes
-    loop.run(app, 1)
+    loop.run(window, 1)
     assert len(app.editor.walls) == n0
     shot = pygame.image.load(str(app.screenshot(tmp_path / "gone.png")))
     assert tuple(shot.get_at((sx, sy)))[:3] not in (draw.WALL, draw.SELECTED)
     key(pygame.K_z)  # undo the delete
-    loop.run(app, 1)
+    loop.run(window, 1)
     assert app.editor.walls[-1]["segment"] == pytest.approx([1.0, 1.3, 1.4, 1.3])
     key(pygame.K_z)  # undo the move
     key(pygame.K_z)  # undo the drawing
-    loop.run(app, 1)
+    loop.run(window, 1)
     assert len(app.editor.walls) == n0
     key(pygame.K_l)  # load the saved room: the wall is back, the robots restart in it
-    loop.run(app, 1)
+    loop.run(window, 1)
     assert app.editor.walls[-1] == {"segment": [1.0, 1.2, 1.4, 1.2]}
     assert app.sim.sim.world is app.editor.world
 
 
-def test_a_box_obstacle_and_a_new_wall_are_seen_by_the_simulated_robots_sensors(make_app: Any, tmp_path: Path) -> None:
-    app = make_app()
+def test_a_box_obstacle_and_a_new_wall_are_seen_by_the_simulated_robots_sensors(make_window: Any,
+                                                                              tmp_path: Path) -> None:
+    window = make_window()
+    app = window.app
     key(pygame.K_SPACE)  # pause
     key(pygame.K_PERIOD)
-    loop.run(app, 1)
+    loop.run(window, 1)
     front = app.sim.counts()[0]
     drag(app, (0.45, 0.2), (0.45, 0.6))  # a wall 5 cm ahead of the robot's rim
     key(pygame.K_PERIOD)
-    loop.run(app, 1)
+    loop.run(window, 1)
     assert app.sim.counts()[0] > front + 200
     key(pygame.K_o)  # the box tool
     drag(app, (1.49, 0.21), (1.81, 0.39))
-    loop.run(app, 1)
+    loop.run(window, 1)
     assert app.editor.walls[-1] == {"polygon": [[1.5, 0.2], [1.8, 0.2], [1.8, 0.4], [1.5, 0.4]]}
     assert app.editor.world.inside_obstacle(np.array([[1.65, 0.3]]))[0]
     shot = pygame.image.load(str(app.screenshot(tmp_path / "box.png")))
     assert tuple(shot.get_at(app.view.to_screen(1.65, 0.3)))[:3] == draw.SELECTED
     key(pygame.K_s)
-    loop.run(app, 1)
+    loop.run(window, 1)
     assert len(load_world(tmp_path / "room.json").polygons) == len(WORLD.polygons) + 1  # valid, convex
 
 
-def test_a_convex_polygon_by_its_corners_and_a_concave_one_refused(make_app: Any) -> None:
-    app = make_app()
+def test_a_convex_polygon_by_its_corners_and_a_concave_one_refused(make_window: Any) -> None:
+    window = make_window()
+    app = window.app
     n0 = len(app.editor.walls)
     key(pygame.K_o)
     key(pygame.K_o)  # wall -> box -> polygon
-    loop.run(app, 1)
+    loop.run(window, 1)
     assert app.tool == "polygon"
 
     def click(x: float, y: float) -> None:
@@ -139,68 +144,72 @@ def test_a_convex_polygon_by_its_corners_and_a_concave_one_refused(make_app: Any
     for corner in [(1.5, 1.2), (1.8, 1.2), (1.5, 1.4), (1.61, 1.31)]:  # a dart: not convex
         click(*corner)
     key(pygame.K_RETURN)
-    loop.run(app, 1)
+    loop.run(window, 1)
     assert len(app.editor.walls) == n0 and "not convex" in app.message
     key(pygame.K_BACKSPACE)  # take back the dent: a triangle
     key(pygame.K_RETURN)
-    loop.run(app, 1)
+    loop.run(window, 1)
     assert app.editor.walls[-1] == {"polygon": [[1.5, 1.2], [1.8, 1.2], [1.5, 1.4]]}
-    assert app.controls.corners == []
+    assert window.controls.corners == []
 
 
-def test_zoom_and_pan(make_app: Any) -> None:
-    app = make_app()
+def test_zoom_and_pan(make_window: Any) -> None:
+    window = make_window()
+    app = window.app
     scale = app.view.scale
     centre = app.view.to_screen(1.0, 0.75)
     pygame.mouse.set_pos(centre)
     post(pygame.MOUSEWHEEL, x=0, y=2, flipped=False, precise_x=0.0, precise_y=2.0, touch=False)
-    loop.run(app, 1)
+    loop.run(window, 1)
     assert app.view.scale == pytest.approx(scale * 1.15 ** 2)
     ox = app.view.ox
     a = app.view.to_screen(0.5, 0.5)
     post(pygame.MOUSEBUTTONDOWN, pos=a, button=2)
     post(pygame.MOUSEMOTION, pos=(a[0] + 100, a[1]), rel=(100, 0), buttons=(0, 1, 0))
     post(pygame.MOUSEBUTTONUP, pos=(a[0] + 100, a[1]), button=2)
-    loop.run(app, 1)
+    loop.run(window, 1)
     assert app.view.ox == pytest.approx(ox - 100 / app.view.scale)
 
 
-def test_keyboard_drives_the_user_robot_and_u_hands_it_the_simulated_one(make_app: Any) -> None:
-    app = make_app()
+def test_keyboard_drives_the_user_robot_and_u_hands_it_the_simulated_one(make_window: Any) -> None:
+    window = make_window()
+    app = window.app
     x0, y0, phi0 = app.user.pose
     post(pygame.KEYDOWN, key=pygame.K_UP, mod=0, unicode="", scancode=0)
-    loop.run(app, 60)  # 1 s
+    loop.run(window, 60)  # 1 s
     assert app.user.firmware.mode == M.MODE_HOST
     assert app.user.setpoints() == (200, 200)
     x1, y1, phi1 = app.user.pose
     along = (x1 - x0) * math.cos(phi0) + (y1 - y0) * math.sin(phi0)
     assert along > 0.1 and abs(phi1 - phi0) < 0.05  # straight ahead
     key(pygame.K_u)  # the user's orders drive the simulated robot too
-    loop.run(app, 5)
+    loop.run(window, 5)
     assert app.sim.firmware.mode == M.MODE_HOST and app.sim.setpoints() == (200, 200)
     post(pygame.KEYUP, key=pygame.K_UP, mod=0, unicode="", scancode=0)
     key(pygame.K_u)  # and back to exploring on its own
-    loop.run(app, 5)
+    loop.run(window, 5)
     assert app.sim.firmware.mode == M.MODE_AUTONOMOUS
     assert app.user.setpoints() == (0, 0)
 
 
-def test_joystick_events_turn_the_user_robot_and_unplugging_stops_it(make_app: Any) -> None:
-    app = make_app()
+def test_joystick_events_turn_the_user_robot_and_unplugging_stops_it(make_window: Any) -> None:
+    window = make_window()
+    app = window.app
     phi0 = app.user.pose[2]
     post(pygame.JOYAXISMOTION, instance_id=0, joy=0, axis=0, value=-1.0)  # stick full left
-    loop.run(app, 30)
+    loop.run(window, 30)
     left, right = app.user.setpoints()
     assert right > 0 > left  # turning on the spot, counter-clockwise
     assert app.user.pose[2] > phi0 + 0.2
     post(pygame.JOYDEVICEREMOVED, instance_id=0)
-    loop.run(app, 5)
+    loop.run(window, 5)
     assert app.user.setpoints() == (0, 0)
 
 
-def test_the_simulated_robot_explores_with_its_firmware(make_app: Any) -> None:
-    app = make_app(speed=4.0)
-    loop.run(app, 150)  # 10 s
+def test_the_simulated_robot_explores_with_its_firmware(make_window: Any) -> None:
+    window = make_window(speed=4.0)
+    app = window.app
+    loop.run(window, 150)  # 10 s
     sim = app.sim.sim
     assert sim.robot.t == pytest.approx(10.0, abs=0.05)
     assert app.sim.firmware.mode == M.MODE_AUTONOMOUS
@@ -210,52 +219,56 @@ def test_the_simulated_robot_explores_with_its_firmware(make_app: Any) -> None:
     assert app.user.pose == pytest.approx(app.user.sim.robot.pose) and app.user.setpoints() == (0, 0)
 
 
-def test_the_simulated_robot_on_a_virtual_board_pil_drives_as_in_process(make_app: Any) -> None:
-    sil = make_app()
-    loop.run(sil, 120)
+def test_the_simulated_robot_on_a_virtual_board_pil_drives_as_in_process(make_window: Any) -> None:
+    sil_window = make_window()
+    sil = sil_window.app
+    loop.run(sil_window, 120)
     pose = sil.sim.pose
-    pil = make_app(pil=True)  # the firmware under MicroPython, this process its hardware and host
-    loop.run(pil, 120)
+    pil_window = make_window(pil=True)  # the firmware under MicroPython, this process its hardware and host
+    pil = pil_window.app
+    loop.run(pil_window, 120)
     assert pil.sim.pose == pose  # fixed step: SIL and PIL bit for bit
     assert pil.sim.mode() == M.MODE_AUTONOMOUS  # from its TELEMETRY
     assert pil.sim.currents() == sil.sim.currents() != (0, 0)
 
 
-def test_controls_noise_rules_emitter_realtime_step_reset(make_app: Any) -> None:
-    app = make_app()
+def test_controls_noise_rules_emitter_realtime_step_reset(make_window: Any) -> None:
+    window = make_window()
+    app = window.app
     for k in (pygame.K_n, pygame.K_f, pygame.K_RIGHTBRACKET, pygame.K_t):
         key(k)
-    loop.run(app, 6)
+    loop.run(window, 6)
     assert app.sim.sim.robot.rng is None and not app.s.noise
     assert app.sim.firmware.params[M.param_by_name("rule_set")[0]] == 0  # first
     assert app.sim.firmware.params[M.param_by_name("emitter_pct")[0]] == 70
     assert app.sim.sim.robot.emitter_pct == 70
     t = app.sim.sim.robot.t
-    loop.run(app, 30)  # real time: each frame is one pass of Dt = 1/60 s
+    loop.run(window, 30)  # real time: each frame is one pass of Dt = 1/60 s
     assert app.sim.sim.robot.t == pytest.approx(t + 0.5, abs=1e-9)
     n = len(app.sim.sim._t)
     app.s.speed = 8.0  # a frame's Dt of 133 ms: passes of at most one period, no control period skipped
-    loop.run(app, 15)
+    loop.run(window, 15)
     assert len(app.sim.sim._t) - n == pytest.approx(8 * 15 / 60 / 0.040, abs=1)
     assert app.sim.stepper.missed == 0
     key(pygame.K_SPACE)  # pause
-    loop.run(app, 10)
+    loop.run(window, 10)
     t = app.sim.sim.robot.t
     key(pygame.K_PERIOD)  # one control period
-    loop.run(app, 10)
+    loop.run(window, 10)
     assert app.sim.sim.robot.t == pytest.approx(t + 0.040, abs=1e-9) and not app.running
     key(pygame.K_r)
-    loop.run(app, 1)
+    loop.run(window, 1)
     assert app.sim.sim.robot.t == 0 and app.sim.pose == pytest.approx(WORLD.start)
 
 
-def test_record_every_robot(make_app: Any, tmp_path: Path) -> None:
-    app = make_app()
+def test_record_every_robot(make_window: Any, tmp_path: Path) -> None:
+    window = make_window()
+    app = window.app
     post(pygame.KEYDOWN, key=pygame.K_UP, mod=0, unicode="", scancode=0)
     key(pygame.K_c)
-    loop.run(app, 60)
+    loop.run(window, 60)
     key(pygame.K_c)
-    loop.run(app, 1)
+    loop.run(window, 1)
     files = sorted(tmp_path.glob("gui-*.csv"))
     assert [f.name.rsplit("-", 1)[1] for f in files] == ["simulated.csv", "user.csv"]  # no real robot here
     sim_rec = load_recording(files[0])
@@ -277,19 +290,20 @@ def telemetry(enc: FrameEncoder, k: int) -> bytes:
     return enc.encode(M.TELEMETRY, M.pack_payload(M.TELEMETRY, f))
 
 
-def run_until(app: App, frames: int) -> None:
+def run_until(window: Window, frames: int) -> None:
     for _ in range(50):
-        loop.run(app, 1)
-        if app.real is not None and app.real.frames >= frames:
+        loop.run(window, 1)
+        if window.app.real is not None and window.app.real.frames >= frames:
             return
 
 
-def test_the_real_robot_on_a_serial_port(make_app: Any, pty_pair: Any, tmp_path: Path) -> None:
-    app = make_app(port=pty_pair.path)
+def test_the_real_robot_on_a_serial_port(make_window: Any, pty_pair: Any, tmp_path: Path) -> None:
+    window = make_window(port=pty_pair.path)
+    app = window.app
     enc = FrameEncoder()
     for k in range(10):
         pty_pair.write(telemetry(enc, k))
-    run_until(app, 10)
+    run_until(window, 10)
     assert app.real is not None and app.real.frames == 10
     assert app.real.counts() == [750, 150, 10, 10, 10, 10, 10, 150]
     dist = 900 * math.pi * DEFAULT.wheel_radius * 2 / DEFAULT.ticks_per_rev
@@ -297,24 +311,25 @@ def test_the_real_robot_on_a_serial_port(make_app: Any, pty_pair: Any, tmp_path:
     assert app.real.pose == pytest.approx((x0 + dist * math.cos(phi0), y0 + dist * math.sin(phi0), phi0), abs=1e-4)
     post(pygame.KEYDOWN, key=pygame.K_LEFT, mod=0, unicode="", scancode=0)
     key(pygame.K_i)  # the user drives the real robot: COMMAND frames in HOST mode go out
-    loop.run(app, 3)
+    loop.run(window, 3)
     sent = FrameDecoder().decode_all(pty_pair.read_available())
     commands = [M.unpack_payload(t, p) for t, _s, p in sent if t == M.COMMAND]
     assert commands and commands[0]["mode"] == M.MODE_HOST
     assert commands[0]["right"] > 0 > commands[0]["left"]
     key(pygame.K_c)  # record: the real robot's TELEMETRY goes to its own file
-    loop.run(app, 1)
+    loop.run(window, 1)
     for k in range(10, 15):
         pty_pair.write(telemetry(enc, k))
-    run_until(app, 15)
+    run_until(window, 15)
     key(pygame.K_c)
-    loop.run(app, 1)
+    loop.run(window, 1)
     real = load_recording(next(tmp_path.glob("gui-*-real.csv")))
     assert real.enc[:, 0].tolist() == [1000, 1100, 1200, 1300, 1400] and real.pose is None
 
 
-def test_the_real_robots_own_odometry_is_used_when_telemetry_carries_it(make_app: Any, pty_pair: Any) -> None:
-    app = make_app(port=pty_pair.path)
+def test_the_real_robots_own_odometry_is_used_when_telemetry_carries_it(make_window: Any, pty_pair: Any) -> None:
+    window = make_window(port=pty_pair.path)
+    app = window.app
     assert app.real is not None
     f = {"tick_ms": 0, "mode": 1, "flags": 0, "enc_l": 0, "enc_r": 0, "ir_on": [0] * 8, "ir_amb": [0] * 8,
          "i_ref_l_ma": 0, "i_ref_r_ma": 0, "vbat_mv": 7400, "odo_x": 100_000, "odo_y": 0, "odo_heading": 1 << 28}
@@ -344,7 +359,7 @@ def test_bench_gui_smoke() -> None:
     assert "[NOT RUN]" in r.stdout  # the three-robot target needs the virtual board
 
 
-def test_the_real_robots_ghost_is_drawn_ahead_of_its_late_pose(make_app: Any, tmp_path: Path) -> None:
+def test_the_real_robots_ghost_is_drawn_ahead_of_its_late_pose(make_window: Any, tmp_path: Path) -> None:
     """A virtual board whose TELEMETRY reaches the host 250 +- 150 ms late, driven ahead by the user: the ghost
     (the late-signal twin) is drawn where the robot is now, ahead of the raw late pose along the motion."""
     import time
@@ -353,16 +368,17 @@ def test_the_real_robots_ghost_is_drawn_ahead_of_its_late_pose(make_app: Any, tm
 
     proc, port = start_board("--world", "arena", "--late", "250", "--jitter", "150")
     try:
-        app = make_app(port=port, link_floor_s=0.1)  # the link's fastest delivery: 250 - 150 ms
+        window = make_window(port=port, link_floor_s=0.1)  # the link's fastest delivery: 250 - 150 ms
+        app = window.app
         assert app.real is not None
         post(pygame.KEYDOWN, key=pygame.K_UP, mod=0, unicode="", scancode=0)
         key(pygame.K_i)  # the user drives the real robot: HOST orders at 10 Hz, each one told to the ghost
         leads: list[float] = []
         end = time.monotonic() + 4.0
         while time.monotonic() < end:
-            loop.run(app, 1)
+            loop.run(window, 1)
             time.sleep(1 / 60)
-            raw, ghost = app.real.pose, app.renderer.ghost_drawn
+            raw, ghost = app.real.pose, window.renderer.ghost_drawn
             if ghost is not None and app.real.last is not None and int(app.real.last["sp_l"]) == 200:
                 leads.append((ghost[0] - raw[0]) * math.cos(raw[2]) + (ghost[1] - raw[1]) * math.sin(raw[2]))
         assert len(leads) > 60  # the robot drove at full speed, late, for over a second
@@ -370,13 +386,13 @@ def test_the_real_robots_ghost_is_drawn_ahead_of_its_late_pose(make_app: Any, tm
         latency = float(np.median(app.real.ghost.latencies[-40:]))
         assert 0.18 < latency < 0.33  # measured from the frames' ticks against their arrival: ~250 ms
         shot = pygame.image.load(str(app.screenshot(tmp_path / "ghost.png")))
-        ghost = app.renderer.ghost_drawn
+        ghost = window.renderer.ghost_drawn
         assert ghost is not None
         at = app.view.to_screen(ghost[0], ghost[1])
         assert tuple(shot.get_at(at))[:3] == draw.GHOST  # its heading line starts at its centre
         key(pygame.K_g)  # hide it
-        loop.run(app, 1)
-        assert app.renderer.ghost_drawn is None
+        loop.run(window, 1)
+        assert window.renderer.ghost_drawn is None
         shot = pygame.image.load(str(app.screenshot(tmp_path / "no-ghost.png")))
         assert tuple(shot.get_at(at))[:3] != draw.GHOST
     finally:

@@ -65,14 +65,15 @@ def workload(frames: int, speed: float, port: str | None, prerun: float) -> dict
     from tools.gui.app import Settings
 
     settings = Settings(world=builtin_world("paper_room"), params=DEFAULT, speed=speed, port=port)
-    app = loop.open_window(settings, headless=True)
+    window = loop.open_window(settings, headless=True)
+    app = window.app
     try:
         if app.real is not None:
             app.real.link.send(M.COMMAND, {"mode": M.MODE_AUTONOMOUS, "left": 0, "right": 0})
             time.sleep(0.5)
         assert app.show_coverage
         app.advance(prerun)
-        times = loop.time_frames(app, frames)
+        times = loop.time_frames(window, frames)
         real_frames = app.real.frames if app.real is not None else 0
         t_sim = app.sim.sim.robot.t
     finally:

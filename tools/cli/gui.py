@@ -1,19 +1,7 @@
-"""`twinbot gui`: the paper's application (its §4, Fig. 14) in a window.
+"""`twinbot gui`: the paper's application (its §4, Fig. 14) in a window: the command's arguments.
 
-Draw the room with the mouse (walls snap to a grid; select, move, delete,
-undo; save and load world files; zoom and pan), and watch three robots at
-once: the simulated robot running the firmware in the loop (SIL), the user
-robot driven by the arrow keys or a joystick / gamepad, and, with --port,
-the real robot on a serial port (a Pico, or a virtual board's pty from
-`twinbot board`), its pose from its odometry and its IR readings as they
-arrive, and its ghost: where the late-signal twin says it is now, its
-signal being late (--link-floor; `twinbot board --late MS` to try it).
-The user's orders can drive the simulated and the real robot too.
-Press h in the window for every key.
-
-Headless: --frames N runs N frames of 1/60 s without a display
-(SDL_VIDEODRIVER=dummy) and --screenshot writes the last one.  The frame
-time is measured by `twinbot bench gui`.
+Builds the GUI's settings from the command line and runs the window
+(tools/gui/), interactive or headless (--frames N).  See docs/gui.md.
 """
 from __future__ import annotations
 
@@ -40,6 +28,24 @@ def existing_folder(text: str) -> str:
         raise argparse.ArgumentTypeError(f"{text}: no such folder")
     return text
 
+
+DESCRIPTION = """\
+Draw the room with the mouse (walls snap to a grid; select, move, delete,
+undo; save and load world files; zoom and pan), and watch three robots at
+once: the simulated robot running the firmware in the loop (SIL), the user
+robot driven by the arrow keys or a joystick / gamepad, and, with --port,
+the real robot on a serial port (a Pico, or a virtual board's pty from
+`twinbot board`), its pose from its odometry and its IR readings as they
+arrive, and its ghost: where the late-signal twin says it is now, its
+signal being late (--link-floor; `twinbot board --late MS` to try it).
+The user's orders can drive the simulated and the real robot too.
+Press h in the window for every key.
+
+Headless: --frames N runs N frames of 1/60 s without a display
+(SDL_VIDEODRIVER=dummy) and --screenshot writes the last one.  The frame
+time is measured by `twinbot bench gui`.
+"""
+
 EXAMPLES = """\
 examples:
   twinbot gui                                   # the paper's room, refined rules
@@ -51,7 +57,7 @@ examples:
 
 
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
-    p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1], epilog=EXAMPLES,
+    p = sub.add_parser(name, help=summary, description=DESCRIPTION, epilog=EXAMPLES,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--world", default="paper_room", help="built-in world (paper_room, maze, arena) or a world file")
     p.add_argument("--rules", choices=("first", "refined"), default="refined", help="fuzzy rule set (default refined)")
@@ -104,15 +110,16 @@ def run(args: argparse.Namespace) -> int:
     import pygame
 
     try:
-        app = loop.open_window(settings, headless=args.frames is not None)
+        window = loop.open_window(settings, headless=args.frames is not None)
     except LinkError as exc:
         raise CliError(f"--port: {exc}") from None
     except pygame.error as exc:  # (a RuntimeError too: before the next clause)
         raise CliError(f"cannot open a window ({exc}); without a display run headless: --frames N") from None
     except RuntimeError as exc:  # the virtual board of --pil did not start
         raise CliError(f"--pil: {exc}") from None
+    app = window.app
     try:
-        frames = loop.run(app, args.frames)
+        frames = loop.run(window, args.frames)
         if args.screenshot:
             app.screenshot(args.screenshot)
             print(f"screenshot: {args.screenshot} ({frames} frames, t = {app.sim.sim.robot.t:.2f} s simulated)")

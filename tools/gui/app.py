@@ -1,12 +1,8 @@
-"""The application's state and its frame: step the robots, then draw everything.
+"""The application's state and its robots: one frame of the world, and every setting the user changes.
 
-One `App` per window.  `frame(dt)` is one pass of the loop: the user's
-orders go to the robots that take them, the simulated robots catch up by
-dt x speed simulated seconds (fixed step: whole 40 ms periods; real time:
-one pass of the paper's clock loop with Dt = dt x speed, see
-host_sim/loops/live.py), the real robot's frames are read, and the window is
-drawn.  Events go through `handle(event)` (tools/gui/controls.py maps
-keys, buttons and the mouse to the methods here).
+`App.update(dt)` moves the world on by one frame (orders, physics, the real
+robot's frames); tools/gui/window.py adds the controls and the drawing.
+See docs/gui.md.
 """
 from __future__ import annotations
 
@@ -75,9 +71,6 @@ class Clock:
 
 class App:
     def __init__(self, settings: Settings, surface: pygame.Surface) -> None:
-        from tools.gui.controls import Controls
-        from tools.gui.render import Renderer
-
         self.s = settings
         self.surface = surface
         self.editor = WallEditor(settings.world, settings.grid)
@@ -93,7 +86,6 @@ class App:
         self.user_drives_real = False
         self.recording: list[Path] = []
         self.message = ""
-        self.frames = 0
         self.clock = Clock()
         self.real: RealBot | None = None
         self.real_error = "absent (start with --port PORT)"
@@ -101,8 +93,6 @@ class App:
             self._open_real(settings.port)
         self._make_bots()
         self._world_version = self.editor.version
-        self.controls = Controls(self)
-        self.renderer = Renderer(self)
 
     # -- robots -----------------------------------------------------------------
     def _make_bots(self) -> None:
@@ -129,8 +119,11 @@ class App:
         return (self.sim, self.user)
 
     # -- one frame -----------------------------------------------------------------
-    def frame(self, dt: float) -> None:
-        """One pass: orders, physics (if running), the real robot's frames, drawing."""
+    def update(self, dt: float) -> None:
+        """One frame of dt wall seconds: orders, physics (if running), the real robot's frames.
+
+        Fixed step: whole 40 ms periods worth dt x speed (dt capped at MAX_CATCH_UP); real time: the
+        paper's clock loop with Dt = dt x speed (host_sim/loops/live.py)."""
         self.sync_world()
         orders = self.user_control.wheels()
         self.user.orders = orders
@@ -143,8 +136,6 @@ class App:
         for bot in self.sim_bots:
             bot.after_frame()
         self.clock.tick(self.sim.sim.robot.t)
-        self.renderer.draw()
-        self.frames += 1
 
     def sync_world(self) -> None:
         """The simulated robots move into the room as edited (before any step, and before drawing)."""
@@ -215,7 +206,6 @@ class App:
 
     def next_tool(self) -> None:
         self.tool = TOOLS[(TOOLS.index(self.tool) + 1) % len(TOOLS)]
-        self.controls.corners = []
         self.say({"wall": "wall tool: drag on the floor draws a wall",
                   "box": "box tool: drag draws a rectangular obstacle",
                   "polygon": "polygon tool: click the corners, Enter closes (convex only)"}[self.tool])

@@ -1,22 +1,17 @@
 """Keys, buttons and the mouse: every control is one `Action`, reachable by a key and most by a button.
 
-The mouse edits the room with the current tool (o cycles them): *wall*,
-drag on empty floor draws a wall (both ends snap to the grid); *box*, drag
-draws a rectangular obstacle; *polygon*, each click adds a corner and
-Enter closes the convex obstacle (Backspace takes back a corner, Esc drops
-it).  With any tool, press on a wall selects it and dragging moves it (by whole
-grid steps); right click deletes the wall under the cursor; the wheel
-zooms about the cursor; the middle button, or shift + drag, pans.
+The mouse edits the room with the current drawing tool (wall, box, convex
+polygon), selects, moves and deletes walls, zooms and pans.  Every key and
+mouse gesture is listed in docs/gui.md.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Callable
+from typing import Any, Callable
 
 import pygame
 
-if TYPE_CHECKING:
-    from tools.gui.app import App
+from tools.gui.app import App
 
 PANEL_X = 900
 BUTTON_TOP = 470
@@ -35,7 +30,7 @@ class Action:
     caption: Callable[[], str] | None = None  # the button's text when it changes with the state
 
 
-def actions(app: App) -> list[Action]:
+def actions(app: App, controls: Controls) -> list[Action]:
     k = pygame
     return [
         Action((k.K_SPACE,), "space", "run/pause", "run / pause", app.toggle_run, lambda: app.running),
@@ -61,7 +56,7 @@ def actions(app: App) -> list[Action]:
                lambda: app.show_coverage),
         Action((k.K_g,), "g", "ghost", "the real robot's ghost (where it is now, its signal being late) on / off",
                app_toggle(app, "show_ghost"), lambda: app.show_ghost),
-        Action((k.K_o,), "o", "tool", "drawing tool: wall / box / convex polygon", app.next_tool,
+        Action((k.K_o,), "o", "tool", "drawing tool: wall / box / convex polygon", controls.next_tool,
                lambda: app.tool != "wall", lambda: f"tool: {app.tool}"),
         Action((k.K_s,), "s", "save", "save the world file", app.save_world),
         Action((k.K_l,), "l", "load", "load the world file", app.load_world),
@@ -82,7 +77,7 @@ def app_toggle(app: App, name: str) -> Callable[[], None]:
 class Controls:
     def __init__(self, app: App) -> None:
         self.app = app
-        self.actions = actions(app)
+        self.actions = actions(app, self)
         self.by_key = {key: a for a in self.actions for key in a.keys}
         self.buttons: list[tuple[pygame.Rect, Action]] = []
         for i, a in enumerate(x for x in self.actions if x.label):
@@ -94,6 +89,11 @@ class Controls:
         self.corners: list[tuple[float, float]] = []  # the polygon being drawn
         self.pointer = (0.0, 0.0)  # world point under the mouse
         self.quit = False
+
+    def next_tool(self) -> None:
+        """The next drawing tool; a polygon's corners clicked so far are dropped."""
+        self.app.next_tool()
+        self.corners = []
 
     def handle(self, event: pygame.event.Event) -> None:
         app = self.app

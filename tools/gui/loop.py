@@ -1,8 +1,8 @@
 """The window's loop: interactive (capped at 60 frames/s), headless for N frames, or timed.
 
-Headless runs (--frames N) step the simulation by a nominal 1/60 s of wall
-time per frame, not by the clock, so what they draw does not depend on how
-fast the machine is: N frames at speed k are N k / 60 simulated seconds.
+Headless runs (--frames N) step by a nominal 1/60 s of wall time per frame,
+not by the clock, so what they draw does not depend on the machine's speed:
+N frames at speed k are N k / 60 simulated seconds.  See docs/gui.md.
 """
 from __future__ import annotations
 
@@ -13,11 +13,12 @@ import time
 import pygame
 
 from tools.gui.app import SIZE, App, Settings
+from tools.gui.window import Window
 
 FRAME_S = 1.0 / 60.0
 
 
-def open_window(settings: Settings, headless: bool) -> App:
+def open_window(settings: Settings, headless: bool) -> Window:
     chosen = os.environ.get("SDL_VIDEODRIVER")
     if (not headless and not chosen and sys.platform.startswith("linux")
             and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))):
@@ -32,24 +33,24 @@ def open_window(settings: Settings, headless: bool) -> App:
     pygame.joystick.init()
     surface = pygame.display.set_mode(SIZE)
     pygame.display.set_caption(f"twinbot gui - {settings.world.name}")
-    return App(settings, surface)
+    return Window(App(settings, surface))
 
 
-def run(app: App, frames: int | None = None) -> int:
+def run(window: Window, frames: int | None = None) -> int:
     """Run until the window closes (frames=None, paced by the clock) or for `frames` frames of 1/60 s."""
     clock = pygame.time.Clock()
     n = 0
-    while not app.controls.quit and (frames is None or n < frames):
+    while not window.quit and (frames is None or n < frames):
         for event in pygame.event.get():
-            app.controls.handle(event)
+            window.handle(event)
         dt = clock.tick(60) / 1000.0 if frames is None else FRAME_S
-        app.frame(dt)
+        window.frame(dt)
         pygame.display.flip()
         n += 1
     return n
 
 
-def time_frames(app: App, frames: int, warmup: int = 30) -> list[float]:
+def time_frames(window: Window, frames: int, warmup: int = 30) -> list[float]:
     """Wall seconds of each frame's work (events, step, draw, flip), after `warmup` frames.
 
     Frames start every 1/60 s as in the window (the real robot's frames arrive
@@ -60,8 +61,8 @@ def time_frames(app: App, frames: int, warmup: int = 30) -> list[float]:
     for k in range(warmup + frames):
         t0 = time.perf_counter()
         for event in pygame.event.get():
-            app.controls.handle(event)
-        app.frame(FRAME_S)
+            window.handle(event)
+        window.frame(FRAME_S)
         pygame.display.flip()
         t1 = time.perf_counter()
         if k >= warmup:

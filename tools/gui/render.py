@@ -1,35 +1,28 @@
 """What the window shows, laid out: the room on the left, a panel on the right, the status bar below.
 
-The room: the grid, the coverage overlay of the simulated robot, walls (the
-selected one lit), the wall being drawn, each robot's trail, body, heading
-and eight IR rays (shaded by the reflected counts), collision marks, the
-exit flag, and the real robot's ghost (where the late-signal twin says it
-is now) beside its raw late pose.  The panel: per robot, its state line
-and the eight IR counts as bars; for the two robots with firmware, the
-wheel-speed set-points it decided (the fuzzy controller's outputs in AUTONOMOUS mode);
-coverage over time with the time to 90 %; the buttons.
+`Renderer.draw()` draws the app's state and the controls' buttons and
+previews with tools/gui/draw.py; what each part shows is in docs/gui.md.
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Sequence
+from typing import Sequence
 
 import pygame
 
 from protocol import messages as M
 from tools.gui import draw
-from tools.gui.controls import PANEL_X
+from tools.gui.app import App
+from tools.gui.controls import PANEL_X, Controls
 from tools.gui.robots import RealBot, SimBot, rays
-
-if TYPE_CHECKING:
-    from tools.gui.app import App
 
 ADC_FULL = 4095.0
 BAR_FULL = 1500.0  # counts at the top of a bar: reflections rarely reach the ADC's full scale
 
 
 class Renderer:
-    def __init__(self, app: App) -> None:
+    def __init__(self, app: App, controls: Controls) -> None:
         self.app = app
+        self.controls = controls
         self.p = draw.Painter(app.surface)
         self._exit: tuple[object, tuple[float, float]] = (None, (0.0, 0.0))
         self._t90: tuple[object, int, float | None] = (None, 0, None)
@@ -56,11 +49,11 @@ class Renderer:
         if app.show_coverage:
             p.coverage(view, cov.covered, round(cov.fraction * cov.n_free), cov.resolution)
         p.walls(view, world.walls, app.editor.selected)
-        preview = app.controls.preview()
+        preview = self.controls.preview()
         if preview is not None:
             p.preview(view, *preview)
-        if app.controls.corners:
-            p.corners(view, app.controls.corners, app.editor.snap(*app.controls.pointer))
+        if self.controls.corners:
+            p.corners(view, self.controls.corners, app.editor.snap(*self.controls.pointer))
         bots: list[tuple[SimBot | RealBot, str]] = [(app.user, "user"), (app.sim, "simulated")]
         if app.real is not None:
             bots.insert(0, (app.real, "real"))
@@ -130,12 +123,12 @@ class Renderer:
         t90 = self.time_to_90()
         p.text(f"coverage of the simulated robot: {100 * cov.fraction:.1f} %", (x, y + 4), draw.TEXT, 20)
         p.plot(pygame.Rect(x, y + 24, 360, 120), t, cov.fractions, t90)
-        for rect, action in app.controls.buttons:
+        for rect, action in self.controls.buttons:
             on = bool(action.on and action.on())
             label = action.caption() if action.caption else action.label
             p.button(rect, label, on, rect.collidepoint(pygame.mouse.get_pos()))
-        rows = (len(app.controls.buttons) + 3) // 4
-        p.text("h: all keys and mouse controls", (x, rows * 30 + app.controls.buttons[0][0].y + 6), draw.DIM, 16)
+        rows = (len(self.controls.buttons) + 3) // 4
+        p.text("h: all keys and mouse controls", (x, rows * 30 + self.controls.buttons[0][0].y + 6), draw.DIM, 16)
 
     def robot_block(self, bot: SimBot | RealBot | None, name: str, x: int, y: int) -> None:
         p = self.p
@@ -196,7 +189,7 @@ class Renderer:
 
     def help(self) -> None:
         lines: list[str] = ["twinbot gui: keys (buttons on the right do the same)", ""]
-        lines += [f"{a.key_label}\t{a.help}" for a in self.app.controls.actions]
+        lines += [f"{a.key_label}\t{a.help}" for a in self.controls.actions]
         lines += ["", *MOUSE_HELP]
         self.p.overlay(lines, pygame.Rect(60, 30, 780, 19 * len(lines) + 24))
 
