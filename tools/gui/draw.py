@@ -1,8 +1,8 @@
 """Drawing: the room, the robots, their rays and bars, coverage, the plot, buttons and text.
 
-Only pygame drawing lives here; what to draw comes from the app.  Costly
-things are cached: rendered text by (string, colour, size), the grid by the
-view, the coverage overlay by (covered count, view).
+Only pygame drawing lives here; what to draw comes from render.py.  Costly things are cached: rendered
+text by (string, colour, size), the grid by the view, the coverage overlay by (covered count, view).
+See docs/gui.md.
 """
 from __future__ import annotations
 

@@ -1,21 +1,7 @@
 """The three robots of the paper's application (§4, Fig. 14), as the window sees them.
 
-- `SimBot`: a simulated robot (host_sim.robot.sim_robot.SimRobot in a
-  host_sim.loops.simulation.Simulation) whose controller is the firmware itself,
-  in this process (host_sim.controller.sil.SilController), or for the simulated robot
-  with --pil on a virtual board under MicroPython (host_sim.board.pil.PilController:
-  its mode and set-points are then known from its TELEMETRY only).  The *simulated robot* runs
-  it in AUTONOMOUS mode (the fuzzy explorer); the *user robot* runs it in
-  HOST mode, its wheel-speed orders from the user.  When the user's orders
-  are routed to the simulated robot too, it is switched to HOST mode and
-  back to AUTONOMOUS when they are taken away.  Orders are sent as COMMAND
-  frames just before each control cycle, so they feed the firmware's
-  watchdog whatever the speed factor.
-- `RealBot`: a robot on a serial port (a Pico, or a virtual board's pty):
-  its pose from TELEMETRY odometry (odo_x, odo_y, odo_heading when the
-  firmware sends them, else its encoders integrated here by the firmware's
-  own odometry with the robot's geometry), placed at the room's start
-  pose; its IR readings as they arrive.
+`SimBot`: the simulated robot (AUTONOMOUS, the fuzzy explorer) and the user robot (HOST, the user's
+orders), each running the firmware itself; `RealBot`: a robot on a serial port.  See docs/gui.md.
 """
 from __future__ import annotations
 
@@ -58,7 +44,14 @@ def rays(world: World, pose: Pose, params: RobotParams) -> np.ndarray:
 
 
 class SimBot:
-    """A SimRobot with the firmware in SIL, stepped a frame at a time."""
+    """A SimRobot with the firmware in SIL, stepped a frame at a time.
+
+    The controller is the firmware in this process (SilController), or for the simulated robot with
+    --pil on a virtual board under MicroPython (PilController: its mode and set-points then known from
+    its TELEMETRY only).  When the user's orders are routed to the simulated robot it is switched to
+    HOST mode, and back to AUTONOMOUS when they are taken away.  Orders go as COMMAND frames just
+    before each control cycle, so they feed the firmware's watchdog whatever the speed factor.
+    """
 
     def __init__(self, name: str, world: World, params: RobotParams, rule_set: int, *, seed: int, noise: bool,
                  emitter_pct: int, user: bool, pil: bool = False) -> None:
@@ -192,7 +185,12 @@ GHOST_HORIZON_S = 2.0  # the ghost runs on at most this long past the last frame
 
 
 class RealBot:
-    """A robot on a serial port: pose from its TELEMETRY odometry, IR readings as they arrive, and its ghost."""
+    """A robot on a serial port: pose from its TELEMETRY odometry, IR readings as they arrive, and its ghost.
+
+    A Pico, or a virtual board's pty.  Its pose: odo_x, odo_y, odo_heading when the firmware sends
+    them, else its encoders integrated here by the firmware's own odometry with the robot's geometry;
+    placed at the room's start pose.
+    """
 
     def __init__(self, link: SerialLink, start: Pose, params: RobotParams, floor_s: float = 0.0) -> None:
         self.link = link

@@ -1,14 +1,7 @@
 """The user's orders: arrow keys or a joystick / gamepad, as two wheel speeds (mm/s).
 
-Everything comes from events, never from polling the devices: the state of
-the arrows from KEYDOWN / KEYUP, the sticks from JOYAXISMOTION, the d-pad
-from JOYHATMOTION.  So posted events (the offscreen tests, where no real
-joystick exists) drive the robot exactly as a device does.  Joysticks come
-and go while the application runs (JOYDEVICEADDED / JOYDEVICEREMOVED).
-
-Mapping: forward speed from up/down (or the left stick's Y, pushed up =
-forward), turning from left/right (stick X), mixed as a differential
-drive: left = v - w, right = v + w, each limited to max_speed.
+Everything comes from events, never from polling the devices, so posted events (the offscreen
+tests, where no real joystick exists) drive the robot exactly as a device does.  See docs/gui.md.
 """
 from __future__ import annotations
 
@@ -21,6 +14,13 @@ TURN_SHARE = 0.6  # full turn input = this fraction of max_speed on each wheel
 
 
 class UserControl:
+    """The arrows from KEYDOWN / KEYUP, the sticks from JOYAXISMOTION, the d-pad from JOYHATMOTION.
+
+    Joysticks come and go while the application runs (JOYDEVICEADDED / JOYDEVICEREMOVED).  Forward
+    speed from up/down (or the left stick's Y, pushed up = forward), turning from left/right (stick X),
+    mixed as a differential drive: left = v - w, right = v + w, each limited to max_speed.
+    """
+
     def __init__(self, max_speed: int = 200) -> None:
         self.max_speed = max_speed
         self.arrows: set[int] = set()

@@ -1,6 +1,6 @@
 """World metres <-> screen pixels: zoom about a point, pan, fit a room into a rectangle.
 
-World frame: x right, y up (metres).  Screen: x right, y down (pixels).
+World frame: x right, y up (metres).  Screen: x right, y down (pixels).  See docs/gui.md.
 """
 from __future__ import annotations
 

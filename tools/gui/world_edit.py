@@ -1,11 +1,7 @@
 """The room being edited: walls drawn on a snapping grid, picked, moved, deleted, undone, saved.
 
-Pure state, no drawing: the walls are kept as entries of the world format
-(host_sim/physics/world.py, docs/worlds.md), so what is saved is a world file that
-`twinbot sim --world FILE` reads, and what is loaded is validated by the
-same `load_world`.  Every change makes a new `World` (its geometry arrays
-are derived once per edit, not per frame) and pushes the old walls on the
-undo stack.
+Pure state, no drawing: the walls are entries of the world format (docs/worlds.md), so a saved room
+is a world file that `twinbot sim --world FILE` reads.  See docs/gui.md.
 """
 from __future__ import annotations
 
@@ -52,6 +48,12 @@ def moved_wall(wall: dict[str, Any], dx: float, dy: float) -> dict[str, Any]:
 
 
 class WallEditor:
+    """The walls as world-format entries; a loaded file is checked by the same `load_world` as any world file.
+
+    Every change makes a new `World` (its geometry arrays derived once per edit, not per frame) and
+    pushes the old walls on the undo stack.
+    """
+
     def __init__(self, world: World, grid: float = 0.05) -> None:
         self.world = world
         self.grid = grid
