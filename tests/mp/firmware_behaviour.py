@@ -190,6 +190,53 @@ def check_setpoints_limited_to_max_speed():
     assert (robot.setpoint_l, robot.setpoint_r) == (200, -200)
 
 
+def check_setpoints_limited_to_max_speed_in_both_directions_on_each_wheel():
+    """The clamp keeps each wheel's sign: -300 on the left is -200, not +200."""
+    for left, right in ((-5000, 5000), (-300, 300), (300, -300), (-201, 201)):
+        hal, robot = robot_with(1, W.MODE_HOST)
+        hal.give(command(W.MODE_HOST, left, right))
+        robot.cycle()
+        want = (200 if left > 0 else -200, 200 if right > 0 else -200)
+        assert (robot.setpoint_l, robot.setpoint_r) == want, (left, right, robot.setpoint_l, robot.setpoint_r)
+
+
+def check_the_first_mode_past_teleop_is_refused():
+    hal, robot = robot_with(1, W.MODE_STOP)
+    hal.take_output()
+    hal.give(command(W.MODE_TELEOP + 1, 50, 50))
+    robot.cycle()
+    assert robot.mode == W.MODE_STOP
+    nacks = [struct.unpack("<3B", p) for t, _s, p in frames_of(hal.take_output()) if t == W.NACK]
+    assert nacks and nacks[-1][1:] == (W.COMMAND, W.ERR_BAD_MODE), nacks
+
+
+def check_watchdog_trips_on_the_first_cycle_past_its_timeout():
+    """watchdog_ms = 200 at a 40 ms cycle: 200 ms after the COMMAND is still in time, 240 ms is not."""
+    hal, robot = robot_with(1, W.MODE_HOST)
+    hal.give(command(W.MODE_HOST, 100, 100))
+    robot.cycle()
+    for _ in range(5):  # 200 ms since the COMMAND was read
+        robot.cycle()
+        assert not robot.flags & W.FLAG_WATCHDOG and robot.setpoint_l == 100
+    robot.cycle()  # 240 ms
+    assert robot.flags & W.FLAG_WATCHDOG and robot.setpoint_l == 0
+
+
+def check_a_long_stall_counts_as_two_seconds():
+    """A gap in the clock beyond 2000 ms (a stalled board) counts as 2000 ms in the wheel loops."""
+    def after_gap(gap_ms):
+        hal, robot = robot_with(1, W.MODE_AUTONOMOUS)
+        for _ in range(5):
+            robot.cycle()
+        hal.t += gap_ms - 40  # wait_cycle adds the period itself
+        robot.cycle()
+        return robot.wheel_l.acc, robot.wheel_l.speed, hal.current[0]
+
+    clamped = after_gap(2000)
+    assert after_gap(8000) == clamped and after_gap(3000) == clamped
+    assert after_gap(1900) != clamped
+
+
 def check_parameters_set_get_and_refuse():
     hal, robot = robot_with(1, W.MODE_STOP)
     hal.take_output()
