@@ -36,6 +36,9 @@ def start() -> None:
     link = hal.link  # type: ignore[attr-defined]
     link.open()
     try:
+        # A peer that restarted sends HELLO first (protocol/SPEC.md), so the host restarts its sequence
+        # count instead of counting a gap: tests/test_virtual_board.py::test_a_soft_reset_starts_with_hello.
+        robot.send_hello()
         robot.run()
     except BreakToRepl:
         pass

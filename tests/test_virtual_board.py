@@ -125,6 +125,28 @@ def test_mpremote_breaks_in_and_reset_restarts_the_firmware(board):
     assert len(frames) >= 10  # the firmware runs again
 
 
+
+def test_a_soft_reset_starts_with_hello(board):
+    """After a soft reset the firmware's first frame is HELLO, so the host counts no gap and no lost frame."""
+    link = SerialLink.open(board.path)
+    try:
+        assert collect(link, 0.5), "the firmware runs"
+        link.port.write(b"\r\x03")  # after a quiet cycle: the break to the friendly REPL
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline and any(f.msg_type == M.TELEMETRY for f in link.poll(0.3)):
+            pass  # until the firmware has stopped at the REPL
+        link.port.reset_input_buffer()
+        link.port.write(b"\x04")  # soft reset: main.py starts the firmware again
+        frames = []
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline and len(frames) < 5:
+            frames += link.poll(0.1)
+    finally:
+        link.close()
+    assert frames and frames[0].msg_type == M.HELLO, [f.msg_type for f in frames[:3]]
+    assert frames[0].fields["board"] == M.BOARD_VIRTUAL
+    assert link.decoder.seq_gaps == 0 and link.decoder.frames_lost == 0
+
 @pytest.mark.slow
 def test_flash_a_blank_board_then_it_answers_hello(tmp_path, standin):
     """The issue's end-to-end check: mpy-cross, mpremote cp, reset, HELLO."""
