@@ -92,6 +92,78 @@ def test_host_mode_and_watchdog_over_the_port(board, standin):
     assert standin.last_actuate is not None and standin.last_actuate["i_ref_l_ma"] == 0
 
 
+
+class JunkFlood:
+    """Random bytes written to the board's port at a steady rate from a thread, beside the host's frames."""
+
+    def __init__(self, link: SerialLink, bytes_per_s: int, seed: int = 11) -> None:
+        import random
+        import threading
+
+        self.link, self.rate, self.rng = link, bytes_per_s, random.Random(seed)
+        self.sent = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self) -> None:
+        start = time.monotonic()
+        while not self._stop.is_set():
+            due = int((time.monotonic() - start) * self.rate) - self.sent
+            if due > 0:
+                # No CR: a break needs a silent cycle first, and a flood has none; this keeps it certain.
+                junk = self.rng.randbytes(min(due, 4000)).replace(b"\r", b"\x0e")
+                self.link.send_raw(junk)
+                self.sent += len(junk)
+            time.sleep(0.01)
+
+    def __enter__(self) -> "JunkFlood":
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join(2)
+
+
+def frames_until(link, seconds, done):
+    """TELEMETRY frames received until done(frame) or the time is up."""
+    out = []
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        for f in link.poll(0.02):
+            if f.msg_type == M.TELEMETRY:
+                out.append(f)
+                if done(f):
+                    return out
+    return out
+
+
+def test_stop_acts_within_two_periods_under_a_junk_flood(board):
+    """50 KB/s of junk in HOST mode: the newest COMMAND wins at once, and STOP acts within two periods."""
+    link = SerialLink.open(board.path)
+    try:
+        with JunkFlood(link, 50_000) as flood:
+            start = time.monotonic()
+            for speed in (60, 90, 120, 150, 180, 100):  # 1.2 s of changing orders under the flood
+                end = start + 0.2
+                while time.monotonic() < end:
+                    link.send(M.COMMAND, {"mode": M.MODE_HOST, "left": speed, "right": -speed})
+                    link.poll(0.05)
+                start = end
+            collect(link, 0.05)  # what was already on its way
+            seen = frames_until(link, 2.0, lambda f: f.fields["sp_l"] == 100)
+            link.send(M.COMMAND, {"mode": M.MODE_STOP, "left": 0, "right": 0})
+            stop = frames_until(link, 3.0, lambda f: f.fields["mode"] == M.MODE_STOP)
+            sent = flood.sent
+    finally:
+        link.close()
+    assert sent > 40_000, sent  # the flood ran for more than a second
+    assert seen and seen[-1].fields["sp_l"] == 100 and len(seen) <= 3, [f.fields["sp_l"] for f in seen]
+    assert stop and stop[-1].fields["mode"] == M.MODE_STOP, "STOP never acted"
+    late = [f for f in stop if f.fields["mode"] != M.MODE_STOP]
+    assert len(late) <= 2, f"{len(late)} cycles in HOST mode after the STOP was sent"
+    assert stop[-1].fields["sp_l"] == 0 and stop[-1].fields["i_ref_l_ma"] == 0
+
 def test_random_bytes_on_the_port_do_not_stop_the_loop(board):
     link = SerialLink.open(board.path)
     try:
