@@ -1,6 +1,5 @@
-"""twinbot firmware: runs on the robot (RP2040) and on the virtual board.
+"""twinbot firmware: runs on the robot (RP2040), on the virtual board and in the simulator.
 
-MicroPython-compatible and dependency-free beyond MicroPython's built-ins and
-the shared protocol package.  (The controller, IR loop, HAL and main loop
-arrive with the firmware issue; this package holds only what has landed.)
+MicroPython-compatible and dependency-free beyond MicroPython's built-ins and the shared
+protocol package; firmware/manifest.py lists what goes on a board (docs/firmware.md).
 """

@@ -1,8 +1,8 @@
-"""The robot as the firmware knows it: geometry, encoder, limits, pin map.
+"""The robot as the firmware knows it: geometry, encoder, limits, pin map (docs/firmware.md).
 
-One file to edit for another robot or another wiring.  The host simulator's
-robot parameters (the one documented set, with units) must agree with the
-geometry here; a test checks that they do.
+One file to edit for another robot or another wiring.  The host simulator's robot
+parameters must agree with the geometry here
+(tests/test_layers_agree.py::test_firmware_geometry_is_the_parameter_set).
 """
 from protocol.compat import const
 

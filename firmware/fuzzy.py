@@ -1,26 +1,10 @@
-"""The fuzzy exploration controller of the paper (section 5), in integers.
+"""The fuzzy exploration controller of the paper (section 5), in integers (docs/fuzzy.md).
 
-A zero-order Sugeno engine: each rule's firing strength (0..1024) weights a
-pair of wheel-speed singletons, and the wheel setpoints are the weighted
-averages (rounded half up).  Memberships use min for AND and max for the
-circular aggregation; no floating point anywhere, so every port computes the
-same setpoints bit for bit.
-
-Inputs: the eight reflected IR readings (ADC counts, ambient removed), S1
-front, then counter-clockwise every 45 degrees.  Each reading's membership
-in "obstacle" ramps from 0 at NEAR_LO counts to 1024 at NEAR_HI counts.
-
-The first rule set sees the sensors through a circular fuzzification into
-{front, left, back, right}: a triangle 90 degrees wide on each side of its
-direction, so S2 is half front and half left.  The refined rule set reacts
-to every sensor on its own and adds the quick turns (Fig. 18).  Because the
-unconditional "go ahead" is always averaged in, the first rule set stops the
-robot in front of a wall it approaches head-on (it settles where "go back"
-balances "go ahead"), as the paper observed; the quick turns of S2 and S8
-are what get it past.
-
-Rule bases are data (RULES_FIRST, RULES_REFINED); tools/cli/fuzzy.py names
-them, prints them as IEC 61131-7 FCL text and draws the sets (docs/fuzzy.md).
+A zero-order Sugeno engine over the eight reflected IR readings: each rule's firing
+strength (0..1024) weights a pair of wheel-speed singletons, and the setpoints are the
+weighted averages, rounded half up.  No floating point, so every port computes the same
+setpoints bit for bit.  The rule bases are data (RULES_FIRST, RULES_REFINED);
+host_sim/controller/fuzzy_rulebase.py names them and `twinbot fuzzy` prints them.
 """
 from protocol.compat import const
 

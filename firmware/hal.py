@@ -1,11 +1,9 @@
-"""The hardware abstraction layer: all that the firmware asks of a board.
+"""The hardware abstraction layer: all that the firmware asks of a board (docs/firmware.md).
 
-Two real implementations: hal_rp2040.Rp2040Hal (the robot) and
-hal_sim_link.SimLinkHal (the virtual board, whose electrical I/O travels as
-HW_SENSE / HW_ACTUATE frames to a simulator).  The simulator's SIL mode
-implements the same interface in-process.  The firmware cannot tell them
-apart.  Every method is called once or twice per control cycle and must not
-allocate on the heap.
+Implemented by hal_rp2040.Rp2040Hal (the robot), hal_sim_link.SimLinkHal (the virtual
+board, whose electrical I/O travels as HW_SENSE / HW_ACTUATE frames to a simulator) and,
+in-process, the simulator's SIL mode; the firmware cannot tell them apart.  Every method
+is called once or twice per control cycle and must not allocate on the heap.
 """
 from protocol.compat import const
 

@@ -1,11 +1,9 @@
-"""A HAL fed one cycle at a time with what a simulator sensed.
+"""A HAL fed one cycle at a time with what a simulator sensed (docs/firmware.md).
 
-The values of a HW_SENSE frame (tick, ADC readings with the emitters off and
-on, encoder counts, battery) are loaded before each cycle; the firmware's
-outputs are collected as a HW_ACTUATE (currents, and the emitter power its
-"on" reading used).  The virtual board (hal_sim_link.SimLinkHal) receives
-and sends those as frames; the simulator's SIL mode loads them in-process.
-Both share this class, so SIL and PIL behave the same bit for bit.
+A HW_SENSE frame's values (tick, ADC readings with emitters off and on, encoder counts,
+battery) are loaded before each cycle; the outputs are collected as a HW_ACTUATE.  The
+virtual board (hal_sim_link.SimLinkHal) moves them as frames, the simulator's SIL mode
+in-process: both share this class, so SIL and PIL behave the same bit for bit.
 """
 from firmware.hal import Hal
 from protocol import wire

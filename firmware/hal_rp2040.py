@@ -1,22 +1,10 @@
-"""The robot's HAL: a Raspberry Pi Pico (RP2040) with the pin map of config.py.
+"""The robot's HAL: a Raspberry Pi Pico (RP2040) with the pin map of config.py (docs/firmware.md).
 
-- IR: the eight phototransistors reach ADC0 through a CD4051 multiplexer;
-  one PWM pin drives all eight emitters (pulse width = light power L).
-- Encoders: channel A of each wheel interrupts on both edges; channel B
-  gives the direction (x2 decoding).  The handlers allocate nothing.
-- Motors: each driver regulates current; its reference is a filtered PWM
-  duty (full scale CURRENT_FULL_SCALE_MA) plus a direction pin.
-- Host link: the USB serial port (or a UART, config.HOST_UART).
-
-Cycles are timed with time.ticks_ms(); a cycle that starts late sets
-`overrun` (the OVERRUN flag in telemetry).  The hardware watchdog
-(machine.WDT, WATCHDOG_MS) is fed at the start of every cycle: a loop that
-stalls is reset by it, and a reset stops the motor PWM.  close() (the
-firmware hands the port to the REPL) switches it off again, which
-MicroPython's WDT cannot: the RP2040's WATCHDOG_CTRL enable bit is cleared.
-Encoder counts wrap within +-2**29 so that the interrupt handlers never
-make a big int (31-bit small ints); deltas are taken modulo 2**30.  Not run in CI (no board there):
-mpy-cross and mypy against the rp2 stubs check it.
+IR through a CD4051 multiplexer into ADC0, one PWM pin for all eight emitters; encoders
+decoded x2 by interrupt handlers that allocate nothing; each motor's current reference as
+a filtered PWM duty plus a direction pin; the host link on USB serial (or a UART).  The
+hardware watchdog is fed every cycle.  No board runs in CI: mpy-cross and mypy against
+the rp2 stubs check it.
 """
 import time
 

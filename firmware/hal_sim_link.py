@@ -1,11 +1,9 @@
-"""The virtual board's HAL: its electrical I/O travels to a simulator.
+"""The virtual board's HAL: its electrical I/O travels to a simulator (docs/firmware.md).
 
-Runs under the MicroPython unix port.  Each control cycle begins when the
-simulator's HW_SENSE frame arrives (ADC readings with the emitters off and
-on, encoder counts, battery) and ends by sending HW_ACTUATE (current
-references, emitter power) back, over a TCP connection to 127.0.0.1.
-The simulator thus owns time: in fixed-step mode a run is exactly
-repeatable.  The host link is the board's stdin/stdout, as on the RP2040.
+Runs under the MicroPython unix port.  Each control cycle begins when the simulator's
+HW_SENSE frame arrives over TCP on 127.0.0.1 and ends by sending HW_ACTUATE back, so the
+simulator owns time and a fixed-step run is exactly repeatable.  The host link is the
+board's stdin/stdout, as on the RP2040.
 """
 import select
 import socket

@@ -1,10 +1,9 @@
 """A board for tests and benchmarks: a HAL with a plain plant, on CPython and MicroPython alike.
 
-IR: each sensor reads ambient + reflection * emitter power / 100, capped at
-the ADC ceiling.  Wheels: encoder ticks advance with the current reference
-(a crude motor: 2 mA a tick a cycle, so 110 mm/s takes some 80 mA, as
-a free-running robot's wheel, and never the stall guard's push current).  Host link: bytes queued with give(); frames sent collected
-in `out`.  No method allocates once the buffers exist.
+IR: ambient + reflection * emitter power / 100, capped at the ADC ceiling.  Wheels: a
+crude motor, 2 mA a tick a cycle (110 mm/s takes some 80 mA, as a free-running wheel,
+never the stall guard's push current).  Host link: bytes queued with give(), frames sent
+collected in `out`.  No method allocates once the buffers exist (docs/firmware.md, Budgets).
 """
 from firmware.hal import TICK_MASK
 

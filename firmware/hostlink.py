@@ -1,10 +1,8 @@
-"""The host link over the board's USB serial port (sys.stdin / sys.stdout).
+"""The host link over the board's USB serial port (sys.stdin / sys.stdout; docs/firmware.md).
 
-The same code on the RP2040 (USB CDC) and on the virtual board (whose
-stdin/stdout are wired to a pseudo-terminal).  Reads never block and,
-like writes, allocate nothing.  Ctrl-C must reach the protocol as a byte,
-so keyboard interrupts are switched off while the firmware runs and
-restored when it stops.
+The same code on the RP2040 (USB CDC) and on the virtual board (stdin/stdout wired to a
+pseudo-terminal).  Reads never block and, like writes, allocate nothing.  Ctrl-C must reach
+the protocol as a byte, so keyboard interrupts are off while the firmware runs.
 """
 import select
 import sys

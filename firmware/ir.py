@@ -1,9 +1,9 @@
-"""IR acquisition with ambient-light subtraction (paper, section 3.3).
+"""IR acquisition with ambient-light subtraction (paper, section 3.3; docs/firmware.md).
 
-Every cycle: emitters off -> read the ambient level of the 8 sensors ->
-emitters on at power L -> read -> reflected = on - ambient (clamped at 0),
-then the selected averaging.  On the paper's robot this takes well under
-the 40 ms cycle, so both readings see the same ambient light.
+Every cycle: emitters off -> read the ambient level of the 8 sensors -> emitters on at
+power L -> read -> reflected = on - ambient (clamped at 0), then the selected averaging.
+On the paper's robot this takes well under the 40 ms cycle, so both readings see the
+same ambient light.
 """
 from array import array
 

@@ -1,13 +1,10 @@
-"""Start the firmware on whatever board this is.
+"""Start the firmware on whatever board this is (docs/firmware.md).
 
-A board's /main.py holds two lines (`twinbot flash` writes them):
-
-    import firmware.main
-    firmware.main.start()
-
-On an RP2040 the HAL is the real hardware; under the unix port (the virtual
-board) it is the simulator's hardware link named by TWINBOT_HW=host:port.
-start() returns when mpremote (or a person) breaks into the REPL.
+A board's /main.py holds two lines, written by `twinbot flash`:
+`import firmware.main` and `firmware.main.start()`.  On an RP2040 the HAL is the real
+hardware; under the unix port (the virtual board) it is the simulator's hardware link
+named by TWINBOT_HW=host:port.  start() returns when mpremote (or a person) breaks into
+the REPL.
 """
 import sys
 

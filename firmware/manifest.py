@@ -1,11 +1,9 @@
-"""What goes on the board: the one list every tool that builds a board reads.
+"""What goes on the board: the one list every tool that builds a board reads (docs/firmware.md).
 
-As micropython-lib's manifest.py: `twinbot flash` compiles BOARD_FILES to
-.mpy and copies them with main.py; the virtual board's factory image holds
-them as sources; `twinbot bench firmware` measures the heap with them
-loaded.  A test checks that every .py under firmware/ and protocol/ is
-named here exactly once, so a new module cannot be forgotten.
-
+`twinbot flash` compiles BOARD_FILES to .mpy and copies them with main.py; the virtual
+board's factory image holds them as sources; `twinbot bench firmware` measures the heap
+with them loaded.  Every .py under firmware/ and protocol/ is named here exactly once
+(tests/test_layers.py::test_manifest_names_every_micropython_module_once).
 Paths are relative to the repository root, with '/' separators.
 """
 

@@ -1,30 +1,10 @@
-"""Dead reckoning from the wheel encoders: three approximations, in integers.
+"""Dead reckoning from the wheel encoders: Euler, midpoint or exact arc, in integers (docs/firmware.md).
 
-Per cycle the wheels move dL, dR; the centre moves s = (dL + dR) / 2 and
-turns dth = (dR - dL) / W.  The approximations differ in the heading the
-step is taken along:
-
-    EULER     x += s cos(th)                   (heading at the start)
-    MIDPOINT  x += s cos(th + dth/2)           (second order)
-    EXACT     x += s sinc(dth/2) cos(th + dth/2)   (the arc's chord: exact
-              for a constant-curvature step)
-
-Position in micrometres, heading in 1/2**30 turn (wrapped, so it stays a
-small int on 32-bit boards); the heading is a sum of exact integer steps, so
-it does not drift by rounding.  Every port gives the same pose bit for bit.
-
-Every intermediate stays within +-2**30 (an RP2040's small ints are 31-bit:
-beyond that MicroPython allocates a big int) for a step of less than 2 m of
-centre travel (1 m/s for a 1 s cycle is 1 m) and a pose within 1 km of the
-origin, whatever the step turns (tests run the golden vectors on a 32-bit
-MicroPython under heap_lock): the wrap works around the half-turn point,
-the turn of a step is taken modulo a turn by mulmod_turn() (a step may turn
-several times over: an encoder glitch, lost cycles), and the geometry is
-turned into per-tick factors by div_round(), a long division in small
-ints, so configure() allocates nothing either (a PARAM_SET of the geometry
-calls it).  A step that turns half a turn or more is taken along its mean
-heading without the chord factor (sinc is only good to a quarter turn, and
-such a step's path cannot be known from its ticks).
+Position in micrometres, heading in 1/2**30 turn (wrapped, so it stays a small int on
+32-bit boards); the heading is a sum of exact integer steps, so it does not drift by
+rounding, and every port gives the same pose bit for bit.  Every intermediate stays
+within +-2**30 for a step under 2 m and a pose within 1 km of the origin, and configure()
+allocates nothing (tests/test_micropython_32bit.py).
 """
 from firmware.hal import count_delta
 from firmware.trig import cos_q14, sin_q14, sinc_q14

@@ -1,23 +1,11 @@
-"""The robot's main loop: one control cycle after another, on any HAL.
+"""The robot's main loop: one control cycle after another, on any HAL (docs/firmware.md).
 
-Each cycle: wait for the cycle tick -> IR acquisition (ambient removed) ->
-encoders -> odometry and wheel speeds -> messages from the host -> the mode
-decides the wheel setpoints (AUTONOMOUS: the fuzzy explorer, with the stall
-guard backing it out of a wedge; HOST, TELEOP: the host's COMMAND, guarded by
-the watchdog; STOP: zero) -> wheel PI ->
-current references -> TELEMETRY.
-
-No path allocates once the robot is built, whatever the host sends (tests
-run every message type, every parameter and hostile frames under
-micropython.heap_lock()).  An exception inside a cycle never ends the loop:
-the motors go to zero at once, it is counted and reported by a LOG frame,
-and the robot goes to STOP with the FAULT flag set.
-
-On a board whose host link is the USB REPL port, mpremote interrupts with
-0x0D 0x03 ("\\r Ctrl-C").  Those two bytes stop the firmware only when they
-are the first bytes after a whole silent cycle (mpremote starts on a quiet
-port; a protocol host sends 0x00 before every frame); anywhere else, and
-always on a UART, they are line noise like any other.
+Each cycle: IR acquisition -> encoders -> odometry and wheel speeds -> host messages ->
+the mode's wheel setpoints (the fuzzy explorer behind the stall guard, the host's
+COMMAND, or zero) -> wheel PI -> current references -> TELEMETRY.  No path allocates once
+the robot is built (tests/test_firmware_budgets.py); an exception in a cycle stops the
+motors and sets FAULT but never ends the loop.  mpremote's 0x0D 0x03 stops the firmware
+only after a whole silent cycle.
 """
 import struct
 

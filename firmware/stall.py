@@ -1,28 +1,10 @@
-"""The explorer's stall guard: back out instead of pushing a wall for ever.
+"""The explorer's stall guard: back out instead of pushing a wall for ever (docs/firmware.md).
 
-The fuzzy explorer sees walls only through its IR ring.  Wedged nose first
-into a gap narrower than the robot (the two front-side sensors see walls, the
-front one sees the gap) it drives on with its wheels held still; the speed
-loops wind up to the current limit and stay there.  Pressed on a wall between
-two sensors' beams, or nearer than the IR response's maximum (where the
-reading falls again), its wheels spin on the floor instead: the encoders say
-they turn, but only against a load free driving never puts on them.  Facing
-a wall square, the refined rule set's "back" and "go ahead" can balance at
-a distance where both setpoints are a few mm/s, too little to move a wheel:
-the robot stands there for ever.  The guard watches all three: a wheel asked
-for at least _STALL_MIN_SPEED that turns at under a quarter of that (or the
-wrong way), a wheel whose current reference is above push_ma, and both
-setpoints under _STALL_MIN_SPEED (the explorer's unconditional "go ahead"
-never asks that of a robot that is free).  Time stuck counts up while any
-holds and down while none does (a wheel slipping by fits and starts is
-caught too); at stall_ms it takes over: _BACK_MS with both wheels back, _HALT_MS at
-rest, then _TURN_MS spinning on the spot away from the side whose IR sees
-more light (alternating when both see the same), both at half max_speed,
-and _HALT_MS at rest again; then the explorer has the wheels.  The halts
-spare the gears a reversal at full speed, and keep the wheels' grip.  stall_ms = 0 turns the guard off, push_ma = 0
-its current rule.
-
-Integers only and no allocation, like the rest of the control cycle.
+The robot is stuck while a wheel turns at under a quarter of the speed it is asked for
+(or the wrong way), while a wheel's current reference is above push_ma, or while both
+setpoints are under _STALL_MIN_SPEED.  At stall_ms of being stuck the guard backs, rests,
+spins away from the brighter side, rests, and hands the wheels back.  stall_ms = 0 turns
+it off, push_ma = 0 its current rule.  Integers only and no allocation, like the cycle.
 """
 from protocol.compat import const
 

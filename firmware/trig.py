@@ -1,10 +1,9 @@
-"""Integer trigonometry: the same bits on every port.
+"""Integer trigonometry: the same bits on every port (docs/firmware.md).
 
-Angles are binary angles: 65536 per turn (a "binang").  sin and cos come
-from a quarter-wave table of round(16384 * sin) at 256 steps per quarter
-turn, interpolated linearly (error below 1e-4); results are Q14
-(16384 = 1.0).  No floating point: single-precision boards agree with
-CPython bit for bit.
+Angles are binary angles: 65536 per turn (a "binang").  sin and cos come from a
+quarter-wave table of round(16384 * sin) at 256 steps per quarter turn, interpolated
+linearly (error below 1e-4); results are Q14 (16384 = 1.0).  No floating point:
+single-precision boards agree with CPython bit for bit.
 """
 from array import array
 

@@ -1,21 +1,11 @@
-"""The virtual board's "ROM": what a real board's MicroPython does around main.py.
+"""The virtual board's "ROM": what a real board's MicroPython does around main.py (docs/firmware.md).
 
-Run by `twinbot board` under the MicroPython unix port, with stdin/stdout
-wired to a pseudo-terminal, so that the board looks like a Pico's USB serial
-port.  It gives the board:
+Run by `twinbot board` under the MicroPython unix port, stdin/stdout wired to a
+pseudo-terminal: its own flash mounted at "/", main.py after every reset, the friendly
+and the raw REPL that mpremote drives, Ctrl-D and machine.reset().
 
-- its own flash: a host folder (VfsPosix) or a littlefs image of a given
-  size, mounted at "/" so that nothing outside it is visible;
-- boot: main.py runs after every (soft or hard) reset, as on a real board;
-- a REPL: the friendly one (>>>) and the raw one that mpremote drives
-  (Ctrl-A, code, Ctrl-D; raw-paste is declined, so mpremote falls back);
-- resets: Ctrl-D (soft reset) and machine.reset() (hard reset), which clear
-  every module loaded from flash and start again.
-
-usage: micropython firmware/unix_board.py FLASH
-  FLASH is a folder, or IMAGE_FILE:SIZE_KB for a littlefs image (created
-  blank when missing).  The firmware finds its simulator through the
-  TWINBOT_HW environment variable (host:port).
+usage: micropython firmware/unix_board.py FLASH, where FLASH is a folder or IMAGE_FILE:SIZE_KB
+(a littlefs image, created blank when missing); TWINBOT_HW=host:port names the simulator.
 """
 import io
 import os

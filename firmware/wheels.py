@@ -1,24 +1,10 @@
-"""Wheel-speed loops: encoder ticks -> speed -> PI -> current reference.
+"""Wheel-speed loops: encoder ticks -> speed -> PI -> current reference, in integers (docs/firmware.md).
 
-The paper's motor driver regulates current, so the loop's output is a
-current reference.  Each wheel has a PI with a clamped output and two
-anti-windup measures: integration stops while the output is saturated in
-the direction of the error, and the integral is clamped so that its term
-alone can never exceed the current limit.  All in integers:
-
-    v    [mm/s]  = dticks * um_per_tick / dt_ms, rounded
-    e    [mm/s]  = setpoint - v
-    P    [mA]    = kp * e / 1000                  (kp: 1/1000 mA per mm/s)
-    acc  [um]   += e * dt_ms
-    I    [mA]    = ki * acc / 1_000_000           (ki: 1/1000 mA per mm)
-    iref [mA]    = clamp(P + I, -limit, +limit)
-
-An RP2040's small ints are 31-bit: every product here is split so that it
-stays within +-2**30 for every parameter in its range (tests run the loop
-on a 32-bit MicroPython under heap_lock), given |e| <= E_MAX (clamped),
-dt_ms <= 2000 (the robot clamps it) and fewer than 2**16 ticks per cycle.
-The integral is capped at ACC_CAP: with a tiny ki its term then saturates
-below the current limit (ki = 1 reaches 536 mA).
+The paper's motor driver regulates current, so each wheel's PI gives a current reference,
+clamped, with two anti-windup measures: integration stops while the output is saturated
+in the error's direction, and the integral is capped (ACC_CAP) so that its term alone
+stays under the current limit.  Every product stays within +-2**30 for every parameter
+in its range (tests/test_micropython_32bit.py).
 """
 from firmware.hal import count_delta
 from protocol.compat import const

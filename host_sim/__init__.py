@@ -1,4 +1,5 @@
-"""twinbot host simulator: the robot's twin (dynamics, motors, IR sensors, walls).
+"""twinbot host simulator: the robot's twin and everything that runs it on the host.
 
-Filled by the host-simulator issue; nothing in it is in use yet.
+Subpackages, bottom up (each imports only those before it; tests/test_layers.py): physics,
+sensors, controller, robot, recordings, loops, board, diagnosis, figures.
 """

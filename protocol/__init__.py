@@ -1,11 +1,8 @@
-"""twinbot serial protocol: one pure-Python implementation for robot and host.
+"""twinbot serial protocol: one pure-Python implementation for robot and host (protocol/SPEC.md).
 
-Runs unchanged on CPython and MicroPython.  See SPEC.md beside this file for the
-wire format.  Modules, in the order bytes flow through them:
-
-    crc16     CRC-16/MCRF4XX (the checksum every frame carries)
-    cobs      Consistent Overhead Byte Stuffing (frames end at the only 0x00)
-    messages  message types, payload layouts, parameter and mode numbers
-    framing   FrameEncoder / FrameDecoder (streaming, bounded, counting)
-    fields    reading a decoded body's fields without allocating (firmware)
+Runs unchanged on CPython and MicroPython.  Modules, in the order bytes flow through
+them: crc16 (the frame checksum), cobs (frames end at the only 0x00), messages (types,
+layouts, parameter and mode numbers; wire holds what the firmware needs of them),
+framing (FrameEncoder / FrameDecoder, streaming and counting) and fields (reading a
+decoded body without allocating).
 """

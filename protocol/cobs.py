@@ -1,11 +1,9 @@
-"""Consistent Overhead Byte Stuffing (Cheshire & Baker, 1999).
+"""Consistent Overhead Byte Stuffing (Cheshire & Baker, 1999): frames end at the only 0x00.
 
-COBS removes every 0x00 from a block so that 0x00 can end a frame.  For a
-block of at most 254 bytes it adds exactly one byte.  A final block of 254
+For a block of at most 254 bytes COBS adds exactly one byte; a final block of 254
 non-zero bytes gets no trailing code byte (as the PyPI `cobs` package does).
-
-`encode_into` / `decode_into` work between preallocated buffers and allocate
-nothing on MicroPython; `encode` / `decode` are the convenient host forms.
+`encode_into` / `decode_into` work between preallocated buffers and allocate nothing on
+MicroPython; `encode` / `decode` are the convenient host forms (protocol/SPEC.md).
 """
 from protocol.compat import IS_MICROPYTHON
 

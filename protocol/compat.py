@@ -1,4 +1,4 @@
-"""The few things CPython and MicroPython spell differently.
+"""The few things CPython and MicroPython spell differently (docs/protocol.md).
 
 `const` is MicroPython's compile-time constant (its compiler folds any
 `X = const(1)` at module level); on CPython it is the identity.

@@ -1,10 +1,9 @@
-"""CRC-16/MCRF4XX: poly 0x1021 reflected, init 0xFFFF, no final xor.
+"""CRC-16/MCRF4XX: poly 0x1021 reflected, init 0xFFFF, no final xor (protocol/SPEC.md).
 
-The same CRC as MAVLink's X.25 "crc_accumulate"; check value 0x6F91 for
-b"123456789".  The bitwise update below needs no table (RAM matters on a
-microcontroller).  On CPython, binascii.crc_hqx (the non-reflected CRC in C)
-gives the same result on bit-reversed bytes, about 50x faster; the tests
-prove both paths equal.
+MAVLink's X.25 "crc_accumulate"; check value 0x6F91 for b"123456789".  The bitwise
+update below needs no table (RAM matters on a microcontroller).  On CPython,
+binascii.crc_hqx gives the same result on bit-reversed bytes, about 50x faster;
+tests/test_protocol_units.py proves both paths equal.
 """
 from protocol.compat import IS_MICROPYTHON, const
 

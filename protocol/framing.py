@@ -1,12 +1,10 @@
-"""Frames on the wire: 0x00 + COBS(version | type | seq | payload | CRC16-LE) + 0x00.
+"""Frames on the wire: 0x00 + COBS(version | type | seq | payload | CRC16-LE) + 0x00 (protocol/SPEC.md).
 
-The leading 0x00 ends whatever junk came before (REPL text, a dead sender's
-half frame), so junk never costs the next frame.  FrameEncoder and
-FrameDecoder own preallocated buffers, so the firmware's send and receive
-paths allocate nothing once they are constructed.  The decoder never raises
-on wire data: every bad frame is dropped at the next 0x00 and counted by
-reason, and sequence gaps are counted as they happen (a HELLO starts the
-count afresh: the peer may have restarted).
+The leading 0x00 ends whatever junk came before (REPL text, a dead sender's half
+frame).  FrameEncoder and FrameDecoder own preallocated buffers, so the firmware's send
+and receive paths allocate nothing once built.  The decoder never raises on wire data:
+every bad frame is dropped at the next 0x00 and counted by reason, and sequence gaps are
+counted (a HELLO starts the count afresh: the peer may have restarted).
 """
 from protocol.cobs import _copy_bytes, decode_into, encode_into
 from protocol.compat import const

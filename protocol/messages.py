@@ -1,10 +1,9 @@
-"""Message types, payload layouts and the numbers both ends agree on.
+"""Message types, payload layouts and the numbers both ends agree on (protocol/SPEC.md).
 
-Every payload is a fixed little-endian struct, except LOG whose text runs
-to the end of the payload.  Each layout also yields a schema byte, folded
-into the frame CRC (as MAVLink's CRC_EXTRA), so that two ends built from
-different message definitions reject each other's frames instead of
-misreading them.  SPEC.md documents every field with its unit.
+Every payload is a fixed little-endian struct, except LOG whose text runs to the end of
+the payload.  Each layout also yields a schema byte, folded into the frame CRC (as
+MAVLink's CRC_EXTRA), so two ends built from different message definitions reject each
+other's frames instead of misreading them.  SPEC.md documents every field with its unit.
 """
 import struct
 

@@ -1,11 +1,10 @@
-"""The numbers both ends of a link agree on: message types, sizes, schema bytes,
-modes, flags, error codes and parameter limits.
+"""The numbers both ends of a link agree on: message types, sizes, schema bytes, modes,
+flags, error codes and parameter limits (protocol/SPEC.md).
 
-This is all the firmware needs of the message set, kept small because it
-lives in a microcontroller's RAM.  protocol/messages.py adds the names, the
-field layouts and packing for hosts, and derives PAYLOAD_SIZE and SCHEMA
-from the layouts; a test checks that the two agree (as MAVLink compiles
-its CRC_EXTRA bytes into generated code).  SPEC.md documents every value.
+All the firmware needs of the message set, kept small for a microcontroller's RAM;
+protocol/messages.py adds names, layouts and packing for hosts.  The sizes and schema
+bytes here agree with those layouts
+(tests/test_protocol_units.py::test_schema_value_is_crc_of_schema_text).
 """
 from array import array
 

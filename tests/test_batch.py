@@ -1,21 +1,16 @@
-"""Batch mode (host_sim/robot/batch.py): N robots at once agree with N single-robot runs.
-
-Tolerances.  BatchSim runs the same physics in the same order as SimRobot,
-but dynamics.step_batch groups the floating-point operations of the closed
-form differently from dynamics.step, so the two agree to rounding error, not
-bit for bit (measured: ~1e-14 m over 16 s, contacts included).  Poses are
-compared to 1e-9 m.  Quantised outputs (encoder ticks, ADC counts) are then
-equal unless the exact value lies within that rounding error of a
-quantisation boundary, so:
-- encoder ticks must be equal wherever the single robot's wheel angle is more
-  than 1e-6 tick from a tick boundary (a 1e-9 m error is ~2e-5 tick at most
-  for a 21 mm wheel at 1200 ticks/rev, 1e-6 being far above the 1e-14 seen),
-  and within 1 tick everywhere;
-- ADC counts must be within 1 count everywhere and equal in all but 0.1 % of
-  the readings (in practice all: a reading is off only if its exact value is
-  within ~1e-10 counts of a rounding boundary).
-"""
+"""Batch mode (host_sim/robot/batch.py): N robots at once agree with N single-robot runs (docs/dynamics.md)."""
 from __future__ import annotations
+
+# Tolerances.  BatchSim runs the same physics in the same order as SimRobot, but
+# dynamics.step_batch groups the floating-point operations of the closed form differently from
+# dynamics.step, so the two agree to rounding error, not bit for bit (about 1e-14 m over 16 s,
+# contacts included).  Poses are compared to 1e-9 m.  Quantised outputs are then equal unless
+# the exact value lies within that rounding error of a quantisation boundary, so:
+# - encoder ticks are equal wherever the single robot's wheel angle is more than 1e-6 tick from
+#   a tick boundary (a 1e-9 m error is ~2e-5 tick at most for a 21 mm wheel at 1200 ticks/rev),
+#   and within 1 tick everywhere;
+# - ADC counts are within 1 count everywhere and equal in all but 0.1 % of the readings (a
+#   reading is off only if its exact value is within ~1e-10 counts of a rounding boundary).
 
 import numpy as np
 import pytest

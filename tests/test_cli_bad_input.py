@@ -1,12 +1,10 @@
-"""Every subcommand, walked through a table of bad inputs (issue 10, point 9).
+"""Every subcommand, walked through a table of bad inputs.
 
-The README promises: bad input gets one line on stderr naming what is
-wrong, and exit status 2.  Each row runs the real `twinbot` command and
-checks exactly that: status 2, one line on stderr that names the value,
-no traceback, and nothing written (no output file, no stray sidecar, no
-`twinbot-board-*` folder in the temporary directory).  Every bad value
-must fail before any heavy work, so the rows run concurrently in a few
-seconds.
+The promise: bad input gets one line on stderr naming what is wrong, and exit status 2.
+Each row runs the real `twinbot` command and checks exactly that: status 2, one line on
+stderr that names the value, no traceback, and nothing written (no output file, no stray
+sidecar, no `twinbot-board-*` folder in the temporary directory).  Every bad value must
+fail before any heavy work, so the rows run concurrently in a few seconds.
 """
 from __future__ import annotations
 

@@ -1,10 +1,9 @@
-"""The command line's smaller promises (issue 10, points 10 and 11).
+"""The command line's smaller promises.
 
---version and the one version source; the host's HELLO; `twinbot serial`'s
-hint on a silent port; `twinbot board` saying why a board did not start and
-leaving no temporary folder; `sim --stop-at-exit`; the warning when a pace
-cannot be kept; `twinbot replay` and `twinbot plot recording`; worlds too
-big for their grids.
+--version and the one version source; the host's HELLO; `twinbot serial`'s hint on a
+silent port; `twinbot board` saying why a board did not start and leaving no temporary
+folder; `sim --stop-at-exit`; the warning when a pace cannot be kept; `twinbot replay` and
+`twinbot plot recording`; worlds too big for their grids.
 """
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
 """The robot's dynamics and motors (host_sim/physics/dynamics.py, host_sim/physics/motors.py; docs/dynamics.md).
 
-The checks of issue 4, item 2-3:
 (a) symmetric torques -> straight line; (b) d = 0 is the textbook model; (c) no input,
 no friction -> kinetic energy conserved, and the fixed-step integrator converges;
 (d) an independent KKT solve of M q'' + V = E tau - A^T lambda agrees with the reduced

@@ -1,13 +1,10 @@
-"""Embedded budgets, proven under the real MicroPython.
+"""Embedded budgets, proven under the real MicroPython (docs/firmware.md, Budgets).
 
-- Zero heap allocations per control cycle in steady state: cycles run under
-  micropython.heap_lock(), with host COMMAND frames arriving, in every
-  combination of rule set, IR averaging and odometry method.
-- The firmware, loaded from .mpy as a board holds it, with a Robot running:
-  on the 32-bit webassembly port (objects the RP2040's size) the heap it
-  keeps in use is within the 32 KB target; on the 64-bit unix port (objects
-  twice the size) the whole run, test board included, fits a 64 KB heap.
-  `twinbot bench firmware` reports the figures.
+- No heap allocation per control cycle in steady state: cycles run under heap_lock(), with
+  host COMMAND frames arriving, in every combination of rule set, IR averaging and odometry.
+- The firmware loaded from .mpy with a Robot running: on the 32-bit webassembly port the heap
+  it keeps is within the 32 KB target; on the 64-bit unix port (objects twice the size) the
+  whole run, test board included, fits a 64 KB heap.  `twinbot bench firmware` reports them.
 """
 from __future__ import annotations
 

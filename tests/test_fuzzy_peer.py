@@ -1,27 +1,11 @@
-"""The fuzzy controller (firmware/fuzzy.py) against a peer library, the paper, and its docs.
+"""The fuzzy controller (firmware/fuzzy.py) against a peer library, the paper, and its docs (docs/fuzzy.md).
 
 The peer is simpful (zero-order Sugeno): the same rule base built there by
-tools/bench_fuzzy.build_simpful, with the circular weights taken from the
-floating-point geometry (host_sim/fuzzy_rulebase.circular_weight), which is
-checked here against the firmware's integer direction_weight.  simpful's Sugeno output is
-sum(w*z)/sum(w) over the rules, each rule separately, which is what the
-firmware computes, so the two may differ only by the firmware's fixed point:
-
-* each firing strength w_k is low by 0 <= d_k < 1/1024 (memberships are
-  floored to 1/1024; min and max keep that error and its sign), so the
-  unrounded setpoint moves by  z' - z = -sum_k d_k (z_k - z) / W'  with
-  W' >= 1 (the unconditional rule always fires at exactly 1).  All d_k have
-  one sign, so |z' - z| <= max(P, N) / 1024 with P = sum over z_k > z of
-  (z_k - z) and N = sum over z_k < z of (z - z_k); P falls and N rises with
-  z, so over the reachable range [z_lo, z_hi] the worst case is P(z_lo) or
-  N(z_hi) (z_lo, z_hi are found on the vertices of the weight box: z is
-  monotone in each weight);
-* the setpoint is then rounded half up to whole mm/s: at most 1/2 more.
-
-At max_speed 200 that bound is 0.99 mm/s for the first rule set (so within
-1 mm/s is guaranteed) and 2.38 mm/s for the refined one (the bound ignores
-that many rules firing at once also raises W').  Both are asserted, and so
-is the 1 mm/s resolution on the seeded sample.
+tools/bench/fuzzy.py build_simpful, with the circular weights taken from the floating-point
+geometry (host_sim/controller/fuzzy_rulebase.py circular_weight), which is checked here against
+the firmware's integer direction_weight.  simpful's Sugeno output is sum(w*z)/sum(w) over the
+rules, as the firmware computes it, so the two may differ only by the firmware's fixed point:
+within a_priori_bound, asserted with the 1 mm/s resolution on the seeded sample.
 """
 from __future__ import annotations
 
@@ -62,7 +46,23 @@ def mirror(readings: list[int]) -> list[int]:
 
 
 def a_priori_bound(rule_set: int, wheel: int, max_speed: int = MAX_SPEED) -> float:
-    """The fixed-point bound of the module docstring, in mm/s."""
+    """How far (mm/s) the firmware's fixed point may take a setpoint from simpful's exact one.
+
+    * each firing strength w_k is low by 0 <= d_k < 1/1024 (memberships are
+      floored to 1/1024; min and max keep that error and its sign), so the
+      unrounded setpoint moves by  z' - z = -sum_k d_k (z_k - z) / W'  with
+      W' >= 1 (the unconditional rule always fires at exactly 1).  All d_k have
+      one sign, so |z' - z| <= max(P, N) / 1024 with P = sum over z_k > z of
+      (z_k - z) and N = sum over z_k < z of (z - z_k); P falls and N rises with
+      z, so over the reachable range [z_lo, z_hi] the worst case is P(z_lo) or
+      N(z_hi) (z_lo, z_hi are found on the vertices of the weight box: z is
+      monotone in each weight);
+    * the setpoint is then rounded half up to whole mm/s: at most 1/2 more.
+
+    At max_speed 200 that bound is 0.99 mm/s for the first rule set (so within 1 mm/s is
+    guaranteed) and 2.38 mm/s for the refined one (the bound ignores that many rules firing at
+    once also raises W').
+    """
     z = singletons(max_speed)
     z0 = None
     zs = []
@@ -134,7 +134,7 @@ def test_matches_simpful_within_fixed_point_resolution(rule_set: int, vectors: l
 
 
 def test_a_priori_bounds() -> None:
-    """Pin the derived bounds (docstring): the first set is guaranteed within 1 mm/s."""
+    """Pin the derived bounds (a_priori_bound): the first set is guaranteed within 1 mm/s."""
     assert [round(a_priori_bound(FIRST, w), 3) for w in (0, 1)] == [0.993, 0.993]
     assert [round(a_priori_bound(REFINED, w), 3) for w in (0, 1)] == [2.382, 2.382]
 

@@ -1,5 +1,6 @@
-"""The firmware uses the geometry of the robot it runs on (issue 7): configured from the parameters in
-SIL and PIL, reported in HELLO, written by `twinbot flash --params`."""
+"""The firmware uses the geometry of the robot it runs on (docs/firmware.md, Geometry):
+configured from the parameters in SIL and PIL, reported in HELLO, written by `twinbot flash --params`.
+"""
 from __future__ import annotations
 
 import json

@@ -1,12 +1,10 @@
-"""The RP2040's small integers are 31-bit: the firmware proven on a 32-bit MicroPython.
+"""The RP2040's small integers are 31-bit: the firmware proven on a 32-bit MicroPython (docs/firmware.md).
 
-The 64-bit unix port keeps any value up to 2**62 a small int, so it cannot
-show an intermediate that passes 2**30, which on the RP2040 becomes a big
-int: a heap allocation every cycle.  The webassembly port (Node, 32-bit
-words, host_sim/micropython_tools.run_micropython_wasm) has the RP2040's
-31-bit small ints; under micropython.heap_lock() a big int raises
-MemoryError there, so the allocation checks below fail on any value beyond
-+-2**30 on the paths they run.  The same golden vectors give the same bits.
+The 64-bit unix port keeps any value up to 2**62 a small int, so it cannot show an
+intermediate past 2**30, which on the RP2040 is a big int: a heap allocation every cycle.
+The webassembly port (host_sim/board/micropython_runner.py run_micropython_wasm) has 31-bit
+small ints; under micropython.heap_lock() a big int raises MemoryError there, so the checks
+below fail on any value beyond +-2**30 on the paths they run.  Same golden vectors, same bits.
 """
 from __future__ import annotations
 

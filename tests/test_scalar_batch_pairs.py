@@ -1,20 +1,20 @@
 """Each piece of physics has a scalar path (one robot, pure Python) and a batch path (N robots,
-numpy) side by side in its module; here each pair is checked to agree (issue 7, point 5), on
-seeded random states, inputs and per-robot parameter sets far from the defaults.
-
-Tolerances, and why:
-- dynamics.step vs step_batch, reduced_accel_fast vs reduced_accel_batch: the same closed
-  form with the floating-point operations grouped differently, so they agree to rounding:
-  1e-12 relative to the size of the terms summed (accel_scale), not bit for bit;
-- motors.wheel_torque vs wheel_torque_batch: the same regimes (current limit, supply voltage
-  less back-EMF, friction) by branches vs np.where: 1e-12 relative;
-- motors.encoder_ticks vs encoder_ticks_batch: a floor, so EXACTLY equal (same float
-  expression, and the ticks are what the firmware counts);
-- SimRobot vs BatchSim, open-loop driving away from walls: the pairs above compounded over
-  seconds: poses to 1e-9 m, ticks equal except within 1e-6 tick of a boundary.
+numpy) side by side in its module; here each pair is checked to agree, on seeded random
+states, inputs and per-robot parameter sets far from the defaults (docs/dynamics.md).
 Contact and the IR beam have their own pair tests, with their code.
 """
 from __future__ import annotations
+
+# Tolerances, and why:
+# - dynamics.step vs step_batch, reduced_accel_fast vs reduced_accel_batch: the same closed
+#   form with the floating-point operations grouped differently, so they agree to rounding:
+#   1e-12 relative to the size of the terms summed (accel_scale), not bit for bit;
+# - motors.wheel_torque vs wheel_torque_batch: the same regimes (current limit, supply voltage
+#   less back-EMF, friction) by branches vs np.where: 1e-12 relative;
+# - motors.encoder_ticks vs encoder_ticks_batch: a floor, so EXACTLY equal (same float
+#   expression, and the ticks are what the firmware counts);
+# - SimRobot vs BatchSim, open-loop driving away from walls: the pairs above compounded over
+#   seconds: poses to 1e-9 m, ticks equal except within 1e-6 tick of a boundary.
 
 import math
 

@@ -221,7 +221,7 @@ def test_a_soft_reset_starts_with_hello(board):
 
 @pytest.mark.slow
 def test_flash_a_blank_board_then_it_answers_hello(tmp_path, standin):
-    """The issue's end-to-end check: mpy-cross, mpremote cp, reset, HELLO."""
+    """End to end, as a user flashes a Pico: mpy-cross, mpremote cp, reset, HELLO."""
     vb = VirtualBoard(f"{tmp_path / 'flash.img'}:512", standin.port, tmp_path / "board.log")
     try:
         r = mpremote(vb.path, "ls")

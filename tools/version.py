@@ -1,8 +1,8 @@
 """The package's version: one source, pyproject.toml's `version`, read through importlib.metadata.
 
-The host's HELLO and `twinbot --version` use it; the firmware carries the
-same number in firmware/config.py FIRMWARE_VERSION (a test keeps the two
-equal), because the board cannot read the host's package metadata.
+The host's HELLO and `twinbot --version` use it; the firmware carries the same number in
+firmware/config.py FIRMWARE_VERSION, because a board cannot read the host's package metadata
+(tests/test_cli_commands.py::test_version_is_the_package_version_and_the_firmware_carries_the_same).
 """
 from __future__ import annotations
 

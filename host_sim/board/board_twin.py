@@ -1,11 +1,9 @@
-"""The robot's twin behind a virtual board: the simulator is the board's hardware.
+"""The robot's twin behind a virtual board: the simulator is the board's hardware (docs/firmware.md).
 
-`twinbot board` starts a virtual board whose hardware link connects here.
-The simulator runs in real time: every control period it sends the board
-what its sensors read (HW_SENSE) and applies the currents the firmware
-answers (HW_ACTUATE) to the simulated robot.  The user drives the board
-through its serial port as they would the real robot; when the board
-resets, the robot stays where it was and the link is taken up again.
+`twinbot board` starts a virtual board whose hardware link connects here.  Every control
+period, in real time, the simulator sends the board what its sensors read (HW_SENSE) and
+applies the currents the firmware answers (HW_ACTUATE).  The user drives the board through
+its serial port as the real robot; when the board resets, the robot stays where it was.
 """
 from __future__ import annotations
 

@@ -1,15 +1,8 @@
-"""Frame logs: every frame a harness saw or sent, one JSON object a line.
+"""Frame logs: every frame a harness saw or sent, one JSON object a line (docs/frame-log.md).
 
-Written as frames arrive, appended and flushed line by line, so a killed
-process loses nothing that had been received.  The format (docs/frame-log.md):
-
-    {"kind": "session", "format": "twinbot-frames", "version": 1, "port": ..., "started": ISO-8601}
-    {"kind": "frame", "t": 0.0123, "dir": "rx", "type": "TELEMETRY", "seq": 7,
-     "fields": {...}, "frame": "<hex of the wire bytes, delimiter included>"}
-    {"kind": "stats", "t": ..., "decoder": {...counters...}}
-
-The reader re-decodes every frame's bytes and checks them against the
-logged type, sequence and fields, so a damaged file is never half-read.
+Written as frames arrive, appended and flushed line by line, so a killed process loses
+nothing it had received.  The reader decodes every frame's bytes again and checks them
+against the logged type, sequence and fields, so a damaged file is never half-read.
 """
 from __future__ import annotations
 

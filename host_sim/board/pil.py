@@ -1,10 +1,9 @@
-"""Processor in the loop: the firmware on a virtual board under MicroPython.
+"""Processor in the loop: the firmware on a virtual board under MicroPython (docs/firmware.md).
 
-This process is the board's hardware and its host: readings and outputs
-travel as HW_SENSE / HW_ACTUATE frames over the board's hardware link (TCP
-on 127.0.0.1), commands over its serial port.  SIL (host_sim/controller/sil.py) and
-PIL feed the firmware the same bytes in the same cycles, so in fixed-step
-mode they give the same trajectory bit for bit.
+This process is the board's hardware and its host: readings and outputs travel as
+HW_SENSE / HW_ACTUATE frames over the board's hardware link (TCP on 127.0.0.1), commands
+over its serial port.  SIL (host_sim/controller/sil.py) and PIL feed the firmware the same
+bytes in the same cycles, so in fixed-step mode they give the same trajectory bit for bit.
 """
 from __future__ import annotations
 

@@ -1,8 +1,8 @@
-"""One end of the twinbot protocol over any pyserial port or URL.
+"""One end of the twinbot protocol over any pyserial port or URL (protocol/SPEC.md).
 
-Opens /dev/tty..., socket://host:port, loop:// or rfc2217:// with errors a
-user can act on, sends messages by name, and turns received bytes into
-decoded frames while the decoder keeps count of everything it dropped.
+Opens /dev/tty..., socket://host:port, loop:// or rfc2217:// with errors a user can act
+on, sends messages by name, and turns received bytes into decoded frames while the
+decoder keeps count of everything it dropped.
 """
 from __future__ import annotations
 

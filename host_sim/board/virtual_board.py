@@ -1,18 +1,10 @@
-"""The virtual board as a process: MicroPython running firmware/unix_board.py,
-its stdin/stdout relayed to a pseudo-terminal.
+"""The virtual board as a process: firmware/unix_board.py under MicroPython, behind a pty.
 
-`twinbot board` and the simulator's PIL mode both start boards through
-this.  The board's hardware link connects to a TCP port on 127.0.0.1 where
-a simulator (or the stand-in of `twinbot board --standin`) serves
-HW_SENSE / HW_ACTUATE frames.
-
-A late link (`late_s`, `jitter_s`): what the board writes reaches the pty
-`late_s + U(-jitter_s, +jitter_s)` seconds later (seeded), in order as on a
-serial line (a chunk never overtakes the one before it), so a host sees
-its TELEMETRY late as over a slow radio link; what the host writes reaches
-the board at once.  This is the late-signal twin's test bench for a real
-host (docs/late-signal-twin.md; host_sim/loops/late_signal_trial.py does the same inside
-one simulation).
+`twinbot board` and the simulator's PIL mode start boards through this; the board's
+hardware link connects to a simulator (or a stand-in) on 127.0.0.1 (docs/firmware.md).
+A late link (`late_s`, `jitter_s`) delays what the board writes, seeded and in order as on
+a slow radio link, while the host's bytes reach the board at once: the late-signal twin's
+bench for a real host (docs/late-signal-twin.md).
 """
 from __future__ import annotations
 

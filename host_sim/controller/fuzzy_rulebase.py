@@ -1,16 +1,10 @@
-"""The fuzzy exploration controller's rule base, named and exported.
+"""The fuzzy exploration controller's rule base, named and exported (docs/fuzzy.md).
 
-firmware/fuzzy.py holds the rule base as bare numbers (RAM is scarce on the
-robot).  This module names those numbers, in the same order as the firmware
-tables, gives the geometry of the circular sets in floating point
-(circular_weight), explains one inference (evaluate), and exports the rule
-base as a Markdown table (rule_table) or as IEC 61131-7 FCL text (to_fcl),
-as pyfuzzylite keeps its exporters in the library.  `twinbot fuzzy`
-(tools/cli/fuzzy.py) is the command on top; docs/fuzzy.md explains it all.
-
-The firmware is the source of truth: everything here is derived from its
-tables, so a change there shows up here (and tests/test_fuzzy_peer.py checks
-the names still match the paper's rule list).
+firmware/fuzzy.py holds the rule base as bare numbers and is the source of truth; this
+module names them in the firmware's order, gives the circular sets' geometry in floating
+point (circular_weight), explains one inference (evaluate), and exports the rule base as
+a Markdown table (rule_table) or as IEC 61131-7 FCL (to_fcl) for `twinbot fuzzy`.
+tests/test_fuzzy_peer.py checks the names against the paper's rule list.
 """
 from __future__ import annotations
 

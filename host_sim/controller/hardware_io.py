@@ -1,15 +1,10 @@
 """The robot's electrical interface as the host sees it, and the constants it shares with the firmware.
 
-Every controller of a simulated robot takes the hardware's readings for a
-control cycle (a `Sense`: what a HW_SENSE frame carries) and returns its
-outputs (an `Actuate`: what a HW_ACTUATE frame carries).  The robots that
-produce readings (host_sim.robot.sim_robot.SimRobot, or any other plant) and the
-controllers that consume them (host_sim.controller.sil, host_sim.board.pil, host_sim.recordings.replay)
-meet here and nowhere else, so this module imports no physics and no
-firmware runtime.
-
-The numbers the firmware defines (control period, tick mask, rule-set
-names) are taken from the firmware itself: one home each.
+Every controller takes a control cycle's readings (a `Sense`: what a HW_SENSE frame
+carries) and returns its outputs (an `Actuate`: a HW_ACTUATE).  Robots (SimRobot or any
+plant) and controllers (SIL, PIL, replay) meet here and nowhere else, so this module
+imports no physics and no firmware runtime.  The firmware's own numbers (control period,
+tick mask, rule-set names) are taken from the firmware (docs/firmware.md).
 """
 from __future__ import annotations
 

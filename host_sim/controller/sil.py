@@ -1,10 +1,9 @@
-"""Software in the loop: the firmware's own modules, in this process.
+"""Software in the loop: the firmware's own modules, in this process (docs/firmware.md).
 
-The firmware's Robot runs on a BufferedHal whose readings are set from a
-`Sense` each cycle and whose host link is a pair of in-process buffers, so
-the host talks to it in frames exactly as over a serial port.  SIL and PIL
-(host_sim/board/pil.py) feed the firmware the same bytes in the same cycles: in
-fixed-step mode they give the same trajectory bit for bit.
+The firmware's Robot runs on a BufferedHal whose readings are set from a `Sense` each
+cycle and whose host link is a pair of in-process buffers, so the host talks to it in
+frames exactly as over a serial port.  SIL and PIL (host_sim/board/pil.py) feed the
+firmware the same bytes in the same cycles: in fixed-step mode, the same trajectory.
 """
 from __future__ import annotations
 

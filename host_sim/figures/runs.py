@@ -1,4 +1,4 @@
-"""Pictures of worlds and runs (matplotlib, no display needed)."""
+"""Pictures of worlds and runs (matplotlib, no display needed; docs/worlds.md)."""
 from __future__ import annotations
 
 import math

@@ -1,24 +1,10 @@
 """The paper's sensor figures (7, 8, 10, 11, 12), drawn from the model (`twinbot plot sensor`).
 
-Each figure is a PNG in the output directory (`--out`, default docs/figures):
-
-    fig7_angle.png     angle response: the target shape, the big and the small
-                       dome polynomials, the blend zone and the blended A(angle)
-    fig8_distance.png  light sensed against distance for three emitter powers,
-                       with the ADC ceiling, the model beyond it and C/x^2
-    fig10_power.png    light sensed against emitter power at fixed distances:
-                       proportional, then flat (emitter or ADC saturation)
-    fig11_3d_L27.png   light sensed against distance and angle at L = 27 %
-    fig12_3d_L78.png   the same at L = 78 %
-
-"Light sensed" is what the firmware gets after the ambient subtraction:
-on - off = min(reflected, adc_max - ambient), without noise.
-
-plot_worlds draws the built-in worlds (worlds.png, `twinbot plot worlds`),
-for docs/worlds.md.
-
-matplotlib (Agg) is imported inside the functions: building the CLI parser
-stays cheap.
+PNGs in --out (default docs/figures): fig7_angle (the angle response), fig8_distance
+(light against distance for three emitter powers), fig10_power (against emitter power),
+fig11_3d_L27 and fig12_3d_L78 (against distance and angle at L = 27 % and 78 %).  Light
+sensed is on - off = min(reflected, adc_max - ambient), without noise (docs/ir-sensor.md).
+plot_worlds draws the built-in worlds (docs/worlds.md).
 """
 from __future__ import annotations
 
@@ -33,6 +19,7 @@ FIRMWARE_NEAR = (40, 700)  # firmware/fuzzy.py NEAR_LO, NEAR_HI: the obstacle me
 
 
 def _pyplot() -> Any:
+    # Imported here, not at the top: building the `twinbot` parser stays cheap.
     import matplotlib
 
     matplotlib.use("Agg")

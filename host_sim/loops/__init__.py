@@ -1,0 +1,1 @@
+"""The loops that run a controller against a robot: simulation, live stepping, sweeps, the manoeuvre, the ghost."""

@@ -1,10 +1,9 @@
-"""Exploration measures: how much of the free area the robot has swept.
+"""Exploration measures: how much of the free area the robot has swept (docs/sweep.md).
 
-The free area is the grid of cells (5 cm by default) whose centre a robot
-centre can reach from the start without touching a wall.  A cell counts as
-covered once the robot's body has been over its centre (centre within one
-body radius) at a control cycle.  Coverage is the covered fraction of the
-free cells, recorded at every control instant in `fractions`.
+The free area is the grid of cells (5 cm by default) whose centre a robot centre can reach
+from the start without touching a wall.  A cell counts as covered once the robot's centre
+has been within one body radius of its centre at a control cycle; `fractions` holds the
+covered fraction of the free cells at every control instant.
 """
 from __future__ import annotations
 

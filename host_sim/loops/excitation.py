@@ -1,22 +1,10 @@
-"""The identification manoeuvre: wheel-speed commands that make the robot's physics show.
+"""The identification manoeuvre: wheel-speed commands that make the robot's physics show (docs/diagnosis.md).
 
-A recording of the robot exploring says little about dry friction (it never
-creeps), delay (it never steps), backlash (it rarely reverses) or traction
-(it never pushes hard).  The manoeuvre asks for each in turn, in the
-firmware's HOST mode (wheel-speed set-points, mm/s), and repeats:
-
-    creep      +-25 mm/s both wheels            dry friction, breakaway
-    steps      0, 150, 250, 0, -150, 0 mm/s     delay, torque constant, inertia
-    chirp      120 mm/s sine, 0.2 -> 2.5 Hz     delay, inertia, viscous friction
-    spins      +-120 mm/s in place              track width, turning resistance
-    arcs       200 / 100 mm/s and mirrored      a wheel's radius, torque constant
-    reversals  +-80 mm/s every 0.6 s            backlash
-    bursts     350 mm/s                         traction, current limit, battery sag
-
-Two guards keep it safe, from what the robot itself reports (TELEMETRY):
-the IR ring (a sensor that sees a wall close ahead of the motion turns the
-command into a spin away from it) and the odometry (beyond `radius` from
-where it started, the robot drives back towards its start).
+An exploring robot never creeps, steps, reverses or pushes hard, so dry friction, delay,
+backlash and traction stay hidden.  The manoeuvre asks for each in turn in HOST mode
+(SEGMENTS: creep, steps, chirp, spins, arcs, reversals, bursts) and repeats.  Two guards on
+what the robot reports keep it safe: a wall seen close ahead turns the command into a spin
+away from it, and beyond `radius` from its start the robot drives back towards it.
 """
 from __future__ import annotations
 

@@ -1,17 +1,10 @@
-"""Proof of the late-signal twin: the robot is the simulator, the link is late.
+"""Proof of the late-signal twin: the robot is the simulator, the link is late (docs/late-signal-twin.md).
 
-The robot is host_sim.loops.simulation.Simulation with the firmware in SIL (HOST
-mode), driven by a scripted host through the identification manoeuvre
-(host_sim/loops/excitation.py).  Every TELEMETRY frame reaches the host after a
-delay `mean_s + U(-jitter_s, +jitter_s)` (simulated time, seeded, in order
-like a serial link: a frame never overtakes the one before it).  The host
-sees only the late frames; it steers from them, tells the ghost
-(host_sim/loops/late_signal_twin.py) each COMMAND and frame, and at every control instant
-the ghost's predicted pose and the raw late pose (the last frame's
-odometry) are compared with the simulator's true pose, put in the
-odometry's frame (the firmware's odometry starts at 0 where the robot
-starts).  The plant shares no code with the ghost: the simulator's
-dynamics and motors against the ghost's kinematic lag.
+The simulator with the firmware in SIL is driven by a scripted host through the
+identification manoeuvre; every TELEMETRY frame reaches the host `mean_s +
+U(-jitter_s, +jitter_s)` late (simulated time, seeded, in order).  At every control instant
+the ghost's prediction and the raw late pose are compared with the true pose, in the
+odometry's frame.  The plant shares no code with the ghost (tests/test_ghost.py).
 """
 from __future__ import annotations
 

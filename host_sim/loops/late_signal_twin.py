@@ -1,29 +1,10 @@
 """The late-signal twin: a ghost robot that says where the robot is NOW when its signal arrives late.
 
-The paper's last paragraph proposes "a simulated model synchronised with
-the real robot, used when the real robot's signal arrives late".  The host
-sees each TELEMETRY frame some time after the robot measured it; the raw
-pose it carries (the firmware's odometry) is where the robot *was*.  The
-ghost keeps:
-
-- the link's latency: each frame's tick (the robot's clock, ms) against its
-  arrival on the host's clock.  The smallest `arrival - tick` over a sliding
-  window is the clock offset plus the link's floor (its fastest delivery);
-  a frame's latency is its excess over that minimum plus the floor.  The
-  floor cannot be seen from one direction of the link alone (the two clocks
-  are not synchronised), so it is an input: a serial link's transmit time,
-  or half a measured round trip; 0 reports the delay relative to the
-  fastest frame.
-- the commands the host sent (HOST mode wheel-speed set-points, mm/s) with
-  their send times;
-- the last real state: the odometry pose (um, 1/2^30 turn) and the wheel
-  speeds from the last two frames' encoder counts.
-
-`predict(now)` advances that state from the frame's tick to `now` (host
-clock mapped to the robot's) through the commands in force, with a
-kinematic model of the firmware's wheel-speed loop: each wheel follows its
-set-point with a first-order lag `tau_s` after a dead time `dead_s`.  Each
-new frame replaces the state, which corrects the ghost.
+The ghost estimates the link's latency from each TELEMETRY frame's tick against its
+arrival (the link's floor is an input: one direction cannot see it), keeps the HOST-mode
+commands the host sent, and `predict(now)` advances the last frame's odometry pose through
+them with a kinematic model of the firmware's wheel loops (a dead time `dead_s`, then a
+first-order lag `tau_s`).  Each new frame replaces the state (docs/late-signal-twin.md).
 """
 from __future__ import annotations
 

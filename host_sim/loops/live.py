@@ -1,24 +1,10 @@
-"""A Simulation stepped from outside, a frame at a time: the loops of `twinbot gui`.
+"""A Simulation stepped from outside, a frame at a time: the loops of `twinbot gui` (docs/gui.md).
 
-`Simulation.run_fixed` and `Simulation.run_realtime` own their loop; an
-interactive front end owns its own (events, drawing) and asks the
-simulation to catch up once per frame.  `LiveStepper` gives it the same
-two ways of stepping, with the same semantics:
-
-- `fixed(seconds)`: whole control periods, each = read the sensors and run
-  the controller, then `substeps` substeps of cycle / substeps.  Seconds
-  that do not make a whole period are owed to the next call, so the
-  trajectory depends only on how many periods ran, never on how the frames
-  cut them: it is run_fixed's trajectory bit for bit.
-- `clock(big_dt)`: one pass of the paper's real-time loop (run_realtime):
-  if the simulated time has reached the next 40 ms control instant, the
-  controller runs now (the grid keeps its phase; instants a long pass
-  jumped over are counted in `missed`), then big_dt is integrated in
-  n = ceil(big_dt / (cycle / substeps)) equal substeps.
-
-`before_control` (optional) is called just before each control instant:
-the place to queue a host command so that it reaches the firmware in the
-cycle it belongs to, whatever the speed factor.
+An interactive front end owns its loop and asks the simulation to catch up once per frame.
+`LiveStepper.fixed(seconds)` runs whole control periods and owes the rest to the next call,
+so its trajectory is run_fixed's bit for bit however the frames cut it; `clock(big_dt)` is
+one pass of run_realtime's loop.  `before_control` runs just before each control instant:
+the place to queue a host command for the cycle it belongs to.
 """
 from __future__ import annotations
 

@@ -1,18 +1,10 @@
-"""The paper's repeatability experiment (section 4, Fig. 15), measured.
+"""The paper's repeatability experiment (section 4, Fig. 15), measured (docs/paper-reproduction.md).
 
-Two runs from identical conditions - same world, start, firmware, noise
-seed - are identical bit for bit with a fixed step, and can take different
-routes with the step from the clock (`Simulation.run_realtime`), when the
-robot meets a decision where a tiny difference tips it one way or the other.
-
-The scenario (`ForkScenario`) is such a decision: the first rule set in the
-paper's room, the robot driving up to the top wall almost square to it.  It
-stalls in front of the wall, balancing "left" against "right", until one
-side wins: turning right takes it towards the exit bay, turning left back
-into the room.  `fork_heading` finds, by bisection with fixed-step runs,
-the start heading where the route forks; `split_experiment` then runs pairs
-from that start and counts the pairs that split: whose routes, compared at
-the same simulated times, are at some time farther apart than a threshold.
+Runs from identical conditions are identical bit for bit with a fixed step and can take
+different routes with the step from the clock.  `ForkScenario` is such a decision: the
+first rule set driving almost square at the paper room's top wall.  `fork_heading` finds by
+bisection the start heading where the route forks; `split_experiment` counts the pairs from
+there whose routes, at the same simulated times, come farther apart than a threshold.
 """
 from __future__ import annotations
 

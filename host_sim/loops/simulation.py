@@ -1,31 +1,11 @@
-"""The simulation loop of the paper's section 4: fixed-step and real-time.
+"""The simulation loop of the paper's section 4: fixed step and real time (docs/paper-reproduction.md).
 
-The firmware's control period is 40 ms: the controller gets the robot's
-readings and sets its currents, and between control instants the physics
-advances.
-
-- Fixed step: every control period is split into n substeps of equal dt and
-  the controller runs exactly every 40 ms of simulated time.  Nothing
-  depends on the clock, so two runs with the same world, seed and
-  controller are identical bit for bit.  `speed` paces it (k x real time)
-  or, at infinity, runs as fast as the machine can.
-- Real time (the paper's variable step, `run_realtime`): the loop takes
-  Dt = (wall time since its last pass) x speed from the clock, never less
-  than `min_step`, and integrates Dt in n = ceil(Dt / (cycle / substeps))
-  substeps of Dt / n (the paper's "Dt = n dt").  When a pass ends at or
-  after the next 40 ms instant the sensors are read and the controller runs
-  there, at the pass: the control instants follow the clock, late by up to
-  one pass, and average 40 ms apart (a pass longer than a period skips the
-  instants it jumped over, counted in RunResult.extra).  Dt depends on what
-  else the machine does, so the sensors see the robot at slightly different
-  places from run to run even with the same noise seed, and, as the paper
-  observed (Fig. 15), two runs from identical conditions can take
-  different routes at a decision point (host_sim/loops/repeatability.py measures
-  how often).
-
-Each substep uses the twin's own integrator (host_sim/physics/dynamics.py, second
-order), not the paper's explicit X = X + X' dt: only the step sizes come
-from the clock.
+Every 40 ms control period the controller gets the robot's readings and sets its currents;
+between control instants the physics advances.  `run_fixed` splits each period into n
+equal substeps: nothing depends on the clock, so runs repeat bit for bit.  `run_realtime`
+(the paper's variable step) integrates the wall time since its last pass, times `speed`, in
+n substeps and runs the controller at the first pass at or after each 40 ms instant, so
+runs from identical conditions can part (host_sim/loops/repeatability.py).
 """
 from __future__ import annotations
 

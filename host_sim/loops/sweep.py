@@ -1,18 +1,10 @@
-"""Many fixed-step runs (rule sets x worlds x seeds x perturbations), on local cores or a Dask cluster.
+"""Many fixed-step exploration runs, on local cores or a Dask cluster (docs/sweep.md).
 
-A case is one fixed-step SIL run; it is a pure function of (rules, world,
-seed, duration, substeps, start jitter, perturbations), bit-for-bit
-repeatable, so a row does not depend on where it ran.  The seed draws the
-sensor noise, and from streams of its own (`draw_start`, `draw_params`): a
-start within `start_radius` of the world's start pose and `start_heading_deg`
-of its heading, and each perturbed RobotParams field uniformly within
-+-REL of nominal (the plant's; the firmware keeps the nominal geometry, as
-a real robot's firmware does not know its own wheels are worn).  `run_cases` hands the cases to Dask distributed: a
-LocalCluster of one single-threaded worker process per core by default, or
-an existing scheduler (`tcp://HOST:8786`) whose workers have twinbot
-installed.  `write_table` writes a row per run, `summarise` a row per
-rule set x world, and `save_coverage_plot` coverage against time (mean and
-10-90 % band per rule set x world).
+A case is one fixed-step SIL run, a pure function of its fields, so a row does not depend
+on where it ran.  Its seed draws the sensor noise, a start near the world's (`draw_start`)
+and the perturbed robot parameters (`draw_params`; the plant's only: the firmware keeps the
+nominal geometry).  `run_cases` runs the cases on Dask distributed; `write_table`,
+`summarise` and `save_coverage_plot` write the results.
 """
 from __future__ import annotations
 

@@ -1,0 +1,1 @@
+"""Recordings of what a robot commanded and sensed, and their replay through the twin (docs/recordings.md)."""

@@ -1,29 +1,10 @@
-"""Recordings: what a robot commanded and sensed, one format for simulator and robot.
+"""Recordings: what a robot commanded and sensed, one format for simulator and robot (docs/recordings.md).
 
-A recording is a CSV file plus a JSON sidecar (docs/recordings.md):
-
-    t,cmd_l,cmd_r,enc_l,enc_r,ir_on_0..7,ir_amb_0..7,vbat,emitter_pct,
-    mode,sp_l,sp_r,odo_x,odo_y,odo_phi,x,y,phi
-
-one row per control cycle: t in seconds; cmd_l, cmd_r the current references
-in A; enc_l, enc_r cumulative encoder ticks; ir_on_i, ir_amb_i raw ADC counts
-with the emitters on and off (sensor 0 = S1 front, counter-clockwise); vbat in
-volts; emitter_pct the emitter pulse width of this row's on-reading; then the
-firmware's own view (mode, wheel-speed set-points in m/s, its odometry in m
-and rad), empty when the robot ran no firmware (an open-loop replay) or an
-older firmware that does not report it; x, y (m) and phi (rad) from an
-external tracker (the simulator's truth), empty when there is none.  The
-sidecar `FILE.json` holds the robot parameters, the world, the sample
-period, the units, the source and the software version.
-
-One writer, `RecordingWriter`, for every source: a robot's TELEMETRY goes in
-through `telemetry()` (the harness, and the simulator with the firmware in
-the loop), readings and outputs of a robot with no firmware through `row()`.
-Rows are written and flushed one at a time: a killed recorder loses nothing
-it had written.  `load_recording` checks every cell and says file, line and
-column of anything wrong; a last line cut short is reported as such, never
-silently dropped.  Version 1 files (without emitter_pct and the firmware's
-view) still load.
+A CSV file, one row per control cycle, plus a JSON sidecar.  One writer, `RecordingWriter`,
+for every source: TELEMETRY through `telemetry()`, a robot with no firmware through `row()`;
+rows are flushed one at a time, so a killed recorder loses nothing it had written.
+`load_recording` checks every cell and names the file, line and column of anything wrong;
+version 1 files still load.
 """
 from __future__ import annotations
 

@@ -1,22 +1,10 @@
-"""Replay a recording's inputs open loop, from any recorded state: one robot, or N parameter sets at once.
+"""Replay a recording's inputs open loop from any recorded state: one robot, or N parameter sets at once.
 
-This is what identification and diagnosis need: take row k of a recording
-(a real robot's or the simulator's), put the model in the state recorded
-there, feed it the recorded current references cycle after cycle, and
-compare what the model's encoders, sensors and pose do with what was
-recorded.  `replay` does it for one robot (host_sim.robot.sim_robot.SimRobot),
-`replay_batch` for N parameter sets at once (host_sim.robot.batch.BatchSim,
-vectorised); both read the recording through `replay_inputs`, the one place
-that says what a recording's timing, emitter power and start mean.
-
-The state at row k comes from the recording alone: the pose of C from the
-tracker columns (needed), the wheel angles from the encoder counts (the
-middle of the recorded tick), and the
-wheel speeds from the encoder counts around row k (central differences, or
-the rows after it at the start).  Where the tracker saw the robot slide over
-the floor at row k (`sliding_rows`), the body's velocity too: the replay
-starts sliding.  At row 0 of a simulator recording the
-robot is at rest, so a replay from there repeats the run exactly.
+`replay` runs one SimRobot, `replay_batch` a BatchSim; both read the recording through
+`replay_inputs`, the one place that says what its timing, emitter power and start mean.
+The state at row k comes from the recording alone (tracker pose, wheel angles and speeds
+from the encoders, a slide the tracker saw: `sliding_rows`), so a simulator recording
+replayed from row 0 repeats the run exactly (docs/recordings.md, docs/diagnosis.md).
 """
 from __future__ import annotations
 

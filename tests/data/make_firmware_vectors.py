@@ -1,27 +1,11 @@
-"""Regenerate tests/data/firmware_golden.jsonl, the firmware's golden vectors.
+"""Regenerate tests/data/firmware_golden.jsonl, the firmware's golden vectors (docs/firmware-vectors.md).
 
     python -m tests.data.make_firmware_vectors [OUTPUT]
 
-The file pins the exact integer outputs of the firmware's control path, so
-that every port (CPython in the host simulator, MicroPython on the robot and
-on the virtual board) can be shown to compute the same bits:
-
-    fz  the fuzzy controller (firmware/fuzzy.py): sensor vectors, each
-        evaluated with both rule sets at two max_speed values;
-    ir  the IR loop (firmware/ir.py): sequences of 5..20 acquisitions through
-        a replaying test HAL, with every averaging method and window;
-    od  odometry (firmware/odometry.py): sequences of 10..50 (dL, dR) steps,
-        each run with all three methods, by step() or by update();
-    wh  the wheel PI (firmware/wheels.py): sequences of measure / control.
-
-JSON Lines, ASCII: the first line is a header (format, seed, counts, the
-layout of every kind), then one case per line, kind first.  MicroPython
-reads it a line at a time with a small heap (tests/mp/firmware_vectors_check.py);
-tests/test_firmware_vectors.py checks the file on CPython and under
-MicroPython, and that it equals what this script writes now.  The script is
-deterministic: one seeded random.Random, integers only, no clock.
-
-Regenerate only when a firmware output changes on purpose (docs/firmware-vectors.md).
+The file pins the exact integer outputs of the firmware's control path (fz fuzzy
+controller, ir IR loop, od odometry, wh wheel PI), so that every port can be shown to
+compute the same bits.  Deterministic: one seeded random.Random, integers only, no clock.
+Regenerate only when a firmware output changes on purpose.
 """
 from __future__ import annotations
 

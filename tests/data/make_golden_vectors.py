@@ -1,17 +1,12 @@
-"""Regenerate tests/data/protocol_golden.json, the protocol's golden vectors.
+"""Regenerate tests/data/protocol_golden.json, the protocol's golden vectors (protocol/SPEC.md).
 
     python -m tests.data.make_golden_vectors [OUTPUT]
 
-The file freezes the wire format: for every message type a set of field
-values (zeros, minima, maxima, 0xFF-heavy, 0x00-heavy, seeded random) with
-the exact frame bytes, and a few streams mixing frames with garbage together
-with the decoder counters they must produce.  tests/test_golden_vectors.py
-checks it on CPython, tests/mp/golden_check.py under MicroPython, and that
-the checked-in file equals what this script writes (it is deterministic:
-seeded, no clock, no dict-order dependence).
-
-Plain JSON (lists, dicts, ints, ASCII strings with \\u escapes), one case
-per line, so MicroPython's json module reads it and diffs stay readable.
+The file freezes the wire format: for every message type field values (zeros, extremes,
+seeded random) with the exact frame bytes, and streams mixing frames with garbage with the
+decoder counters they must produce.  tests/test_golden_vectors.py checks it on CPython, under
+MicroPython (tests/mp/golden_check.py), and that it equals what this deterministic script
+writes.  Plain JSON, one case per line, so MicroPython reads it and diffs stay readable.
 """
 from __future__ import annotations
 

@@ -1,16 +1,10 @@
 """Allocation check under MicroPython: micropython [-X heapsize=64k] tests/mp/alloc_check.py
 
-Once FrameEncoder / FrameDecoder exist and every code path has run once,
-receiving and sending must not touch the heap (a firmware control loop must
-not trigger the GC).  The hot loops run inside micropython.heap_lock(), where
-any allocation raises MemoryError; then once more with the GC disabled,
-comparing gc.mem_alloc() before and after.  Everything runs inside functions
-(a new module global would allocate) and results go into preallocated lists.
-Prints 'alloc: ok' last; exits 1 on any allocation or wrong result.
-
-The pytest runs it with the default heap and with -X heapsize=64k, from
-source and with protocol/ compiled by mpy-cross (as flashed).  The 64-bit
-unix port's objects are about twice an RP2040's, so 64 kB here is tight.
+Once FrameEncoder / FrameDecoder exist and every path has run once, receiving and sending
+must not touch the heap: the hot loops run inside micropython.heap_lock(), then again with
+the GC disabled, comparing gc.mem_alloc().  Everything runs inside functions (a new module
+global would allocate).  Prints 'alloc: ok' last; exits 1 on any allocation or wrong result.
+tests/test_micropython_alloc.py runs it from source and compiled, in the default and a 64 kB heap.
 """
 import gc
 import struct

@@ -1,16 +1,10 @@
 """One control cycle allocates nothing: micropython tests/mp/firmware_cycle_check.py
 
-Runs the firmware's Robot on the test HAL (firmware/hal_testbench.py), whose methods allocate nothing,
-warms every path up (autonomous with obstacles, host commands, a parameter
-change, the watchdog), then runs cycles inside micropython.heap_lock(): any
-heap allocation raises MemoryError.  Host bytes (COMMAND frames) arrive
-during the locked cycles, so the receive path is inside the proof too.
-Then every message type the host can send, every parameter at its minimum
-and its maximum (each followed by driving cycles, so the control path runs
-at that extreme), out-of-range and unknown parameters, and hostile frames
-(bad CRC, wrong length, unknown type, oversize, junk bursts) arrive inside
-locked cycles too; the decoder's counters and the parameters applied are
-checked afterwards, so a frame cannot pass by being ignored.
+Runs the firmware's Robot on the test HAL (firmware/hal_testbench.py), warms every path up,
+then runs cycles inside micropython.heap_lock() while host frames arrive: every message
+type, every parameter at its minimum and maximum (each followed by driving cycles),
+out-of-range and unknown parameters, and hostile frames.  The decoder's counters and the
+parameters applied are checked afterwards, so a frame cannot pass by being ignored.
 Prints 'cycle: ok N cycles' and the heap in use; exits 1 on failure.
 """
 import gc

@@ -1,17 +1,11 @@
 """Firmware golden vectors: micropython tests/mp/firmware_vectors_check.py tests/data/firmware_golden.jsonl
 
-Replays every case of the file written by tests/data/make_firmware_vectors.py
-through the firmware (fuzzy controller, IR loop on a replaying test HAL,
-odometry, wheel PI) and compares every output exactly.  Reads one line at a
-time, so a small heap is enough.  Prints 'firmware vectors: N cases ok (fz
-.., ir .., od .., wh ..)'; on the first difference prints the line, the case
-and both values and exits 1.  Only MicroPython built-ins (json, sys); CPython
-runs it too (tests/test_firmware_vectors.py imports check_file).
-
-With --locked (MicroPython only) every call into the firmware runs inside
-micropython.heap_lock(): on a 32-bit port, where small ints are 31-bit, any
-intermediate beyond +-2**30 would be a big int, an allocation, and so a
-MemoryError, reported as 'FAIL line N ...: allocation in ...'.
+Replays every case of tests/data/make_firmware_vectors.py's file through the firmware and
+compares every output exactly, a line at a time (a small heap is enough).  Prints
+'firmware vectors: N cases ok (...)' or the first difference and exits 1.  CPython runs it
+too (tests/test_firmware_vectors.py imports check_file).  With --locked (MicroPython only)
+every firmware call runs inside heap_lock(): on a 32-bit port a value beyond +-2**30 is a
+big int, an allocation, reported as 'FAIL line N ...: allocation in ...'.
 """
 import json
 import sys

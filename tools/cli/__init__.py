@@ -1,0 +1,1 @@
+"""The `twinbot` command: main.py wires one module per subcommand."""

@@ -1,21 +1,11 @@
 """`twinbot board`: the firmware on a virtual board, behind a pseudo-terminal.
 
-The board is the MicroPython unix port running firmware/unix_board.py: it boots
-main.py from its own flash (a folder, or a littlefs image of a given size),
-offers the REPL that mpremote drives, and runs the firmware, whose host
-link is the board's stdin/stdout.  This module relays those to a
-pseudo-terminal, so `twinbot serial`, mpremote or any terminal program
-opens the printed /dev/pts/N as they would a Pico's /dev/ttyACM0.
-
-The firmware's electrical I/O (HW_SENSE / HW_ACTUATE) goes to the robot's
-twin: the simulator, in real time, in the world of --world (the paper's
-room by default).  Drive the board as the real robot: `twinbot serial
-/dev/pts/N --command autonomous 0 0` and it explores.  --standin serves
-fixed readings instead (a wall in front, wheels that do not turn).
---late MS [--jitter MS] makes the link late: what the board sends reaches
-the pty that much later (in order), as over a slow radio link, to try the
-late-signal twin (the ghost of `twinbot gui --port`, `twinbot serial
---predict`) against a real host.
+MicroPython's unix port runs firmware/unix_board.py (its own flash, boot, REPL, resets) and
+this relays its stdin/stdout to a pty that `twinbot serial`, mpremote or a terminal opens as
+a Pico's /dev/ttyACM0.  Its hardware is the robot's twin in --world, in real time; drive it as
+the real robot (`twinbot serial /dev/pts/N --command autonomous 0 0`).  --standin serves fixed
+readings instead.  --late MS [--jitter MS] delays what the board sends, to try the late-signal
+twin against a real host (docs/firmware.md, docs/late-signal-twin.md).
 """
 from __future__ import annotations
 

@@ -1,16 +1,9 @@
-"""`twinbot demo`: the paper's experiment, start to finish.
+"""`twinbot demo`: the paper's experiment, start to finish (docs/paper-reproduction.md).
 
-1. Both rule sets of section 5 explore the paper's room (Fig. 15), with the
-   firmware in the loop (SIL), fixed step: trajectory pictures, coverage
-   over time, collisions.
-2. The repeatability experiment of section 4 (Fig. 15): pairs of runs from
-   identical conditions at a decision point (first rule set, the robot
-   driving square at a wall; host_sim/loops/repeatability.py).  With the step
-   from the wall clock a good share of the pairs split (their routes are
-   more than 0.3 m apart at some time); with a fixed step none do, every
-   pair is identical bit for bit.
-
-Pictures go to --out (default demo/).  `twinbot demo --loopback` shows the
+Both rule sets explore the paper's room with the firmware in the loop (trajectories,
+coverage over time, collisions); then the repeatability experiment of section 4: pairs of
+runs from identical conditions at a decision point split with the step from the wall clock,
+and never with a fixed step.  Pictures go to --out (default demo/); --loopback shows the
 serial protocol on its own instead.
 """
 from __future__ import annotations

@@ -1,13 +1,9 @@
 """`twinbot flash --port PORT`: put this checkout's firmware on a board.
 
-Steps: ask the board (through mpremote) for its .mpy version and free
-flash; compile firmware/ and protocol/ with mpy-cross into bytecode .mpy
-files that this board can load; remove the old firmware/ and protocol/
-folders (a stale .py would shadow its new .mpy); copy the new ones and
-main.py with mpremote; reset the board (machine.reset()); wait for the
-firmware to answer HELLO over the twinbot protocol.
-
-Works the same on a Raspberry Pi Pico (/dev/ttyACM0) and on `twinbot board`.
+Asks the board for its .mpy version and free flash, compiles firmware/ and protocol/ with
+mpy-cross, replaces the old folders (a stale .py would shadow its .mpy), copies main.py,
+resets the board and waits for the firmware's HELLO.  Works the same on a Raspberry Pi Pico
+(/dev/ttyACM0) and on `twinbot board` (docs/firmware.md).
 """
 from __future__ import annotations
 

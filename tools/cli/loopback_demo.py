@@ -1,9 +1,9 @@
-"""`twinbot demo --loopback`: the serial protocol, shown on its own.
+"""`twinbot demo --loopback`: the serial protocol, shown on its own (protocol/SPEC.md).
 
-A protocol loop-back: a scripted robot conversation (HELLO, parameters, COMMANDs, TELEMETRY, a LOG) goes out
-through the serial harness on loop:// and comes back decoded, with one
-frame corrupted on the way and one dropped, so the counters show what the
-decoder catches.  Every frame is recorded to a frame log.
+A scripted robot conversation (HELLO, parameters, COMMANDs, TELEMETRY, a LOG) goes out
+through the serial harness on loop:// and comes back decoded, with one frame corrupted on
+the way and one dropped, so the counters show what the decoder catches.  Every frame is
+recorded to a frame log (docs/frame-log.md).
 """
 from __future__ import annotations
 

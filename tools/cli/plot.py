@@ -4,7 +4,7 @@
     twinbot plot sensor              the IR sensor model as the paper's Figs. 7, 8, 10, 11, 12
     twinbot plot worlds              the built-in worlds
 
-The figures themselves are host_sim/figures/sensor_model.py's.
+The figures themselves are host_sim/figures/sensor_model.py's (docs/ir-sensor.md, docs/worlds.md).
 """
 from __future__ import annotations
 

@@ -1,15 +1,11 @@
 """`twinbot replay REC.csv`: a recording's commands, open loop, through the twin.
 
-The twin starts in the state recorded at --start (row 0 by default: the
-tracker pose, the encoder angles, wheel speeds from the encoder counts),
-is fed the recorded current references cycle after cycle, and the command
-prints how far its encoders and pose end from the recorded ones, and the
-largest gap on the way.  A simulator recording replays exactly (0 ticks,
-0 mm); a real robot's shows how far the twin is from the robot.
-
-The robot parameters and the world come from the recording's sidecar
-unless --params / --world say otherwise (a real robot's recording has no
-world: give --world).  --png draws the recording with the twin's track.
+The twin starts in the state recorded at --start (row 0 by default), is fed the recorded
+current references, and the command prints how far its encoders and pose end from the
+recorded ones, and the largest gap on the way: 0 ticks and 0 mm for a simulator recording, the
+twin's distance from the robot for a real one.  Parameters and world come from the sidecar
+unless --params / --world say otherwise (a real robot's recording has no world: give
+--world).  docs/recordings.md.
 """
 from __future__ import annotations
 

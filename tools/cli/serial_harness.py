@@ -3,6 +3,8 @@
 Shows every decoded frame in readable form with running counts of good
 frames, CRC errors and sequence gaps; sends HELLO, COMMAND and PARAM
 messages given on the command line; records every frame to a log.
+
+The protocol is protocol/SPEC.md; the log's format, docs/frame-log.md.
 """
 from __future__ import annotations
 

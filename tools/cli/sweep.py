@@ -1,22 +1,10 @@
-"""`twinbot sweep`: many exploration runs (rule sets x worlds x seeds x perturbations) in parallel, one table.
+"""`twinbot sweep`: many exploration runs (rule sets x worlds x seeds x perturbations) in parallel.
 
-Every combination is a fixed-step SIL run (exactly repeatable: the same
-seed gives the same row on any machine).  Each seed draws the sensor noise,
-a start near the world's (by default within 5 cm and +-15 degrees; see
---start-radius, --start-heading, --fixed-start) and, with --perturb, the
-robot's parameters within +-REL of nominal.  By default the runs go to a Dask
-LocalCluster of one worker process per local core; --scheduler sends them
-to an existing Dask distributed cluster instead (its workers need twinbot
-installed: `pip install -e .` in a checkout of the same version).
-
-Writes in --out: runs.csv (a row per run: rules, world, seed, duration_s,
-coverage_end (fraction of the free area), t90_s (time to 90 % coverage,
-empty if never), start_x_m, start_y_m, start_phi_rad (the start drawn), exit_found, exit_time_s, collisions, stuck (the robot did
-not find the exit and its centre stayed within 5 cm of where it was 20 s
-before the end; runs shorter than 20 s use the whole run),
-moved_last_window_m, then each --perturb parameter's drawn value), summary.csv (a row per rule set x world: means,
-rates, medians) and coverage.png (coverage against time, mean and 10-90 %
-band over the seeds, a panel per world).
+Every combination is a fixed-step SIL run, so the same seed gives the same row on any
+machine.  Each seed draws the sensor noise, a start near the world's and, with --perturb,
+robot parameters within +-REL of nominal.  The runs go to a local Dask cluster, or with
+--scheduler to an existing one (its workers need twinbot installed).  --out gets runs.csv
+(a row per run), summary.csv (a row per rule set x world) and coverage.png (docs/sweep.md).
 """
 from __future__ import annotations
 
