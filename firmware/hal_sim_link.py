@@ -9,11 +9,10 @@ import select
 import socket
 import struct
 
-from firmware.hal import TICK_MASK
 from firmware.hal_buffered import BufferedHal
 from firmware.hostlink import StdioLink
 from protocol import wire
-from protocol.fields import read_i32, read_u16
+from protocol.fields import read_u16, read_u30, read_wrap30
 from protocol.framing import FrameDecoder, FrameEncoder
 
 _ACTUATE_FMT = "<IhhB"
@@ -68,12 +67,12 @@ class SimLinkHal(BufferedHal):
             if dec.ready and dec.msg_type == wire.HW_SENSE:
                 self.begin()
                 b = dec.body
-                self.tick = read_i32(b, 3) & TICK_MASK
+                self.tick = read_u30(b, 3)  # the clock modulo 2**30 (firmware/hal.py TICK_MASK)
                 for k in range(8):
                     self.adc_off[k] = read_u16(b, 7 + 2 * k)
                     self.adc_on[k] = read_u16(b, 23 + 2 * k)
-                self.enc[0] = read_i32(b, 39)
-                self.enc[1] = read_i32(b, 43)
+                self.enc[0] = read_wrap30(b, 39)  # counts wrap in [-2**29, 2**29), as the RP2040 HAL's
+                self.enc[1] = read_wrap30(b, 43)
                 self.vbat = read_u16(b, 47)
                 return self.tick
 

@@ -90,7 +90,8 @@ class IRArray:
             for i in range(N_SENSORS):
                 y[i] = x[i]
             return
-        self._count += 1
+        if self._count < 0x3FFFFFFF:  # saturates inside the RP2040's small ints
+            self._count += 1
         if method == AVG_EXPONENTIAL:
             k = self.window
             s = self._exp

@@ -17,6 +17,7 @@ EXACT = const(2)
 HEADING_TURN = 1 << 30  # heading units per turn (a big int on 32-bit ports: not used per cycle)
 HEADING_MASK = const(0x3FFFFFFF)
 _HALF = const(0x20000000)  # half a turn
+_POS_WRAP = const(0x20000000)  # um: x and y wrap at +-2**29
 _PI_NUM = const(355)  # pi ~ 355/113, error 8.5e-8
 _PI_DEN = const(113)
 
@@ -82,9 +83,19 @@ class Odometry:
             a = ((th - _HALF) + (half - _HALF)) >> 14
             if method == EXACT and dd and -self._dd_max <= dd <= self._dd_max:
                 s = mul_q14(s, sinc_q14((dd * hpt) >> 7))
-        self.x_um += mul_q14(s, cos_q14(a))
-        self.y_um += mul_q14(s, sin_q14(a))
+        self.x_um = _wrap_position(self.x_um + mul_q14(s, cos_q14(a)))
+        self.y_um = _wrap_position(self.y_um + mul_q14(s, sin_q14(a)))
         self.heading = _add_turn(th, mulmod_turn(dd, hpt))
+
+
+def _wrap_position(v: int) -> int:
+    """x or y in um, wrapped into [-2**29, 2**29) (+-536.870912 m) alike on every interpreter: a step
+    moves far less than 2**29 um, so no value passes 2**30 (tests/mp/counters_check.py)."""
+    if v >= _POS_WRAP:
+        return v - _POS_WRAP - _POS_WRAP
+    if v < -_POS_WRAP:
+        return v + _POS_WRAP + _POS_WRAP
+    return v
 
 
 def _add_turn(a: int, b: int) -> int:

@@ -18,30 +18,31 @@ from firmware.stall import StallGuard
 from firmware.wheels import WheelLoop
 from protocol import wire as M
 from protocol.compat import const
-from protocol.fields import read_i16, read_i32
+from protocol.fields import read_i16, read_i31
 from protocol.framing import FrameDecoder, FrameEncoder
 
 # Parameter ids (protocol/SPEC.md).
-P_EMITTER = const(1)
-P_AVERAGING = const(2)
-P_WINDOW = const(3)
-P_RULE_SET = const(4)
-P_WATCHDOG = const(5)
-P_CYCLE = const(6)
-P_KP = const(7)
-P_KI = const(8)
-P_ODOMETRY = const(9)
-P_MAX_SPEED = const(10)
-P_CURRENT_LIMIT = const(11)
-P_WHEEL_DIAMETER = const(12)
-P_WHEEL_BASE = const(13)
-P_TICKS_PER_REV = const(14)
-P_STALL = const(15)
-P_PUSH = const(16)
-N_PARAMS = const(17)
-MAX_RX_PER_CYCLE = const(4096)  # bytes a cycle: 100 KB/s at 25 Hz; bounds the cycle time under a flood
-RX_CHUNK = const(64)  # bytes read from the link at a time (heap: tests/test_firmware_budgets.py)
-MAX_DT_MS = const(2000)  # a longer gap (a stalled board) counts as this much: keeps the PI in range
+_P_EMITTER = const(1)
+_P_AVERAGING = const(2)
+_P_WINDOW = const(3)
+_P_RULE_SET = const(4)
+_P_WATCHDOG = const(5)
+_P_CYCLE = const(6)
+_P_KP = const(7)
+_P_KI = const(8)
+_P_ODOMETRY = const(9)
+_P_MAX_SPEED = const(10)
+_P_CURRENT_LIMIT = const(11)
+_P_WHEEL_DIAMETER = const(12)
+_P_WHEEL_BASE = const(13)
+_P_TICKS_PER_REV = const(14)
+_P_STALL = const(15)
+_P_PUSH = const(16)
+_N_PARAMS = const(17)
+_MAX_RX_PER_CYCLE = const(4096)  # bytes a cycle: 100 KB/s at 25 Hz; bounds the cycle time under a flood
+_RX_CHUNK = const(32)  # bytes read from the link at a time (heap: tests/test_firmware_budgets.py)
+_SATURATED = const(0x3FFFFFFF)  # counters stop at 2**30 - 1: past it every increment would allocate
+_MAX_DT_MS = const(2000)  # a longer gap (a stalled board) counts as this much: keeps the PI in range
 
 _TELEMETRY_FMT = "<IBHii8H8HhhHhhiiiB"
 _TELEMETRY_SIZE = const(70)
@@ -77,25 +78,25 @@ class Robot:
 
     def __init__(self, hal: object) -> None:
         self.hal = hal
-        self.params = [0] * N_PARAMS
-        for pid in range(1, N_PARAMS):
+        self.params = [0] * _N_PARAMS
+        for pid in range(1, _N_PARAMS):
             self.params[pid] = M.PARAM_LIMITS[3 * pid + 2]
         p = self.params
         geometry = geometry_defaults()
         for k in range(3):
-            pid = P_WHEEL_DIAMETER + k
+            pid = _P_WHEEL_DIAMETER + k
             lo = M.PARAM_LIMITS[3 * pid]
             hi = M.PARAM_LIMITS[3 * pid + 1]
             if not lo <= geometry[k] <= hi:
                 raise ValueError("robot_geometry: parameter {} = {} is outside {}..{}".format(pid, geometry[k], lo, hi))
             p[pid] = geometry[k]
-        self.ir = IRArray(hal, p[P_EMITTER], p[P_AVERAGING], p[P_WINDOW])
-        self.fuzzy = FuzzyController(p[P_RULE_SET], p[P_MAX_SPEED])
-        self.stall = StallGuard(p[P_STALL], p[P_PUSH], p[P_MAX_SPEED])
-        self.odometry = Odometry(p[P_WHEEL_DIAMETER], p[P_WHEEL_BASE], p[P_TICKS_PER_REV], p[P_ODOMETRY])
+        self.ir = IRArray(hal, p[_P_EMITTER], p[_P_AVERAGING], p[_P_WINDOW])
+        self.fuzzy = FuzzyController(p[_P_RULE_SET], p[_P_MAX_SPEED])
+        self.stall = StallGuard(p[_P_STALL], p[_P_PUSH], p[_P_MAX_SPEED])
+        self.odometry = Odometry(p[_P_WHEEL_DIAMETER], p[_P_WHEEL_BASE], p[_P_TICKS_PER_REV], p[_P_ODOMETRY])
         q8 = self.odometry.um_per_tick_q8
-        self.wheel_l = WheelLoop(q8, p[P_KP], p[P_KI], p[P_CURRENT_LIMIT])
-        self.wheel_r = WheelLoop(q8, p[P_KP], p[P_KI], p[P_CURRENT_LIMIT])
+        self.wheel_l = WheelLoop(q8, p[_P_KP], p[_P_KI], p[_P_CURRENT_LIMIT])
+        self.wheel_r = WheelLoop(q8, p[_P_KP], p[_P_KI], p[_P_CURRENT_LIMIT])
         self.enc = [0, 0]
         self.mode = M.MODE_STOP
         self.cmd_left = 0
@@ -114,7 +115,7 @@ class Robot:
         self.tx = FrameEncoder()
         self.rx = FrameDecoder()
         self._rx_one = bytearray(1)
-        self._rx_chunk = bytearray(RX_CHUNK)
+        self._rx_chunk = bytearray(_RX_CHUNK)
         self._digits = bytearray(12)
         # Breaks are honoured only on the USB REPL port, never on a UART.
         self.repl_link = bool(getattr(hal, "repl_link", False))
@@ -125,11 +126,11 @@ class Robot:
 
     def cycle(self) -> None:
         hal = self.hal
-        tick = hal.wait_cycle(self.params[P_CYCLE])  # type: ignore[attr-defined]
+        tick = hal.wait_cycle(self.params[_P_CYCLE])  # type: ignore[attr-defined]
         self.tick = tick
         dt = 0 if self._last_tick < 0 else (tick - self._last_tick) & TICK_MASK
-        if dt > MAX_DT_MS:
-            dt = MAX_DT_MS
+        if dt > _MAX_DT_MS:
+            dt = _MAX_DT_MS
         self._last_tick = tick
         self.ir.acquire()
         enc = self.enc
@@ -153,7 +154,8 @@ class Robot:
         self.fault_pending = False
         self.send_telemetry(il, ir)
         hal.end_cycle()  # type: ignore[attr-defined]
-        self.cycles += 1
+        if self.cycles < _SATURATED:  # saturates: a counter past 2**30 would allocate every cycle
+            self.cycles += 1
 
     def decide(self, dt: int) -> None:
         mode = self.mode
@@ -174,7 +176,7 @@ class Robot:
             self.setpoint_r = guard.right
             self.watchdog_tripped = False
         elif mode == M.MODE_HOST or mode == M.MODE_TELEOP:
-            if (self.tick - self.last_command) & TICK_MASK > self.params[P_WATCHDOG]:
+            if (self.tick - self.last_command) & TICK_MASK > self.params[_P_WATCHDOG]:
                 self.watchdog_tripped = True
             if self.watchdog_tripped:
                 self.setpoint_l = 0
@@ -233,7 +235,8 @@ class Robot:
         self.wheel_r.reset()
 
     def on_fault(self, exc: Exception) -> None:
-        self.faults += 1
+        if self.faults < _SATURATED:
+            self.faults += 1
         self.fault_pending = True
         self.safe_state()
         try:
@@ -289,69 +292,43 @@ class Robot:
     # -- host messages ---------------------------------------------------
 
     def read_host(self) -> None:
-        """Take every byte the host sent since the last cycle (at most MAX_RX_PER_CYCLE), in order.
+        """Take every byte the host sent since the last cycle (at most _MAX_RX_PER_CYCLE), in order.
 
-        Draining the link each cycle is what lets a STOP or a new COMMAND act on the cycle it arrives
-        in under a flood: nothing waits behind stale bytes (tests/test_virtual_board.py::
-        test_stop_acts_within_two_periods_under_a_junk_flood).  On the REPL link, 0x0D 0x03 as the
-        first bytes after a silent cycle is mpremote's break; those first bytes are read one at a
-        time so that nothing after the break is consumed: the REPL must see the Ctrl-A that follows
-        it.  A partial frame that gets no byte for a whole cycle is dropped (the sender died
-        mid-frame), so the next frame starts clean.
+        Draining the link each cycle lets a STOP or a new COMMAND act on the cycle it arrives in under
+        a flood (tests/test_virtual_board.py::test_stop_acts_within_two_periods_under_a_junk_flood).
+        On the REPL link, 0x0D 0x03 as the first bytes after a silent cycle is mpremote's break: those
+        bytes are read one at a time, so nothing after the break is consumed (the REPL must see the
+        Ctrl-A that follows it).  A partial frame that gets no byte for a whole cycle is dropped.
         """
         hal = self.hal
+        dec = self.rx
+        one = self._rx_one
+        watch = self.repl_link and (self._silent or self._break_armed)
         got = 0
-        if self._break_armed or (self._silent and self.repl_link):
-            got = self._read_break()
-            if got < 0:
-                got = 0
-        chunk = self._rx_chunk
-        while got < MAX_RX_PER_CYCLE:
-            n = hal.host_read(chunk)  # type: ignore[attr-defined]
+        while got < _MAX_RX_PER_CYCLE:
+            buf = one if watch else self._rx_chunk
+            n = hal.host_read(buf)  # type: ignore[attr-defined]
             if n <= 0:
                 break
+            if watch:
+                if self._break_armed:
+                    if one[0] == 0x03:
+                        raise BreakToRepl()
+                    self._break_armed = False
+                    watch = False
+                elif got == 0 and one[0] == 0x0D:
+                    self._break_armed = True
+                else:
+                    watch = False
             got += n
-            self._decode(chunk, n)
-        if got:
-            self._silent = False
-        else:
-            self._silent = True
-            self.rx.abandon_partial()
-
-    def _read_break(self) -> int:
-        """The first bytes after a silent cycle, one at a time: how many were read (-1: none).
-
-        Raises BreakToRepl on 0x0D 0x03 (the 0x03 may come a cycle later)."""
-        one = self._rx_one
-        hal = self.hal
-        if hal.host_read(one) <= 0:  # type: ignore[attr-defined]
-            return -1
-        if self._break_armed:
-            if one[0] == 0x03:
-                raise BreakToRepl()
-            self._break_armed = False
-            self._decode(one, 1)
-            return 1
-        self._decode(one, 1)
-        if one[0] != 0x0D:
-            return 1
-        self._break_armed = True
-        if hal.host_read(one) <= 0:  # type: ignore[attr-defined]
-            return 1
-        if one[0] == 0x03:
-            raise BreakToRepl()
-        self._break_armed = False
-        self._decode(one, 1)
-        return 2
-
-    def _decode(self, data: bytearray, n: int) -> None:
-        """Feed n bytes to the frame decoder and act on every frame they complete, in order."""
-        dec = self.rx
-        i = 0
-        while i < n:
-            i = dec.feed(data, i, n)
-            if dec.ready:
-                self.handle(dec.msg_type, dec.seq, dec.body)
+            i = 0
+            while i < n:
+                i = dec.feed(buf, i, n)
+                if dec.ready:
+                    self.handle(dec.msg_type, dec.seq, dec.body)
+        self._silent = not got
+        if not got:
+            dec.abandon_partial()
 
     def handle(self, msg_type: int, seq: int, b: bytearray) -> None:
         if msg_type == M.COMMAND:
@@ -359,7 +336,7 @@ class Robot:
             if mode > M.MODE_TELEOP:
                 self.nack(seq, msg_type, M.ERR_BAD_MODE)
                 return
-            limit = self.params[P_MAX_SPEED]
+            limit = self.params[_P_MAX_SPEED]
             left = read_i16(b, 4)
             right = read_i16(b, 6)
             self.cmd_left = limit if left > limit else -limit if left < -limit else left
@@ -372,14 +349,14 @@ class Robot:
             self.watchdog_tripped = False
         elif msg_type == M.PARAM_SET:
             pid = b[3]
-            err = self.set_param(pid, read_i32(b, 4))
+            err = self.set_param(pid, read_i31(b, 4))  # 2**30 and past: out of range, no big int
             if err:
                 self.nack(seq, msg_type, err)
             else:
                 self.send_param(pid)
         elif msg_type == M.PARAM_GET:
             pid = b[3]
-            if 0 < pid < N_PARAMS:
+            if 0 < pid < _N_PARAMS:
                 self.send_param(pid)
             else:
                 self.nack(seq, msg_type, M.ERR_UNKNOWN_PARAM)
@@ -390,31 +367,31 @@ class Robot:
 
     def set_param(self, pid: int, value: int) -> int:
         """Apply a parameter; 0 or a NACK error code."""
-        if not 0 < pid < N_PARAMS:
+        if not 0 < pid < _N_PARAMS:
             return M.ERR_UNKNOWN_PARAM
         limits = M.PARAM_LIMITS
         if not limits[3 * pid] <= value <= limits[3 * pid + 1]:
             return M.ERR_OUT_OF_RANGE
         p = self.params
         p[pid] = value
-        if pid == P_EMITTER or pid == P_AVERAGING or pid == P_WINDOW:
-            self.ir.configure(p[P_EMITTER], p[P_AVERAGING], p[P_WINDOW])
-        elif pid == P_RULE_SET or pid == P_MAX_SPEED or pid == P_STALL or pid == P_PUSH:
-            self.fuzzy.configure(p[P_RULE_SET], p[P_MAX_SPEED])
-            self.stall.stall_ms = p[P_STALL]
-            self.stall.push_ma = p[P_PUSH]
-            self.stall.max_speed = p[P_MAX_SPEED]
-        elif pid == P_ODOMETRY:
+        if pid == _P_EMITTER or pid == _P_AVERAGING or pid == _P_WINDOW:
+            self.ir.configure(p[_P_EMITTER], p[_P_AVERAGING], p[_P_WINDOW])
+        elif pid == _P_RULE_SET or pid == _P_MAX_SPEED or pid == _P_STALL or pid == _P_PUSH:
+            self.fuzzy.configure(p[_P_RULE_SET], p[_P_MAX_SPEED])
+            self.stall.stall_ms = p[_P_STALL]
+            self.stall.push_ma = p[_P_PUSH]
+            self.stall.max_speed = p[_P_MAX_SPEED]
+        elif pid == _P_ODOMETRY:
             self.odometry.method = value
-        elif pid == P_KP or pid == P_KI or pid == P_CURRENT_LIMIT:
+        elif pid == _P_KP or pid == _P_KI or pid == _P_CURRENT_LIMIT:
             for k in range(2):
                 w = self.wheel_r if k else self.wheel_l
-                w.kp = p[P_KP]
-                w.ki = p[P_KI]
-                w.limit = p[P_CURRENT_LIMIT]
-        elif P_WHEEL_DIAMETER <= pid <= P_TICKS_PER_REV:
+                w.kp = p[_P_KP]
+                w.ki = p[_P_KI]
+                w.limit = p[_P_CURRENT_LIMIT]
+        elif _P_WHEEL_DIAMETER <= pid <= _P_TICKS_PER_REV:
             odo = self.odometry
-            odo.configure(p[P_WHEEL_DIAMETER], p[P_WHEEL_BASE], p[P_TICKS_PER_REV])
+            odo.configure(p[_P_WHEEL_DIAMETER], p[_P_WHEEL_BASE], p[_P_TICKS_PER_REV])
             self.wheel_l.um_per_tick_q8 = odo.um_per_tick_q8
             self.wheel_r.um_per_tick_q8 = odo.um_per_tick_q8
         return 0
@@ -446,8 +423,8 @@ class Robot:
         v = config.FIRMWARE_VERSION
         p = self.params
         struct.pack_into(_HELLO_FMT, self.tx.body, 3, M.PROTOCOL_VERSION, v[0], v[1], v[2],
-                         self.hal.board, 8, p[P_WHEEL_DIAMETER], p[P_WHEEL_BASE],  # type: ignore[attr-defined]
-                         p[P_TICKS_PER_REV])
+                         self.hal.board, 8, p[_P_WHEEL_DIAMETER], p[_P_WHEEL_BASE],  # type: ignore[attr-defined]
+                         p[_P_TICKS_PER_REV])
         self._send(M.HELLO, _HELLO_SIZE)
 
     def nack(self, seq: int, msg_type: int, error: int) -> None:

@@ -81,7 +81,8 @@ class StallGuard:
             self.state = state = _BACKING
             self.phase_ms = 0
             self.stalled_ms = 0
-            self.escapes += 1
+            if self.escapes < 0x3FFFFFFF:  # saturates inside the RP2040's small ints
+                self.escapes += 1
             # Spin away from the side that sees more: S2..S4 are on the left, S6..S8 on the right.
             seen_left = ir[1] + ir[2] + ir[3]
             seen_right = ir[5] + ir[6] + ir[7]

@@ -16,6 +16,7 @@ CRC_SIZE = const(2)
 MAX_BODY = const(254)  # so that COBS adds exactly one byte
 MAX_ENCODED = const(255)  # COBS(body) without the delimiters
 MAX_FRAME = const(257)  # leading 0x00 + COBS(body) + trailing 0x00
+_SATURATED = const(0x3FFFFFFF)  # counters stop at 2**30 - 1
 OVERHEAD = const(8)  # header + CRC + COBS code byte + two delimiters
 
 
@@ -82,6 +83,13 @@ def _crc(body: bytearray, end: int, msg_type: int) -> int:
     return crc16_byte(crc, schema >> 8)
 
 
+
+def _count_up(n: int, k: int) -> int:
+    """n + k for a counter that saturates at 2**30 - 1 instead of leaving the RP2040's small ints
+    (tests/mp/counters_check.py)."""
+    return n + k if n < _SATURATED - k else _SATURATED
+
+
 class FrameDecoder:
     """Streaming decoder with a bounded buffer; never raises on wire data.
 
@@ -119,7 +127,7 @@ class FrameDecoder:
     def abandon_partial(self) -> None:
         """Drop an unfinished frame (its sender went quiet); counted in `abandoned`."""
         if self._n or self._overflow:
-            self.abandoned += 1
+            self.abandoned = _count_up(self.abandoned, 1)
         self._n = 0
         self._overflow = False
 
@@ -156,7 +164,7 @@ class FrameDecoder:
             i = j + 1
             if self._overflow:
                 self._overflow = False
-                self.overflows += 1
+                self.overflows = _count_up(self.overflows, 1)
                 n = 0
             elif n:
                 ok = self._finish(n)
@@ -171,37 +179,37 @@ class FrameDecoder:
         body = self.body
         m = decode_into(self._raw, 0, n, body)
         if m < 0:
-            self.cobs_errors += 1
+            self.cobs_errors = _count_up(self.cobs_errors, 1)
             return False
         if m < HEADER_SIZE + CRC_SIZE:
-            self.length_errors += 1
+            self.length_errors = _count_up(self.length_errors, 1)
             return False
         if body[0] != PROTOCOL_VERSION:
-            self.version_errors += 1
+            self.version_errors = _count_up(self.version_errors, 1)
             return False
         msg_type = body[1]
         size = PAYLOAD_SIZE[msg_type] if msg_type < N_TYPES else UNKNOWN
         if size == UNKNOWN:
-            self.unknown_types += 1
+            self.unknown_types = _count_up(self.unknown_types, 1)
             return False
         plen = m - HEADER_SIZE - CRC_SIZE
         if plen != size and not (msg_type == VARIABLE_TYPE and plen > size):
-            self.length_errors += 1
+            self.length_errors = _count_up(self.length_errors, 1)
             return False
         if _crc(body, m - CRC_SIZE, msg_type) != body[m - 2] | (body[m - 1] << 8):
-            self.crc_errors += 1
+            self.crc_errors = _count_up(self.crc_errors, 1)
             return False
         seq = body[2]
         if self._last_seq >= 0 and msg_type != HELLO:  # a HELLO may follow a restart
             gap = (seq - self._last_seq - 1) & 0xFF
             if gap:
-                self.seq_gaps += 1
-                self.frames_lost += gap
+                self.seq_gaps = _count_up(self.seq_gaps, 1)
+                self.frames_lost = _count_up(self.frames_lost, gap)
         self._last_seq = seq
         self.msg_type = msg_type
         self.seq = seq
         self.payload_len = plen
-        self.frames += 1
+        self.frames = _count_up(self.frames, 1)
         self.ready = True
         return True
 

@@ -401,11 +401,14 @@ def test_encoder_sequence_wraps() -> None:
 
 @pytest.mark.parametrize("value", [0, 1, -1, 255, 256, -256, 0x7FFFFFFF, -0x80000000, 123456789, -987654321])
 def test_field_readers_match_struct(value: int) -> None:
-    """protocol.fields reads what struct packs, at any offset, signs included."""
+    """protocol.fields reads what struct packs, at any offset, signs included; a 32-bit field is read
+    saturated (read_i31) or modulo 2**30 (read_u30, read_wrap30), never past the RP2040's small ints."""
     from protocol import fields
 
     buf = bytearray(3) + struct.pack("<i", value) + bytearray(2)
-    assert fields.read_i32(buf, 3) == value
+    assert fields.read_i31(buf, 3) == max(-2 ** 30, min(2 ** 30 - 1, value))
+    assert fields.read_u30(buf, 3) == value % 2 ** 30
+    assert fields.read_wrap30(buf, 3) == (value + 2 ** 29) % 2 ** 30 - 2 ** 29
     v16 = value & 0xFFFF
     buf16 = bytearray(1) + struct.pack("<H", v16)
     assert fields.read_u16(buf16, 1) == v16
