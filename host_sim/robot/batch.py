@@ -19,7 +19,7 @@ host_sim/simulation.Simulation do for one robot, for all N at once:
 
 1. the readings at the control instant: encoder ticks (motors.encoder_ticks_batch,
    quantised, floor), the pose of C, and optionally the IR sensors
-   (ir_sensor.read_sensors_batch, at the emitter power of the previous
+   (ir_sensor.read_sensors, at the emitter power of the previous
    actuation: `emitter_pct`, 60 % by default; a simulator robot that was just
    switched on reads its first sample with the emitters off,
    `initial_emitter_pct=0`; with an ir_latency, at the pose of that long ago,
@@ -67,12 +67,12 @@ With seed=s and N = 1 the sensor noise is the same stream as SimRobot(seed=s).
 
 Speed: the motors and the dynamics cost ~60 numpy operations on arrays of N
 per substep, the wall test a few more (and a nearest-wall query for the
-robots near a wall), the IR ring one read_sensors_batch per group and
+robots near a wall), the IR ring one ir_sensor.read_sensors per group and
 period: `twinbot bench sim` measures it (tools/bench/sim.py).
 
 Sensors with N parameter sets: robots are grouped by their IR parameters
 (body radius, range, every ir_* value, ambient leakage, ADC bits) and each group is read with
-one read_sensors_batch call, so N robots differing only in their dynamics
+one ir_sensor.read_sensors call, so N robots differing only in their dynamics
 cost one call.
 """
 from __future__ import annotations
@@ -96,7 +96,7 @@ SUBSTEPS = 8
 VECTOR_CONTACTS_FROM = 64  # robots in one contact step from which the vectorised solve is the faster
 N_SENSORS = ir_sensor.N_SENSORS
 # RobotParams fields the IR model reads: robots that agree on all of them
-# share one read_sensors_batch call.
+# share one ir_sensor.read_sensors call.
 IR_FIELDS = tuple(f.name for f in dataclasses.fields(RobotParams)
                   if f.name.startswith("ir_") or f.name in ("body_radius", "sensor_range", "adc_bits",
                                                              "ambient_leakage"))
@@ -390,9 +390,9 @@ class BatchSim:
                 t = self.t - p.ir_latency
                 at = self._ir_history.at(t)
             if idx is None:
-                off[:], on[:] = ir_sensor.read_sensors_batch(self.world, at, self.emitter_now, t, p, rng)
+                off[:], on[:] = ir_sensor.read_sensors(self.world, at, self.emitter_now, t, p, rng)
             else:
-                off[idx], on[idx] = ir_sensor.read_sensors_batch(self.world, at[idx], self.emitter_now, t, p, rng)
+                off[idx], on[idx] = ir_sensor.read_sensors(self.world, at[idx], self.emitter_now, t, p, rng)
         return on, off
 
     # ------------------------------------------------------------------ physics

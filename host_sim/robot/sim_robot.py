@@ -81,10 +81,9 @@ class SimRobot:
         t_read = self.t
         if self.p.ir_latency > 0:  # the readings describe the pose of ir_latency ago
             x, y, phi, t_read = self._past_pose(x, y, phi)
-        off, on = ir_sensor.read_sensors_lists(self.world, x, y, phi, float(self.emitter_pct), t_read, self.p,
-                                               self.rng)
+        off, on = ir_sensor.read_sensors(self.world, (x, y, phi), float(self.emitter_pct), t_read, self.p, self.rng)
         enc_l, enc_r = self.encoder_ticks()
-        s = Sense(int(round(self.t * 1000)) & TICK_MASK, off, on, enc_l, enc_r,
+        s = Sense(int(round(self.t * 1000)) & TICK_MASK, off.tolist(), on.tolist(), enc_l, enc_r,
                   int(round(self.vbat * 1000)))
         self.last_sense = s
         return s

@@ -45,7 +45,7 @@ ir_gain_scale[k] on its reflected light, its axis turned by
 ir_misalignment[k] about its mount (ray, incidence angle, beam and lamp term
 follow it), ir_offset[k] counts and ambient_leakage[k] times the ambient
 added to its emitter-on reading; and ir_latency, the readings describing the
-pose of that long ago (PoseHistory, read_sensors_track).
+pose of that long ago (PoseHistory, read_sensors(track=True)).
 """
 from __future__ import annotations
 
@@ -512,13 +512,13 @@ def _counts_one(c: _Consts, amb_off: list[float], amb_on: list[float], refl: lis
             [v if 0 <= v <= top else (0 if v < 0 else top) for v in on_i])
 
 
-def read_sensors_lists(world: World, x: float, y: float, phi: float, power_pct: float, t: float, p: RobotParams,
-                       rng: np.random.Generator | None) -> tuple[list[int], list[int]]:
-    """read_sensors as two lists of Python ints: the simulator's per-cycle hot path.
+def _read_one(world: World, x: float, y: float, phi: float, power_pct: float, t: float, p: RobotParams,
+              rng: np.random.Generator | None) -> tuple[list[int], list[int]]:
+    """read_sensors for one robot, as two lists of Python ints: the simulator's per-cycle hot path.
 
-    The same formulas as read_sensors_batch in plain floats after the ray
-    cast; the two agree to the last bit or, in a rare rounding tie of the
-    beam's sum, 1 count.
+    The same formulas as _read in plain floats after the ray cast; the two
+    agree to the last bit or, in a rare rounding tie of the beam's sum,
+    1 count (tests/test_ir_sensor.py::test_beam_batch_equals_single).
     """
     c = _consts(p)
     dist, ang, _hit = world.cast_robot(x, y, phi, c.ray_bearings, c.reach, c.ray_origins)
@@ -530,41 +530,6 @@ def read_sensors_lists(world: World, x: float, y: float, phi: float, power_pct: 
         refl = [v * g for v, g in zip(refl, c.gain_scale)]
     amb_off, amb_on = _ambient_one(world, x, y, phi, t, p, c)
     return _counts_one(c, amb_off, amb_on, refl, rng, p.ir_noise)
-
-
-def read_sensors(world: World, pose: Any, power_pct: float = 60.0, t: float = 0.0, p: RobotParams = DEFAULT,
-                 rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """One robot at pose (x, y, phi): (adc_off[8], adc_on[8]) integer ADC counts, S1..S8.
-
-    off = ambient + noise; on = ambient (ir_on_delay later) + reflected +
-    noise; each clipped to 0..adc_max and rounded (half to even).  rng: a
-    numpy Generator for the noise (None = no noise); it draws 16 normals
-    per call, off then on, like read_sensors_batch for one robot.  The pose
-    is the one the readings describe (ir_latency is the caller's: see
-    PoseHistory and read_sensors_track).
-    """
-    if len(pose) != 3:
-        raise ValueError(f"pose must be (x, y, phi), got {len(pose)} values")
-    x, y, phi = (float(v) for v in pose)
-    off, on = read_sensors_lists(world, x, y, phi, float(power_pct), float(t), p, rng)
-    return np.array(off, dtype=np.int64), np.array(on, dtype=np.int64)
-
-
-def read_sensors_batch(world: World, poses: Any, power_pct: Any = 60.0, t: Any = 0.0, p: RobotParams = DEFAULT,
-                       rng: np.random.Generator | None = None, quantise: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """N robots at poses (N, 3): (adc_off (N, 8), adc_on (N, 8)).
-
-    power_pct and t may be scalars or (N,) arrays, one per robot.
-    quantise=False: the light before the ADC rounds it (floats within its
-    range), smooth in the parameters: what a fit compares.
-    """
-    q = np.asarray(poses, dtype=float)
-    if q.ndim != 2 or q.shape[1] != 3:
-        raise ValueError(f"poses must have shape (N, 3), got {q.shape}")
-    power = np.asarray(power_pct, dtype=float)
-    if power.ndim:
-        power = power[:, None]
-    return _read(world, q, power, t, p, rng, quantise)
 
 
 # --------------------------------------------------------------------------- #
@@ -596,7 +561,7 @@ class PoseHistory:
 
     A simulator adds the pose at every reading; `at(t)` interpolates
     (pose_at) between them, so every path - SimRobot.sense,
-    BatchSim.read_sensors, read_sensors_track on a recorded track - reads
+    BatchSim.read_sensors, read_sensors(track=True) on a recorded track - reads
     the same past pose.  Keeps `keep` seconds of them.
     """
 
@@ -618,16 +583,40 @@ class PoseHistory:
         return pose_at(self.t, self.poses, t)
 
 
-def read_sensors_track(world: World, t: Any, poses: Any, power_pct: Any = 60.0, p: RobotParams = DEFAULT,
-                       rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(adc_off, adc_on), each (K, 8), of one robot along a track: times t (K,), poses (K, 3).
+# --------------------------------------------------------------------------- #
+# Readings: the one entry point, for one robot or N
+# --------------------------------------------------------------------------- #
+def read_sensors(world: World, poses: Any, power_pct: Any = 60.0, t: Any = 0.0, p: RobotParams = DEFAULT,
+                 rng: np.random.Generator | None = None, *, quantise: bool = True,
+                 track: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(adc_off, adc_on) of one robot at pose (x, y, phi), each (8,), or of N robots at poses (N, 3), each (N, 8).
 
-    Row j is read at time t[j] - ir_latency, at the track's pose then
-    (pose_at: linear between rows); without latency, at the row's own.
+    off = ambient + noise; on = ambient (ir_on_delay later) + reflected +
+    noise; each clipped to 0..adc_max and rounded (half to even) to int64
+    counts, S1..S8.  power_pct (%) and t (s): scalars, or (N,) arrays, one
+    per robot.  rng: a numpy Generator for the noise (None = no noise); it
+    draws 16 normals per robot, off then on.  quantise=False: the light
+    before the ADC rounds it (floats within its range), smooth in the
+    parameters: what a fit compares.  The poses are the ones the readings
+    describe (ir_latency is the caller's: PoseHistory), except with
+    track=True: poses (K, 3) are one robot's track at times t (K,), and row
+    j is read at t[j] - ir_latency at the track's pose then (pose_at).
     """
-    times = np.asarray(t, dtype=float)
     q = np.asarray(poses, dtype=float)
-    if p.ir_latency > 0:
+    if q.ndim not in (1, 2) or q.shape[-1] != 3:
+        raise ValueError(f"poses must be one pose (x, y, phi) or (N, 3), got shape {q.shape}")
+    if track and p.ir_latency > 0:
+        times = np.asarray(t, dtype=float)
         q = pose_at(times, q, times - p.ir_latency)
-        times = times - p.ir_latency
-    return read_sensors_batch(world, q, power_pct, times, p, rng)
+        t = times - p.ir_latency
+    if q.ndim == 1:
+        if quantise:  # one robot: plain floats, eight values are too few for numpy
+            x, y, phi = q.tolist()
+            off, on = _read_one(world, x, y, phi, float(power_pct), float(t), p, rng)
+            return np.array(off, dtype=np.int64), np.array(on, dtype=np.int64)
+        off_n, on_n = _read(world, q[None], power_pct, t, p, rng, quantise)
+        return off_n[0], on_n[0]
+    power = np.asarray(power_pct, dtype=float)
+    if power.ndim:
+        power = power[:, None]
+    return _read(world, q, power, t, p, rng, quantise)
