@@ -177,6 +177,9 @@ def _on_disc(be: Any, bn: Any, lim: Any, eig: tuple[Any, Any, Any, Any]) -> tupl
     In W's eigenbasis (eig = cos, sin of its first eigenvector, eigenvalues mu1 >= mu2), Newton on
     1/|P(lam)| - 1/lim, which converges monotonically from below (More and Sorensen), from the
     lower bound |b| / lim - mu1; a fixed number of steps, then scaled onto the disc.  Floats or arrays."""
+    if not isinstance(lim, np.ndarray) and lim <= 0.0:  # mu = 0: the disc is the point 0, no grip
+        # (tests/test_contact.py::test_zero_wheel_friction_slides_freely_with_shared_parameters_and_with_drive_effects)
+        return be * 0.0, bn * 0.0
     c, s, mu1, mu2 = eig
     # square roots, not powers: numpy's x ** -0.5 is its own (SIMD) power, which differs from libm's in the
     # last bit; a square root is exactly rounded everywhere, so a robot's figures are the same alone or in a batch
