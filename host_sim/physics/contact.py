@@ -33,11 +33,15 @@ same computation (tests/test_contact.py checks them against each other).
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from host_sim.physics.params import RobotParams, cached_per_params
+
+if TYPE_CHECKING:  # annotations only: no import at run time
+    from host_sim.physics.dynamics import Params, PerRobot, Vec
+    from host_sim.physics.world import World
 
 GRAVITY = 9.81  # m/s^2
 PGS_TOL = 1e-10  # m/s: a sweep that moves no velocity by more than this ends the solve
@@ -52,7 +56,7 @@ REACH_MARGIN = 2e-3  # m: a wall closer than the step's travel + this is a conta
 
 
 @cached_per_params
-def consts(p: Any) -> tuple[Any, ...]:
+def consts(p: Params) -> tuple[Any, ...]:
     """(m, k = m_c d, J_C, D = m J_C - k^2, I_w, r, b, d, R, mu N, mu_wall, m g): RobotParams or ParamBatch."""
     m = p.body_mass + 2 * p.wheel_mass
     k = p.body_mass * p.com_offset
@@ -68,7 +72,7 @@ def consts(p: Any) -> tuple[Any, ...]:
 # --------------------------------------------------------------------------- #
 # Rolling: do the wheels hold?
 # --------------------------------------------------------------------------- #
-def traction_ok(v0: Any, v1: Any, tau: Any, dt: float, p: RobotParams) -> bool:
+def traction_ok(v0: Vec, v1: Vec, tau: Vec, dt: float, p: RobotParams) -> bool:
     """True if the rolling step v0 -> v1 under wheel torques tau needed ground forces inside the cones."""
     m, k, _j, _dd, iw, r, b, _d, _rr, cap, _mw, _mg = consts(p)
     f_l = (tau[0] - iw * (v1[0] - v0[0]) / dt) / r
@@ -82,7 +86,7 @@ def traction_ok(v0: Any, v1: Any, tau: Any, dt: float, p: RobotParams) -> bool:
     return abs(f_n) <= math.sqrt(cap * cap - f_l * f_l) + math.sqrt(cap * cap - f_r * f_r)
 
 
-def traction_ok_batch(v0: np.ndarray, v1: np.ndarray, tau: np.ndarray, dt: Any, p: Any) -> np.ndarray:
+def traction_ok_batch(v0: np.ndarray, v1: np.ndarray, tau: np.ndarray, dt: PerRobot, p: Params) -> np.ndarray:
     """traction_ok for N robots: v0, v1, tau (N, 2) -> (N,) bool."""
     m, k, _j, _dd, iw, r, b, _d, _rr, cap, _mw, _mg = consts(p)
     f_l = (tau[:, 0] - iw * (v1[:, 0] - v0[:, 0]) / dt) / r
@@ -100,7 +104,7 @@ def traction_ok_batch(v0: np.ndarray, v1: np.ndarray, tau: np.ndarray, dt: Any, 
 # --------------------------------------------------------------------------- #
 # Which walls a step can reach
 # --------------------------------------------------------------------------- #
-def walls_in_reach(world: Any, cx: float, cy: float, radius: float, within: float
+def walls_in_reach(world: World, cx: float, cy: float, radius: float, within: float
                    ) -> tuple[list[tuple[float, float, float, int]], float]:
     """([(gap, nx, ny, wall index), ...] in wall order for the walls with gap < within, smallest gap
     (inf: none).
@@ -115,7 +119,7 @@ def walls_in_reach(world: Any, cx: float, cy: float, radius: float, within: floa
             float(gaps.min()))
 
 
-def walls_in_reach_batch(world: Any, centres: np.ndarray, radius: Any, within: Any
+def walls_in_reach_batch(world: World, centres: np.ndarray, radius: PerRobot, within: np.ndarray
                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """For K robots: gaps (K, W), normals (K, W, 2), wall indices (K, W) of the walls in reach, padded
     with gap = inf, and the smallest gap (K,).  W is the most walls any of them has in reach; walls
@@ -133,13 +137,14 @@ def walls_in_reach_batch(world: Any, centres: np.ndarray, radius: Any, within: A
 # --------------------------------------------------------------------------- #
 # The slipping / contact step
 # --------------------------------------------------------------------------- #
-def body_velocity(v: Any, p: Any) -> tuple[Any, Any, Any]:
+def body_velocity(v: Vec, p: Params) -> tuple[Any, Any, Any]:
     """(u, l, omega) of a rolling robot from its wheel speeds (l = 0)."""
     r, b = p.wheel_radius, p.half_axle
     return 0.5 * r * (v[0] + v[1]), 0.0 * v[0], 0.5 * r * (v[1] - v[0]) / b
 
 
-def _free_body(u: Any, l: Any, om: Any, dt: Any, m: Any, k: Any, j: Any) -> tuple[Any, Any, Any]:
+def _free_body(u: PerRobot, l: PerRobot, om: PerRobot, dt: PerRobot, m: PerRobot, k: PerRobot, j: PerRobot
+               ) -> tuple[Any, Any, Any]:
     """The body's free motion over dt: (M - a G) nu1 = (M + a G) nu0, a = dt/2 omega (implicit midpoint
     on the gyroscopic terms, which do no work), solved by Cramer's rule.  Floats or arrays."""
     a = 0.5 * dt * om
@@ -170,7 +175,7 @@ def _wheel_blocks(iwl: Any, iwr: Any, m: Any, k: Any, j: Any, radii: tuple[Any, 
     return blocks
 
 
-def _on_disc(be: Any, bn: Any, lim: Any, eig: tuple[Any, Any, Any, Any]) -> tuple[Any, Any]:
+def _on_disc(be: Any, bn: Any, lim: PerRobot, eig: tuple[Any, Any, Any, Any]) -> tuple[Any, Any]:
     """The impulse on the disc |P| = lim minimising 1/2 P^T W P + P^T b (b = (be, bn)), when the
     unconstrained minimum lies outside it: P(lam) = -(W + lam I)^-1 b with |P(lam)| = lim, so that
     the slip velocity W P + b = -lam P is opposite to the friction (Coulomb's maximal dissipation).
@@ -212,7 +217,7 @@ def _eigen(wee: Any, wen: Any, wnn: Any) -> tuple[Any, Any, Any, Any]:
     return c, s, 0.5 * (wee + wnn) + rad, 0.5 * (wee + wnn) - rad
 
 
-def _wall_block(ne: Any, nn: Any, m: Any, k: Any, j: Any, rad: Any) -> tuple[Any, ...]:
+def _wall_block(ne: PerRobot, nn: PerRobot, m: PerRobot, k: PerRobot, j: PerRobot, rad: PerRobot) -> tuple[Any, ...]:
     """A wall with normal (ne, nn) in the body frame: M^-1 J^T of its normal row on l, omega (nl, nw),
     of its tangent row (tl, tw), and the rows' inverse masses.  Floats or arrays."""
     ju, jd = 1.0 / m, 1.0 / (m * j - k * k)
@@ -221,7 +226,7 @@ def _wall_block(ne: Any, nn: Any, m: Any, k: Any, j: Any, rad: Any) -> tuple[Any
             1.0 / (nn * nn * ju + (j * ne * ne + 2 * k * rad * ne + m * rad * rad) * jd))
 
 
-def slip_step(q: Any, v: Any, body: tuple[float, float, float] | None, tau: Any, slope: Any, dt: float,
+def slip_step(q: Vec, v: Vec, body: tuple[float, float, float] | None, tau: Any, slope: Any, dt: float,
               p: RobotParams, walls: list[tuple[float, float, float, int]],
               warm: tuple[list[list[float]], list[list[float]]] | None = None, axle_friction: Any = None
               ) -> tuple[tuple[float, ...], tuple[float, float], tuple[float, float, float] | None, bool,
@@ -334,8 +339,8 @@ def _solve(nu: list[float], wheels: list[tuple[Any, ...]], contacts: list[tuple[
             break
 
 
-def slip_step_batch(q: np.ndarray, v: np.ndarray, body: np.ndarray, tau: np.ndarray, slope: np.ndarray, dt: Any,
-                    p: Any, gaps: np.ndarray, normals: np.ndarray, idx: np.ndarray | None = None,
+def slip_step_batch(q: np.ndarray, v: np.ndarray, body: np.ndarray, tau: np.ndarray, slope: np.ndarray, dt: PerRobot,
+                    p: Params, gaps: np.ndarray, normals: np.ndarray, idx: np.ndarray | None = None,
                     warm_wheels: np.ndarray | None = None, warm_walls: np.ndarray | None = None,
                     radii: np.ndarray | None = None, body_force: tuple[Any, Any, Any] | None = None,
                     axle_friction: np.ndarray | None = None, yaw_damping: np.ndarray | float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -393,7 +398,7 @@ def slip_step_batch(q: np.ndarray, v: np.ndarray, body: np.ndarray, tau: np.ndar
 
 
 def _solve_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: list[tuple[Any, ...]],
-                 pw: np.ndarray, pc: np.ndarray, cs: tuple[Any, ...], dt: Any, start: bool,
+                 pw: np.ndarray, pc: np.ndarray, cs: tuple[PerRobot, ...], dt: PerRobot, start: bool,
                  axles: list[tuple[Any, Any, np.ndarray]]) -> None:
     """`_solve` for K robots (pw (2, 2, K), pc (2, W, K), nu five (K,) arrays, all updated in place):
     each robot stops at the sweep where its own impulses settle, as the scalar solve does.  axles as
@@ -440,7 +445,7 @@ def _solve_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: 
 
 
 def _wheel_rows(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], pw: np.ndarray,
-                axles: list[tuple[Any, Any, np.ndarray]], lim: Any, lat: tuple[Any, Any, Any],
+                axles: list[tuple[Any, Any, np.ndarray]], lim: PerRobot, lat: tuple[Any, Any, Any],
                 active: np.ndarray) -> None:
     """One sweep of the wheels' rows (`_solve`'s, for K robots): each wheel's friction impulse, on its
     disc where it would leave it, then its axle's friction.  lat: (1 / m, j / D, -k / D)."""
@@ -592,7 +597,7 @@ def _axle_row(nu: list[np.ndarray], i: int, axle: tuple[Any, Any, np.ndarray], a
     held += da
 
 
-def _sub_robots(a: Any, idx: np.ndarray | None) -> Any:
+def _sub_robots(a: PerRobot, idx: np.ndarray | None) -> Any:
     """A parameter's values for robots idx (a shared float as it is)."""
     return a[idx] if idx is not None and isinstance(a, np.ndarray) else a
 

@@ -32,12 +32,17 @@ with its stick and slip events located.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from host_sim.physics import dynamics, friction, motors
+from numpy.typing import ArrayLike
+
 from host_sim.physics.params import RobotParams, cached_per_params
+
+if TYPE_CHECKING:  # annotations only
+    from host_sim.physics.dynamics import Params, PerRobot, Vec
 
 
 @cached_per_params
@@ -58,7 +63,7 @@ def _torque(i: float, w: float, k_r: float, v_r: float, eta_n_kt: float, c_v: fl
     return eta_n_kt * i - c_v * w, i
 
 
-def drive_step(q: Any, v: Any, i_ref: Any, dt: float, p: RobotParams
+def drive_step(q: Vec, v: Vec, i_ref: Vec, dt: float, p: RobotParams
                ) -> tuple[tuple[float, ...], tuple[float, float], tuple[float, float], tuple[float, float]]:
     """One coupled step: (q_next, v_next, (tau_l, tau_r) used (dry friction included), (i_l, i_r) at mid-step)."""
     lim, k_r, eta, v_r, c_v, t_c, g, _mt, _jt, imt, ijt, _mtjt, ir, bir, hr, kw, _d, hd, ho = _consts(p)
@@ -82,7 +87,7 @@ def drive_step(q: Any, v: Any, i_ref: Any, dt: float, p: RobotParams
     return q1, v1, tau, (cl, cr)
 
 
-def step(q: Any, v: Any, tau: Any, dt: float, p: RobotParams, f_pred: Any = (0.0, 0.0)
+def step(q: Vec, v: Vec, tau: Vec, dt: float, p: RobotParams, f_pred: Vec = (0.0, 0.0)
          ) -> tuple[tuple[float, ...], tuple[float, float], tuple[float, float]]:
     """dynamics.step under the torques tau held over the step, plus the axles' dry friction solved in it:
     (q_next, v_next, the torques with the dry friction).  f_pred: the dry friction that predicted the
@@ -115,7 +120,7 @@ def step(q: Any, v: Any, tau: Any, dt: float, p: RobotParams, f_pred: Any = (0.0
     return q1, (wl1, wr1), (tl + fl, tr + fr)
 
 
-def drive_step_batch(q: np.ndarray, v: np.ndarray, i_ref: Any, dt: Any, p: Any, p_wheels: Any = None,
+def drive_step_batch(q: np.ndarray, v: np.ndarray, i_ref: ArrayLike, dt: PerRobot, p: Params, p_wheels: Params | None = None,
                      out: tuple[np.ndarray, np.ndarray] | None = None
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """`drive_step` for N robots: q (N, 5), v (N, 2), i_ref (2,) or (N, 2) -> (q_next, v_next, tau, current).
@@ -154,8 +159,8 @@ def drive_step_batch(q: np.ndarray, v: np.ndarray, i_ref: Any, dt: Any, p: Any, 
     return q1, v1, tau + np.stack([fl, fr], 1), cur
 
 
-def _advance(q: np.ndarray, v: np.ndarray, wl1: np.ndarray, wr1: np.ndarray, u: np.ndarray, w: np.ndarray, dt: Any,
-             coeffs: tuple[Any, Any, Any], out: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:
+def _advance(q: np.ndarray, v: np.ndarray, wl1: np.ndarray, wr1: np.ndarray, u: np.ndarray, w: np.ndarray, dt: PerRobot,
+             coeffs: tuple[PerRobot, PerRobot, PerRobot], out: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:
     """(q_next, v_next) from the end speeds, as dynamics.step_batch: the pose at the mean velocities."""
     hr, kw, d = coeffs
     hdt = 0.5 * dt

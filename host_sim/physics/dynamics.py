@@ -60,16 +60,18 @@ from collections.abc import Sequence
 from typing import Any, Union
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from host_sim.physics.params import RobotParams, cached_per_params
 
 Vec = Union[Sequence[float], np.ndarray]  # a state vector: tuple, list or numpy array
+PerRobot = Union[float, np.ndarray]  # a value every robot shares, or an array of one per robot
 
 # ----------------------------------------------------------------------------- #
 # Parameters: the combinations the closed form needs
 # ----------------------------------------------------------------------------- #
 
-def effective_inertias(p: Any) -> tuple[Any, Any]:
+def effective_inertias(p: Params) -> tuple[Any, Any]:
     """(m_t, J_t): the effective translational mass (kg) and yaw inertia about C (kg m^2).
 
     m_t = m_c + 2 m_w + 2 I_w / r^2
@@ -84,7 +86,7 @@ def effective_inertias(p: Any) -> tuple[Any, Any]:
 
 
 @cached_per_params
-def _coeffs(p: Any) -> tuple[Any, ...]:
+def _coeffs(p: Params) -> tuple[Any, ...]:
     """(r, b, d, g = m_c d, m_t, J_t, 1/m_t, 1/J_t, r/2, r/(2b), 1/r, b/r, m_t J_t).
 
     Cached for the last RobotParams seen (they are frozen); a ParamBatch keeps its own."""
@@ -131,7 +133,7 @@ class ParamBatch:
         return cls({k: np.full(n, float(getattr(p, k))) for k in RobotParams.scalar_names()})
 
     @classmethod
-    def from_vectors(cls, values: Any, names: Sequence[str], base: RobotParams | None = None) -> ParamBatch:
+    def from_vectors(cls, values: ArrayLike, names: Sequence[str], base: RobotParams | None = None) -> ParamBatch:
         values = np.asarray(values, dtype=float)
         if values.ndim != 2 or values.shape[1] != len(names):
             raise ValueError(f"values must have shape (N, {len(names)}), got {values.shape}")
@@ -162,6 +164,10 @@ class ParamBatch:
             self._dyn = (r, b, self.com_offset, self.body_mass * self.com_offset, m_t, j_t, 1.0 / m_t, 1.0 / j_t,
                          0.5 * r, 0.5 * r / b, 1.0 / r, b / r, m_t * j_t)
         return self._dyn
+
+
+# What the shared physics reads attribute by attribute: one robot's parameters (floats) or N robots' (arrays)
+Params = Union[RobotParams, ParamBatch]
 
 
 # ----------------------------------------------------------------------------- #
@@ -342,7 +348,7 @@ def step(q: Vec, v: Vec, tau: Vec, dt: float, p: RobotParams) -> tuple[tuple[flo
 # ----------------------------------------------------------------------------- #
 # Closed form, N robots (numpy), per-robot parameters
 # ----------------------------------------------------------------------------- #
-def reduced_accel_batch(q: np.ndarray, v: np.ndarray, tau: np.ndarray, p: Any) -> np.ndarray:
+def reduced_accel_batch(q: np.ndarray, v: np.ndarray, tau: np.ndarray, p: Params) -> np.ndarray:
     """v' for N robots: v, tau (N, 2) -> (N, 2); p a RobotParams (shared) or a ParamBatch of N."""
     r, b, _d, g, _mt, _jt, imt, ijt = _coeffs(p)[:8]
     wl, wr = v[:, 0], v[:, 1]
@@ -357,7 +363,7 @@ def reduced_accel_batch(q: np.ndarray, v: np.ndarray, tau: np.ndarray, p: Any) -
     return out
 
 
-def step_batch(q: np.ndarray, v: np.ndarray, tau: np.ndarray, dt: float, p: Any,
+def step_batch(q: np.ndarray, v: np.ndarray, tau: np.ndarray, dt: float, p: Params,
                out: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """`step` for N robots: q (N, 5), v (N, 2), tau (N, 2) -> (q_next, v_next).
 

@@ -40,9 +40,12 @@ thing; tests/test_friction.py checks them against each other and against the con
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:  # annotations only: no import at run time
+    from host_sim.physics.dynamics import PerRobot
 
 
 def _clip(x: float, lim: float) -> float:
@@ -114,7 +117,7 @@ def end_speeds(vl: float, vr: float, w11: float, w12: float, w21: float, w22: fl
     return (0.0 if stick_l else vl + w11 * fl + w12 * fr), (0.0 if stick_r else vr + w21 * fl + w22 * fr)
 
 
-def solve_batch(vl: np.ndarray, vr: np.ndarray, w11: Any, w12: Any, w21: Any, w22: Any, tl: Any, tr: Any,
+def solve_batch(vl: np.ndarray, vr: np.ndarray, w11: PerRobot, w12: PerRobot, w21: PerRobot, w22: PerRobot, tl: PerRobot, tr: PerRobot,
                 start: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """`solve` for N robots: (f_l, f_r, left sticks, right sticks), each (N,); start (N, 2) the speeds at the
     step's start (None: 0).  Robots whose wheels both keep turning their way are done in a few
@@ -138,7 +141,7 @@ def solve_batch(vl: np.ndarray, vr: np.ndarray, w11: Any, w12: Any, w21: Any, w2
     return fl, fr, stick_l, stick_r
 
 
-def _crossings(vl: np.ndarray, vr: np.ndarray, w: tuple[Any, ...], tl: Any, tr: Any, g: tuple[np.ndarray, ...],
+def _crossings(vl: np.ndarray, vr: np.ndarray, w: tuple[PerRobot, ...], tl: PerRobot, tr: PerRobot, g: tuple[np.ndarray, ...],
                start: np.ndarray) -> tuple[np.ndarray, ...]:
     """`solve`'s mean friction of the wheels that reverse in the step (`_reversal`), for K robots."""
     w11, w12, w21, w22 = w
@@ -156,7 +159,7 @@ def _crossings(vl: np.ndarray, vr: np.ndarray, w: tuple[Any, ...], tl: Any, tr: 
     return fl, fr, stick_l, stick_r
 
 
-def _reversal_batch(a: np.ndarray, e: np.ndarray, f: np.ndarray, w: Any, t: Any) -> tuple[np.ndarray, np.ndarray]:
+def _reversal_batch(a: np.ndarray, e: np.ndarray, f: np.ndarray, w: PerRobot, t: PerRobot) -> tuple[np.ndarray, np.ndarray]:
     """`_reversal` for K wheels."""
     s = np.sign(a)
     e1 = e + w * (-t * s - f)
@@ -167,7 +170,7 @@ def _reversal_batch(a: np.ndarray, e: np.ndarray, f: np.ndarray, w: Any, t: Any)
     return np.where(cross, f_mean, f), cross
 
 
-def _three_candidates(vl: np.ndarray, vr: np.ndarray, w11: Any, w12: Any, w21: Any, w22: Any, tl: Any, tr: Any
+def _three_candidates(vl: np.ndarray, vr: np.ndarray, w11: PerRobot, w12: PerRobot, w21: PerRobot, w22: PerRobot, tl: PerRobot, tr: PerRobot
                       ) -> tuple[np.ndarray, ...]:
     """`solve`'s three candidates (the right wheel sticks, slips forwards, backwards), the least violating."""
     s = w11 - w12 * w21 / w22
@@ -186,7 +189,7 @@ def _three_candidates(vl: np.ndarray, vr: np.ndarray, w11: Any, w12: Any, w21: A
     return best_fl, best_fr, np.abs(best_fl) < tl, best_sr
 
 
-def end_speeds_batch(vl: np.ndarray, vr: np.ndarray, w11: Any, w12: Any, w21: Any, w22: Any, fl: np.ndarray,
+def end_speeds_batch(vl: np.ndarray, vr: np.ndarray, w11: PerRobot, w12: PerRobot, w21: PerRobot, w22: PerRobot, fl: np.ndarray,
                      fr: np.ndarray, stick_l: np.ndarray, stick_r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """`end_speeds` for N robots."""
     return (np.where(stick_l, 0.0, vl + w11 * fl + w12 * fr), np.where(stick_r, 0.0, vr + w21 * fl + w22 * fr))

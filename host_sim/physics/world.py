@@ -44,6 +44,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 WORLDS_DIR = Path(__file__).resolve().parents[1] / "worlds"
 BUILTIN_NAMES = ("paper_room", "maze", "arena")
@@ -183,7 +184,7 @@ class World:
         self._seg_polygon = np.array([poly_of_entry.get(int(e), -1) for e in self.segment_entry], dtype=int)
 
     # ------------------------------------------------------------------ basics
-    def lamp_levels(self, t: Any = 0.0) -> np.ndarray:
+    def lamp_levels(self, t: ArrayLike = 0.0) -> np.ndarray:
         """Every lamp's level (counts at 1 m) at time t (s): shape t.shape + (n_lamps,)."""
         if not self.flickers:
             if isinstance(t, (int, float)):

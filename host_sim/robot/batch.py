@@ -78,15 +78,16 @@ cost one call.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeGuard, Union, cast
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from host_sim.physics import contact, drivetrain, drivetrain_effects, dynamics, backlash, motors
 from host_sim.sensors import ir_sensor
-from host_sim.physics.dynamics import ParamBatch
+from host_sim.physics.dynamics import ParamBatch, Params, PerRobot
 from host_sim.controller.hardware_io import CYCLE_S
 from host_sim.physics.params import RobotParams
 from host_sim.physics.world import World
@@ -100,6 +101,8 @@ N_SENSORS = ir_sensor.N_SENSORS
 IR_FIELDS = tuple(f.name for f in dataclasses.fields(RobotParams)
                   if f.name.startswith("ir_") or f.name in ("body_radius", "sensor_range", "adc_bits",
                                                              "ambient_leakage"))
+# What BatchSim takes as its robots' parameters (the module docstring says how each is read)
+ParamSets = Union[RobotParams, Sequence[RobotParams], ParamBatch]
 
 
 @dataclass
@@ -122,11 +125,11 @@ class BatchResult:
         return int(self.enc.shape[0])
 
 
-def _is_array(a: Any) -> bool:
+def _is_array(a: object) -> TypeGuard[np.ndarray]:
     return isinstance(a, np.ndarray) and a.ndim >= 1
 
 
-def _sub(a: Any, idx: np.ndarray) -> Any:
+def _sub(a: PerRobot, idx: np.ndarray) -> PerRobot:
     """a[idx] for a per-robot array, a itself for a shared scalar."""
     return a[idx] if _is_array(a) else a
 
@@ -153,7 +156,7 @@ class _PerWheel:
 class _SubParams:
     """Robots s of a parameter set (RobotParams shared, or per-robot arrays), for the motor model."""
 
-    def __init__(self, p: Any, s: np.ndarray) -> None:
+    def __init__(self, p: Params | _PerWheel, s: np.ndarray) -> None:
         self._p, self._s = p, s
 
     def __getattr__(self, name: str) -> Any:
@@ -166,8 +169,8 @@ class BatchSim:
 
     _ir_history: ir_sensor.PoseHistory | None = None  # the poses at the last readings, for ir_latency
 
-    def __init__(self, world: World | None, params: RobotParams | Sequence[RobotParams] | ParamBatch,
-                 poses: Any = None, *, q: Any = None, v: Any = None, t: float = 0.0,
+    def __init__(self, world: World | None, params: ParamSets,
+                 poses: ArrayLike | None = None, *, q: ArrayLike | None = None, v: ArrayLike | None = None, t: float = 0.0,
                  base: RobotParams | None = None, cycle_s: float = CYCLE_S, substeps: int = SUBSTEPS,
                  emitter_pct: float = 60.0, initial_emitter_pct: float | None = None) -> None:
         """
@@ -234,14 +237,14 @@ class BatchSim:
         self._wall_force = np.zeros((2, self.n, max(world.n_walls, 1)))
         self._walls = world.n_walls > 0
 
-    def place(self, poses: Any) -> None:
+    def place(self, poses: ArrayLike) -> None:
         """Put the robots at (x, y, phi) `poses` ((N, 3), q's first three) as they are otherwise (speeds,
         gears, slides, commands on their way): a replayed window starts on its recorded pose."""
         self.q[:, :3] = np.asarray(poses, dtype=float)
         self._gap[:] = -1.0  # the broad phase measured its gaps where the robots were
         self._warm[:] = False
 
-    def start_sliding(self, slides: Any, body: Any) -> None:
+    def start_sliding(self, slides: ArrayLike, body: ArrayLike) -> None:
         """Robots `slides` ((N,) bool) start sliding over the floor with body velocity (u, l, omega) of C
         `body` ((N, 3)), not rolling at their wheels' speeds: a replay from a row where the tracker saw the
         robot slide (replay.sliding_rows)."""
@@ -249,7 +252,7 @@ class BatchSim:
         self.slipping[slides] = True
         self.body[slides] = np.asarray(body, dtype=float)[slides]
 
-    def seed_commands(self, times: Any, cmds: Any) -> None:
+    def seed_commands(self, times: Iterable[float], cmds: Iterable[ArrayLike]) -> None:
         """The commands issued before now (times ascending, s; cmds (K, N, 2) or (K, 2), A): what a delayed
         actuator still has on its way when the run starts.  Without it: no current before the first."""
         for t, c in zip(times, cmds):
@@ -257,7 +260,7 @@ class BatchSim:
             self._hist_i.append(np.broadcast_to(np.asarray(c, dtype=float), (self.n, 2)).copy())
 
     # ------------------------------------------------------------------ set-up
-    def _set_state(self, poses: Any, q: Any, v: Any) -> None:
+    def _set_state(self, poses: ArrayLike | None, q: ArrayLike | None, v: ArrayLike | None) -> None:
         """q and v given, or robots at rest at poses of C (default the world's start)."""
         n = self.n
         if q is not None:
@@ -278,7 +281,7 @@ class BatchSim:
         self.q[:, 2] = pz[:, 2]
         self.v = np.zeros((n, 2))
 
-    def _set_params(self, params: Any, n_hint: int | None) -> None:
+    def _set_params(self, params: ParamSets, n_hint: int | None) -> None:
         if isinstance(params, RobotParams):
             n = n_hint if n_hint is not None else 1
             robots: list[RobotParams] | None = [params]
@@ -304,8 +307,9 @@ class BatchSim:
         self.params = batch  # one value per robot, always
         # What the motors and the dynamics read: the shared RobotParams (floats,
         # faster; the same numbers) when every robot has the same parameters.
-        self._p: Any = shared if shared is not None else batch
-        self._p_motors: Any = shared if shared is not None else _PerWheel(batch)
+        self._p: Params = shared if shared is not None else batch
+        # _PerWheel reads as the ParamBatch it widens
+        self._p_motors: Params = shared if shared is not None else cast(ParamBatch, _PerWheel(batch))
         self._d = shared.com_offset if shared is not None else batch.com_offset
         self._r = shared.body_radius if shared is not None else batch.body_radius
         self._wheel_radius = shared.wheel_radius if shared is not None else batch.wheel_radius
@@ -353,7 +357,7 @@ class BatchSim:
             return motors.encoder_ticks_batch(self.encoder_angles(), self.params, wheels=True)
         return motors.encoder_ticks_batch(self.q[:, 3:5], self._p)
 
-    def engage_gears(self, side: Any) -> None:
+    def engage_gears(self, side: ArrayLike) -> None:
         """Backlash: close each gear's gap on `side` (N, 2) (+1 forward, -1 backward, 0 the middle), the
         encoders reading as before (the wheels move instead): where a robot that had been driven sits."""
         if self.gear_gap is not None:
@@ -396,7 +400,7 @@ class BatchSim:
         return on, off
 
     # ------------------------------------------------------------------ physics
-    def substep(self, i_ref: Any, dt: float) -> None:
+    def substep(self, i_ref: ArrayLike, dt: float) -> None:
         """All N robots by dt seconds with current references i_ref, (2,) or (N, 2) A: SimRobot.advance
         for each (rolling where the wheels hold and no wall is hit, else the contact step)."""
         if self._delay is not None:
@@ -433,7 +437,7 @@ class BatchSim:
         self.q, self.v = q1, v1
         self.t += dt
 
-    def _gear_step(self, q0: np.ndarray, v0: np.ndarray, i_ref: Any, dt: float
+    def _gear_step(self, q0: np.ndarray, v0: np.ndarray, i_ref: ArrayLike, dt: float
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
         """The rolling step with the gears' play (backlash.substep): (q1, v1, traction holds, the references a
         contact step takes, (wheel angles, motor-side speeds and gaps at the end of the rolling step))."""
@@ -449,7 +453,7 @@ class BatchSim:
         return q1, v1, ok, i_contact, (q1[:, 3:5].copy(), wm1, gap1)
 
     def _slip_step(self, q0: np.ndarray, v0: np.ndarray, q1: np.ndarray, v1: np.ndarray, bad: np.ndarray,
-                   i_ref: Any, dt: float, idx: np.ndarray, gaps: np.ndarray, normals: np.ndarray,
+                   i_ref: ArrayLike, dt: float, idx: np.ndarray, gaps: np.ndarray, normals: np.ndarray,
                    order: np.ndarray) -> None:
         """contact.slip_step_batch for the robots `bad`, written into q1, v1."""
         s = np.flatnonzero(bad)
@@ -515,8 +519,8 @@ class BatchSim:
         return qn, vn, bn, rolled, pushed, wheel_out, wall_out
 
     def _robot_params(self, j: int) -> RobotParams:
-        if self._shared:
-            return self._p  # type: ignore[no-any-return]
+        if isinstance(self._p, RobotParams):  # every robot shares it
+            return self._p
         cached = self._robots_cache.get(j)
         if cached is None:
             cached = self._robots_cache[j] = self._p.robot(j, self.base)
@@ -538,7 +542,7 @@ class BatchSim:
             t_c = fx.t_c if self.gear_gap is None else np.where(self._gear_engaged[s], fx.t_c, 0.0)
             return tau, slope, body, {"radii": fx.radius, "body_force": forces, "axle_friction": t_c,
                                       "yaw_damping": drivetrain_effects.yaw_damping(body[:, 2], fx)}
-        tau, _cur, slope = motors.wheel_torque_slope_batch(i_s, vs, _SubParams(self._p_motors, s))
+        tau, _cur, slope = motors.wheel_torque_slope_batch(i_s, vs, cast(Params, _SubParams(self._p_motors, s)))
         if rolling.any():
             r, b = _sub(self._wheel_radius, s), _sub(self._half_axle, s)
             body[:, 0] = np.where(rolling, 0.5 * r * (vs[:, 0] + vs[:, 1]), body[:, 0])
@@ -546,7 +550,7 @@ class BatchSim:
             body[:, 2] = np.where(rolling, 0.5 * r * (vs[:, 1] - vs[:, 0]) / b, body[:, 2])
         return tau, slope, body, {}
 
-    def _delayed(self, i_ref: Any, dt: float) -> np.ndarray:
+    def _delayed(self, i_ref: ArrayLike, dt: float) -> np.ndarray:
         """The current references the drivers see over this substep, actuator_delay after they were issued
         (a command is issued when it differs from the last; drivetrain_effects.delayed_reference)."""
         i = np.broadcast_to(np.asarray(i_ref, dtype=float), (self.n, 2))
@@ -589,9 +593,9 @@ class BatchSim:
         return idx, gaps, normals, order
 
     # ------------------------------------------------------------------ runs
-    def run_inputs(self, cmd: Any, substeps: int | None = None, sensors: bool = True,
-                   seed: int | np.random.Generator | None = None, period: Any = None,
-                   emitter: Any = None) -> BatchResult:
+    def run_inputs(self, cmd: ArrayLike, substeps: int | None = None, sensors: bool = True,
+                   seed: int | np.random.Generator | None = None, period: ArrayLike | None = None,
+                   emitter: Sequence[float] | np.ndarray | None = None) -> BatchResult:
         """Apply T rows of current references, one per control period; returns the readings.
 
         cmd: (T, 2) A, the same references for every robot, or (T, N, 2).
@@ -654,7 +658,8 @@ def machinery(p: RobotParams) -> tuple[bool, bool, bool]:
     return (drivetrain_effects.active(p), bool(p.backlash_l or p.backlash_r), bool(p.actuator_delay))
 
 
-def robot_params(params: Any, base: RobotParams | None) -> tuple[Any, list[RobotParams]]:
+def robot_params(params: ParamSets, base: RobotParams | None
+                 ) -> tuple[RobotParams | list[RobotParams] | ParamBatch, list[RobotParams]]:
     """(what BatchSim takes, the N RobotParams) from a RobotParams, a sequence of them or a ParamBatch."""
     if isinstance(params, RobotParams):
         return params, [params]

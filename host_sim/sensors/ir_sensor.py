@@ -50,9 +50,9 @@ pose of that long ago (PoseHistory, read_sensors(track=True)).
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from host_sim.physics.params import DEFAULT, RobotParams
 from host_sim.physics.world import World
@@ -241,7 +241,7 @@ def _smootherstep(u: np.ndarray) -> np.ndarray:
     return u * u * u * (u * (6.0 * u - 15.0) + 10.0)
 
 
-def domes(angle: Any, p: RobotParams = DEFAULT) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def domes(angle: ArrayLike, p: RobotParams = DEFAULT) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(big dome, small dome, blend weight of the big dome) at |angle| (rad)."""
     c = _consts(p)
     a = np.abs(np.asarray(angle, dtype=float))
@@ -249,7 +249,7 @@ def domes(angle: Any, p: RobotParams = DEFAULT) -> tuple[np.ndarray, np.ndarray,
     return v[..., 0], v[..., 1], _smoothstep((a - c.blend_lo) * c.inv_blend)
 
 
-def angle_term(angle: Any, p: RobotParams = DEFAULT) -> np.ndarray:
+def angle_term(angle: ArrayLike, p: RobotParams = DEFAULT) -> np.ndarray:
     """A(angle): relative response to a wall seen at `angle` (rad) from its normal; A(0) ~ 1."""
     c = _consts(p)
     a = np.abs(np.asarray(angle, dtype=float))
@@ -263,7 +263,7 @@ def angle_term(angle: Any, p: RobotParams = DEFAULT) -> np.ndarray:
     return np.maximum(vs + w * vd, 0.0)
 
 
-def distance_term(distance: Any, p: RobotParams = DEFAULT) -> np.ndarray:
+def distance_term(distance: ArrayLike, p: RobotParams = DEFAULT) -> np.ndarray:
     """F(x) in 1/m^2: x^2/x_p^4 near, 1/x^2 far, averaged in between; 0 beyond sensor_range.
 
     Between x_p/k and k x_p (k = ir_blend) the two laws are averaged
@@ -280,14 +280,14 @@ def distance_term(distance: Any, p: RobotParams = DEFAULT) -> np.ndarray:
     return f * (u * u * (3.0 - 2.0 * u))
 
 
-def power_term(power_pct: Any, p: RobotParams = DEFAULT) -> Any:
+def power_term(power_pct: ArrayLike, p: RobotParams = DEFAULT) -> float | np.ndarray:
     """P(L): light emitted at pulse width L (%), as a fraction of full: proportional, then flat."""
     if isinstance(power_pct, (int, float)):
         return min(max(power_pct / 100.0, 0.0), p.ir_saturation)
     return np.minimum(np.maximum(np.asarray(power_pct, dtype=float) / 100.0, 0.0), p.ir_saturation)
 
 
-def response(distance: Any, angle: Any, power_pct: Any, p: RobotParams = DEFAULT) -> np.ndarray:
+def response(distance: ArrayLike, angle: ArrayLike, power_pct: ArrayLike, p: RobotParams = DEFAULT) -> np.ndarray:
     """Reflected light (ADC counts, before noise and the ADC ceiling) of a wall at
     `distance` (m, along the sensor axis; inf = nothing) seen at `angle` (rad)
     with the emitters at `power_pct` (%).  Vectorised; arguments broadcast."""
@@ -300,7 +300,7 @@ def response(distance: Any, angle: Any, power_pct: Any, p: RobotParams = DEFAULT
 _BEAR = np.array(BEARINGS)
 
 
-def sensor_axes(poses: Any, p: RobotParams = DEFAULT) -> tuple[np.ndarray, np.ndarray]:
+def sensor_axes(poses: ArrayLike, p: RobotParams = DEFAULT) -> tuple[np.ndarray, np.ndarray]:
     """(mounts, axes), unit vectors (..., 8, 2) of robots at poses (..., 3).
 
     Sensor k sits on the rim at C + body_radius * mounts[k] (bearing 45 k
@@ -320,7 +320,7 @@ def _unit(ang: np.ndarray) -> np.ndarray:
     return out
 
 
-def reflection(world: World, poses: Any, p: RobotParams = DEFAULT) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def reflection(world: World, poses: ArrayLike, p: RobotParams = DEFAULT) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(distance from the sensor (m), incidence angle (rad), hit) along each sensor's axis, shape (..., 8).
 
     The ray leaves the robot's centre along the sensor's axis (a misaligned
@@ -345,7 +345,7 @@ def _quantise(v: np.ndarray, adc_max: int) -> np.ndarray:
     return np.minimum(np.maximum(np.rint(v), 0.0), adc_max).astype(np.int64)
 
 
-def _reflected_batch(world: World, poses: np.ndarray, power_pct: Any, p: RobotParams, c: _Consts) -> np.ndarray:
+def _reflected_batch(world: World, poses: np.ndarray, power_pct: ArrayLike, p: RobotParams, c: _Consts) -> np.ndarray:
     """Reflected light (counts) of every sensor, (N, 8): response along its axis, or its beam's weighted sum."""
     if c.beam_n == 1:
         dist, ang, _hit = reflection(world, poses, p)
@@ -386,7 +386,8 @@ def _robot_lamp_gains(world: World, poses: np.ndarray, p: RobotParams, c: _Const
     return g
 
 
-def _ambient_batch(world: World, poses: np.ndarray, t: Any, p: RobotParams, c: _Consts) -> tuple[Any, Any]:
+def _ambient_batch(world: World, poses: np.ndarray, t: ArrayLike, p: RobotParams, c: _Consts
+                   ) -> tuple[float | np.ndarray, float | np.ndarray]:
     """(ambient at the emitter-off reading, at the emitter-on one): the world's level plus the lamps."""
     base = p.ir_ambient if world.ambient is None else world.ambient
     if not world.lamps:
@@ -399,7 +400,7 @@ def _ambient_batch(world: World, poses: np.ndarray, t: Any, p: RobotParams, c: _
     return amb_off, base + (gains * world.lamp_levels(t_arr + p.ir_on_delay)[..., None, :]).sum(-1)
 
 
-def _read(world: World, poses: np.ndarray, power_pct: Any, t: Any, p: RobotParams,
+def _read(world: World, poses: np.ndarray, power_pct: ArrayLike, t: ArrayLike, p: RobotParams,
           rng: np.random.Generator | None, quantise: bool = True) -> tuple[np.ndarray, np.ndarray]:
     c = _consts(p)
     refl = _reflected_batch(world, poses, power_pct, p, c)
@@ -522,7 +523,7 @@ def _read_one(world: World, x: float, y: float, phi: float, power_pct: float, t:
     """
     c = _consts(p)
     dist, ang, _hit = world.cast_robot(x, y, phi, c.ray_bearings, c.reach, c.ray_origins)
-    refl = _reflected_one(c, dist.tolist(), ang.tolist(), p.ir_gain * power_term(power_pct, p), p.body_radius)
+    refl = _reflected_one(c, dist.tolist(), ang.tolist(), p.ir_gain * float(power_term(power_pct, p)), p.body_radius)
     if c.beam_n > 1:  # the beam: the weighted sum of each sensor's rays
         n, w = c.beam_n, c.beam_w_list
         refl = [sum(w[j] * refl[k * n + j] for j in range(n)) for k in range(N_SENSORS)]
@@ -535,7 +536,7 @@ def _read_one(world: World, x: float, y: float, phi: float, power_pct: float, t:
 # --------------------------------------------------------------------------- #
 # Latency: the readings describe the pose of ir_latency ago
 # --------------------------------------------------------------------------- #
-def pose_at(times: Any, poses: Any, t: Any) -> np.ndarray:
+def pose_at(times: ArrayLike, poses: ArrayLike, t: ArrayLike) -> np.ndarray:
     """Poses at time(s) t, linear between the samples of a track: times (K,) increasing, poses (K, ..., 3).
 
     Clamped to the first and last sample (a robot stood where it started);
@@ -570,7 +571,7 @@ class PoseHistory:
         self.t: list[float] = []
         self.poses: list[np.ndarray] = []
 
-    def add(self, t: float, pose: Any) -> None:
+    def add(self, t: float, pose: ArrayLike) -> None:
         if self.t and t <= self.t[-1]:  # the same instant read again: the newer pose
             self.t.pop()
             self.poses.pop()
@@ -586,8 +587,8 @@ class PoseHistory:
 # --------------------------------------------------------------------------- #
 # Readings: the one entry point, for one robot or N
 # --------------------------------------------------------------------------- #
-def read_sensors(world: World, poses: Any, power_pct: Any = 60.0, t: Any = 0.0, p: RobotParams = DEFAULT,
-                 rng: np.random.Generator | None = None, *, quantise: bool = True,
+def read_sensors(world: World, poses: ArrayLike, power_pct: float | np.ndarray = 60.0, t: float | np.ndarray = 0.0,
+                 p: RobotParams = DEFAULT, rng: np.random.Generator | None = None, *, quantise: bool = True,
                  track: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """(adc_off, adc_on) of one robot at pose (x, y, phi), each (8,), or of N robots at poses (N, 3), each (N, 8).
 
