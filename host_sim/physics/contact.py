@@ -1,34 +1,9 @@
-"""Contact: wheels on the floor that may slip, and the body's rim against walls.  Scalar and batch side by side.
+"""Contact: wheels on the floor that may slip, and the body's rim against walls.
 
-Model and equations: docs/dynamics.md, "Contact".  In short:
-
-* While both wheels roll without slipping and no wall pushes, the robot is
-  the paper's reduced Lagrangian model (host_sim/physics/dynamics.py, advanced by
-  host_sim/physics/drivetrain.py).  `traction_ok` checks, after each such step, that the
-  ground forces the no-slip constraints needed (longitudinal F_l, F_r at the
-  wheels, lateral F_n at the axle) fit in the friction cones of the wheels:
-  |(F_i, a_i)| <= mu N with a_l + a_r = F_n, N = (m_c + 2 m_w) g / 2 per wheel.
-* Otherwise (a wheel slips, or the step would take the body into a wall) the
-  step is `slip_step`: the unconstrained planar robot, generalised velocity
-  nu = (u, l, omega, w_l, w_r) (velocity of C along the heading and to the
-  left, yaw rate, wheel speeds), with contact impulses solved at the velocity
-  level (time-stepping, Moreau / Stewart-Trinkle):
-    - each wheel: Coulomb friction on the slip velocity of its contact point
-      (u -+ b omega - r w_i along the heading, l sideways), |P| <= mu N dt;
-    - each wall within reach: a normal impulse P_n >= 0 keeping the rim out of
-      the wall (speculative: v_n + gap / dt >= 0, complementary to P_n), and
-      Coulomb friction |P_t| <= mu_wall P_n at the rim point C - R n;
-  solved by projected Gauss-Seidel to a fixed tolerance.  The body's
-  gyroscopic terms are taken by the implicit midpoint rule (they do no work),
-  the wheels' motor torque linearly implicitly (stable for a free-spinning
-  wheel at any step), the pose with the new velocities (no push-out).
-  When both wheels end the step inside their friction cones the robot is
-  rolling again and goes back to the reduced model.
-
-`walls_in_reach` (scalar) / `walls_in_reach_batch` pick the walls a step can
-reach from World.wall_distances.  `slip_step` / `slip_step_batch` and
-`traction_ok` / `traction_ok_batch` are the scalar and batch versions of the
-same computation (tests/test_contact.py checks them against each other).
+While the wheels roll and no wall pushes, the robot is the reduced model (`traction_ok` checks the
+ground forces fit the wheels' friction cones); otherwise `slip_step` takes the unconstrained planar
+robot with wheel and wall impulses solved by projected Gauss-Seidel (time-stepping).  The scalar and
+batch versions sit side by side (tests/test_contact.py checks them).  Model: docs/contact.md.
 """
 from __future__ import annotations
 

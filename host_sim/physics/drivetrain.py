@@ -1,33 +1,9 @@
-"""The coupled motor + rolling-dynamics step, second order, with stick-slip dry friction: scalar and batch.
+"""The coupled motor + rolling-dynamics step, second order, with stick-slip dry friction.
 
-The motors (host_sim/physics/motors.py) give the wheel torques from the current
-references and the wheel speeds; the dynamics (host_sim/physics/dynamics.py) advance
-the robot under a torque held over the step; the axles' dry friction
-(host_sim/physics/friction.py) is solved at the velocity level inside the step.
-Evaluating the torque at the start of the step makes the coupled step first
-order, however good the dynamics step is.  Here the torque is taken at the
-speed predicted for the middle of the step (explicit midpoint on the torque):
-
-    tau_n   = tau(i_ref, v_n)                         motor less viscous friction
-    v_mid   = v_n + dt/2 * v'(v_n, tau_n + f_h)       (reduced closed form)
-    tau_mid = tau(i_ref, v_mid)
-    (q, v)_{n+1} = dynamics.step(q_n, v_n, tau_mid + f, dt)
-
-f_h and f (|f_i| <= T_c) the dry friction over the half step and the step:
-each wheel ends the (half) step at rest when a friction torque within its
-bound can hold it there (stick), else the friction is -T_c opposing its
-speed at the end (slip).  The step is linear in f once its gyroscopic
-coefficient is fixed (from the predictor, with f_h), so f is a 2x2
-box-constrained problem (friction.solve).  Away from stick the friction is
-a constant -T_c sign(w) and the step is second order for the coupled system
-wherever the torque is smooth in the speed; a step in which a wheel sticks
-or breaks away is first order (docs/dynamics.md, "Integrator", the measured
-tables).
-
-`drive_step` (pure-Python floats, one robot) and `drive_step_batch` (numpy,
-N robots, per-robot parameters) compute the same thing; tests/test_drive.py
-checks them against each other and against an RK4 of the coupled system
-with its stick and slip events located.
+The motors' torque is taken at the speed predicted for the middle of the step (explicit midpoint on
+the torque), the axles' dry friction solved inside the step (friction.py), then dynamics.step.
+`drive_step` (Python floats, one robot) and `drive_step_batch` (numpy, N robots) compute the same thing
+(tests/test_drive.py).  Derivation and measured orders: docs/dynamics.md ("Integrator"), docs/motors.md.
 """
 from __future__ import annotations
 

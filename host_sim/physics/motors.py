@@ -1,37 +1,9 @@
-"""Current-regulated DC gear motors and wheel encoders (paper §3.2).  Derivation: docs/dynamics.md.
+"""Current-regulated DC gear motors and wheel encoders (paper section 3.2).
 
-The firmware gives each wheel a current reference i_ref (A).  The driver's current
-regulator is much faster than the robot, so the current it delivers is taken as
-instantaneous:
-
-    i = clip(clip(i_ref, -I_lim, I_lim), (-V_bat - k_e N w) / R, (V_bat - k_e N w) / R)
-
-first the driver's limit, then what the battery can push against the back-EMF
-(the bridge applies a voltage in [-V_bat, V_bat]; the motor turns at N w).  If the
-two ranges do not overlap (the wheel is driven faster than V_bat allows), the
-bridge does its best, the nearest feasible current.  k_e = k_t (SI units).
-
-Torque on the wheel about its axle from the motor and the viscous friction:
-
-    tau = eta N k_t i - c_v w
-
-eta the gear efficiency (one value for both directions of power flow), c_v viscous
-friction at the wheel axle.  The dry friction T_c at the axle is not a function of
-the speed alone: a wheel at rest holds under any torque below T_c (stick) and turns
-against -T_c sign(w) above it (slip).  It is solved inside the step, at the velocity
-level, with the two wheels coupled through the robot's inertia (host_sim/physics/friction.py,
-used by host_sim/physics/drivetrain.py and host_sim/physics/contact.py).
-
-Encoders: cumulative ticks = floor(theta / (2 pi) * ticks_per_rev), floor toward
--inf, so tick k covers [k, k+1) * 2 pi / ticks_per_rev whatever the sign of theta
-(a counter that starts at 0 with the wheel at angle 0 counts -1 as soon as it
-turns backwards by any amount).  `encoder_angle(k)` is the centre of tick k,
-the best guess of the angle from a count and safe from rounding at the edges.
-
-Scalar functions are pure Python floats (one robot, hot path); the *_batch
-versions take numpy arrays of shape (N,) or (N, 2) (left, right) with parameters
-a RobotParams (shared) or a ParamBatch (one value per robot, broadcast along
-axis 0).
+The driver delivers i_ref clipped to its limit and to what the battery can push against the back-EMF;
+the wheel torque is eta N k_t i - c_v w (the axle's dry friction is solved in the step: friction.py).
+Encoders count floor(theta / 2 pi * ticks_per_rev).  Scalar functions take Python floats; *_batch ones
+arrays (N,) or (N, 2) with a RobotParams or a ParamBatch.  Equations: docs/motors.md.
 """
 from __future__ import annotations
 

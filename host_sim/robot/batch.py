@@ -1,79 +1,10 @@
-"""Batch mode: N robots at once (N parameter sets, or N robots), vectorised numpy.
+"""Batch mode: N robots stepped together, vectorised numpy (N parameter sets, or N robots).
 
-The core loop of parameter identification: put N candidate robots in the
-same recorded state, feed them the same recorded current references, and
-compare what each one's encoders, sensors and pose do with the recording.
-
-    sim = BatchSim(world, params, poses)            # poses: (N, 3) of C
-    res = sim.run_inputs(cmd)                       # cmd: (T, 2) or (T, N, 2), A
-    res.enc (T, N, 2), res.pose (T, N, 3), res.ir_on / res.ir_amb (T, N, 8)
-
-    res = host_sim.recordings.replay.replay_batch(rec, params_list, start=k)  # replay row k.. for N sets
-
-`params` is one RobotParams (N copies), a sequence of N RobotParams, or a
-dynamics.ParamBatch (one value per robot for every scalar parameter; the
-tuple-valued IR coefficients come from `base`).
-
-Each control period (default 40 ms) is what host_sim/robot/sim_robot.py's SimRobot and
-host_sim/simulation.Simulation do for one robot, for all N at once:
-
-1. the readings at the control instant: encoder ticks (motors.encoder_ticks_batch,
-   quantised, floor), the pose of C, and optionally the IR sensors
-   (ir_sensor.read_sensors, at the emitter power of the previous
-   actuation: `emitter_pct`, 60 % by default; a simulator robot that was just
-   switched on reads its first sample with the emitters off,
-   `initial_emitter_pct=0`; with an ir_latency, at the pose of that long ago,
-   linear between the earlier control instants' poses, as SimRobot does);
-2. the current references of that row are applied (row j of the results is
-   the state *before* row j's command acts: the recording format's convention,
-   so results and recordings line up row for row);
-3. n substeps of dt = period / n: motors at the mid-step speed and dynamics
-   (drivetrain.drive_step_batch: current regulator, back-EMF, current limit,
-   friction; dynamics.step_batch, the same integrator as dynamics.step),
-   then contact where needed.
-
-Contacts: the same model as SimRobot, vectorised (host_sim/physics/contact.py,
-docs/dynamics.md "Contact"): every robot takes the rolling step
-(drivetrain.drive_step_batch); those whose wheels lose their grip
-(contact.traction_ok_batch) or whose rim would enter a wall take the
-contact step instead (contact.slip_step_batch, on that subset only), with
-all the walls within their reach (contact.walls_in_reach_batch); the start
-of each contact counts one collision.  When fewer than
-`vector_contacts_from` (64) robots need the contact step, they take it one
-by one through contact.slip_step, its scalar twin: the vectorised solve
-iterates until its slowest robot settles, and for a few robots its sweeps
-are all Python overhead.  The wall test runs only for robots
-that may reach a wall in the step (a conservative bound on how far C moved
-since their last test).  world=None means no walls: no wall contacts, and
-the IR sensors see only the ambient light.
-
-Effects (host_sim/physics/effects.py, docs/effects.md): while every drive effect is absent the
-substep is the nominal one above; with any present, drivetrain_effects.py computes the motors,
-supply, body forces, dynamics and traction (per-wheel radii, friction, torque constants, the
-battery's sag: `vbat`), the gears' backlash (host_sim/physics/backlash.py: a motor side of its own beyond the play,
-`gear_gap`, `rotor_speed`), `actuator_delay` delays the
-references through a command history (`seed_commands` for what was sent before the start),
-and per-wheel encoder scales count each wheel with its own ticks per turn.  BatchResult.vbat
-is the battery voltage the robots sense at each control instant.
-
-Agreement with SimRobot: the same physics in the same order, but the numpy
-paths group the floating-point operations differently from the pure-Python
-ones, so a batch robot and a SimRobot with the same inputs agree to
-rounding error (below 1e-9 m in tests/test_batch.py and tests/test_contact.py,
-wall contacts, slip and corners included) rather than bit for bit; the
-quantised outputs (encoder ticks, ADC counts) are then equal except where
-the exact value sits within that rounding error of a quantisation boundary.
-With seed=s and N = 1 the sensor noise is the same stream as SimRobot(seed=s).
-
-Speed: the motors and the dynamics cost ~60 numpy operations on arrays of N
-per substep, the wall test a few more (and a nearest-wall query for the
-robots near a wall), the IR ring one ir_sensor.read_sensors per group and
-period: `twinbot bench sim` measures it (tools/bench/sim.py).
-
-Sensors with N parameter sets: robots are grouped by their IR parameters
-(body radius, range, every ir_* value, ambient leakage, ADC bits) and each group is read with
-one ir_sensor.read_sensors call, so N robots differing only in their dynamics
-cost one call.
+The core of identification: N candidate robots in the same recorded state, fed the same current
+references, their encoders, IR ring and pose compared with the recording.  `BatchSim` takes one
+RobotParams, a sequence of them or a ParamBatch; `run_inputs` applies one row of references per
+control period and returns a `BatchResult`.  The same physics as SimRobot, to rounding error.
+Equations: docs/dynamics.md ("Batch"), docs/contact.md; the effects: docs/effects.md.
 """
 from __future__ import annotations
 

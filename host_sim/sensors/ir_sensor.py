@@ -1,51 +1,10 @@
-"""The IR proximity sensors of the paper (section 3.3), with ambient light, noise and the ADC.
+"""The IR proximity ring of the paper (section 3.3): eight emitter/phototransistor pairs on the rim.
 
-Eight emitter/phototransistor pairs sit on the rim of the body (radius
-body_radius) at bearings 45*i degrees from the heading, i = 0..7 = S1..S8
-(S1 front, then counter-clockwise), each looking radially outward.
-
-Reflected light (docs/ir-sensor.md has the figures and the derivation):
-
-    response(x, angle, L) = C * P(L) * A(angle) * F(x)           [ADC counts]
-
-* the reflection point: a ray from the sensor along its axis to the nearest
-  wall (world.World.cast_robot); x is the distance along the ray (m), angle
-  the incidence angle between the ray and the wall's normal;
-* A: two 5th-degree polynomials in |angle| (rad), the big dome (diffuse
-  reflection) and the small dome (the specular beam on top of it near normal
-  incidence), blended by a smoothstep of |angle| over ir_angle_blend: the
-  small dome alone below its first value, the big dome alone above its
-  second; symmetric on [-pi/2, pi/2] by construction, clipped at 0;
-* F: 1/x^2 far (a fixed solid angle of light), x^2 / x_p^4 near (the
-  emitter's and the receiver's cones stop overlapping), the two meeting at
-  the peak x_p = ir_near_peak; in between (x_p/k .. k x_p, k = ir_blend)
-  their weighted geometric average, the far law's weight s rising as a
-  smootherstep of ln x: F = x_p^-2 (x/x_p)^(2 - 4 s); faded to 0 over the
-  last 20 % of sensor_range;
-* P: the pulse width L (%) gives proportional light, min(L/100,
-  ir_saturation): flat above the emitter's saturation (Fig. 10);
-* C = ir_gain, counts m^2 at 100 % pulse width (extrapolated linearly).
-
-Option, a beam (ir_beam_rays = n > 1): each sensor casts n rays over
-+-ir_beam_half_angle around its axis and reads the sum of their responses
-weighted by cos^2 of the angle off the axis (`beam`), on both paths.
-
-Readings (`read_sensors`): emitters off -> ambient + noise; emitters on ->
-ambient + reflected + noise; each clipped to 0..adc_max (the ADC ceiling
-saturates the total) and rounded to integer counts.  The ambient is the
-world's global level (or ir_ambient) plus lamps, each adding
-level * max(0, cos(axis, direction to lamp)) / d^2 when no wall hides it,
-flickering as level * (1 + depth sin(2 pi f t)) if asked; the emitter-on
-reading is taken ir_on_delay after the emitter-off one, so a flickering lamp
-leaks into on - off as it does on the robot.
-
-Effects (host_sim/physics/effects.py, docs/effects.md "IR sensor effects"), absent
-by default and then without any effect on a reading: per pair k a gain
-ir_gain_scale[k] on its reflected light, its axis turned by
-ir_misalignment[k] about its mount (ray, incidence angle, beam and lamp term
-follow it), ir_offset[k] counts and ambient_leakage[k] times the ambient
-added to its emitter-on reading; and ir_latency, the readings describing the
-pose of that long ago (PoseHistory, read_sensors(track=True)).
+Reflected light = C P(L) A(angle) F(x) along each sensor's axis (or its beam), plus the ambient light
+of the world and its lamps, noise and the ADC.  `read_sensors` reads one robot (pose (3,)) or N
+(poses (N, 3)); `PoseHistory` and read_sensors(track=True) give the readings an ir_latency.  The IR
+effects of the library (gain, misalignment, offset, leakage, latency) act here too.
+Model, figures and derivation: docs/ir-sensor.md; the effects: docs/effects.md.
 """
 from __future__ import annotations
 
