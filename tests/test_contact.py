@@ -350,3 +350,23 @@ def test_on_ice_the_wheels_spin_and_the_robot_stays():
         res = sim.run_inputs(np.tile([[0.5, 0.3]], (25, 1)), sensors=False)
         assert np.array_equal(res.pose[-1, 0], [0.0, 0.0, 0.0]) and res.pose[-1, 1, 0] > 0.3
         assert np.abs(res.enc[-1, 0] - robot.encoder_ticks()).max() <= 1  # row 24: after 0.96 s
+
+
+def test_zero_wheel_friction_slides_freely_with_shared_parameters_and_with_drive_effects():
+    """wheel_friction = 0 where the friction disc's radius is a Python float: every robot of a batch on the
+    same parameters, solved vectorised, and a robot with a drive effect (a BatchSim of one).  The disc is
+    the point 0 (no grip): the wheels spin, the body stays, and the paths agree."""
+    ice = DEFAULT.replace(wheel_friction=0.0)
+    eig = contact._eigen(40.0, 0.3, 2.0)
+    assert contact._on_disc(0.3, -0.2, 0.0, eig) == (0.0, 0.0)
+    free = World(name="e", size=(1.0, 1.0), walls=[])
+    robot = drive(free, (0.0, 0.0, 0.0), (500, 300), 0.96, 0.005, p=ice)
+    sim = BatchSim(None, ice, np.zeros((2, 3)))
+    sim.vector_contacts_from = 1
+    res = sim.run_inputs(np.tile([[0.5, 0.3]], (25, 1)), sensors=False)
+    assert np.array_equal(res.pose[-1], np.zeros((2, 3)))
+    assert np.abs(res.enc[-1] - robot.encoder_ticks()).max() <= 1  # row 24: after 0.96 s
+    wider = ice.replace(wheel_radius_delta_l=1e-4)
+    effects = drive(free, (0.0, 0.0, 0.0), (500, 300), 0.96, 0.005, p=wider)
+    assert effects.pose == (0.0, 0.0, 0.0) and effects.slip is not None
+    assert abs(effects.encoder_ticks()[1] - robot.encoder_ticks()[1]) <= 1

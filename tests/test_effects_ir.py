@@ -2,7 +2,7 @@
 
 Each effect on a case computed by hand (a wall straight ahead of S1, the
 emitters at 60 %, no noise), then the single-robot path (read_sensors,
-SimRobot) against the batch path (read_sensors_batch, BatchSim), then a
+SimRobot) against the batch path (read_sensors on (N, 3) poses, BatchSim), then a
 parameter file that sets them all.  With every effect absent the readings
 are those of tests/test_ir_sensor.py, unchanged.
 """
@@ -147,17 +147,17 @@ def test_scalar_equals_batch(name):
     rng = np.random.default_rng(11)
     poses = np.column_stack([rng.uniform(0.1, 1.9, 64), rng.uniform(0.1, 1.4, 64), rng.uniform(-4, 4, 64)])
     power, t = rng.uniform(10, 100, 64), rng.uniform(0, 5, 64)
-    off_b, on_b = ir.read_sensors_batch(w, poses, power, t, p)
+    off_b, on_b = ir.read_sensors(w, poses, power, t, p)
     single = [ir.read_sensors(w, poses[i], float(power[i]), float(t[i]), p) for i in range(64)]
     assert np.array_equal(np.array([s[0] for s in single]), off_b)
     assert np.array_equal(np.array([s[1] for s in single]), on_b)
-    assert not np.array_equal(on_b, ir.read_sensors_batch(w, poses, power, t, P)[1])  # the effect acts
+    assert not np.array_equal(on_b, ir.read_sensors(w, poses, power, t, P)[1])  # the effect acts
     noisy = ir.read_sensors(w, poses[0], 60.0, 1.0, p, np.random.default_rng(3))
-    batch = ir.read_sensors_batch(w, poses[:1], 60.0, 1.0, p, np.random.default_rng(3))
+    batch = ir.read_sensors(w, poses[:1], 60.0, 1.0, p, np.random.default_rng(3))
     assert np.array_equal(noisy[1], batch[1][0]) and np.array_equal(noisy[0], batch[0][0])
     beam = p.replace(ir_beam_rays=5)  # and with the beam: 1 count at a rounding tie of its sum
     single = np.array([ir.read_sensors(w, poses[i], float(power[i]), float(t[i]), beam)[1] for i in range(64)])
-    assert np.abs(single - ir.read_sensors_batch(w, poses, power, t, beam)[1]).max() <= 1
+    assert np.abs(single - ir.read_sensors(w, poses, power, t, beam)[1]).max() <= 1
 
 
 def test_latency_simrobot_equals_batchsim_and_groups_apart():
@@ -178,13 +178,13 @@ def test_latency_simrobot_equals_batchsim_and_groups_apart():
 
 
 def test_a_track_is_read_with_its_latency():
-    """read_sensors_track (replay, diagnosis) reads a recorded track as SimRobot reads its own history."""
+    """read_sensors(track=True) (replay, diagnosis) reads a recorded track as SimRobot reads its own history."""
     w = builtin_world("paper_room")
     p = P.replace(ir_latency=0.06)
     cmd = np.full((25, 2), 0.12)
     ref = simrobot_run(w, p, (0.35, 0.35, math.pi), cmd)
     t = 0.04 * np.arange(25)
-    off, on = ir.read_sensors_track(w, t, ref["pose"], 60.0, p)
+    off, on = ir.read_sensors(w, ref["pose"], 60.0, t, p, track=True)
     assert_adc_match(on, ref["on"])
     assert_adc_match(off, ref["amb"])
 

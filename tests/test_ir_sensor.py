@@ -194,7 +194,7 @@ def test_noise_has_the_configured_std_and_readings_are_integers():
     w = builtin_world("arena")
     rng = np.random.default_rng(42)
     poses = np.tile([1.0, 1.0, 0.3], (4000, 1))
-    off, on = ir.read_sensors_batch(w, poses, 60, 0.0, P, rng)
+    off, on = ir.read_sensors(w, poses, 60, 0.0, P, rng)
     assert off.dtype.kind == "i" and on.dtype.kind == "i"
     assert off.min() >= 0 and on.max() <= CEILING
     amb = P.ir_ambient
@@ -203,7 +203,7 @@ def test_noise_has_the_configured_std_and_readings_are_integers():
     assert off.std() == pytest.approx(math.sqrt(P.ir_noise ** 2 + 1 / 12), rel=0.05)
     assert (on - off).std() == pytest.approx(math.sqrt(2 * P.ir_noise ** 2 + 2 / 12), rel=0.05)
     loud = P.replace(ir_noise=40.0)
-    off, _ = ir.read_sensors_batch(w, poses[:2000], 60, 0.0, loud, rng)
+    off, _ = ir.read_sensors(w, poses[:2000], 60, 0.0, loud, rng)
     assert off.std() == pytest.approx(40.0, rel=0.05)
     # rng None: no noise, the same answer every time.
     a = ir.read_sensors(w, (1.0, 1.0, 0.3), 60)
@@ -217,7 +217,7 @@ def test_batch_equals_single():
     poses = np.column_stack([rng.uniform(0.1, 1.9, 64), rng.uniform(0.1, 1.4, 64), rng.uniform(-4, 4, 64)])
     power = rng.uniform(10, 100, 64)
     t = rng.uniform(0, 5, 64)
-    off_b, on_b = ir.read_sensors_batch(w, poses, power, t)
+    off_b, on_b = ir.read_sensors(w, poses, power, t)
     for i in range(64):
         off, on = ir.read_sensors(w, poses[i], float(power[i]), float(t[i]))
         assert np.array_equal(off, off_b[i]) and np.array_equal(on, on_b[i])
@@ -228,7 +228,7 @@ def test_batch_equals_single():
     lit = w.with_changes(lamps=tuple(ir_lamp(**lamp) for lamp in lamps))
     for i in range(0, 64, 4):
         single = ir.read_sensors(lit, poses[i], float(power[i]), float(t[i]), P, np.random.default_rng(i))
-        batch = ir.read_sensors_batch(lit, poses[i:i + 1], power[i], t[i], P, np.random.default_rng(i))
+        batch = ir.read_sensors(lit, poses[i:i + 1], power[i], t[i], P, np.random.default_rng(i))
         assert np.array_equal(single[0], batch[0][0]) and np.array_equal(single[1], batch[1][0])
 
 
@@ -272,12 +272,12 @@ def test_beam_batch_equals_single():
     rng = np.random.default_rng(11)
     poses = np.column_stack([rng.uniform(0.1, 1.9, 64), rng.uniform(0.1, 1.4, 64), rng.uniform(-4, 4, 64)])
     power = rng.uniform(10, 100, 64)
-    off_b, on_b = ir.read_sensors_batch(w, poses, power, 0.0, BEAM)
+    off_b, on_b = ir.read_sensors(w, poses, power, 0.0, BEAM)
     single = np.array([ir.read_sensors(w, poses[i], float(power[i]), 0.0, BEAM)[1] for i in range(64)])
     assert np.abs(single - on_b).max() <= 1 and (single == on_b).mean() > 0.99  # 1 count at a rounding tie
-    assert not np.array_equal(on_b, ir.read_sensors_batch(w, poses, power, 0.0, P)[1])  # the beam is on
+    assert not np.array_equal(on_b, ir.read_sensors(w, poses, power, 0.0, P)[1])  # the beam is on
     noisy = ir.read_sensors(w, poses[0], 60.0, 0.0, BEAM, np.random.default_rng(3))
-    batch = ir.read_sensors_batch(w, poses[:1], 60.0, 0.0, BEAM, np.random.default_rng(3))
+    batch = ir.read_sensors(w, poses[:1], 60.0, 0.0, BEAM, np.random.default_rng(3))
     assert np.abs(noisy[1] - batch[1][0]).max() <= 1
 
 
@@ -292,7 +292,7 @@ def test_beam_sees_a_corner_between_two_sensor_axes():
     assert (on - off)[:2].max() == 0  # neither S1's nor S2's axis meets it
     off, on = ir.read_sensors(w, (1.0, 1.0, 0.0), 60, 0.0, BEAM)
     assert (on - off)[0] > 40 and (on - off)[1] > 40  # firmware NEAR_LO: both see an obstacle
-    off_b, on_b = ir.read_sensors_batch(w, np.array([[1.0, 1.0, 0.0]]), 60, 0.0, BEAM)
+    off_b, on_b = ir.read_sensors(w, np.array([[1.0, 1.0, 0.0]]), 60, 0.0, BEAM)
     assert np.abs(on_b[0] - on).max() <= 1
 
 

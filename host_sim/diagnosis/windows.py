@@ -345,7 +345,7 @@ def sensors_on_track(rec: Recording, rows: np.ndarray, robots: list[RobotParams]
         if p.ir_latency > 0:
             t = t - p.ir_latency
             poses = ir_sensor.pose_at(rec.t, rec.pose, t)
-        amb[s], on[s] = ir_sensor.read_sensors_batch(world, poses, inputs.emitter[flat], t, p, rng, quantise=False)
+        amb[s], on[s] = ir_sensor.read_sensors(world, poses, inputs.emitter[flat], t, p, rng, quantise=False)
     shape = (len(robots), *rows.shape, ir_sensor.N_SENSORS)
     return on.reshape(shape), amb.reshape(shape)
 
@@ -372,7 +372,7 @@ def unjudged_readings(rec: Recording, rows: np.ndarray, p: RobotParams, world: W
     refl = []
     for turn in (0.0, -POSE_DOUBT_RAD, POSE_DOUBT_RAD):
         poses = rec.pose[flat] + np.array([0.0, 0.0, turn])
-        amb, on = ir_sensor.read_sensors_batch(world, poses, inputs.emitter[flat], rec.t[flat], p, None,
+        amb, on = ir_sensor.read_sensors(world, poses, inputs.emitter[flat], rec.t[flat], p, None,
                                                quantise=False)
         refl.append(on - amb)
     spread = np.ptp(np.stack(refl), axis=0)

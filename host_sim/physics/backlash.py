@@ -24,12 +24,16 @@ engaged one: continuous in the backlash.
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from host_sim.physics import drivetrain_effects, friction
 from host_sim.physics.drivetrain_effects import Drive
+
+if TYPE_CHECKING:  # annotations only
+    from host_sim.physics.dynamics import PerRobot
 
 MAX_EVENTS = 3  # gaps that close within one substep and split it (two wheels, and a margin)
 BISECTIONS = 48  # on the closing time, as a fraction of the stretch: 4e-15
@@ -65,7 +69,7 @@ def rotor_step(wm: np.ndarray, w_other: np.ndarray, i_ref: np.ndarray, dt: np.nd
     return wm_mid, dry(wm + k * torque(wm_mid), k)
 
 
-def phase(q: np.ndarray, v: np.ndarray, wm: np.ndarray, i_ref: np.ndarray, dt: np.ndarray, d: Drive, dc: Any,
+def phase(q: np.ndarray, v: np.ndarray, wm: np.ndarray, i_ref: np.ndarray, dt: np.ndarray, d: Drive, dc: PerRobot,
           eng: np.ndarray) -> list[np.ndarray]:
     """One stretch dt (N,) with the gears' modes eng (N, 2) held: [q, v, w_m at its end, the gear torque lambda
     on each wheel (0 where open), currents, supply V]."""
@@ -82,7 +86,7 @@ def phase(q: np.ndarray, v: np.ndarray, wm: np.ndarray, i_ref: np.ndarray, dt: n
     return [q1, v1, np.where(eng, v1, wm1), lam, cur, volts]
 
 
-def impact(v: np.ndarray, wm: np.ndarray, closing: np.ndarray, d: Drive, eng: np.ndarray, alone: Any = False
+def impact(v: np.ndarray, wm: np.ndarray, closing: np.ndarray, d: Drive, eng: np.ndarray, alone: bool | np.ndarray = False
            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(wheel speeds, motor-side speeds, impulses P (N, 2) on the wheels) after the gaps `closing` close
     inelastically: (W + diag(1 / I_r)) P = w_m - w on them, P = 0 elsewhere.  W = J H^-1 J^T with the
@@ -120,7 +124,7 @@ def closing_fraction(gap: np.ndarray, rate0: np.ndarray, rate1: np.ndarray, dt: 
     return hi
 
 
-def substep(q: np.ndarray, v: np.ndarray, wm: np.ndarray, gap: np.ndarray, i_ref: Any, dt: Any, d: Drive, dc: Any,
+def substep(q: np.ndarray, v: np.ndarray, wm: np.ndarray, gap: np.ndarray, i_ref: ArrayLike, dt: PerRobot, d: Drive, dc: PerRobot,
             events: int = 0) -> list[np.ndarray]:
     """The drive step over dt with the gears' play: [q, v, w_m, gap at its end, the mean gear torque on each
     wheel over dt (N, 2) but for the impacts, currents, supply V, the impacts' jumps in wheel speed (N, 2)].

@@ -1,43 +1,22 @@
-"""Contact: wheels on the floor that may slip, and the body's rim against walls.  Scalar and batch side by side.
+"""Contact: wheels on the floor that may slip, and the body's rim against walls.
 
-Model and equations: docs/dynamics.md, "Contact".  In short:
-
-* While both wheels roll without slipping and no wall pushes, the robot is
-  the paper's reduced Lagrangian model (host_sim/physics/dynamics.py, advanced by
-  host_sim/physics/drivetrain.py).  `traction_ok` checks, after each such step, that the
-  ground forces the no-slip constraints needed (longitudinal F_l, F_r at the
-  wheels, lateral F_n at the axle) fit in the friction cones of the wheels:
-  |(F_i, a_i)| <= mu N with a_l + a_r = F_n, N = (m_c + 2 m_w) g / 2 per wheel.
-* Otherwise (a wheel slips, or the step would take the body into a wall) the
-  step is `slip_step`: the unconstrained planar robot, generalised velocity
-  nu = (u, l, omega, w_l, w_r) (velocity of C along the heading and to the
-  left, yaw rate, wheel speeds), with contact impulses solved at the velocity
-  level (time-stepping, Moreau / Stewart-Trinkle):
-    - each wheel: Coulomb friction on the slip velocity of its contact point
-      (u -+ b omega - r w_i along the heading, l sideways), |P| <= mu N dt;
-    - each wall within reach: a normal impulse P_n >= 0 keeping the rim out of
-      the wall (speculative: v_n + gap / dt >= 0, complementary to P_n), and
-      Coulomb friction |P_t| <= mu_wall P_n at the rim point C - R n;
-  solved by projected Gauss-Seidel to a fixed tolerance.  The body's
-  gyroscopic terms are taken by the implicit midpoint rule (they do no work),
-  the wheels' motor torque linearly implicitly (stable for a free-spinning
-  wheel at any step), the pose with the new velocities (no push-out).
-  When both wheels end the step inside their friction cones the robot is
-  rolling again and goes back to the reduced model.
-
-`walls_in_reach` (scalar) / `walls_in_reach_batch` pick the walls a step can
-reach from World.wall_distances.  `slip_step` / `slip_step_batch` and
-`traction_ok` / `traction_ok_batch` are the scalar and batch versions of the
-same computation (tests/test_contact.py checks them against each other).
+While the wheels roll and no wall pushes, the robot is the reduced model (`traction_ok` checks the
+ground forces fit the wheels' friction cones); otherwise `slip_step` takes the unconstrained planar
+robot with wheel and wall impulses solved by projected Gauss-Seidel (time-stepping).  The scalar and
+batch versions sit side by side (tests/test_contact.py checks them).  Model: docs/contact.md.
 """
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from host_sim.physics.params import RobotParams, cached_per_params
+
+if TYPE_CHECKING:  # annotations only: no import at run time
+    from host_sim.physics.dynamics import Params, PerRobot, Vec
+    from host_sim.physics.world import World
 
 GRAVITY = 9.81  # m/s^2
 PGS_TOL = 1e-10  # m/s: a sweep that moves no velocity by more than this ends the solve
@@ -52,7 +31,7 @@ REACH_MARGIN = 2e-3  # m: a wall closer than the step's travel + this is a conta
 
 
 @cached_per_params
-def consts(p: Any) -> tuple[Any, ...]:
+def consts(p: Params) -> tuple[Any, ...]:
     """(m, k = m_c d, J_C, D = m J_C - k^2, I_w, r, b, d, R, mu N, mu_wall, m g): RobotParams or ParamBatch."""
     m = p.body_mass + 2 * p.wheel_mass
     k = p.body_mass * p.com_offset
@@ -68,7 +47,7 @@ def consts(p: Any) -> tuple[Any, ...]:
 # --------------------------------------------------------------------------- #
 # Rolling: do the wheels hold?
 # --------------------------------------------------------------------------- #
-def traction_ok(v0: Any, v1: Any, tau: Any, dt: float, p: RobotParams) -> bool:
+def traction_ok(v0: Vec, v1: Vec, tau: Vec, dt: float, p: RobotParams) -> bool:
     """True if the rolling step v0 -> v1 under wheel torques tau needed ground forces inside the cones."""
     m, k, _j, _dd, iw, r, b, _d, _rr, cap, _mw, _mg = consts(p)
     f_l = (tau[0] - iw * (v1[0] - v0[0]) / dt) / r
@@ -82,7 +61,7 @@ def traction_ok(v0: Any, v1: Any, tau: Any, dt: float, p: RobotParams) -> bool:
     return abs(f_n) <= math.sqrt(cap * cap - f_l * f_l) + math.sqrt(cap * cap - f_r * f_r)
 
 
-def traction_ok_batch(v0: np.ndarray, v1: np.ndarray, tau: np.ndarray, dt: Any, p: Any) -> np.ndarray:
+def traction_ok_batch(v0: np.ndarray, v1: np.ndarray, tau: np.ndarray, dt: PerRobot, p: Params) -> np.ndarray:
     """traction_ok for N robots: v0, v1, tau (N, 2) -> (N,) bool."""
     m, k, _j, _dd, iw, r, b, _d, _rr, cap, _mw, _mg = consts(p)
     f_l = (tau[:, 0] - iw * (v1[:, 0] - v0[:, 0]) / dt) / r
@@ -100,7 +79,7 @@ def traction_ok_batch(v0: np.ndarray, v1: np.ndarray, tau: np.ndarray, dt: Any, 
 # --------------------------------------------------------------------------- #
 # Which walls a step can reach
 # --------------------------------------------------------------------------- #
-def walls_in_reach(world: Any, cx: float, cy: float, radius: float, within: float
+def walls_in_reach(world: World, cx: float, cy: float, radius: float, within: float
                    ) -> tuple[list[tuple[float, float, float, int]], float]:
     """([(gap, nx, ny, wall index), ...] in wall order for the walls with gap < within, smallest gap
     (inf: none).
@@ -115,7 +94,7 @@ def walls_in_reach(world: Any, cx: float, cy: float, radius: float, within: floa
             float(gaps.min()))
 
 
-def walls_in_reach_batch(world: Any, centres: np.ndarray, radius: Any, within: Any
+def walls_in_reach_batch(world: World, centres: np.ndarray, radius: PerRobot, within: np.ndarray
                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """For K robots: gaps (K, W), normals (K, W, 2), wall indices (K, W) of the walls in reach, padded
     with gap = inf, and the smallest gap (K,).  W is the most walls any of them has in reach; walls
@@ -133,13 +112,14 @@ def walls_in_reach_batch(world: Any, centres: np.ndarray, radius: Any, within: A
 # --------------------------------------------------------------------------- #
 # The slipping / contact step
 # --------------------------------------------------------------------------- #
-def body_velocity(v: Any, p: Any) -> tuple[Any, Any, Any]:
+def body_velocity(v: Vec, p: Params) -> tuple[Any, Any, Any]:
     """(u, l, omega) of a rolling robot from its wheel speeds (l = 0)."""
     r, b = p.wheel_radius, p.half_axle
     return 0.5 * r * (v[0] + v[1]), 0.0 * v[0], 0.5 * r * (v[1] - v[0]) / b
 
 
-def _free_body(u: Any, l: Any, om: Any, dt: Any, m: Any, k: Any, j: Any) -> tuple[Any, Any, Any]:
+def _free_body(u: PerRobot, l: PerRobot, om: PerRobot, dt: PerRobot, m: PerRobot, k: PerRobot, j: PerRobot
+               ) -> tuple[Any, Any, Any]:
     """The body's free motion over dt: (M - a G) nu1 = (M + a G) nu0, a = dt/2 omega (implicit midpoint
     on the gyroscopic terms, which do no work), solved by Cramer's rule.  Floats or arrays."""
     a = 0.5 * dt * om
@@ -170,13 +150,16 @@ def _wheel_blocks(iwl: Any, iwr: Any, m: Any, k: Any, j: Any, radii: tuple[Any, 
     return blocks
 
 
-def _on_disc(be: Any, bn: Any, lim: Any, eig: tuple[Any, Any, Any, Any]) -> tuple[Any, Any]:
+def _on_disc(be: Any, bn: Any, lim: PerRobot, eig: tuple[Any, Any, Any, Any]) -> tuple[Any, Any]:
     """The impulse on the disc |P| = lim minimising 1/2 P^T W P + P^T b (b = (be, bn)), when the
     unconstrained minimum lies outside it: P(lam) = -(W + lam I)^-1 b with |P(lam)| = lim, so that
     the slip velocity W P + b = -lam P is opposite to the friction (Coulomb's maximal dissipation).
     In W's eigenbasis (eig = cos, sin of its first eigenvector, eigenvalues mu1 >= mu2), Newton on
     1/|P(lam)| - 1/lim, which converges monotonically from below (More and Sorensen), from the
     lower bound |b| / lim - mu1; a fixed number of steps, then scaled onto the disc.  Floats or arrays."""
+    if not isinstance(lim, np.ndarray) and lim <= 0.0:  # mu = 0: the disc is the point 0, no grip
+        # (tests/test_contact.py::test_zero_wheel_friction_slides_freely_with_shared_parameters_and_with_drive_effects)
+        return be * 0.0, bn * 0.0
     c, s, mu1, mu2 = eig
     # square roots, not powers: numpy's x ** -0.5 is its own (SIMD) power, which differs from libm's in the
     # last bit; a square root is exactly rounded everywhere, so a robot's figures are the same alone or in a batch
@@ -209,7 +192,7 @@ def _eigen(wee: Any, wen: Any, wnn: Any) -> tuple[Any, Any, Any, Any]:
     return c, s, 0.5 * (wee + wnn) + rad, 0.5 * (wee + wnn) - rad
 
 
-def _wall_block(ne: Any, nn: Any, m: Any, k: Any, j: Any, rad: Any) -> tuple[Any, ...]:
+def _wall_block(ne: PerRobot, nn: PerRobot, m: PerRobot, k: PerRobot, j: PerRobot, rad: PerRobot) -> tuple[Any, ...]:
     """A wall with normal (ne, nn) in the body frame: M^-1 J^T of its normal row on l, omega (nl, nw),
     of its tangent row (tl, tw), and the rows' inverse masses.  Floats or arrays."""
     ju, jd = 1.0 / m, 1.0 / (m * j - k * k)
@@ -218,7 +201,7 @@ def _wall_block(ne: Any, nn: Any, m: Any, k: Any, j: Any, rad: Any) -> tuple[Any
             1.0 / (nn * nn * ju + (j * ne * ne + 2 * k * rad * ne + m * rad * rad) * jd))
 
 
-def slip_step(q: Any, v: Any, body: tuple[float, float, float] | None, tau: Any, slope: Any, dt: float,
+def slip_step(q: Vec, v: Vec, body: tuple[float, float, float] | None, tau: Any, slope: Any, dt: float,
               p: RobotParams, walls: list[tuple[float, float, float, int]],
               warm: tuple[list[list[float]], list[list[float]]] | None = None, axle_friction: Any = None
               ) -> tuple[tuple[float, ...], tuple[float, float], tuple[float, float, float] | None, bool,
@@ -331,8 +314,8 @@ def _solve(nu: list[float], wheels: list[tuple[Any, ...]], contacts: list[tuple[
             break
 
 
-def slip_step_batch(q: np.ndarray, v: np.ndarray, body: np.ndarray, tau: np.ndarray, slope: np.ndarray, dt: Any,
-                    p: Any, gaps: np.ndarray, normals: np.ndarray, idx: np.ndarray | None = None,
+def slip_step_batch(q: np.ndarray, v: np.ndarray, body: np.ndarray, tau: np.ndarray, slope: np.ndarray, dt: PerRobot,
+                    p: Params, gaps: np.ndarray, normals: np.ndarray, idx: np.ndarray | None = None,
                     warm_wheels: np.ndarray | None = None, warm_walls: np.ndarray | None = None,
                     radii: np.ndarray | None = None, body_force: tuple[Any, Any, Any] | None = None,
                     axle_friction: np.ndarray | None = None, yaw_damping: np.ndarray | float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -390,7 +373,7 @@ def slip_step_batch(q: np.ndarray, v: np.ndarray, body: np.ndarray, tau: np.ndar
 
 
 def _solve_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: list[tuple[Any, ...]],
-                 pw: np.ndarray, pc: np.ndarray, cs: tuple[Any, ...], dt: Any, start: bool,
+                 pw: np.ndarray, pc: np.ndarray, cs: tuple[PerRobot, ...], dt: PerRobot, start: bool,
                  axles: list[tuple[Any, Any, np.ndarray]]) -> None:
     """`_solve` for K robots (pw (2, 2, K), pc (2, W, K), nu five (K,) arrays, all updated in place):
     each robot stops at the sweep where its own impulses settle, as the scalar solve does.  axles as
@@ -437,7 +420,7 @@ def _solve_batch(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], contacts: 
 
 
 def _wheel_rows(nu: list[np.ndarray], wheels: list[tuple[Any, ...]], pw: np.ndarray,
-                axles: list[tuple[Any, Any, np.ndarray]], lim: Any, lat: tuple[Any, Any, Any],
+                axles: list[tuple[Any, Any, np.ndarray]], lim: PerRobot, lat: tuple[Any, Any, Any],
                 active: np.ndarray) -> None:
     """One sweep of the wheels' rows (`_solve`'s, for K robots): each wheel's friction impulse, on its
     disc where it would leave it, then its axle's friction.  lat: (1 / m, j / D, -k / D)."""
@@ -589,7 +572,7 @@ def _axle_row(nu: list[np.ndarray], i: int, axle: tuple[Any, Any, np.ndarray], a
     held += da
 
 
-def _sub_robots(a: Any, idx: np.ndarray | None) -> Any:
+def _sub_robots(a: PerRobot, idx: np.ndarray | None) -> Any:
     """A parameter's values for robots idx (a shared float as it is)."""
     return a[idx] if idx is not None and isinstance(a, np.ndarray) else a
 

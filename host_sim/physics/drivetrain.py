@@ -1,43 +1,24 @@
-"""The coupled motor + rolling-dynamics step, second order, with stick-slip dry friction: scalar and batch.
+"""The coupled motor + rolling-dynamics step, second order, with stick-slip dry friction.
 
-The motors (host_sim/physics/motors.py) give the wheel torques from the current
-references and the wheel speeds; the dynamics (host_sim/physics/dynamics.py) advance
-the robot under a torque held over the step; the axles' dry friction
-(host_sim/physics/friction.py) is solved at the velocity level inside the step.
-Evaluating the torque at the start of the step makes the coupled step first
-order, however good the dynamics step is.  Here the torque is taken at the
-speed predicted for the middle of the step (explicit midpoint on the torque):
-
-    tau_n   = tau(i_ref, v_n)                         motor less viscous friction
-    v_mid   = v_n + dt/2 * v'(v_n, tau_n + f_h)       (reduced closed form)
-    tau_mid = tau(i_ref, v_mid)
-    (q, v)_{n+1} = dynamics.step(q_n, v_n, tau_mid + f, dt)
-
-f_h and f (|f_i| <= T_c) the dry friction over the half step and the step:
-each wheel ends the (half) step at rest when a friction torque within its
-bound can hold it there (stick), else the friction is -T_c opposing its
-speed at the end (slip).  The step is linear in f once its gyroscopic
-coefficient is fixed (from the predictor, with f_h), so f is a 2x2
-box-constrained problem (friction.solve).  Away from stick the friction is
-a constant -T_c sign(w) and the step is second order for the coupled system
-wherever the torque is smooth in the speed; a step in which a wheel sticks
-or breaks away is first order (docs/dynamics.md, "Integrator", the measured
-tables).
-
-`drive_step` (pure-Python floats, one robot) and `drive_step_batch` (numpy,
-N robots, per-robot parameters) compute the same thing; tests/test_drive.py
-checks them against each other and against an RK4 of the coupled system
-with its stick and slip events located.
+The motors' torque is taken at the speed predicted for the middle of the step (explicit midpoint on
+the torque), the axles' dry friction solved inside the step (friction.py), then dynamics.step.
+`drive_step` (Python floats, one robot) and `drive_step_batch` (numpy, N robots) compute the same thing
+(tests/test_drive.py).  Derivation and measured orders: docs/dynamics.md ("Integrator"), docs/motors.md.
 """
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from host_sim.physics import dynamics, friction, motors
+from numpy.typing import ArrayLike
+
 from host_sim.physics.params import RobotParams, cached_per_params
+
+if TYPE_CHECKING:  # annotations only
+    from host_sim.physics.dynamics import Params, PerRobot, Vec
 
 
 @cached_per_params
@@ -58,7 +39,7 @@ def _torque(i: float, w: float, k_r: float, v_r: float, eta_n_kt: float, c_v: fl
     return eta_n_kt * i - c_v * w, i
 
 
-def drive_step(q: Any, v: Any, i_ref: Any, dt: float, p: RobotParams
+def drive_step(q: Vec, v: Vec, i_ref: Vec, dt: float, p: RobotParams
                ) -> tuple[tuple[float, ...], tuple[float, float], tuple[float, float], tuple[float, float]]:
     """One coupled step: (q_next, v_next, (tau_l, tau_r) used (dry friction included), (i_l, i_r) at mid-step)."""
     lim, k_r, eta, v_r, c_v, t_c, g, _mt, _jt, imt, ijt, _mtjt, ir, bir, hr, kw, _d, hd, ho = _consts(p)
@@ -82,7 +63,7 @@ def drive_step(q: Any, v: Any, i_ref: Any, dt: float, p: RobotParams
     return q1, v1, tau, (cl, cr)
 
 
-def step(q: Any, v: Any, tau: Any, dt: float, p: RobotParams, f_pred: Any = (0.0, 0.0)
+def step(q: Vec, v: Vec, tau: Vec, dt: float, p: RobotParams, f_pred: Vec = (0.0, 0.0)
          ) -> tuple[tuple[float, ...], tuple[float, float], tuple[float, float]]:
     """dynamics.step under the torques tau held over the step, plus the axles' dry friction solved in it:
     (q_next, v_next, the torques with the dry friction).  f_pred: the dry friction that predicted the
@@ -115,7 +96,7 @@ def step(q: Any, v: Any, tau: Any, dt: float, p: RobotParams, f_pred: Any = (0.0
     return q1, (wl1, wr1), (tl + fl, tr + fr)
 
 
-def drive_step_batch(q: np.ndarray, v: np.ndarray, i_ref: Any, dt: Any, p: Any, p_wheels: Any = None,
+def drive_step_batch(q: np.ndarray, v: np.ndarray, i_ref: ArrayLike, dt: PerRobot, p: Params, p_wheels: Params | None = None,
                      out: tuple[np.ndarray, np.ndarray] | None = None
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """`drive_step` for N robots: q (N, 5), v (N, 2), i_ref (2,) or (N, 2) -> (q_next, v_next, tau, current).
@@ -154,8 +135,8 @@ def drive_step_batch(q: np.ndarray, v: np.ndarray, i_ref: Any, dt: Any, p: Any, 
     return q1, v1, tau + np.stack([fl, fr], 1), cur
 
 
-def _advance(q: np.ndarray, v: np.ndarray, wl1: np.ndarray, wr1: np.ndarray, u: np.ndarray, w: np.ndarray, dt: Any,
-             coeffs: tuple[Any, Any, Any], out: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:
+def _advance(q: np.ndarray, v: np.ndarray, wl1: np.ndarray, wr1: np.ndarray, u: np.ndarray, w: np.ndarray, dt: PerRobot,
+             coeffs: tuple[PerRobot, PerRobot, PerRobot], out: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:
     """(q_next, v_next) from the end speeds, as dynamics.step_batch: the pose at the mean velocities."""
     hr, kw, d = coeffs
     hdt = 0.5 * dt

@@ -26,11 +26,16 @@ to rounding error): an effect's value enters continuously from "absent".
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from host_sim.physics import friction
+
+if TYPE_CHECKING:  # annotations only
+    from host_sim.physics.dynamics import ParamBatch, Params, PerRobot
 
 SMOOTHING_SPEED = 0.1  # rad/s at the wheel: the caster's drag is smoothed over it
 SCRUB_SMOOTHING_SPEED = 0.01  # rad/s at the wheel: and the tyres' scrub over this, a near-Coulomb torque (stepped
@@ -46,12 +51,12 @@ FIELDS = ("coulomb_friction_delta_l", "coulomb_friction_delta_r", "viscous_frict
           "backlash_r")
 
 
-def active(p: Any) -> bool:
+def active(p: Params) -> bool:
     """True if any drive effect is present (p a RobotParams or a ParamBatch)."""
     return any(np.any(np.asarray(getattr(p, f)) != 0.0) for f in FIELDS)
 
 
-def _pair(a: Any, b: Any) -> np.ndarray:
+def _pair(a: PerRobot, b: PerRobot) -> np.ndarray:
     return np.stack([np.asarray(a, dtype=float), np.asarray(b, dtype=float)], axis=-1)
 
 
@@ -83,8 +88,8 @@ class Drive:
     i_r: np.ndarray  # (N, 1) kg m^2, the motor side (rotor through the gear) at the wheel: gear_play.py
 
     @classmethod
-    def of(cls, p: Any) -> Drive:
-        """From a ParamBatch (or anything with (N,) parameter arrays)."""
+    def of(cls, p: ParamBatch) -> Drive:
+        """From a ParamBatch."""
         r = _pair(p.wheel_radius + p.wheel_radius_delta_l, p.wheel_radius + p.wheel_radius_delta_r)
         col = (lambda a: np.asarray(a, dtype=float)[:, None])
         b, iw = np.asarray(p.half_axle, dtype=float), np.asarray(p.wheel_inertia, dtype=float)
@@ -128,7 +133,7 @@ def _currents(c: np.ndarray, emf: np.ndarray, volts: np.ndarray, res: np.ndarray
     return i, np.where(c > hi, 1.0, np.where(c < lo, -1.0, 0.0)) / res
 
 
-def supply(i_ref: Any, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray]:
+def supply(i_ref: ArrayLike, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray]:
     """(V (N,), currents (N, 2)): V = V_bat - R_int (i_e + sum(u i) / V), with the currents V allows.
 
     The drivers switch (PWM): each bridge passes the motor's power u i (u = R i + k_e N w, its
@@ -154,7 +159,7 @@ def supply(i_ref: Any, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray]
     return volts, i
 
 
-def wheel_torque(i_ref: Any, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def wheel_torque(i_ref: ArrayLike, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(torque on each wheel (N, 2), current (N, 2), supply V (N,)): motors.wheel_torque per wheel (the motor
     less the viscous friction; the dry friction is the step's)."""
     volts, i = supply(i_ref, w, d)
@@ -162,7 +167,7 @@ def wheel_torque(i_ref: Any, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.nd
     return tau, i, volts
 
 
-def wheel_torque_slope(i_ref: Any, w: np.ndarray, d: Drive
+def wheel_torque_slope(i_ref: ArrayLike, w: np.ndarray, d: Drive
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(torque, current, d torque / d w at fixed V) per wheel (N, 2), motors.wheel_torque_slope's, and
     the supply V (N,)."""
@@ -233,12 +238,13 @@ def _solve_x(v: np.ndarray, tau: np.ndarray, d: Drive, h: tuple[np.ndarray, ...]
     return u, om, (c * fu - bb * fw) / det, (a * fw - bb * fu) / det
 
 
-def _wheels(x_u: Any, x_w: Any, d: Drive) -> tuple[Any, Any]:
+def _wheels(x_u: PerRobot, x_w: PerRobot, d: Drive) -> tuple[Any, Any]:
     """Wheel speeds (left, right) of a motion (u, omega): (u -+ b omega) / r_i."""
     return (x_u - d.b * x_w) / d.radius[:, 0], (x_u + d.b * x_w) / d.radius[:, 1]
 
 
-def _response(i11: Any, i12: Any, i21: Any, i22: Any, d: Drive) -> tuple[Any, Any, Any, Any]:
+def _response(i11: PerRobot, i12: PerRobot, i21: PerRobot, i22: PerRobot, d: Drive
+              ) -> tuple[Any, Any, Any, Any]:
     """W (w11, w12, w21, w22): the wheel speeds' response to wheel torques through the inverse (i..) of a
     system matrix in (u, omega): a torque f_i gives the generalised forces (f_i / r_i)(1, -+ b)."""
     el, er = 1.0 / d.radius[:, 0], 1.0 / d.radius[:, 1]
@@ -259,7 +265,7 @@ def inertia(d: Drive, iw: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return d.m + kl + kr, d.b * (kr - kl), d.j_b + d.b * d.b * (kl + kr)
 
 
-def drive_step(q: np.ndarray, v: np.ndarray, i_ref: Any, dt: Any, d: Drive, dc: Any, torque: Any = None,
+def drive_step(q: np.ndarray, v: np.ndarray, i_ref: ArrayLike, dt: PerRobot, d: Drive, dc: PerRobot, torque: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None,
                h: tuple[np.ndarray, ...] | None = None, t_c: np.ndarray | None = None
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """drive.drive_step_batch with the effects: (q_next, v_next, wheel torques (dry friction included),
@@ -304,7 +310,7 @@ def drive_step(q: np.ndarray, v: np.ndarray, i_ref: Any, dt: Any, d: Drive, dc: 
 
 
 def _advance(q: np.ndarray, v: np.ndarray, v1: np.ndarray, u: np.ndarray, om: np.ndarray, dt: Any, d: Drive,
-             dc: Any) -> np.ndarray:
+             dc: PerRobot) -> np.ndarray:
     """q_next from the end speeds v1: the pose at the mean velocities (dynamics.step_batch)."""
     hdt = 0.5 * dt
     u1, w1 = _uw(v1, d)
@@ -320,7 +326,7 @@ def _advance(q: np.ndarray, v: np.ndarray, v1: np.ndarray, u: np.ndarray, om: np
     return qn
 
 
-def traction_ok(v0: np.ndarray, v1: np.ndarray, tau: np.ndarray, dt: Any, d: Drive, iw: Any = None) -> np.ndarray:
+def traction_ok(v0: np.ndarray, v1: np.ndarray, tau: np.ndarray, dt: PerRobot, d: Drive, iw: np.ndarray | None = None) -> np.ndarray:
     """contact.traction_ok_batch with per-wheel radii; the caster carries its own sideways force.  tau: the
     torques on the wheels as iw (default d.iw, both) turn with them (gear_play.py: the gear's, on the wheel's own)."""
     iw = d.iw[:, None] if iw is None else iw
@@ -342,7 +348,7 @@ def body_velocity(v: np.ndarray, d: Drive) -> np.ndarray:
     return np.stack([u, 0.0 * u, om], 1)
 
 
-def ticks_per_rev(p: Any) -> np.ndarray:
+def ticks_per_rev(p: Params) -> np.ndarray:
     """(N, 2) encoder counts per wheel turn, each wheel's own."""
     return _pair(p.ticks_per_rev + p.ticks_per_rev_delta_l, p.ticks_per_rev + p.ticks_per_rev_delta_r)
 

@@ -1,57 +1,10 @@
-"""The robot's dynamics (paper §3.1): Lagrangian, Pfaffian constraints, reduced through S(q).
+"""The robot's rolling dynamics (paper section 3.1): Lagrangian, Pfaffian constraints, reduced through S(q).
 
-Derivation: docs/dynamics.md.  Summary of the conventions:
-
-* q = (x_c, y_c, phi, theta_l, theta_r).  **(x_c, y_c) is the position of G**, the
-  body's centre of mass, which lies a distance d = `com_offset` ahead of C, the
-  centre of the wheel axle.  That is the only reading under which the paper's
-  lateral constraint  y_c' cos(phi) - x_c' sin(phi) - d phi' = 0  is the no-slip
-  condition of the wheels (it says: the point d behind (x_c, y_c) -- the axle --
-  has no sideways velocity).  `axle_centre` / `q_from_axle_pose` convert.
-  phi is counter-clockwise from the x axis and is never wrapped.
-* The left wheel is at +b on the axle (to the left of the heading), the right at
-  -b.  The constraints are the paper's three scalar equations.  The paper's printed
-  A(q) has the b entries of rows 2 and 3 swapped: that matrix belongs to the order
-  (theta_r, theta_l) of Sarkar, Yun & Kumar.  We follow the scalar equations.
-* Masses: m_c (body without wheels, centre of mass G, inertia I_c about the
-  vertical through G), m_w per wheel at C +- b n, I_w per wheel about its axle
-  (rotor included), I_m per wheel about a diameter.
-* Reduced velocity v = (theta_l', theta_r') (the wheel speeds, rad/s), so that
-  S^T E = I and the reduced equation is the paper's  S^T (M S v' + M S' v + V) = tau.
-* Input tau = (tau_l, tau_r): the net torques on the wheels about their axles (N m),
-  motor minus friction, see host_sim/physics/motors.py.
-
-Closed form (m_t = m_c + 2 m_w + 2 I_w / r^2,
-J_t = I_c + m_c d^2 + 2 m_w b^2 + 2 I_m + 2 b^2 I_w / r^2,  u = r (w_l + w_r) / 2,
-omega = r (w_r - w_l) / (2 b)):
-
-    m_t u'     = (tau_l + tau_r) / r + m_c d omega^2
-    J_t omega' = b (tau_r - tau_l) / r - m_c d u omega
-    w_l' = (u' - b omega') / r,   w_r' = (u' + b omega') / r
-
-Paths, all the same equations:
-
-* `matrices` / `reduced_accel` / `step_matrix`: the paper's non-stationary matrices,
-  recomputed at every call (numpy, for reading and checking);
-* `reduced_accel_fast` / `step`: the closed form in pure-Python floats (one robot);
-* `reduced_accel_batch` / `step_batch`: the closed form on numpy arrays of N robots,
-  each with its own parameters (`ParamBatch`).
-
-The independent check, the full constrained system M q'' + V = E tau - A^T lambda
-with A q'' + A' q' = 0 solved as a KKT system (no S), lives in tests/test_dynamics.py.
-
-The integrator (`step`, `step_matrix`, `step_batch`; docs/dynamics.md, "Integrator"):
-fixed step, second order, velocities first then pose:
-
-    omega*  = omega + dt/2 omega'(v_n)                       (predictor)
-    H (v+ - v) = dt tau - dt C(omega*) (v + v+) / 2           (linearly implicit)
-    q+ = q + dt S(phi + dt omega_bar / 2) (v + v+) / 2
-
-where H = S^T M S (constant) and C(omega*) is the gyroscopic (skew) matrix with
-phi' frozen at omega*.  Second order for a torque held over the step; with the
-motors in the loop the torque must be taken at mid-step (host_sim/physics/drivetrain.py).  It costs one 2x2 solve, is exact for d = 0 under a
-constant torque, and satisfies the work-energy balance  T+ - T = tau . (theta+ - theta)
-to rounding error, so with no input the kinetic energy is conserved exactly.
+q = (x_c, y_c, phi, theta_l, theta_r) with (x_c, y_c) the centre of mass G, d = com_offset ahead of
+the axle's centre C; v = (theta_l', theta_r').  The paper's matrices (`matrices`, `step_matrix`), the
+closed form for one robot (`reduced_accel_fast`, `step`) and for N (`reduced_accel_batch`, `step_batch`
+with a `ParamBatch`) are the same equations and the same second-order integrator.
+Derivation, conventions and the integrator: docs/dynamics.md.
 """
 from __future__ import annotations
 
@@ -60,16 +13,18 @@ from collections.abc import Sequence
 from typing import Any, Union
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from host_sim.physics.params import RobotParams, cached_per_params
 
 Vec = Union[Sequence[float], np.ndarray]  # a state vector: tuple, list or numpy array
+PerRobot = Union[float, np.ndarray]  # a value every robot shares, or an array of one per robot
 
 # ----------------------------------------------------------------------------- #
 # Parameters: the combinations the closed form needs
 # ----------------------------------------------------------------------------- #
 
-def effective_inertias(p: Any) -> tuple[Any, Any]:
+def effective_inertias(p: Params) -> tuple[Any, Any]:
     """(m_t, J_t): the effective translational mass (kg) and yaw inertia about C (kg m^2).
 
     m_t = m_c + 2 m_w + 2 I_w / r^2
@@ -84,7 +39,7 @@ def effective_inertias(p: Any) -> tuple[Any, Any]:
 
 
 @cached_per_params
-def _coeffs(p: Any) -> tuple[Any, ...]:
+def _coeffs(p: Params) -> tuple[Any, ...]:
     """(r, b, d, g = m_c d, m_t, J_t, 1/m_t, 1/J_t, r/2, r/(2b), 1/r, b/r, m_t J_t).
 
     Cached for the last RobotParams seen (they are frozen); a ParamBatch keeps its own."""
@@ -131,7 +86,7 @@ class ParamBatch:
         return cls({k: np.full(n, float(getattr(p, k))) for k in RobotParams.scalar_names()})
 
     @classmethod
-    def from_vectors(cls, values: Any, names: Sequence[str], base: RobotParams | None = None) -> ParamBatch:
+    def from_vectors(cls, values: ArrayLike, names: Sequence[str], base: RobotParams | None = None) -> ParamBatch:
         values = np.asarray(values, dtype=float)
         if values.ndim != 2 or values.shape[1] != len(names):
             raise ValueError(f"values must have shape (N, {len(names)}), got {values.shape}")
@@ -162,6 +117,10 @@ class ParamBatch:
             self._dyn = (r, b, self.com_offset, self.body_mass * self.com_offset, m_t, j_t, 1.0 / m_t, 1.0 / j_t,
                          0.5 * r, 0.5 * r / b, 1.0 / r, b / r, m_t * j_t)
         return self._dyn
+
+
+# What the shared physics reads attribute by attribute: one robot's parameters (floats) or N robots' (arrays)
+Params = Union[RobotParams, ParamBatch]
 
 
 # ----------------------------------------------------------------------------- #
@@ -342,7 +301,7 @@ def step(q: Vec, v: Vec, tau: Vec, dt: float, p: RobotParams) -> tuple[tuple[flo
 # ----------------------------------------------------------------------------- #
 # Closed form, N robots (numpy), per-robot parameters
 # ----------------------------------------------------------------------------- #
-def reduced_accel_batch(q: np.ndarray, v: np.ndarray, tau: np.ndarray, p: Any) -> np.ndarray:
+def reduced_accel_batch(q: np.ndarray, v: np.ndarray, tau: np.ndarray, p: Params) -> np.ndarray:
     """v' for N robots: v, tau (N, 2) -> (N, 2); p a RobotParams (shared) or a ParamBatch of N."""
     r, b, _d, g, _mt, _jt, imt, ijt = _coeffs(p)[:8]
     wl, wr = v[:, 0], v[:, 1]
@@ -357,7 +316,7 @@ def reduced_accel_batch(q: np.ndarray, v: np.ndarray, tau: np.ndarray, p: Any) -
     return out
 
 
-def step_batch(q: np.ndarray, v: np.ndarray, tau: np.ndarray, dt: float, p: Any,
+def step_batch(q: np.ndarray, v: np.ndarray, tau: np.ndarray, dt: float, p: Params,
                out: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """`step` for N robots: q (N, 5), v (N, 2), tau (N, 2) -> (q_next, v_next).
 

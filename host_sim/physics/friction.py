@@ -1,48 +1,18 @@
-"""Dry (Coulomb) friction at the two wheel axles, stick-slip, solved at the velocity level.  Scalar and batch.
+"""Dry (Coulomb) friction at the two wheel axles, stick-slip, solved at the velocity level.
 
-Model and equations: docs/effects.md ("dry_friction") and docs/dynamics.md (§8, §9).  Over a step
-the dry friction of wheel i is a torque f_i held constant, with |f_i| <= T_i.  The step is linear
-in f: the wheel speeds at its end are
-
-    v = v_free + W f          (W 2x2: the step's response to a torque held over it)
-
-v_free the end speeds with no dry friction.  The wheels are coupled through the robot's inertia,
-so W is full; its symmetric part is positive definite (the dynamics' linearly implicit midpoint
-step adds only a skew part), so W is a P-matrix and the problem below has exactly one solution,
-a Lipschitz-continuous function of v_free, W and T (what a fit by finite differences on T
-needs).  Each wheel:
-
-    stick  |f_i| <= T_i  and  v_i = 0
-    slip   f_i = -T_i sign(v_i),  v_i != 0
-
-(friction opposing the speed at the end of the step: Stewart and Trinkle's time-stepping, the
-same way contact.py treats the floor).  A wheel at rest under a torque below T_i stays exactly
-at rest; above it, it starts.
-
-A wheel driven through zero speed within the step (reversing: it turned one way at the start,
-slips the other way at the end) felt -T_i s before it crossed and +T_i s after (s its sign at
-the start).  Time-stepping would charge +T_i s for the whole step, an error in speed of order dt
-that the wheel keeps (first order overall).  Instead the wheel's friction is the mean over the
-step, f_i = T_i s (1 - 2 theta), theta the fraction of the step before the crossing, where its
-speed would have reached zero under -T_i s (linear in time between the start speed and that end
-speed), and the other wheel's friction is solved again with it held (a clip).  This is
-continuous: theta -> 1 is the wheel that just reaches zero (f = -T_i s), and at the threshold of
-sticking (applied torque T_i) the mean friction ends the step exactly at rest, as sticking does.
-
-The solve: with two unknowns, take the right wheel's three states in turn.  In each, the left
-wheel is a one-dimensional problem, solved exactly by a clip; the right wheel's state is then
-checked.  Exactly one of the three is consistent (up to rounding at the boundaries between
-them, where neighbouring candidates coincide), and the one that violates its condition least
-is taken.
-
-`solve` (pure-Python floats, one robot) and `solve_batch` (numpy, N robots) compute the same
-thing; tests/test_friction.py checks them against each other and against the conditions.
+Over a step each wheel's friction is a torque held constant within its bound; the step is linear in
+it, a 2x2 problem with exactly one solution (a wheel reversing within the step gets its mean friction).
+`solve` (Python floats, one robot) and `solve_batch` (numpy, N robots) compute the same thing
+(tests/test_friction.py).  Model and equations: docs/motors.md (dry friction), docs/effects.md.
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:  # annotations only: no import at run time
+    from host_sim.physics.dynamics import PerRobot
 
 
 def _clip(x: float, lim: float) -> float:
@@ -114,7 +84,7 @@ def end_speeds(vl: float, vr: float, w11: float, w12: float, w21: float, w22: fl
     return (0.0 if stick_l else vl + w11 * fl + w12 * fr), (0.0 if stick_r else vr + w21 * fl + w22 * fr)
 
 
-def solve_batch(vl: np.ndarray, vr: np.ndarray, w11: Any, w12: Any, w21: Any, w22: Any, tl: Any, tr: Any,
+def solve_batch(vl: np.ndarray, vr: np.ndarray, w11: PerRobot, w12: PerRobot, w21: PerRobot, w22: PerRobot, tl: PerRobot, tr: PerRobot,
                 start: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """`solve` for N robots: (f_l, f_r, left sticks, right sticks), each (N,); start (N, 2) the speeds at the
     step's start (None: 0).  Robots whose wheels both keep turning their way are done in a few
@@ -138,7 +108,7 @@ def solve_batch(vl: np.ndarray, vr: np.ndarray, w11: Any, w12: Any, w21: Any, w2
     return fl, fr, stick_l, stick_r
 
 
-def _crossings(vl: np.ndarray, vr: np.ndarray, w: tuple[Any, ...], tl: Any, tr: Any, g: tuple[np.ndarray, ...],
+def _crossings(vl: np.ndarray, vr: np.ndarray, w: tuple[PerRobot, ...], tl: PerRobot, tr: PerRobot, g: tuple[np.ndarray, ...],
                start: np.ndarray) -> tuple[np.ndarray, ...]:
     """`solve`'s mean friction of the wheels that reverse in the step (`_reversal`), for K robots."""
     w11, w12, w21, w22 = w
@@ -156,7 +126,7 @@ def _crossings(vl: np.ndarray, vr: np.ndarray, w: tuple[Any, ...], tl: Any, tr: 
     return fl, fr, stick_l, stick_r
 
 
-def _reversal_batch(a: np.ndarray, e: np.ndarray, f: np.ndarray, w: Any, t: Any) -> tuple[np.ndarray, np.ndarray]:
+def _reversal_batch(a: np.ndarray, e: np.ndarray, f: np.ndarray, w: PerRobot, t: PerRobot) -> tuple[np.ndarray, np.ndarray]:
     """`_reversal` for K wheels."""
     s = np.sign(a)
     e1 = e + w * (-t * s - f)
@@ -167,7 +137,7 @@ def _reversal_batch(a: np.ndarray, e: np.ndarray, f: np.ndarray, w: Any, t: Any)
     return np.where(cross, f_mean, f), cross
 
 
-def _three_candidates(vl: np.ndarray, vr: np.ndarray, w11: Any, w12: Any, w21: Any, w22: Any, tl: Any, tr: Any
+def _three_candidates(vl: np.ndarray, vr: np.ndarray, w11: PerRobot, w12: PerRobot, w21: PerRobot, w22: PerRobot, tl: PerRobot, tr: PerRobot
                       ) -> tuple[np.ndarray, ...]:
     """`solve`'s three candidates (the right wheel sticks, slips forwards, backwards), the least violating."""
     s = w11 - w12 * w21 / w22
@@ -186,7 +156,7 @@ def _three_candidates(vl: np.ndarray, vr: np.ndarray, w11: Any, w12: Any, w21: A
     return best_fl, best_fr, np.abs(best_fl) < tl, best_sr
 
 
-def end_speeds_batch(vl: np.ndarray, vr: np.ndarray, w11: Any, w12: Any, w21: Any, w22: Any, fl: np.ndarray,
+def end_speeds_batch(vl: np.ndarray, vr: np.ndarray, w11: PerRobot, w12: PerRobot, w21: PerRobot, w22: PerRobot, fl: np.ndarray,
                      fr: np.ndarray, stick_l: np.ndarray, stick_r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """`end_speeds` for N robots."""
     return (np.where(stick_l, 0.0, vl + w11 * fl + w12 * fr), np.where(stick_r, 0.0, vr + w21 * fl + w22 * fr))

@@ -1,46 +1,23 @@
-"""Current-regulated DC gear motors and wheel encoders (paper §3.2).  Derivation: docs/dynamics.md.
+"""Current-regulated DC gear motors and wheel encoders (paper section 3.2).
 
-The firmware gives each wheel a current reference i_ref (A).  The driver's current
-regulator is much faster than the robot, so the current it delivers is taken as
-instantaneous:
-
-    i = clip(clip(i_ref, -I_lim, I_lim), (-V_bat - k_e N w) / R, (V_bat - k_e N w) / R)
-
-first the driver's limit, then what the battery can push against the back-EMF
-(the bridge applies a voltage in [-V_bat, V_bat]; the motor turns at N w).  If the
-two ranges do not overlap (the wheel is driven faster than V_bat allows), the
-bridge does its best, the nearest feasible current.  k_e = k_t (SI units).
-
-Torque on the wheel about its axle from the motor and the viscous friction:
-
-    tau = eta N k_t i - c_v w
-
-eta the gear efficiency (one value for both directions of power flow), c_v viscous
-friction at the wheel axle.  The dry friction T_c at the axle is not a function of
-the speed alone: a wheel at rest holds under any torque below T_c (stick) and turns
-against -T_c sign(w) above it (slip).  It is solved inside the step, at the velocity
-level, with the two wheels coupled through the robot's inertia (host_sim/physics/friction.py,
-used by host_sim/physics/drivetrain.py and host_sim/physics/contact.py).
-
-Encoders: cumulative ticks = floor(theta / (2 pi) * ticks_per_rev), floor toward
--inf, so tick k covers [k, k+1) * 2 pi / ticks_per_rev whatever the sign of theta
-(a counter that starts at 0 with the wheel at angle 0 counts -1 as soon as it
-turns backwards by any amount).  `encoder_angle(k)` is the centre of tick k,
-the best guess of the angle from a count and safe from rounding at the edges.
-
-Scalar functions are pure Python floats (one robot, hot path); the *_batch
-versions take numpy arrays of shape (N,) or (N, 2) (left, right) with parameters
-a RobotParams (shared) or a ParamBatch (one value per robot, broadcast along
-axis 0).
+The driver delivers i_ref clipped to its limit and to what the battery can push against the back-EMF;
+the wheel torque is eta N k_t i - c_v w (the axle's dry friction is solved in the step: friction.py).
+Encoders count floor(theta / 2 pi * ticks_per_rev).  Scalar functions take Python floats; *_batch ones
+arrays (N,) or (N, 2) with a RobotParams or a ParamBatch.  Equations: docs/motors.md.
 """
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from numpy.typing import ArrayLike
+
 from host_sim.physics.params import RobotParams, cached_per_params
+
+if TYPE_CHECKING:  # annotations only: no import at run time
+    from host_sim.physics.dynamics import Params, PerRobot
 
 TWO_PI = 2.0 * math.pi
 
@@ -97,21 +74,22 @@ def wheel_torque_slope(i_ref: float, w: float, p: RobotParams) -> tuple[float, f
     return eta_n_kt * i - c_v * w, i, slope
 
 
-def _axis0(a: Any, ndim: int) -> Any:
+def _axis0(a: PerRobot, ndim: int) -> Any:
     """Per-robot parameter arrays (N,) broadcast against data of shape (N, ...)."""
     if isinstance(a, np.ndarray) and a.ndim == 1 and ndim > 1:
         return a.reshape((-1,) + (1,) * (ndim - 1))
     return a
 
 
-def wheel_torque_batch(i_ref: Any, w: Any, p: Any) -> tuple[np.ndarray, np.ndarray]:
+def wheel_torque_batch(i_ref: ArrayLike, w: ArrayLike, p: Params) -> tuple[np.ndarray, np.ndarray]:
     """(torque, current) for arrays i_ref, w of shape (N,) or (N, 2); p RobotParams or ParamBatch."""
     w, nd, n_kt, _inv_r, i, _limited = _driver_batch(i_ref, w, p)
     torque = _axis0(p.gear_efficiency, nd) * n_kt * i - _axis0(p.viscous_friction, nd) * w
     return torque, i
 
 
-def _driver_batch(i_ref: Any, w: Any, p: Any) -> tuple[np.ndarray, int, Any, Any, np.ndarray, np.ndarray]:
+def _driver_batch(i_ref: ArrayLike, w: ArrayLike, p: Params
+                  ) -> tuple[np.ndarray, int, Any, Any, np.ndarray, np.ndarray]:
     """(w, its ndim, k_e N, 1 / R, the current the driver delivers, where the battery limits it): arrays."""
     i_ref = np.asarray(i_ref, dtype=float)
     w = np.asarray(w, dtype=float)
@@ -127,7 +105,7 @@ def _driver_batch(i_ref: Any, w: Any, p: Any) -> tuple[np.ndarray, int, Any, Any
     return w, nd, n_kt, inv_r, np.minimum(np.maximum(i, lo), hi), limited
 
 
-def wheel_torque_slope_batch(i_ref: Any, w: Any, p: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def wheel_torque_slope_batch(i_ref: ArrayLike, w: ArrayLike, p: Params) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """wheel_torque_slope for arrays i_ref, w of shape (N,) or (N, 2): (torque, current, slope)."""
     w, nd, n_kt, inv_r, i, limited = _driver_batch(i_ref, w, p)
     eta_n_kt = _axis0(p.gear_efficiency, nd) * n_kt
@@ -150,7 +128,7 @@ def encoder_ticks(theta: float, p: RobotParams, wheel: int | None = None) -> int
     return math.floor(theta / TWO_PI * ticks_per_rev(p, wheel))
 
 
-def encoder_ticks_batch(theta: Any, p: Any, wheels: bool = False) -> np.ndarray:
+def encoder_ticks_batch(theta: ArrayLike, p: Params, wheels: bool = False) -> np.ndarray:
     """encoder_ticks for an array of angles (N,) or (N, 2) -> int64 array of the same shape.
 
     wheels: theta is (N, 2) (left, right), each wheel counted with its own counts per turn."""
@@ -170,7 +148,7 @@ def encoder_angle(ticks: int, p: RobotParams, wheel: int | None = None) -> float
     return (ticks + 0.5) * TWO_PI / ticks_per_rev(p, wheel)
 
 
-def encoder_angle_batch(ticks: Any, p: Any) -> np.ndarray:
+def encoder_angle_batch(ticks: ArrayLike, p: Params) -> np.ndarray:
     """encoder_angle for an array of counts (N,) or (N, 2) -> float array of the same shape."""
     ticks = np.asarray(ticks, dtype=float)
     return (ticks + 0.5) * (TWO_PI / _axis0(p.ticks_per_rev, ticks.ndim))

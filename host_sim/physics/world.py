@@ -1,39 +1,9 @@
 """Worlds: walls (segments and convex polygons), lamps, and the geometry on them.
 
-A world is a JSON file (format in docs/worlds.md)::
-
-    {"name": "paper_room", "size": [2.0, 1.5],
-     "walls": [{"segment": [x1, y1, x2, y2]}, {"polygon": [[x, y], ...]}],
-     "start": {"x": 0.4, "y": 0.45, "phi": 0.3},
-     "lamps": [{"x": 1.0, "y": 2.0, "level": 300, "flicker_hz": 100}],
-     "ambient": 150}
-
-`load_world(path)` validates it and raises WorldError naming the file, the
-entry (``walls[3].polygon``) and the problem.  Built-in worlds live in
-host_sim/worlds/*.json: `builtin_world(name)`, `world_by_name_or_path(text)`.
-
-Coordinates are metres in a fixed frame, x right, y up; angles are radians,
-counter-clockwise from +x.  "size" is the area of interest [0, w] x [0, h]:
-the coverage grid spans it, and a robot whose centre leaves it has left the
-world (found the exit of the paper's room).  Walls are lines without
-thickness; a convex polygon is a solid obstacle.
-
-Geometry (numpy, vectorised; every wall, polygon edges included, is one row
-of `World.segments`, shape (M, 4)):
-
-* `World.ray_cast(origins, directions, max_range)` -> (distance, incidence,
-  hit) for rays of any batch shape;
-* `World.cast_robots(poses, bearings)` the same for rays leaving robot
-  centres (or points fixed in the robot's frame: `origins`) at fixed
-  bearings (the IR ring), with the front end folded into one matrix
-  product: the fast path of the sensor model;
-* `World.nearest_wall(points)` -> (signed distance, unit normal) to the
-  nearest wall; `World.wall_distances(points)` the same to every wall at
-  once (contact with several walls, host_sim/physics/contact.py);
-* `World.inside_obstacle(points)`; `World.visible(points, targets)` (line of
-  sight, for lamps);
-* `World.free_cells(resolution, margin)` -> boolean occupancy grid of the
-  places a robot centre may occupy, for coverage.
+A world is a JSON file (`load_world`, `builtin_world`, `world_by_name_or_path`; errors name the file
+and the entry).  `World` casts rays (`ray_cast`, `cast_robots` for the IR ring), finds the nearest and
+every wall (`nearest_wall`, `wall_distances`, for contact), tests lines of sight (lamps) and builds
+the coverage grid (`free_cells`).  Format and conventions: docs/worlds.md.
 """
 from __future__ import annotations
 
@@ -44,6 +14,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 WORLDS_DIR = Path(__file__).resolve().parents[1] / "worlds"
 BUILTIN_NAMES = ("paper_room", "maze", "arena")
@@ -183,7 +154,7 @@ class World:
         self._seg_polygon = np.array([poly_of_entry.get(int(e), -1) for e in self.segment_entry], dtype=int)
 
     # ------------------------------------------------------------------ basics
-    def lamp_levels(self, t: Any = 0.0) -> np.ndarray:
+    def lamp_levels(self, t: ArrayLike = 0.0) -> np.ndarray:
         """Every lamp's level (counts at 1 m) at time t (s): shape t.shape + (n_lamps,)."""
         if not self.flickers:
             if isinstance(t, (int, float)):

@@ -247,7 +247,7 @@ def replay(rec: Recording, p: RobotParams, world: World, start: int = 0, stop: i
         for _ in range(substeps):
             robot.advance(h)
     if not exact_sensors:
-        ir_amb, ir_on = ir_sensor.read_sensors_track(world, t, pose, inputs.emitter, p, robot.rng)
+        ir_amb, ir_on = ir_sensor.read_sensors(world, pose, inputs.emitter, t, p, robot.rng, track=True)
     return ReplayResult(t, enc, pose, ir_on, ir_amb, start)
 
 

@@ -1,92 +1,24 @@
-"""Batch mode: N robots at once (N parameter sets, or N robots), vectorised numpy.
+"""Batch mode: N robots stepped together, vectorised numpy (N parameter sets, or N robots).
 
-The core loop of parameter identification: put N candidate robots in the
-same recorded state, feed them the same recorded current references, and
-compare what each one's encoders, sensors and pose do with the recording.
-
-    sim = BatchSim(world, params, poses)            # poses: (N, 3) of C
-    res = sim.run_inputs(cmd)                       # cmd: (T, 2) or (T, N, 2), A
-    res.enc (T, N, 2), res.pose (T, N, 3), res.ir_on / res.ir_amb (T, N, 8)
-
-    res = host_sim.recordings.replay.replay_batch(rec, params_list, start=k)  # replay row k.. for N sets
-
-`params` is one RobotParams (N copies), a sequence of N RobotParams, or a
-dynamics.ParamBatch (one value per robot for every scalar parameter; the
-tuple-valued IR coefficients come from `base`).
-
-Each control period (default 40 ms) is what host_sim/robot/sim_robot.py's SimRobot and
-host_sim/simulation.Simulation do for one robot, for all N at once:
-
-1. the readings at the control instant: encoder ticks (motors.encoder_ticks_batch,
-   quantised, floor), the pose of C, and optionally the IR sensors
-   (ir_sensor.read_sensors_batch, at the emitter power of the previous
-   actuation: `emitter_pct`, 60 % by default; a simulator robot that was just
-   switched on reads its first sample with the emitters off,
-   `initial_emitter_pct=0`; with an ir_latency, at the pose of that long ago,
-   linear between the earlier control instants' poses, as SimRobot does);
-2. the current references of that row are applied (row j of the results is
-   the state *before* row j's command acts: the recording format's convention,
-   so results and recordings line up row for row);
-3. n substeps of dt = period / n: motors at the mid-step speed and dynamics
-   (drivetrain.drive_step_batch: current regulator, back-EMF, current limit,
-   friction; dynamics.step_batch, the same integrator as dynamics.step),
-   then contact where needed.
-
-Contacts: the same model as SimRobot, vectorised (host_sim/physics/contact.py,
-docs/dynamics.md "Contact"): every robot takes the rolling step
-(drivetrain.drive_step_batch); those whose wheels lose their grip
-(contact.traction_ok_batch) or whose rim would enter a wall take the
-contact step instead (contact.slip_step_batch, on that subset only), with
-all the walls within their reach (contact.walls_in_reach_batch); the start
-of each contact counts one collision.  When fewer than
-`vector_contacts_from` (64) robots need the contact step, they take it one
-by one through contact.slip_step, its scalar twin: the vectorised solve
-iterates until its slowest robot settles, and for a few robots its sweeps
-are all Python overhead.  The wall test runs only for robots
-that may reach a wall in the step (a conservative bound on how far C moved
-since their last test).  world=None means no walls: no wall contacts, and
-the IR sensors see only the ambient light.
-
-Effects (host_sim/physics/effects.py, docs/effects.md): while every drive effect is absent the
-substep is the nominal one above; with any present, drivetrain_effects.py computes the motors,
-supply, body forces, dynamics and traction (per-wheel radii, friction, torque constants, the
-battery's sag: `vbat`), the gears' backlash (host_sim/physics/backlash.py: a motor side of its own beyond the play,
-`gear_gap`, `rotor_speed`), `actuator_delay` delays the
-references through a command history (`seed_commands` for what was sent before the start),
-and per-wheel encoder scales count each wheel with its own ticks per turn.  BatchResult.vbat
-is the battery voltage the robots sense at each control instant.
-
-Agreement with SimRobot: the same physics in the same order, but the numpy
-paths group the floating-point operations differently from the pure-Python
-ones, so a batch robot and a SimRobot with the same inputs agree to
-rounding error (below 1e-9 m in tests/test_batch.py and tests/test_contact.py,
-wall contacts, slip and corners included) rather than bit for bit; the
-quantised outputs (encoder ticks, ADC counts) are then equal except where
-the exact value sits within that rounding error of a quantisation boundary.
-With seed=s and N = 1 the sensor noise is the same stream as SimRobot(seed=s).
-
-Speed: the motors and the dynamics cost ~60 numpy operations on arrays of N
-per substep, the wall test a few more (and a nearest-wall query for the
-robots near a wall), the IR ring one read_sensors_batch per group and
-period: `twinbot bench sim` measures it (tools/bench/sim.py).
-
-Sensors with N parameter sets: robots are grouped by their IR parameters
-(body radius, range, every ir_* value, ambient leakage, ADC bits) and each group is read with
-one read_sensors_batch call, so N robots differing only in their dynamics
-cost one call.
+The core of identification: N candidate robots in the same recorded state, fed the same current
+references, their encoders, IR ring and pose compared with the recording.  `BatchSim` takes one
+RobotParams, a sequence of them or a ParamBatch; `run_inputs` applies one row of references per
+control period and returns a `BatchResult`.  The same physics as SimRobot, to rounding error.
+Equations: docs/dynamics.md ("Batch"), docs/contact.md; the effects: docs/effects.md.
 """
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeGuard, Union, cast
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from host_sim.physics import contact, drivetrain, drivetrain_effects, dynamics, backlash, motors
 from host_sim.sensors import ir_sensor
-from host_sim.physics.dynamics import ParamBatch
+from host_sim.physics.dynamics import ParamBatch, Params, PerRobot
 from host_sim.controller.hardware_io import CYCLE_S
 from host_sim.physics.params import RobotParams
 from host_sim.physics.world import World
@@ -96,10 +28,12 @@ SUBSTEPS = 8
 VECTOR_CONTACTS_FROM = 64  # robots in one contact step from which the vectorised solve is the faster
 N_SENSORS = ir_sensor.N_SENSORS
 # RobotParams fields the IR model reads: robots that agree on all of them
-# share one read_sensors_batch call.
+# share one ir_sensor.read_sensors call.
 IR_FIELDS = tuple(f.name for f in dataclasses.fields(RobotParams)
                   if f.name.startswith("ir_") or f.name in ("body_radius", "sensor_range", "adc_bits",
                                                              "ambient_leakage"))
+# What BatchSim takes as its robots' parameters (the module docstring says how each is read)
+ParamSets = Union[RobotParams, Sequence[RobotParams], ParamBatch]
 
 
 @dataclass
@@ -122,11 +56,11 @@ class BatchResult:
         return int(self.enc.shape[0])
 
 
-def _is_array(a: Any) -> bool:
+def _is_array(a: object) -> TypeGuard[np.ndarray]:
     return isinstance(a, np.ndarray) and a.ndim >= 1
 
 
-def _sub(a: Any, idx: np.ndarray) -> Any:
+def _sub(a: PerRobot, idx: np.ndarray) -> PerRobot:
     """a[idx] for a per-robot array, a itself for a shared scalar."""
     return a[idx] if _is_array(a) else a
 
@@ -153,7 +87,7 @@ class _PerWheel:
 class _SubParams:
     """Robots s of a parameter set (RobotParams shared, or per-robot arrays), for the motor model."""
 
-    def __init__(self, p: Any, s: np.ndarray) -> None:
+    def __init__(self, p: Params | _PerWheel, s: np.ndarray) -> None:
         self._p, self._s = p, s
 
     def __getattr__(self, name: str) -> Any:
@@ -166,8 +100,8 @@ class BatchSim:
 
     _ir_history: ir_sensor.PoseHistory | None = None  # the poses at the last readings, for ir_latency
 
-    def __init__(self, world: World | None, params: RobotParams | Sequence[RobotParams] | ParamBatch,
-                 poses: Any = None, *, q: Any = None, v: Any = None, t: float = 0.0,
+    def __init__(self, world: World | None, params: ParamSets,
+                 poses: ArrayLike | None = None, *, q: ArrayLike | None = None, v: ArrayLike | None = None, t: float = 0.0,
                  base: RobotParams | None = None, cycle_s: float = CYCLE_S, substeps: int = SUBSTEPS,
                  emitter_pct: float = 60.0, initial_emitter_pct: float | None = None) -> None:
         """
@@ -234,14 +168,14 @@ class BatchSim:
         self._wall_force = np.zeros((2, self.n, max(world.n_walls, 1)))
         self._walls = world.n_walls > 0
 
-    def place(self, poses: Any) -> None:
+    def place(self, poses: ArrayLike) -> None:
         """Put the robots at (x, y, phi) `poses` ((N, 3), q's first three) as they are otherwise (speeds,
         gears, slides, commands on their way): a replayed window starts on its recorded pose."""
         self.q[:, :3] = np.asarray(poses, dtype=float)
         self._gap[:] = -1.0  # the broad phase measured its gaps where the robots were
         self._warm[:] = False
 
-    def start_sliding(self, slides: Any, body: Any) -> None:
+    def start_sliding(self, slides: ArrayLike, body: ArrayLike) -> None:
         """Robots `slides` ((N,) bool) start sliding over the floor with body velocity (u, l, omega) of C
         `body` ((N, 3)), not rolling at their wheels' speeds: a replay from a row where the tracker saw the
         robot slide (replay.sliding_rows)."""
@@ -249,7 +183,7 @@ class BatchSim:
         self.slipping[slides] = True
         self.body[slides] = np.asarray(body, dtype=float)[slides]
 
-    def seed_commands(self, times: Any, cmds: Any) -> None:
+    def seed_commands(self, times: Iterable[float], cmds: Iterable[ArrayLike]) -> None:
         """The commands issued before now (times ascending, s; cmds (K, N, 2) or (K, 2), A): what a delayed
         actuator still has on its way when the run starts.  Without it: no current before the first."""
         for t, c in zip(times, cmds):
@@ -257,7 +191,7 @@ class BatchSim:
             self._hist_i.append(np.broadcast_to(np.asarray(c, dtype=float), (self.n, 2)).copy())
 
     # ------------------------------------------------------------------ set-up
-    def _set_state(self, poses: Any, q: Any, v: Any) -> None:
+    def _set_state(self, poses: ArrayLike | None, q: ArrayLike | None, v: ArrayLike | None) -> None:
         """q and v given, or robots at rest at poses of C (default the world's start)."""
         n = self.n
         if q is not None:
@@ -278,7 +212,7 @@ class BatchSim:
         self.q[:, 2] = pz[:, 2]
         self.v = np.zeros((n, 2))
 
-    def _set_params(self, params: Any, n_hint: int | None) -> None:
+    def _set_params(self, params: ParamSets, n_hint: int | None) -> None:
         if isinstance(params, RobotParams):
             n = n_hint if n_hint is not None else 1
             robots: list[RobotParams] | None = [params]
@@ -304,8 +238,9 @@ class BatchSim:
         self.params = batch  # one value per robot, always
         # What the motors and the dynamics read: the shared RobotParams (floats,
         # faster; the same numbers) when every robot has the same parameters.
-        self._p: Any = shared if shared is not None else batch
-        self._p_motors: Any = shared if shared is not None else _PerWheel(batch)
+        self._p: Params = shared if shared is not None else batch
+        # _PerWheel reads as the ParamBatch it widens
+        self._p_motors: Params = shared if shared is not None else cast(ParamBatch, _PerWheel(batch))
         self._d = shared.com_offset if shared is not None else batch.com_offset
         self._r = shared.body_radius if shared is not None else batch.body_radius
         self._wheel_radius = shared.wheel_radius if shared is not None else batch.wheel_radius
@@ -353,7 +288,7 @@ class BatchSim:
             return motors.encoder_ticks_batch(self.encoder_angles(), self.params, wheels=True)
         return motors.encoder_ticks_batch(self.q[:, 3:5], self._p)
 
-    def engage_gears(self, side: Any) -> None:
+    def engage_gears(self, side: ArrayLike) -> None:
         """Backlash: close each gear's gap on `side` (N, 2) (+1 forward, -1 backward, 0 the middle), the
         encoders reading as before (the wheels move instead): where a robot that had been driven sits."""
         if self.gear_gap is not None:
@@ -390,13 +325,13 @@ class BatchSim:
                 t = self.t - p.ir_latency
                 at = self._ir_history.at(t)
             if idx is None:
-                off[:], on[:] = ir_sensor.read_sensors_batch(self.world, at, self.emitter_now, t, p, rng)
+                off[:], on[:] = ir_sensor.read_sensors(self.world, at, self.emitter_now, t, p, rng)
             else:
-                off[idx], on[idx] = ir_sensor.read_sensors_batch(self.world, at[idx], self.emitter_now, t, p, rng)
+                off[idx], on[idx] = ir_sensor.read_sensors(self.world, at[idx], self.emitter_now, t, p, rng)
         return on, off
 
     # ------------------------------------------------------------------ physics
-    def substep(self, i_ref: Any, dt: float) -> None:
+    def substep(self, i_ref: ArrayLike, dt: float) -> None:
         """All N robots by dt seconds with current references i_ref, (2,) or (N, 2) A: SimRobot.advance
         for each (rolling where the wheels hold and no wall is hit, else the contact step)."""
         if self._delay is not None:
@@ -433,7 +368,7 @@ class BatchSim:
         self.q, self.v = q1, v1
         self.t += dt
 
-    def _gear_step(self, q0: np.ndarray, v0: np.ndarray, i_ref: Any, dt: float
+    def _gear_step(self, q0: np.ndarray, v0: np.ndarray, i_ref: ArrayLike, dt: float
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
         """The rolling step with the gears' play (backlash.substep): (q1, v1, traction holds, the references a
         contact step takes, (wheel angles, motor-side speeds and gaps at the end of the rolling step))."""
@@ -449,7 +384,7 @@ class BatchSim:
         return q1, v1, ok, i_contact, (q1[:, 3:5].copy(), wm1, gap1)
 
     def _slip_step(self, q0: np.ndarray, v0: np.ndarray, q1: np.ndarray, v1: np.ndarray, bad: np.ndarray,
-                   i_ref: Any, dt: float, idx: np.ndarray, gaps: np.ndarray, normals: np.ndarray,
+                   i_ref: ArrayLike, dt: float, idx: np.ndarray, gaps: np.ndarray, normals: np.ndarray,
                    order: np.ndarray) -> None:
         """contact.slip_step_batch for the robots `bad`, written into q1, v1."""
         s = np.flatnonzero(bad)
@@ -515,8 +450,8 @@ class BatchSim:
         return qn, vn, bn, rolled, pushed, wheel_out, wall_out
 
     def _robot_params(self, j: int) -> RobotParams:
-        if self._shared:
-            return self._p  # type: ignore[no-any-return]
+        if isinstance(self._p, RobotParams):  # every robot shares it
+            return self._p
         cached = self._robots_cache.get(j)
         if cached is None:
             cached = self._robots_cache[j] = self._p.robot(j, self.base)
@@ -538,7 +473,7 @@ class BatchSim:
             t_c = fx.t_c if self.gear_gap is None else np.where(self._gear_engaged[s], fx.t_c, 0.0)
             return tau, slope, body, {"radii": fx.radius, "body_force": forces, "axle_friction": t_c,
                                       "yaw_damping": drivetrain_effects.yaw_damping(body[:, 2], fx)}
-        tau, _cur, slope = motors.wheel_torque_slope_batch(i_s, vs, _SubParams(self._p_motors, s))
+        tau, _cur, slope = motors.wheel_torque_slope_batch(i_s, vs, cast(Params, _SubParams(self._p_motors, s)))
         if rolling.any():
             r, b = _sub(self._wheel_radius, s), _sub(self._half_axle, s)
             body[:, 0] = np.where(rolling, 0.5 * r * (vs[:, 0] + vs[:, 1]), body[:, 0])
@@ -546,7 +481,7 @@ class BatchSim:
             body[:, 2] = np.where(rolling, 0.5 * r * (vs[:, 1] - vs[:, 0]) / b, body[:, 2])
         return tau, slope, body, {}
 
-    def _delayed(self, i_ref: Any, dt: float) -> np.ndarray:
+    def _delayed(self, i_ref: ArrayLike, dt: float) -> np.ndarray:
         """The current references the drivers see over this substep, actuator_delay after they were issued
         (a command is issued when it differs from the last; drivetrain_effects.delayed_reference)."""
         i = np.broadcast_to(np.asarray(i_ref, dtype=float), (self.n, 2))
@@ -589,9 +524,9 @@ class BatchSim:
         return idx, gaps, normals, order
 
     # ------------------------------------------------------------------ runs
-    def run_inputs(self, cmd: Any, substeps: int | None = None, sensors: bool = True,
-                   seed: int | np.random.Generator | None = None, period: Any = None,
-                   emitter: Any = None) -> BatchResult:
+    def run_inputs(self, cmd: ArrayLike, substeps: int | None = None, sensors: bool = True,
+                   seed: int | np.random.Generator | None = None, period: ArrayLike | None = None,
+                   emitter: Sequence[float] | np.ndarray | None = None) -> BatchResult:
         """Apply T rows of current references, one per control period; returns the readings.
 
         cmd: (T, 2) A, the same references for every robot, or (T, N, 2).
@@ -654,7 +589,8 @@ def machinery(p: RobotParams) -> tuple[bool, bool, bool]:
     return (drivetrain_effects.active(p), bool(p.backlash_l or p.backlash_r), bool(p.actuator_delay))
 
 
-def robot_params(params: Any, base: RobotParams | None) -> tuple[Any, list[RobotParams]]:
+def robot_params(params: ParamSets, base: RobotParams | None
+                 ) -> tuple[RobotParams | list[RobotParams] | ParamBatch, list[RobotParams]]:
     """(what BatchSim takes, the N RobotParams) from a RobotParams, a sequence of them or a ParamBatch."""
     if isinstance(params, RobotParams):
         return params, [params]

@@ -1,21 +1,10 @@
 """One simulated robot: its physics and the electrical I/O its firmware sees.
 
-The state is the paper's q = (x_c, y_c, phi, theta_l, theta_r), (x_c, y_c)
-being the centre of mass G (host_sim/physics/dynamics.py), with the wheel speeds
-v = (theta_l_dot, theta_r_dot).  The robot's pose (x, y, phi) everywhere
-else - sensors, body disc, collisions, the tracker columns of recordings - is
-that of C, the centre of the wheel axle.  Each substep: the current
-references go through the motor model (current regulator, back-EMF,
-current limit, friction) to wheel torques, the reduced Lagrangian dynamics
-advance q and v, and contact with a wall is resolved (the robot is pushed
-back out and its wheels stall; the start of each contact is a collision).
-
-With any drive effect of the library present (host_sim/physics/effects.py, docs/effects.md) the robot
-runs through a host_sim.robot.batch.BatchSim of one, where the effects' physics is written once.
-
-`sense()` gives what a HW_SENSE frame carries (tick, IR ADC counts with
-the emitters off and on at the power of the last actuation, encoder ticks,
-battery), `actuate()` takes what HW_ACTUATE carries.
+`sense()` gives what a HW_SENSE frame carries (tick, IR ADC counts with the emitters off and on,
+encoder ticks, battery), `actuate()` takes what HW_ACTUATE carries, `advance(dt)` steps the physics:
+rolling (drivetrain) while the wheels hold and no wall is hit, else the contact step.  With a drive
+effect of the library the robot runs as a BatchSim of one (the effects' physics is written once).
+Equations: docs/dynamics.md, docs/contact.md, docs/motors.md.
 """
 from __future__ import annotations
 
@@ -81,10 +70,9 @@ class SimRobot:
         t_read = self.t
         if self.p.ir_latency > 0:  # the readings describe the pose of ir_latency ago
             x, y, phi, t_read = self._past_pose(x, y, phi)
-        off, on = ir_sensor.read_sensors_lists(self.world, x, y, phi, float(self.emitter_pct), t_read, self.p,
-                                               self.rng)
+        off, on = ir_sensor.read_sensors(self.world, (x, y, phi), float(self.emitter_pct), t_read, self.p, self.rng)
         enc_l, enc_r = self.encoder_ticks()
-        s = Sense(int(round(self.t * 1000)) & TICK_MASK, off, on, enc_l, enc_r,
+        s = Sense(int(round(self.t * 1000)) & TICK_MASK, off.tolist(), on.tolist(), enc_l, enc_r,
                   int(round(self.vbat * 1000)))
         self.last_sense = s
         return s

@@ -1,58 +1,17 @@
-"""The IR proximity sensors of the paper (section 3.3), with ambient light, noise and the ADC.
+"""The IR proximity ring of the paper (section 3.3): eight emitter/phototransistor pairs on the rim.
 
-Eight emitter/phototransistor pairs sit on the rim of the body (radius
-body_radius) at bearings 45*i degrees from the heading, i = 0..7 = S1..S8
-(S1 front, then counter-clockwise), each looking radially outward.
-
-Reflected light (docs/ir-sensor.md has the figures and the derivation):
-
-    response(x, angle, L) = C * P(L) * A(angle) * F(x)           [ADC counts]
-
-* the reflection point: a ray from the sensor along its axis to the nearest
-  wall (world.World.cast_robot); x is the distance along the ray (m), angle
-  the incidence angle between the ray and the wall's normal;
-* A: two 5th-degree polynomials in |angle| (rad), the big dome (diffuse
-  reflection) and the small dome (the specular beam on top of it near normal
-  incidence), blended by a smoothstep of |angle| over ir_angle_blend: the
-  small dome alone below its first value, the big dome alone above its
-  second; symmetric on [-pi/2, pi/2] by construction, clipped at 0;
-* F: 1/x^2 far (a fixed solid angle of light), x^2 / x_p^4 near (the
-  emitter's and the receiver's cones stop overlapping), the two meeting at
-  the peak x_p = ir_near_peak; in between (x_p/k .. k x_p, k = ir_blend)
-  their weighted geometric average, the far law's weight s rising as a
-  smootherstep of ln x: F = x_p^-2 (x/x_p)^(2 - 4 s); faded to 0 over the
-  last 20 % of sensor_range;
-* P: the pulse width L (%) gives proportional light, min(L/100,
-  ir_saturation): flat above the emitter's saturation (Fig. 10);
-* C = ir_gain, counts m^2 at 100 % pulse width (extrapolated linearly).
-
-Option, a beam (ir_beam_rays = n > 1): each sensor casts n rays over
-+-ir_beam_half_angle around its axis and reads the sum of their responses
-weighted by cos^2 of the angle off the axis (`beam`), on both paths.
-
-Readings (`read_sensors`): emitters off -> ambient + noise; emitters on ->
-ambient + reflected + noise; each clipped to 0..adc_max (the ADC ceiling
-saturates the total) and rounded to integer counts.  The ambient is the
-world's global level (or ir_ambient) plus lamps, each adding
-level * max(0, cos(axis, direction to lamp)) / d^2 when no wall hides it,
-flickering as level * (1 + depth sin(2 pi f t)) if asked; the emitter-on
-reading is taken ir_on_delay after the emitter-off one, so a flickering lamp
-leaks into on - off as it does on the robot.
-
-Effects (host_sim/physics/effects.py, docs/effects.md "IR sensor effects"), absent
-by default and then without any effect on a reading: per pair k a gain
-ir_gain_scale[k] on its reflected light, its axis turned by
-ir_misalignment[k] about its mount (ray, incidence angle, beam and lamp term
-follow it), ir_offset[k] counts and ambient_leakage[k] times the ambient
-added to its emitter-on reading; and ir_latency, the readings describing the
-pose of that long ago (PoseHistory, read_sensors_track).
+Reflected light = C P(L) A(angle) F(x) along each sensor's axis (or its beam), plus the ambient light
+of the world and its lamps, noise and the ADC.  `read_sensors` reads one robot (pose (3,)) or N
+(poses (N, 3)); `PoseHistory` and read_sensors(track=True) give the readings an ir_latency.  The IR
+effects of the library (gain, misalignment, offset, leakage, latency) act here too.
+Model, figures and derivation: docs/ir-sensor.md; the effects: docs/effects.md.
 """
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from host_sim.physics.params import DEFAULT, RobotParams
 from host_sim.physics.world import World
@@ -241,7 +200,7 @@ def _smootherstep(u: np.ndarray) -> np.ndarray:
     return u * u * u * (u * (6.0 * u - 15.0) + 10.0)
 
 
-def domes(angle: Any, p: RobotParams = DEFAULT) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def domes(angle: ArrayLike, p: RobotParams = DEFAULT) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(big dome, small dome, blend weight of the big dome) at |angle| (rad)."""
     c = _consts(p)
     a = np.abs(np.asarray(angle, dtype=float))
@@ -249,7 +208,7 @@ def domes(angle: Any, p: RobotParams = DEFAULT) -> tuple[np.ndarray, np.ndarray,
     return v[..., 0], v[..., 1], _smoothstep((a - c.blend_lo) * c.inv_blend)
 
 
-def angle_term(angle: Any, p: RobotParams = DEFAULT) -> np.ndarray:
+def angle_term(angle: ArrayLike, p: RobotParams = DEFAULT) -> np.ndarray:
     """A(angle): relative response to a wall seen at `angle` (rad) from its normal; A(0) ~ 1."""
     c = _consts(p)
     a = np.abs(np.asarray(angle, dtype=float))
@@ -263,7 +222,7 @@ def angle_term(angle: Any, p: RobotParams = DEFAULT) -> np.ndarray:
     return np.maximum(vs + w * vd, 0.0)
 
 
-def distance_term(distance: Any, p: RobotParams = DEFAULT) -> np.ndarray:
+def distance_term(distance: ArrayLike, p: RobotParams = DEFAULT) -> np.ndarray:
     """F(x) in 1/m^2: x^2/x_p^4 near, 1/x^2 far, averaged in between; 0 beyond sensor_range.
 
     Between x_p/k and k x_p (k = ir_blend) the two laws are averaged
@@ -280,14 +239,14 @@ def distance_term(distance: Any, p: RobotParams = DEFAULT) -> np.ndarray:
     return f * (u * u * (3.0 - 2.0 * u))
 
 
-def power_term(power_pct: Any, p: RobotParams = DEFAULT) -> Any:
+def power_term(power_pct: ArrayLike, p: RobotParams = DEFAULT) -> float | np.ndarray:
     """P(L): light emitted at pulse width L (%), as a fraction of full: proportional, then flat."""
     if isinstance(power_pct, (int, float)):
         return min(max(power_pct / 100.0, 0.0), p.ir_saturation)
     return np.minimum(np.maximum(np.asarray(power_pct, dtype=float) / 100.0, 0.0), p.ir_saturation)
 
 
-def response(distance: Any, angle: Any, power_pct: Any, p: RobotParams = DEFAULT) -> np.ndarray:
+def response(distance: ArrayLike, angle: ArrayLike, power_pct: ArrayLike, p: RobotParams = DEFAULT) -> np.ndarray:
     """Reflected light (ADC counts, before noise and the ADC ceiling) of a wall at
     `distance` (m, along the sensor axis; inf = nothing) seen at `angle` (rad)
     with the emitters at `power_pct` (%).  Vectorised; arguments broadcast."""
@@ -300,7 +259,7 @@ def response(distance: Any, angle: Any, power_pct: Any, p: RobotParams = DEFAULT
 _BEAR = np.array(BEARINGS)
 
 
-def sensor_axes(poses: Any, p: RobotParams = DEFAULT) -> tuple[np.ndarray, np.ndarray]:
+def sensor_axes(poses: ArrayLike, p: RobotParams = DEFAULT) -> tuple[np.ndarray, np.ndarray]:
     """(mounts, axes), unit vectors (..., 8, 2) of robots at poses (..., 3).
 
     Sensor k sits on the rim at C + body_radius * mounts[k] (bearing 45 k
@@ -320,7 +279,7 @@ def _unit(ang: np.ndarray) -> np.ndarray:
     return out
 
 
-def reflection(world: World, poses: Any, p: RobotParams = DEFAULT) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def reflection(world: World, poses: ArrayLike, p: RobotParams = DEFAULT) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(distance from the sensor (m), incidence angle (rad), hit) along each sensor's axis, shape (..., 8).
 
     The ray leaves the robot's centre along the sensor's axis (a misaligned
@@ -345,7 +304,7 @@ def _quantise(v: np.ndarray, adc_max: int) -> np.ndarray:
     return np.minimum(np.maximum(np.rint(v), 0.0), adc_max).astype(np.int64)
 
 
-def _reflected_batch(world: World, poses: np.ndarray, power_pct: Any, p: RobotParams, c: _Consts) -> np.ndarray:
+def _reflected_batch(world: World, poses: np.ndarray, power_pct: ArrayLike, p: RobotParams, c: _Consts) -> np.ndarray:
     """Reflected light (counts) of every sensor, (N, 8): response along its axis, or its beam's weighted sum."""
     if c.beam_n == 1:
         dist, ang, _hit = reflection(world, poses, p)
@@ -386,7 +345,8 @@ def _robot_lamp_gains(world: World, poses: np.ndarray, p: RobotParams, c: _Const
     return g
 
 
-def _ambient_batch(world: World, poses: np.ndarray, t: Any, p: RobotParams, c: _Consts) -> tuple[Any, Any]:
+def _ambient_batch(world: World, poses: np.ndarray, t: ArrayLike, p: RobotParams, c: _Consts
+                   ) -> tuple[float | np.ndarray, float | np.ndarray]:
     """(ambient at the emitter-off reading, at the emitter-on one): the world's level plus the lamps."""
     base = p.ir_ambient if world.ambient is None else world.ambient
     if not world.lamps:
@@ -399,7 +359,7 @@ def _ambient_batch(world: World, poses: np.ndarray, t: Any, p: RobotParams, c: _
     return amb_off, base + (gains * world.lamp_levels(t_arr + p.ir_on_delay)[..., None, :]).sum(-1)
 
 
-def _read(world: World, poses: np.ndarray, power_pct: Any, t: Any, p: RobotParams,
+def _read(world: World, poses: np.ndarray, power_pct: ArrayLike, t: ArrayLike, p: RobotParams,
           rng: np.random.Generator | None, quantise: bool = True) -> tuple[np.ndarray, np.ndarray]:
     c = _consts(p)
     refl = _reflected_batch(world, poses, power_pct, p, c)
@@ -512,17 +472,17 @@ def _counts_one(c: _Consts, amb_off: list[float], amb_on: list[float], refl: lis
             [v if 0 <= v <= top else (0 if v < 0 else top) for v in on_i])
 
 
-def read_sensors_lists(world: World, x: float, y: float, phi: float, power_pct: float, t: float, p: RobotParams,
-                       rng: np.random.Generator | None) -> tuple[list[int], list[int]]:
-    """read_sensors as two lists of Python ints: the simulator's per-cycle hot path.
+def _read_one(world: World, x: float, y: float, phi: float, power_pct: float, t: float, p: RobotParams,
+              rng: np.random.Generator | None) -> tuple[list[int], list[int]]:
+    """read_sensors for one robot, as two lists of Python ints: the simulator's per-cycle hot path.
 
-    The same formulas as read_sensors_batch in plain floats after the ray
-    cast; the two agree to the last bit or, in a rare rounding tie of the
-    beam's sum, 1 count.
+    The same formulas as _read in plain floats after the ray cast; the two
+    agree to the last bit or, in a rare rounding tie of the beam's sum,
+    1 count (tests/test_ir_sensor.py::test_beam_batch_equals_single).
     """
     c = _consts(p)
     dist, ang, _hit = world.cast_robot(x, y, phi, c.ray_bearings, c.reach, c.ray_origins)
-    refl = _reflected_one(c, dist.tolist(), ang.tolist(), p.ir_gain * power_term(power_pct, p), p.body_radius)
+    refl = _reflected_one(c, dist.tolist(), ang.tolist(), p.ir_gain * float(power_term(power_pct, p)), p.body_radius)
     if c.beam_n > 1:  # the beam: the weighted sum of each sensor's rays
         n, w = c.beam_n, c.beam_w_list
         refl = [sum(w[j] * refl[k * n + j] for j in range(n)) for k in range(N_SENSORS)]
@@ -532,45 +492,10 @@ def read_sensors_lists(world: World, x: float, y: float, phi: float, power_pct: 
     return _counts_one(c, amb_off, amb_on, refl, rng, p.ir_noise)
 
 
-def read_sensors(world: World, pose: Any, power_pct: float = 60.0, t: float = 0.0, p: RobotParams = DEFAULT,
-                 rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """One robot at pose (x, y, phi): (adc_off[8], adc_on[8]) integer ADC counts, S1..S8.
-
-    off = ambient + noise; on = ambient (ir_on_delay later) + reflected +
-    noise; each clipped to 0..adc_max and rounded (half to even).  rng: a
-    numpy Generator for the noise (None = no noise); it draws 16 normals
-    per call, off then on, like read_sensors_batch for one robot.  The pose
-    is the one the readings describe (ir_latency is the caller's: see
-    PoseHistory and read_sensors_track).
-    """
-    if len(pose) != 3:
-        raise ValueError(f"pose must be (x, y, phi), got {len(pose)} values")
-    x, y, phi = (float(v) for v in pose)
-    off, on = read_sensors_lists(world, x, y, phi, float(power_pct), float(t), p, rng)
-    return np.array(off, dtype=np.int64), np.array(on, dtype=np.int64)
-
-
-def read_sensors_batch(world: World, poses: Any, power_pct: Any = 60.0, t: Any = 0.0, p: RobotParams = DEFAULT,
-                       rng: np.random.Generator | None = None, quantise: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """N robots at poses (N, 3): (adc_off (N, 8), adc_on (N, 8)).
-
-    power_pct and t may be scalars or (N,) arrays, one per robot.
-    quantise=False: the light before the ADC rounds it (floats within its
-    range), smooth in the parameters: what a fit compares.
-    """
-    q = np.asarray(poses, dtype=float)
-    if q.ndim != 2 or q.shape[1] != 3:
-        raise ValueError(f"poses must have shape (N, 3), got {q.shape}")
-    power = np.asarray(power_pct, dtype=float)
-    if power.ndim:
-        power = power[:, None]
-    return _read(world, q, power, t, p, rng, quantise)
-
-
 # --------------------------------------------------------------------------- #
 # Latency: the readings describe the pose of ir_latency ago
 # --------------------------------------------------------------------------- #
-def pose_at(times: Any, poses: Any, t: Any) -> np.ndarray:
+def pose_at(times: ArrayLike, poses: ArrayLike, t: ArrayLike) -> np.ndarray:
     """Poses at time(s) t, linear between the samples of a track: times (K,) increasing, poses (K, ..., 3).
 
     Clamped to the first and last sample (a robot stood where it started);
@@ -596,7 +521,7 @@ class PoseHistory:
 
     A simulator adds the pose at every reading; `at(t)` interpolates
     (pose_at) between them, so every path - SimRobot.sense,
-    BatchSim.read_sensors, read_sensors_track on a recorded track - reads
+    BatchSim.read_sensors, read_sensors(track=True) on a recorded track - reads
     the same past pose.  Keeps `keep` seconds of them.
     """
 
@@ -605,7 +530,7 @@ class PoseHistory:
         self.t: list[float] = []
         self.poses: list[np.ndarray] = []
 
-    def add(self, t: float, pose: Any) -> None:
+    def add(self, t: float, pose: ArrayLike) -> None:
         if self.t and t <= self.t[-1]:  # the same instant read again: the newer pose
             self.t.pop()
             self.poses.pop()
@@ -618,16 +543,40 @@ class PoseHistory:
         return pose_at(self.t, self.poses, t)
 
 
-def read_sensors_track(world: World, t: Any, poses: Any, power_pct: Any = 60.0, p: RobotParams = DEFAULT,
-                       rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(adc_off, adc_on), each (K, 8), of one robot along a track: times t (K,), poses (K, 3).
+# --------------------------------------------------------------------------- #
+# Readings: the one entry point, for one robot or N
+# --------------------------------------------------------------------------- #
+def read_sensors(world: World, poses: ArrayLike, power_pct: float | np.ndarray = 60.0, t: float | np.ndarray = 0.0,
+                 p: RobotParams = DEFAULT, rng: np.random.Generator | None = None, *, quantise: bool = True,
+                 track: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(adc_off, adc_on) of one robot at pose (x, y, phi), each (8,), or of N robots at poses (N, 3), each (N, 8).
 
-    Row j is read at time t[j] - ir_latency, at the track's pose then
-    (pose_at: linear between rows); without latency, at the row's own.
+    off = ambient + noise; on = ambient (ir_on_delay later) + reflected +
+    noise; each clipped to 0..adc_max and rounded (half to even) to int64
+    counts, S1..S8.  power_pct (%) and t (s): scalars, or (N,) arrays, one
+    per robot.  rng: a numpy Generator for the noise (None = no noise); it
+    draws 16 normals per robot, off then on.  quantise=False: the light
+    before the ADC rounds it (floats within its range), smooth in the
+    parameters: what a fit compares.  The poses are the ones the readings
+    describe (ir_latency is the caller's: PoseHistory), except with
+    track=True: poses (K, 3) are one robot's track at times t (K,), and row
+    j is read at t[j] - ir_latency at the track's pose then (pose_at).
     """
-    times = np.asarray(t, dtype=float)
     q = np.asarray(poses, dtype=float)
-    if p.ir_latency > 0:
+    if q.ndim not in (1, 2) or q.shape[-1] != 3:
+        raise ValueError(f"poses must be one pose (x, y, phi) or (N, 3), got shape {q.shape}")
+    if track and p.ir_latency > 0:
+        times = np.asarray(t, dtype=float)
         q = pose_at(times, q, times - p.ir_latency)
-        times = times - p.ir_latency
-    return read_sensors_batch(world, q, power_pct, times, p, rng)
+        t = times - p.ir_latency
+    if q.ndim == 1:
+        if quantise:  # one robot: plain floats, eight values are too few for numpy
+            x, y, phi = q.tolist()
+            off, on = _read_one(world, x, y, phi, float(power_pct), float(t), p, rng)
+            return np.array(off, dtype=np.int64), np.array(on, dtype=np.int64)
+        off_n, on_n = _read(world, q[None], power_pct, t, p, rng, quantise)
+        return off_n[0], on_n[0]
+    power = np.asarray(power_pct, dtype=float)
+    if power.ndim:
+        power = power[:, None]
+    return _read(world, q, power, t, p, rng, quantise)

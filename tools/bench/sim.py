@@ -140,7 +140,7 @@ COMPONENTS = {
         ("coverage bookkeeping (Coverage.add)", "host_sim/loops/coverage.py", "add"),
     ],
     "(c) batch with IR": [
-        ("IR sensors (read_sensors_batch)", "host_sim/sensors/ir_sensor.py", "read_sensors_batch"),
+        ("IR sensors (read_sensors)", "host_sim/sensors/ir_sensor.py", "read_sensors"),
         ("  of which the ray cast (World.cast_robots)", "host_sim/physics/world.py", "cast_robots"),
         ("motors (wheel_torque_batch)", "host_sim/physics/motors.py", "wheel_torque_batch"),
         ("dynamics (step_batch)", "host_sim/physics/dynamics.py", "step_batch"),
