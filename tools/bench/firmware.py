@@ -34,6 +34,7 @@ from typing import Any
 
 from firmware.manifest import BOARD_FILES
 from host_sim.board.micropython_runner import REPO_ROOT, mpy_cross_compile, run_micropython, run_micropython_wasm
+from tools.bench.report import machine_line
 
 MP_SCRIPT = REPO_ROOT / "tools" / "bench" / "mp" / "mp_firmware.py"
 HEAP_SCRIPT = REPO_ROOT / "tools" / "bench" / "mp" / "mp_heap_firmware.py"
@@ -216,7 +217,7 @@ def _print_cycle(mp: dict[str, Any], heap: dict[str, Any], heap32: dict[str, Any
     """The machine, then the control cycle's time, parts, allocation and heap."""
     parts = mp["parts_us"]
     assert isinstance(parts, dict)
-    print(f"machine:     {platform.platform()}, {platform.processor() or platform.machine()}")
+    print(f"machine:     {machine_line()}")
     print(f"python:      CPython {platform.python_version()}")
     print(f"micropython: MicroPython {mp['micropython']} unix port (64-bit)")
     print()

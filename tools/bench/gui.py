@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import statistics
 import subprocess
 import sys
@@ -29,6 +28,7 @@ from typing import Any
 
 from tools.arguments import float_range, int_range
 from tools.arguments import CliError
+from tools.bench.report import machine_line
 
 TARGET_FPS = 60.0
 PRERUN = 200.0  # simulated seconds before timing: 5000 control periods, trails at their longest
@@ -106,8 +106,7 @@ def print_report(args: argparse.Namespace, rows: list[tuple[str, dict[str, Any]]
     print("twinbot bench gui")
     print(f"command:  twinbot bench gui --frames {args.frames} --prerun {args.prerun:g}"
           f"{' --no-board' if args.no_board else ''}")
-    print(f"machine:  {platform.platform()}, {platform.machine()}, {os.cpu_count()} CPUs, "
-          f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    print(f"machine:  {machine_line()}")
     print(f"pygame-ce {pygame.version.ver} (SDL {'.'.join(map(str, pygame.get_sdl_version()))}), "
           f"video driver {os.environ.get('SDL_VIDEODRIVER')}, window 1280 x 780, paper_room, coverage overlay, "
           f"rays and trails on; trails {args.prerun:g} s long before timing; frames started at 60 Hz")

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from tools.arguments import float_range, image_file, int_range, output_file
+from tools.bench.report import machine_line, print_targets
 
 DELAYS_MS = (0, 50, 100, 200, 300)
 
@@ -89,11 +90,15 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
 
 def run(args: argparse.Namespace) -> int:
     rows = measure(args.duration, args.jitter, args.seed)
-    print(f"# {platform.node()} Python {platform.python_version()}")
-    print(f"# twinbot bench ghost --duration {args.duration:g} --jitter {args.jitter:g} --seed {args.seed}")
+    print("twinbot bench ghost")
+    print(f"command:     twinbot bench ghost --duration {args.duration:g} --jitter {args.jitter:g} --seed {args.seed}")
+    print(f"machine:     {machine_line()}")
+    print(f"python:      CPython {platform.python_version()}")
+    print()
     print(table(rows))
     worse = [r["delay_ms"] for r in rows if r["delay_ms"] > 0 and r["ghost_mean_mm"] >= r["raw_mean_mm"]]
-    print(f"target: ghost error below the raw late pose's at every delay > 0: {'met' if not worse else 'NOT met'}")
+    print_targets([{"met": not worse, "text": "ghost error below the raw late pose's at every delay > 0"
+                                              + (f" (not at {', '.join(map(str, worse))} ms)" if worse else "")}])
     if args.plot is not None:
         plot(rows, Path(args.plot))
         print(f"plot: {args.plot}")

@@ -51,7 +51,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from tools.bench.command import print_targets
+from tools.bench.report import print_targets
 
 TARGET_REPLAY_RTF = 1000.0
 TARGET_SIL_RTF = 200.0
