@@ -42,6 +42,7 @@ def test_a_run_writes_its_section_under_the_header(bench_only: None, tmp_path: P
     assert "Command: `twinbot bench ghost --duration 5 --jitter 50 --seed 0`" in ghost
     assert "- date: " in ghost and "- machine: " in ghost and "load average" in ghost
     assert printed.strip() in ghost  # the printout, table and targets as shown
+    assert "<details><summary>How it measures" in ghost and "the ghost's predicted pose" in ghost
     assert "targets:\n  [MET]" in ghost or "targets:\n  [MISSED]" in ghost
 
 

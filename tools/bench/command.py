@@ -1,9 +1,9 @@
-"""`twinbot bench`: the benchmarks behind the README's figures.
+"""`twinbot bench`: the benchmarks, each a module of tools/bench with its own options.
 
-Each benchmark is a module with a `register(subparsers, name, summary)`
-function, like the top-level subcommands; adding one is one line in
-BENCHMARKS.  Modules are imported when the parser is built, so they keep
-heavy imports (numpy, pymavlink) inside their functions.
+A benchmark registers itself with `register(subparsers, name, summary)`, so
+adding one is one line in BENCHMARKS; each gets --markdown FILE here
+(tools/bench/report.py).  Modules keep heavy imports (numpy, pymavlink)
+inside their functions.  The figures: docs/benchmarks.md.
 """
 from __future__ import annotations
 

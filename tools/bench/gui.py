@@ -1,19 +1,8 @@
 """`twinbot bench gui`: frame time of `twinbot gui` with its robots, rays and coverage on.
 
-Each workload opens the application headless (SDL_VIDEODRIVER=dummy),
-first runs the two simulated robots PRERUN simulated seconds at full speed
-(so that their trails are as long as the window draws them, 4000 points),
-then 30 frames to warm up, then times FRAMES frames one by one, started
-every 1/60 s as in the window (the wait is not counted): the events, the simulated robots' physics and firmware for 1/60 s of wall
-time x the speed factor, the real robot's frames, and drawing everything
-(room, coverage overlay, trails, 8 rays and bars per robot, set-points,
-coverage plot, buttons, status bar) into the window.  The real robot is a
-virtual board (`twinbot board`, MicroPython running the firmware, its own
-twin as hardware, in real time, on this machine's cores too) set
-exploring (AUTONOMOUS) before the timing starts.
-
-The dummy driver has no display to show the frame on: a real display's
-flip (a copy to the compositor) comes on top and is not measured here.
+Headless, in the paper's room, with and without a virtual board as the real
+robot; DESCRIPTION (the --help text) says what a timed frame holds.
+Figures: docs/benchmarks.md.
 """
 from __future__ import annotations
 
@@ -30,13 +19,30 @@ from tools.arguments import float_range, int_range
 from tools.arguments import CliError
 from tools.bench.report import machine_line
 
+DESCRIPTION = """\
+Each workload opens the application headless (SDL_VIDEODRIVER=dummy),
+first runs the two simulated robots PRERUN simulated seconds at full speed
+(so that their trails are as long as the window draws them, 4000 points),
+then 30 frames to warm up, then times FRAMES frames one by one, started
+every 1/60 s as in the window (the wait is not counted): the events, the simulated robots' physics and firmware for 1/60 s of wall
+time x the speed factor, the real robot's frames, and drawing everything
+(room, coverage overlay, trails, 8 rays and bars per robot, set-points,
+coverage plot, buttons, status bar) into the window.  The real robot is a
+virtual board (`twinbot board`, MicroPython running the firmware, its own
+twin as hardware, in real time, on this machine's cores too) set
+exploring (AUTONOMOUS) before the timing starts.
+
+The dummy driver has no display to show the frame on: a real display's
+flip (a copy to the compositor) comes on top and is not measured here.
+"""
+
 TARGET_FPS = 60.0
 PRERUN = 200.0  # simulated seconds before timing: 5000 control periods, trails at their longest
 REPO = Path(__file__).resolve().parents[2]
 
 
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
-    p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1],
+    p = sub.add_parser(name, help=summary, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--frames", type=int_range(10, 1_000_000), default=600, help="timed frames per workload (default 600)")
     p.add_argument("--prerun", type=float_range(0, 86_400, unit="s"), default=PRERUN,

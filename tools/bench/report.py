@@ -71,13 +71,13 @@ def add_markdown_option(parser: argparse.ArgumentParser, name: str, summary: str
         if not args.markdown:
             return int(run(args) or 0)
         command = bench_command(parser, name, args)
-        started, t0 = datetime.datetime.now(), time.monotonic()
+        started, t0 = datetime.datetime.now().astimezone(), time.monotonic()
         tee = _Tee(sys.stdout)
         with contextlib.redirect_stdout(tee):
             status = int(run(args) or 0)
         if status != 2:
-            section = format_section(name, summary, command, tee.kept.getvalue(),
-                                     started, time.monotonic() - t0)
+            section = format_section(name, summary, command, tee.kept.getvalue(), started,
+                                     time.monotonic() - t0, parser.description or "")
             write_section(Path(args.markdown), name, section, order)
         return status
 
@@ -120,25 +120,32 @@ class _Tee(io.TextIOBase):
 
 # --------------------------------------------------------------------------- the page
 def format_section(name: str, summary: str, command: str, printed: str, started: datetime.datetime,
-                   wall_s: float) -> str:
-    """One benchmark's section, markers included: what it measures, the command, when, where, its printout."""
-    fence = "`" * max(3, 1 + max((len(run) for run in re.findall(r"`+", printed)), default=0))
+                   wall_s: float, method: str = "") -> str:
+    """One benchmark's section, markers included: what it measures (and how: its --help text), the
+    command, when, where, and its printout."""
+    how = ([f"<details><summary>How it measures (<code>twinbot bench {name} --help</code>)</summary>", "",
+            *_block(method), "", "</details>", ""] if method.strip() else [])
     return "\n".join([
         f"<!-- bench:{name} begin -->",
         f"## `twinbot bench {name}`",
         "",
         summary[0].upper() + summary[1:] + ".",
         "",
+        *how,
         f"Command: `{command}`",
         "",
-        f"- date: {started:%Y-%m-%d %H:%M}, {wall_s:.0f} s wall time",
+        f"- date: {started:%Y-%m-%d %H:%M %Z}, {wall_s:.0f} s wall time",
         f"- machine: {machine_line()} (at the end of the run)",
         "",
-        fence + "text",
-        printed.rstrip("\n"),
-        fence,
+        *_block(printed),
         f"<!-- bench:{name} end -->",
     ])
+
+
+def _block(text: str) -> list[str]:
+    """Text as a fenced block, the fence longer than any run of backticks in it."""
+    fence = "`" * max(3, 1 + max((len(run) for run in re.findall(r"`+", text)), default=0))
+    return [fence + "text", text.strip("\n"), fence]
 
 
 def format_header(commands: list[str], page: str) -> str:
