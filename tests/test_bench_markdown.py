@@ -61,6 +61,7 @@ def test_a_run_replaces_its_own_section_and_keeps_the_others(bench_only: None, t
         # In the benchmarks' order: ghost is listed last, so its section goes after sim's.
         assert text.index(sim) < text.index("<!-- bench:ghost begin -->")
     assert "--seed 0`" in section(first, "ghost") and "--seed 1`" in section(second, "ghost")
+    assert "-->\n\n\n" not in second and "\n\n\n<!--" not in second  # one blank line between blocks
     assert second.count("# Benchmarks") == 1
 
 

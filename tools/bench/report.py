@@ -17,7 +17,7 @@ import shlex
 import sys
 import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from tools.arguments import CliError, output_file
 
@@ -134,7 +134,7 @@ def format_section(name: str, summary: str, command: str, printed: str, started:
         *how,
         f"Command: `{command}`",
         "",
-        f"- date: {started:%Y-%m-%d %H:%M %Z}, {wall_s:.0f} s wall time",
+        f"- date: {f'{started:%Y-%m-%d %H:%M %Z}'.rstrip()}, {wall_s:.0f} s wall time",
         f"- machine: {machine_line()} (at the end of the run)",
         "",
         *_block(printed),
@@ -207,6 +207,8 @@ def place_section(text: str, name: str, section: str, order: list[str], page: st
         later = [i for i, n in enumerate(names) if n is not None and _rank(n, order) > _rank(name, order)]
         if later:
             pieces[later[0]:later[0]] = [(name, section), (None, "\n\n")]
+        elif pieces and pieces[-1][0] is None:  # after the page's last text, one blank line
+            pieces[-1:] = [(None, pieces[-1][1].rstrip("\n") + "\n\n"), (name, section)]
         else:
             pieces += [(None, "\n\n"), (name, section)]
     sections = sorted(((n, b) for n, b in pieces if n is not None), key=lambda p: _rank(p[0], order))
