@@ -1,9 +1,9 @@
-"""`twinbot bench`: the benchmarks behind the README's figures.
+"""`twinbot bench`: the benchmarks, each a module of tools/bench with its own options.
 
-Each benchmark is a module with a `register(subparsers, name, summary)`
-function, like the top-level subcommands; adding one is one line in
-BENCHMARKS.  Modules are imported when the parser is built, so they keep
-heavy imports (numpy, pymavlink) inside their functions.
+A benchmark registers itself with `register(subparsers, name, summary)`, so
+adding one is one line in BENCHMARKS; each gets --markdown FILE here
+(tools/bench/report.py).  Modules keep heavy imports (numpy, pymavlink)
+inside their functions.  The figures: docs/benchmarks.md.
 """
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ import textwrap
 from typing import Any
 
 from tools.arguments import help_and_error
+from tools.bench.report import add_markdown_option
 
 # (name, module, what it measures).
 BENCHMARKS = (
@@ -42,9 +43,10 @@ BENCHMARKS = (
 
 def _description() -> str:
     lines = [
-        "Benchmarks that produce the README's figures.  Each prints the machine, the exact",
+        "Benchmarks that produce the project's figures.  Each prints the machine, the exact",
         "command, one table and the targets with whether each is met; --json FILE keeps",
-        "every figure.  Timings are medians over repeated runs.",
+        "every figure, --markdown FILE writes the printout as its own section of FILE",
+        "(docs/benchmarks.md).  Timings are medians over repeated runs.",
         "",
         "benchmarks (what each measures):",
     ]
@@ -59,19 +61,13 @@ def register(subparsers: Any, name: str, summary: str) -> None:
         name, help=summary, description=_description(), formatter_class=argparse.RawDescriptionHelpFormatter
     )
     sub = parser.add_subparsers(dest="benchmark", metavar="BENCHMARK")
+    order = [b[0] for b in BENCHMARKS]
     for bench_name, module_name, bench_summary in BENCHMARKS:
         importlib.import_module(module_name).register(sub, bench_name, bench_summary)
+        add_markdown_option(sub.choices[bench_name], bench_name, bench_summary, order)
 
     def no_benchmark(args: argparse.Namespace) -> int:
         return help_and_error(parser, "BENCHMARK", [b[0] for b in BENCHMARKS])
 
     parser.set_defaults(func=no_benchmark)
 
-
-def print_targets(targets: list[dict[str, Any]]) -> None:
-    """The targets block every benchmark ends with: a blank line, 'targets:', one marked line each."""
-    print()
-    print("targets:")
-    for target in targets:
-        mark = "[NOT RUN]" if target["met"] is None else ("[MET]   " if target["met"] else "[MISSED]")
-        print(f"  {mark} {target['text']}")

@@ -45,7 +45,7 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from pathlib import Path
 from typing import Any
 
-from tools.bench.command import print_targets
+from tools.bench.report import print_targets
 
 TARGET_NAMED = 0.95  # share of concealed (excited, in-library) effects named with the right side
 TARGET_PARAMS = 0.95  # share of the rightly named effects whose parameter is within scoring.PARAM_TOLERANCE

@@ -1,19 +1,9 @@
-"""Speed of the robot dynamics (host_sim/physics/dynamics.py) and motors (host_sim/physics/motors.py).
+"""Speed of the robot dynamics and motors: one robot's step and a batch of 1000.
 
-`bench(n_steps)` times, each as the median of 5 runs of `n_steps` steps (dt = 1 ms,
-default parameters, a turning robot):
-
-* fast_step_us          one `dynamics.step` (closed form, pure Python), microseconds
-* fast_step_motors_us   two `motors.wheel_torque` + one `dynamics.step`: the physics of
-                        one robot per simulation step, microseconds
-* accel_fast_us         one `dynamics.reduced_accel_fast`, microseconds
-* matrix_step_us        one `dynamics.step_matrix` (the paper's matrices rebuilt every
-                        step, numpy), microseconds
-* batch_robot_steps_per_s  `dynamics.step_batch` on N = 1000 robots, each with its own
-                        parameters (ParamBatch), in robot-steps per second
-* batch_motors_robot_steps_per_s  the same with `motors.wheel_torque_batch` before each step
-
-plus the real-time factors of one robot (dt / time per step).
+`bench(n_steps)` times host_sim/physics/dynamics.py and motors.py, the closed
+form against the paper's matrices; `python -m tools.bench.dynamics` prints
+it (not a `twinbot bench` benchmark, those: docs/benchmarks.md).  The
+equations: docs/dynamics.md.
 """
 from __future__ import annotations
 
@@ -37,6 +27,16 @@ def _median_time(fn: Callable[[int], None], n: int, repeats: int = 5) -> float:
 
 
 def bench(n_steps: int = 20_000) -> dict[str, Any]:
+    """Each figure the median of 5 runs of `n_steps` steps (dt = 1 ms, default parameters, a turning robot).
+
+      fast_step_us          one `dynamics.step` (closed form, pure Python)
+      fast_step_motors_us   two `motors.wheel_torque` + one `dynamics.step`: one robot's physics per step
+      accel_fast_us         one `dynamics.reduced_accel_fast`
+      matrix_step_us        one `dynamics.step_matrix` (the paper's matrices rebuilt every step, numpy)
+      batch_robot_steps_per_s         `dynamics.step_batch` on N = 1000 robots, each its own parameters
+      batch_motors_robot_steps_per_s  the same with `motors.wheel_torque_batch` before each step
+    plus the real-time factors of one robot (dt / time per step).
+    """
     fast, fast_motors, accel, matrix = _scalar_loops()
     batch, batch_motors = _batch_loops()
     n_matrix = max(1, n_steps // 50)

@@ -1,5 +1,27 @@
 """`twinbot bench firmware`: the firmware's embedded budgets, measured.
 
+The control cycle's time and allocations and the loaded firmware's heap
+under MicroPython (64-bit unix and 32-bit webassembly ports), and one fuzzy
+inference beside peer libraries on CPython; DESCRIPTION (the --help text)
+says how.  Figures: docs/benchmarks.md.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from firmware.manifest import BOARD_FILES
+from host_sim.board.micropython_runner import REPO_ROOT, mpy_cross_compile, run_micropython, run_micropython_wasm
+from tools.bench.report import machine_line
+
+DESCRIPTION = """\
 Under the MicroPython unix port (tools/bench/mp/mp_firmware.py):
   - one full control cycle (IR acquisition with ambient subtraction, fuzzy
     inference, two wheel PIs, odometry, a TELEMETRY frame): median, p90, max;
@@ -20,20 +42,6 @@ The unix port is 64-bit: its objects and GC blocks are twice the size of
 an RP2040's, so its heap figures are upper bounds for the robot; the
 32-bit port's are the ones the <= 32 KB target is held to.
 """
-from __future__ import annotations
-
-import argparse
-import json
-import platform
-import statistics
-import sys
-import tempfile
-import time
-from pathlib import Path
-from typing import Any
-
-from firmware.manifest import BOARD_FILES
-from host_sim.board.micropython_runner import REPO_ROOT, mpy_cross_compile, run_micropython, run_micropython_wasm
 
 MP_SCRIPT = REPO_ROOT / "tools" / "bench" / "mp" / "mp_firmware.py"
 HEAP_SCRIPT = REPO_ROOT / "tools" / "bench" / "mp" / "mp_heap_firmware.py"
@@ -44,7 +52,7 @@ TARGET_SPEEDUP = 30
 
 
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
-    p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1],
+    p = sub.add_parser(name, help=summary, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     from tools.arguments import int_range, output_file
 
@@ -216,7 +224,7 @@ def _print_cycle(mp: dict[str, Any], heap: dict[str, Any], heap32: dict[str, Any
     """The machine, then the control cycle's time, parts, allocation and heap."""
     parts = mp["parts_us"]
     assert isinstance(parts, dict)
-    print(f"machine:     {platform.platform()}, {platform.processor() or platform.machine()}")
+    print(f"machine:     {machine_line()}")
     print(f"python:      CPython {platform.python_version()}")
     print(f"micropython: MicroPython {mp['micropython']} unix port (64-bit)")
     print()

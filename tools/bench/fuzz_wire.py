@@ -1,13 +1,11 @@
-"""Measure how often random k-bit corruptions of frames on the wire are accepted.
+"""How often random k-bit corruptions of frames on the wire are accepted.
 
     python -m tools.bench.fuzz_wire [TRIALS] [SEED]
 
-For k = 1, 2, 3: take a random frame of a random type (random payload),
-flip k distinct random bits anywhere in it (both delimiters included), feed
-it followed by an intact sentinel frame, and count the trials in which the
-decoder delivered a frame that is not the one sent.  Also counts the
-sentinel lost (it never is: the leading 0x00 protects it).  SPEC.md quotes
-the figures; tests/test_protocol_robustness.py runs a smaller seeded copy.
+For k = 1, 2, 3: a random frame with k bits flipped, then an intact
+sentinel frame; counts wrong frames delivered and sentinels lost.  Quoted
+in protocol/SPEC.md, tested small in tests/test_protocol_robustness.py; not
+a `twinbot bench` benchmark (those: docs/benchmarks.md).
 """
 from __future__ import annotations
 

@@ -1,30 +1,9 @@
 """Fuzzy inference speed: the firmware engine on CPython against peer libraries.
 
-`bench_inference(repeats)` times one inference (median of `repeats` timed
-calls on random readings, per rule set) of firmware/fuzzy.py and of the same
-rule base built in
-
-* simpful       zero-order Sugeno, crisp output values: the same arithmetic
-                (rule-by-rule weighted average), so it must agree to ~1 mm/s;
-* pyfuzzylite   TakagiSugeno: Constant output terms, WeightedAverage,
-                UnboundedSum aggregation, General activation: the same
-                arithmetic too;
-* scikit-fuzzy  has no Sugeno engine: a Mamdani build of the same rules
-                (narrow triangles of half-width 5 mm/s round the singletons,
-                min activation, max accumulation, centroid).  Not the same
-                arithmetic: its setpoints differ (reported), timing only.
-
-Each peer also reports the largest difference from the firmware's setpoints
-over the timed inputs, so a fast but wrong build would show.  A peer that is
-not installed is listed under "unavailable" with the reason.
-
-The peer builds live here so that tests/test_fuzzy_peer.py checks exactly
-the simpful build that is timed.  They take the rule base from the firmware
-tables but take the circular weights from the floating-point geometry
-(host_sim/fuzzy_rulebase.circular_weight: sensor i at 45*i degrees,
-triangles of half-width 90 degrees), and express them as min(near, weight)
-with a constant input ("bias"), so the firmware's integer direction_weight
-is checked, not copied.
+`bench_inference(repeats)` times one inference of firmware/fuzzy.py and of
+the same rule base built in simpful, pyfuzzylite and scikit-fuzzy, for
+`twinbot bench firmware`.  Figures: docs/benchmarks.md; the controller:
+docs/fuzzy.md.
 """
 from __future__ import annotations
 
@@ -47,6 +26,10 @@ MAX_READING = 4095  # 12-bit ADC
 # --------------------------------------------------------------------------- #
 # The rule base, independently of the firmware's integer arithmetic
 # --------------------------------------------------------------------------- #
+# The peer builds live here so that tests/test_fuzzy_peer.py checks exactly the simpful build that is
+# timed.  They take the circular weights from the floating-point geometry (sensor i at 45*i degrees,
+# triangles of half-width 90 degrees), as min(near, weight) with a constant input ("bias"), so the
+# firmware's integer direction_weight is checked, not copied.
 def peer_rules(rule_set: int) -> list[tuple[list[tuple[int, float]] | None, int, int]]:
     """(disjuncts, left term, right term) per firmware rule; disjuncts None = always.
 
@@ -281,6 +264,17 @@ def _time(infer: Infer, vectors: list[list[int]], reference: list[tuple[float, f
 def bench_inference(repeats: int = 1000, max_speed: int = 200, seed: int = 1,
                     peer_repeats: int | None = None) -> dict[str, Any]:
     """Median microseconds per inference, per engine and rule set.
+
+    The peers, each reporting its largest difference from the firmware's
+    setpoints over the timed inputs (a fast but wrong build would show);
+    one not installed is listed under "unavailable" with the reason:
+      simpful       zero-order Sugeno, crisp outputs: the same arithmetic
+                    (rule-by-rule weighted average), agreeing to ~1 mm/s;
+      pyfuzzylite   TakagiSugeno, Constant terms, WeightedAverage,
+                    UnboundedSum, General activation: the same arithmetic;
+      scikit-fuzzy  no Sugeno engine: a Mamdani build (triangles of
+                    half-width 5 mm/s round the singletons, min activation,
+                    max accumulation, centroid), so its setpoints differ.
 
     The firmware engine is timed on `repeats` random reading vectors, the
     peers on the first `peer_repeats` of them (default min(repeats, 300):

@@ -1,5 +1,25 @@
 """`twinbot bench gui`: frame time of `twinbot gui` with its robots, rays and coverage on.
 
+Headless, in the paper's room, with and without a virtual board as the real
+robot; DESCRIPTION (the --help text) says what a timed frame holds.
+Figures: docs/benchmarks.md.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from tools.arguments import float_range, int_range
+from tools.arguments import CliError
+from tools.bench.report import machine_line
+
+DESCRIPTION = """\
 Each workload opens the application headless (SDL_VIDEODRIVER=dummy),
 first runs the two simulated robots PRERUN simulated seconds at full speed
 (so that their trails are as long as the window draws them, 4000 points),
@@ -15,20 +35,6 @@ exploring (AUTONOMOUS) before the timing starts.
 The dummy driver has no display to show the frame on: a real display's
 flip (a copy to the compositor) comes on top and is not measured here.
 """
-from __future__ import annotations
-
-import argparse
-import os
-import platform
-import statistics
-import subprocess
-import sys
-import time
-from pathlib import Path
-from typing import Any
-
-from tools.arguments import float_range, int_range
-from tools.arguments import CliError
 
 TARGET_FPS = 60.0
 PRERUN = 200.0  # simulated seconds before timing: 5000 control periods, trails at their longest
@@ -36,7 +42,7 @@ REPO = Path(__file__).resolve().parents[2]
 
 
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
-    p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1],
+    p = sub.add_parser(name, help=summary, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--frames", type=int_range(10, 1_000_000), default=600, help="timed frames per workload (default 600)")
     p.add_argument("--prerun", type=float_range(0, 86_400, unit="s"), default=PRERUN,
@@ -107,8 +113,7 @@ def print_report(args: argparse.Namespace, rows: list[tuple[str, dict[str, Any]]
     print("twinbot bench gui")
     print(f"command:  twinbot bench gui --frames {args.frames} --prerun {args.prerun:g}"
           f"{' --no-board' if args.no_board else ''}")
-    print(f"machine:  {platform.platform()}, {platform.machine()}, {os.cpu_count()} CPUs, "
-          f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    print(f"machine:  {machine_line()}")
     print(f"pygame-ce {pygame.version.ver} (SDL {'.'.join(map(str, pygame.get_sdl_version()))}), "
           f"video driver {os.environ.get('SDL_VIDEODRIVER')}, window 1280 x 780, paper_room, coverage overlay, "
           f"rays and trails on; trails {args.prerun:g} s long before timing; frames started at 60 Hz")

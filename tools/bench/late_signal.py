@@ -1,13 +1,8 @@
 """`twinbot bench ghost`: the late-signal twin's pose error against the raw late pose.
 
-The robot is the simulator with the firmware in SIL (HOST mode), driven
-through the identification manoeuvre by a scripted host; each TELEMETRY
-frame reaches the host MEAN +- JITTER ms late (uniform, seeded, in order).
-At every control instant (40 ms) the ghost's predicted pose
-(host_sim/loops/late_signal_twin.py) and the raw late pose (the last frame's odometry) are
-compared with the simulator's true pose.  Prints one table (mean and 95th
-percentile position error, mm; the ghost's latency estimate against the
-frames' true latency) and writes a plot.
+Behind a late link of 0-300 ms, the ghost's predicted pose and the last
+frame's pose against the simulator's true one; DESCRIPTION (the --help text)
+says how.  Figures: docs/benchmarks.md; the twin: docs/late-signal-twin.md.
 """
 from __future__ import annotations
 
@@ -18,12 +13,24 @@ from pathlib import Path
 from typing import Any
 
 from tools.arguments import float_range, image_file, int_range, output_file
+from tools.bench.report import machine_line, print_targets
+
+DESCRIPTION = """\
+The robot is the simulator with the firmware in SIL (HOST mode), driven
+through the identification manoeuvre by a scripted host; each TELEMETRY
+frame reaches the host MEAN +- JITTER ms late (uniform, seeded, in order).
+At every control instant (40 ms) the ghost's predicted pose
+(host_sim/loops/late_signal_twin.py) and the raw late pose (the last frame's odometry) are
+compared with the simulator's true pose.  Prints one table (mean and 95th
+percentile position error, mm; the ghost's latency estimate against the
+frames' true latency) and, with --plot, draws them.
+"""
 
 DELAYS_MS = (0, 50, 100, 200, 300)
 
 
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
-    p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1],
+    p = sub.add_parser(name, help=summary, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--duration", type=float_range(5, 3600, unit="s"), default=46.0,
                    help="simulated seconds per delay (default 46: one whole manoeuvre)")
@@ -89,11 +96,15 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
 
 def run(args: argparse.Namespace) -> int:
     rows = measure(args.duration, args.jitter, args.seed)
-    print(f"# {platform.node()} Python {platform.python_version()}")
-    print(f"# twinbot bench ghost --duration {args.duration:g} --jitter {args.jitter:g} --seed {args.seed}")
+    print("twinbot bench ghost")
+    print(f"command:     twinbot bench ghost --duration {args.duration:g} --jitter {args.jitter:g} --seed {args.seed}")
+    print(f"machine:     {machine_line()}")
+    print(f"python:      CPython {platform.python_version()}")
+    print()
     print(table(rows))
     worse = [r["delay_ms"] for r in rows if r["delay_ms"] > 0 and r["ghost_mean_mm"] >= r["raw_mean_mm"]]
-    print(f"target: ghost error below the raw late pose's at every delay > 0: {'met' if not worse else 'NOT met'}")
+    print_targets([{"met": not worse, "text": "ghost error below the raw late pose's at every delay > 0"
+                                              + (f" (not at {', '.join(map(str, worse))} ms)" if worse else "")}])
     if args.plot is not None:
         plot(rows, Path(args.plot))
         print(f"plot: {args.plot}")

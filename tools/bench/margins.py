@@ -42,7 +42,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
-from tools.bench.command import print_targets
+from tools.bench.report import print_targets
 
 RULES = ("bias", "scale", "scatter", "timing", "lag")
 # The concealed effects (tools/reference_plant/effects.py) each rule is there to find; bias: the rest of the library.

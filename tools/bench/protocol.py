@@ -1,25 +1,9 @@
 """`twinbot bench protocol`: what the serial protocol costs, against MAVLink 2.
 
-Builds FRAMES TELEMETRY frames (70-byte payload) from realistic values and
-times, as medians over REPEATS runs:
-
-  * CPython, ours: encode = messages.pack_payload + FrameEncoder.encode, from
-    the field values; decode = FrameDecoder.decode_all over the whole stream +
-    messages.unpack_payload of every frame to a dict.  Also "framing only":
-    encode of ready payloads and decode_all without unpacking.
-  * CPython, pymavlink: a MAVLink dialect with one message holding the same
-    fields (so the same 70-byte payload) is generated at bench time with
-    pymavlink's mavgen (wire protocol 2.0, language Python); encode =
-    building the message object + msg.pack(mav); decode = mav.parse_buffer
-    over the whole stream (robust_parsing off), giving message objects.
-  * MicroPython (unix port): tools/bench/mp/mp_protocol.py, the firmware's
-    allocation-free path (struct.pack_into + enc.finish; feed() loop with
-    struct.unpack_from), plus bytes allocated per received byte.
-  * Framing overhead: len(frame) - len(payload), measured on the frames.
-
-Rates are frames per second and MB/s (1 MB = 10^6 bytes) of wire bytes, i.e.
-whole frames with their overhead, for encode and decode alike.  Heavy
-imports (pymavlink) happen inside the functions, not at import time.
+TELEMETRY frames encoded and decoded by ours on CPython and MicroPython and
+by pymavlink, the framing overhead, and MicroPython's allocation per received
+byte; DESCRIPTION (the --help text) says how.  Figures: docs/benchmarks.md;
+the protocol: protocol/SPEC.md.
 """
 from __future__ import annotations
 

@@ -1,16 +1,9 @@
 """Sensor-model speed: one robot's IR read and a batch of robots, in the paper's room.
 
-`bench()` returns a dict (used by `twinbot bench sim`):
-
-    ray_cast_us        one robot's 8 rays against the room's walls (World.cast_robot), us per call
-    read_us            read_sensors for one robot: rays, model, lamp, noise, ADC; us per call
-    batch_n            robots in the batch
-    batch_ms           read_sensors for batch_n robots, ms per call
-    batch_reads_per_s  robot-reads per second in the batch (8 sensors each)
-    walls              wall segments in the world
-
-Timings are medians of `repeats` timed blocks; poses are random free poses
-in the room, the noise generator is seeded.
+`bench()` times the ray cast, one robot's read and a batch's read of
+host_sim/sensors/ir_sensor.py; tests/test_ir_sensor.py runs it small (not
+a `twinbot bench` benchmark, those: docs/benchmarks.md).  The model:
+docs/ir-sensor.md.
 """
 from __future__ import annotations
 
@@ -45,6 +38,15 @@ def random_free_poses(world: Any, n: int, rng: np.random.Generator, margin: floa
 
 
 def bench(world: str = "paper_room", repeats: int = 7, batch: int = 1000, power_pct: float = 60.0) -> dict[str, Any]:
+    """Medians of `repeats` timed blocks, at random free poses, the noise seeded:
+
+        ray_cast_us        one robot's 8 rays against the room's walls (World.cast_robot), us per call
+        read_us            read_sensors for one robot: rays, model, lamp, noise, ADC; us per call
+        batch_n            robots in the batch
+        batch_ms           read_sensors_batch for batch_n robots, ms per call
+        batch_reads_per_s  robot-reads per second in the batch (8 sensors each)
+        walls              wall segments in the world
+    """
     from host_sim.sensors import ir_sensor
     from host_sim.physics.params import DEFAULT
     from host_sim.physics.world import world_by_name_or_path

@@ -1,5 +1,31 @@
-"""`twinbot bench sim`: how fast the host simulator runs, and IR-SIM beside it.
+"""`twinbot bench sim`: how fast the host simulator runs, with IR-SIM beside it.
 
+One robot replaying a recording, one with the firmware in SIL, a batch of
+robots with their own parameters, and IR-SIM on the same room; DESCRIPTION
+(the --help text) says what each workload times.  Figures: docs/benchmarks.md.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import cProfile
+import io
+import json
+import math
+import os
+import platform
+import pstats
+import statistics
+import sys
+import tempfile
+import textwrap
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+from tools.bench.report import print_targets
+
+DESCRIPTION = """\
 Measured in one run, each figure the median of --repeats timed runs, all in
 the paper's room (host_sim/worlds/paper_room.json), fixed step, as fast as
 possible, nothing drawn:
@@ -32,26 +58,6 @@ advanced by one 40 ms control period: 8 robot-steps plus the readings at the
 control instant (encoders, and the IR ring when sensors are on).  IR-SIM has
 no substeps: one env.step() is one robot-period and one robot-step.
 """
-from __future__ import annotations
-
-import argparse
-import contextlib
-import cProfile
-import io
-import json
-import math
-import os
-import platform
-import pstats
-import statistics
-import sys
-import tempfile
-import textwrap
-import time
-from pathlib import Path
-from typing import Any, Callable
-
-from tools.bench.command import print_targets
 
 TARGET_REPLAY_RTF = 1000.0
 TARGET_SIL_RTF = 200.0
@@ -72,7 +78,7 @@ ROW_IRSIM = "(d) IR-SIM {version}, 1 robot + 8-beam lidar"
 
 
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
-    p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1],
+    p = sub.add_parser(name, help=summary, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     from tools.arguments import float_range, int_range, output_file
 

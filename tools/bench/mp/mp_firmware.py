@@ -1,11 +1,10 @@
-"""MicroPython side of `twinbot bench firmware` (run by tools/bench/firmware.py).
+"""The MicroPython side of `twinbot bench firmware`: the control cycle's time and allocations.
 
-usage: micropython tools/bench/mp/mp_firmware.py time N      cycle and part timings, allocations
-(the heap figures come from tools/bench/mp/mp_heap_firmware.py)
+    micropython tools/bench/mp/mp_firmware.py time N
 
-Prints one JSON object.  The robot runs on firmware/hal_testbench.TestHal, whose
-own work (filling 8 ADC readings twice, copying frames) is part of the
-cycle time measured here, as the real ADC reads are on a board.
+Prints one JSON object.  The robot runs on firmware/hal_testbench.TestHal, whose own work (filling
+the ADC readings, copying frames) is in the cycle time, as the ADC reads are on a board; the heap
+figures come from mp_heap_firmware.py.  Figures: docs/benchmarks.md.
 """
 import gc
 import json

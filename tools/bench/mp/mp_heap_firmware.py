@@ -1,14 +1,10 @@
-"""The heap of the loaded firmware, under MicroPython (run by tools/bench/firmware.py).
+"""The MicroPython side of `twinbot bench firmware`: the heap of the loaded firmware.
 
-The firmware's modules (loaded from .mpy, as a board holds them) plus a
-Robot running cycles, against the test board (firmware/hal_testbench.py)
-standing in for the RP2040's HAL.  The test board and this module are not
-the firmware: their share of the heap is measured and left out of
-`heap_in_use`, but it is in the heap the run needs.
-
-The unix port runs main(N) in one go.  The webassembly port collects
-garbage only between top-level execs, so tools/bench/firmware.py runs the
-same parts there one exec at a time (load() module by module).
+The firmware's modules from .mpy plus a running Robot, on the test board
+(firmware/hal_testbench.py), whose share and this script's are measured and
+left out of `heap_in_use`.  The webassembly port collects only between
+top-level execs, so tools/bench/firmware.py runs the parts there one exec at
+a time.  Figures: docs/benchmarks.md.
 """
 import gc
 import json

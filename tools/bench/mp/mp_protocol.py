@@ -1,42 +1,11 @@
-"""Protocol benchmark that runs under MicroPython (the firmware's view).
+"""The MicroPython side of `twinbot bench protocol`: the firmware's view of the protocol.
 
     micropython tools/bench/mp/mp_protocol.py [FRAMES [REPEATS [CHUNK_OUT]]]
 
-(with the repository root on MICROPYPATH; `twinbot bench protocol` runs it
-through host_sim.board.micropython_runner and parses the one JSON line it prints last.)
-
-What it times, each as the median over REPEATS runs with time.ticks_us:
-
-  encode        the firmware's allocation-free send path for FRAMES frames:
-                struct.pack_into of the 24 TELEMETRY values into enc.body,
-                then enc.finish(); the values come from a preallocated array,
-                as the firmware reads its state.
-  decode        FrameDecoder.feed() over a stream of FRAMES frames and, for
-                every frame delivered, struct.unpack_from() of its fields
-                (the message unpacking a receiver does).
-  decode_feed   the same feed() loop without unpack_from: framing, COBS, CRC,
-                type, length and sequence checks only.
-
-As on a board, RAM holds a bounded buffer, not the whole run: the frames of
-CHUNK_FRAMES (1024) value sets are built once, and the stream of FRAMES
-frames is that buffer fed again and again (frame k carries the values of
-frame k % 1024).  1024 is a multiple of 256, so the 8-bit sequence numbers
-run on across passes and the decoder sees one gap-free stream.  A bounded
-heap also matters for the figures: MicroPython's allocator scans for room
-for every multi-block object (unpack_from's 24-item tuple is 14 blocks)
-from the first free block, so with megabytes of live data each such
-allocation would cost tens of microseconds more than on a board.
-
-Allocation (gc.disable(), then the gc.mem_alloc() difference) is measured in
-separate untimed passes: over all FRAMES frames for the feed() loop and for
-the encode loop (both expected to be 0 bytes), and over one chunk for the
-loop with unpack_from (it returns a new tuple per frame, by design).
-
-Both ends build the frames from telemetry_values(k) below, so that the
-CPython side (tools/bench/protocol.py imports this function) can check that
-MicroPython encoded byte-identical frames (CHUNK_OUT receives the chunk).
-This module must stay importable on CPython: the benchmark itself only runs
-under `__name__ == "__main__"`.
+Times the allocation-free encode path and the feed() loop, with and without
+unpacking, and the bytes they allocate; prints one JSON line last.  It must
+stay importable on CPython, which builds the same frames from
+telemetry_values() to check them byte for byte.  Figures: docs/benchmarks.md.
 """
 import gc
 import struct
@@ -48,6 +17,9 @@ from protocol.messages import FORMATS, PAYLOAD_SIZE, TELEMETRY
 
 N_VALUES = 30  # flat TELEMETRY values: tick, mode, flags, enc_l, enc_r, 8 ir_on, 8 ir_amb, 2 i_ref, vbat,
 # 2 set-points, odometry x, y, heading, emitter power
+# As on a board, RAM holds a bounded buffer fed again and again (frame k carries the values of frame
+# k % CHUNK_FRAMES): with megabytes live, MicroPython's allocator, scanning from the first free block
+# for every multi-block object (unpack_from's 24-item tuple is 14 blocks), would add tens of us each.
 CHUNK_FRAMES = 1024  # frames held in RAM; a multiple of 256, so the wrapping sequence runs on across passes
 
 
@@ -278,7 +250,10 @@ def _wire_bytes(ends, n_frames, chunk):
 
 
 def _time_loops(vals, stream, ends, n_frames, chunk, fmt, mtype, plen, repeats):
-    # Microseconds per run of the encode, decode-with-unpack and feed()-only loops.
+    # Microseconds per run, time.ticks_us, of: encode (struct.pack_into of the values into enc.body,
+    # then enc.finish(), from a preallocated array as the firmware reads its state); decode (feed()
+    # over the stream and struct.unpack_from() of every frame delivered); feed() alone (framing, COBS,
+    # CRC, type, length and sequence checks).
     ticks_us = time.ticks_us
     ticks_diff = time.ticks_diff
     enc_us = []
