@@ -43,7 +43,7 @@ def bench(world: str = "paper_room", repeats: int = 7, batch: int = 1000, power_
         ray_cast_us        one robot's 8 rays against the room's walls (World.cast_robot), us per call
         read_us            read_sensors for one robot: rays, model, lamp, noise, ADC; us per call
         batch_n            robots in the batch
-        batch_ms           read_sensors_batch for batch_n robots, ms per call
+        batch_ms           read_sensors for batch_n robots, ms per call
         batch_reads_per_s  robot-reads per second in the batch (8 sensors each)
         walls              wall segments in the world
     """
