@@ -112,7 +112,7 @@ PARAMS: dict[str, ParamMap] = {
 
 def load_key(path: str | Path) -> dict[str, Any]:
     """The answer key, with the plant's unrounded encoder positions (n, 2) as "encoders" where
-    cases.make_case kept them beside it (suites generated before session 28 have none)."""
+    cases.make_case kept them beside it (a suite kept without its truth files has none)."""
     key: dict[str, Any] = json.loads(Path(path).read_text())
     truth = truth_file(Path(path).parent, Path(path).name.removesuffix(".answer.json"))
     if truth.exists():
