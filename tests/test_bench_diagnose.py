@@ -1,9 +1,8 @@
 """`twinbot bench diagnose`: the scorer on hand-made answers, and a three-case suite end to end.
 
-The scorer is proven on synthetic diagnoses (right, wrong side, wrong name,
-missed, wrong parameter) so that its logic does not depend on how good the
-diagnosis is today.  The suite run checks the scoreboard's structure, not
-its figures: benchmarks are not timed or scored tests.
+The scorer is proven on synthetic diagnoses (right, wrong side, wrong name, missed, wrong parameter) so that
+its logic does not depend on how good the diagnosis is today.  The suite run checks the scoreboard's
+structure, not its figures (docs/proving-ground.md, "The blind suite").
 """
 from __future__ import annotations
 
@@ -392,7 +391,7 @@ def test_the_perfect_twin_is_the_plants_own_encoders_on_the_judged_windows(suite
 
 def test_the_wheel_fit_target_sets_apart_what_no_twin_could_meet() -> None:
     """A case where even a perfect twin scores under the target is listed apart, not counted a miss; a case
-    without the truth (a suite from before session 28) is counted."""
+    without the truth (a suite kept without its truth files) is counted."""
     base = {"kind": "control", "outcome": "right", "excitation": "firmware", "rule_set": 1, "fit_before": 80.0,
             "sindy": {"error": "not run"}, "seconds_per_90s": 1.0, "cpu_seconds_per_90s": 1.0}
     rows = [{**base, "case": "case_0001", "fit_after": 95.0, "fit_perfect": 97.0, "fit_ceiling": 97.5},

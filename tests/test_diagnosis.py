@@ -1,9 +1,8 @@
 """twinbot diagnose on recordings whose truth is known: the twin's own, with effects injected into it.
 
-The MuJoCo plant (tools/reference_plant) is the independent proof; these are
-the easy cases: a recording made by the twin with one parameter changed is
-diagnosed with the nominal twin, which must name the change, measure it and
-fit the held-out windows again.
+The reference plant (tools/reference_plant) is the independent proof; these are the easy cases: a recording
+made by the twin with one parameter changed is diagnosed with the nominal twin, which must name the change,
+measure it and fit the held-out windows again.  The rules tested: docs/diagnosis.md.
 """
 from __future__ import annotations
 
@@ -150,14 +149,13 @@ def test_two_effects_at_once_are_both_named(tmp_path, first, second):
 
 
 @pytest.mark.slow
-def test_a_blind_pair_is_named_in_full_on_the_proving_ground(tmp_path, monkeypatch):
-    """Blind pair 0043 (twinbot bench diagnose --effects 2 --seed 40): the tyres' scrub beside wheels 4.4 %
-    large, under the firmware's exploration on the MuJoCo plant.  The radius used to fail both tests once the
-    scrub was fitted: its located gain was taken on the six channels the nominal twin located (the scrub's),
-    and each residual was weighed by the nominal twin's noise, which the scrub's mismatch had spread (the
-    turn's by 27 times).  Now a second effect is judged on what the fitted twin leaves located (the travel and
-    the turn), weighed by the noise it leaves; either change alone names this one.  Two processes give the
-    same diagnosis as one: the weights travel to the workers."""
+def test_a_blind_pair_is_named_in_full_on_the_reference_plant(tmp_path, monkeypatch):
+    """The reference plant's two-effect case of seed 43 (make_case(43, n_effects=2)): the tyres' scrub beside
+    wheels 4.4 % large, under the firmware's exploration.  Once the scrub is fitted, the radius must be judged
+    on what the scrub's twin leaves located (the travel and the turn), not on the six channels the nominal
+    twin located, and each residual weighed by the noise that twin leaves, not by the nominal twin's, which
+    the scrub's mismatch spread (the turn's by 27 times); either rule alone names this case.  Two processes
+    give the same diagnosis as one: the weights travel to the workers."""
     from host_sim.diagnosis import fit as F
     from tools.bench import diagnose_scoring as scoring
     from tools.reference_plant.cases import make_case
@@ -237,9 +235,8 @@ def test_a_wheel_that_slips_burst_by_burst_is_located_without_a_bias(tmp_path):
 
 
 def test_a_wheel_that_answers_late_is_located_by_its_lag(tmp_path, nominal_run):
-    """A 25 ms actuator delay under the firmware's exploration: a bias too small for any regime bin (the
-    blind suite's 31 ms delay, case 0132, was a match), but over 0.2 s blocks each wheel's count falls
-    behind the twin's by the delay times its change of speed.  Judged per period instead of per block, the
+    """A 25 ms actuator delay under the firmware's exploration: a bias too small for any regime bin, but
+    over 0.2 s blocks each wheel's count falls behind the twin's by the delay times its change of speed.  Judged per period instead of per block, the
     speed loop's feedback of the encoders' rounding makes the twin's own run seem to lead by 6-10 ms."""
     nominal = compare(nominal_run, DEFAULT, ROOM)
     assert rule_margins(nominal, nominal_run, DEFAULT, ROOM)["lag"][0] < 0.5
@@ -260,7 +257,8 @@ def test_a_wheel_that_answers_late_is_located_by_its_lag(tmp_path, nominal_run):
 
 def test_a_lag_beside_another_drive_finding_is_not_located(tmp_path):
     """A body of 0.58 kg lags the twin too (margin over 1), but its wheels' bias already locates the
-    drive: the lag is not added (blind 0004, 0022 and 0153, with it added, went from named to unexplained)."""
+    drive: the lag is not added (beside the finding that names the effect, it only dilutes the channels the
+    fit must improve)."""
     heavy = record(tmp_path, E.apply(DEFAULT, "mass", "both", [0.58]))
     cmp = compare(heavy, DEFAULT, ROOM)
     margins = rule_margins(cmp, heavy, DEFAULT, ROOM)
@@ -273,7 +271,7 @@ def test_a_wheel_that_chatters_is_located_against_its_encoders_rounding(tmp_path
     """A small gear play (0.035 rad) in the left wheel's speed loop: the motor and its encoder rattle in
     the play, so the count alternates period to period.  Its first differences then read the mismatch
     as noise (a noise level above the residual's own RMS), and only the encoder's rounding, its noise
-    floor, shows it: an RMS of some 14 roundings.  The blind suite's 0.034 rad (case 0127) was a match."""
+    floor, shows it: an RMS of some 14 roundings."""
     chatter = record(tmp_path, E.apply(DEFAULT, "backlash", "left", [0.035]))
     cmp = compare(chatter, DEFAULT, ROOM)
     ch = cmp.channel("wheel_l")
@@ -311,9 +309,7 @@ def test_an_odometry_sized_error_is_located_over_whole_windows(tmp_path, nominal
 def test_an_encoder_error_under_the_threshold_over_1_s_is_located_over_5_s(tmp_path):
     """An encoder 1.5 % fine, under the manoeuvre's open-loop drive.  Each window's twin enters at the speed
     the counts give at the nominal scale (its lead-in matches them), and that start takes back nearly half
-    the error over 1 s (0.8 % more counts, under the 1 % threshold) but little of it over 5 s (1.3 %):
-    so was blind case 0086's 1.8 % located.  A 1.8 % encoder here showed as 0.8 % over 1 s before the
-    windows' lead-in, as 1.0 % since: located over 1 s."""
+    the error over 1 s (0.8 % more counts, under the 1 % threshold) but little of it over 5 s (1.3 %)."""
     from host_sim.diagnosis.compare import compare_all
 
     counts = ("count_l", "count_r")
@@ -467,10 +463,9 @@ def test_each_window_twin_enters_from_its_lead_in(tmp_path, monkeypatch):
 
 def test_a_window_whose_lead_in_is_at_a_wall_starts_as_without_one(tmp_path):
     """A lead-in at a wall starts the twin from a tracked pose that may be a millimetre into it, and its
-    contact throws the wheels (blind control 0075's firmware backed out of a stall at 39 counts a period, its
-    twin at 67: a false alarm).  So where the recorded robot comes within CONTACT_MARGIN of a wall in the
-    lead-in, the twin enters rolling at the encoders' speeds on the window's first row, as a window without a
-    lead-in starts; away from the walls it enters from its lead-in."""
+    contact throws the wheels, and a false alarm follows.  So where the recorded robot comes within
+    CONTACT_MARGIN of a wall in the lead-in, the twin enters rolling at the encoders' speeds on the window's
+    first row, as a window without a lead-in starts; away from the walls it enters from its lead-in."""
     from host_sim.diagnosis.windows import CONTACT_MARGIN, Windows, run_windows
     from tools.reference_plant.recorder import ProgramController
 
@@ -554,8 +549,7 @@ def test_the_chosen_effect_is_the_best_of_those_that_pass_held_out(tmp_path, nom
 def test_a_leak_that_varies_less_than_a_readings_noise_is_an_offset(nominal_run):
     """A sensor's offset and its ambient leakage both pass, the leakage a little lower in BIC: under a light so
     steady that the fitted leak varies by less than a reading's noise, the two are one constant and the offset
-    (plainer) is chosen; a leak that varies more, or one very strongly favoured, is kept (blind case 0187:
-    an offset named a leakage)."""
+    (plainer) is chosen; a leak that varies more, or one very strongly favoured, is kept."""
     from types import SimpleNamespace
 
     from host_sim.diagnosis.fit import LEAK_DISTINCT_COUNTS, LEAK_STRONG_BIC, Candidate, Model, bic, choose, leak_swing
@@ -583,9 +577,8 @@ def test_a_leak_that_varies_less_than_a_readings_noise_is_an_offset(nominal_run)
 
 def test_readings_that_run_behind_the_pose_are_located_on_the_ring(nominal_run):
     """Every sensor's readings two periods late: below the twin's while a sensor closes on a wall, above it
-    while it draws away, on the ring's sensors that see walls.  One sensor alone late is not a latency
-    (a blind control showed that much on one sensor), nor are sensors late and others early, and the
-    twin's own run shows none."""
+    while it draws away, on the ring's sensors that see walls.  One sensor alone late is not a latency,
+    nor are sensors late and others early, and the twin's own run shows none."""
     import dataclasses
 
     from host_sim.diagnosis.compare import compare
@@ -748,9 +741,9 @@ def test_a_value_near_a_small_bound_is_a_measurement_not_a_pin():
 
 
 def test_screening_tries_each_effect_about_twice_as_far_each_time_then_zooms_in_on_the_best():
-    """A dry friction's cost valley is about 2x wide (blind case 0168): the trials from absent towards each
-    bound are at most 2.5x apart.  A rough cost (a gear's play, blind case 0165) is then tried between the
-    best trial's neighbours, and the fit starts from the best of those, not from the trial itself."""
+    """A dry friction's cost valley is about 2x wide: the trials from absent towards each bound are at most
+    2.5x apart.  A rough cost (a gear's play) is then tried between the best trial's neighbours, and the fit
+    starts from the best of those, not from the trial itself."""
     from types import SimpleNamespace
 
     from host_sim.diagnosis.fit import Candidate, Model, screen_trials, zoom
@@ -760,7 +753,7 @@ def test_screening_tries_each_effect_about_twice_as_far_each_time_then_zooms_in_
     for side in ([x for x in trials if x > 0], [-x for x in trials if x < 0]):
         assert side == sorted(side) and max(b / a for a, b in zip(side, side[1:])) <= 2.5
     assert max(trials) >= 0.5 * hi[0] and min(trials) <= 0.5 * lo[0] and min(abs(x) for x in trials) <= 0.03 * hi[0]
-    assert any(0.5e-3 < x < 2e-3 for x in trials)  # 0168's valley
+    assert any(0.5e-3 < x < 2e-3 for x in trials)  # a valley at 1 mN m, 0.5-2 mN m wide, is tried
 
     play = Candidate("backlash", "left")
 
@@ -782,8 +775,7 @@ def test_screening_tries_each_effect_about_twice_as_far_each_time_then_zooms_in_
 def test_an_effect_whose_cost_rises_every_way_the_screening_looked_is_not_fitted():
     """A one-parameter effect shortlisted on its linear step's promise is tried where its fit would start
     (a little inside its bounds); if that costs more than the twin without it, as every trial did, it is
-    not fitted (blind ice case 0077: a gear's play from 0.003 rad, 3x the cost of none).  If the start
-    does cost less, it is fitted from there."""
+    not fitted.  If the start does cost less, it is fitted from there."""
     from types import SimpleNamespace
 
     from host_sim.diagnosis.fit import Candidate, Model, fit_start, zoom
@@ -1072,7 +1064,7 @@ def test_a_twin_asked_for_twice_in_one_batch_runs_once(nominal_run):
 def test_a_fit_on_the_sensors_alone_runs_no_physics(nominal_run, monkeypatch):
     """The IR channels are the twin's sensors on the recorded track, whatever its motion: an objective of
     sensor channels alone (an IR effect located on the ring) gets the same residuals without running the
-    drive, which on a robot at the walls was most of an IR fit's time (blind case 0205)."""
+    drive, which on a robot at the walls would be most of an IR fit's time."""
     from host_sim.diagnosis import fit as F
 
     first = compare(nominal_run, DEFAULT, ROOM)

@@ -1,10 +1,9 @@
-"""The proving ground's MuJoCo plant: it runs, it records, the twin replays it, and each effect is physical.
+"""The reference plant (MuJoCo): it runs, it records, the twin replays it, and each effect is physical.
 
-The plant is the independent "real robot" that diagnosis (issue 9) is proved
-on, so the tests hold it to three things: (1) with no effect on, the twin
-(host_sim.recordings.replay) replays its recordings closely; (2) every named effect
-changes the physics in the direction physics says; (3) it is deterministic
-and writes recordings in the project's one format, the answer key apart.
+The plant is the independent robot diagnosis is proved on (docs/proving-ground.md), so the tests hold it to
+three things: with no effect on, the twin (host_sim.recordings.replay) replays its recordings closely; every
+named effect changes the physics in the direction physics says; it is deterministic and writes recordings
+in the project's one format, the answer key apart.
 """
 from __future__ import annotations
 
@@ -94,8 +93,7 @@ def test_nominal_plant_rolls_without_slip_on_its_true_wheels():
 def test_the_pose_the_ring_and_the_encoders_are_of_one_instant():
     """After each period the bodies' frames, which give the pose, the tracker and the IR ring's rays, are
     those of the joints the encoders read.  mj_step leaves the frames where its step began, 1 ms before the
-    joints: the ring then read 1 ms behind the encoders, which a pose steadied by the encoders showed (blind
-    controls 0049 and 0143 located "S1's reading runs 1 ms behind the tracked pose's")."""
+    joints, so without mj_kinematics at each period's end the ring would read 1 ms behind the encoders."""
     import mujoco
 
     plant = Plant(EXACT, ARENA, (1.0, 1.0, 0.0), 0)
@@ -259,8 +257,8 @@ def test_backlash_lets_the_motor_turn_before_the_wheel():
         moved = float(np.dot(run.pose[-1, :2] - run.pose[0, :2], [1.0, 0.0]))
         return enc_dist - moved
     assert abs(lag(drive(EXACT, prog))) < 0.0004
-    # the wheel lags by most of r * gap = 2.1 mm (1.45 mm: with the pose of the step's end; 1.5 with the frames
-    # 1 ms stale, session 34), against 0.4 mm at most without the play
+    # the wheel lags by most of r * gap = 2.1 mm (1.45 mm with the pose of the step's end), against 0.4 mm at
+    # most without the play
     assert lag(drive(with_effect("backlash", 0.1, "both"), prog)) < -0.5 * 0.021 * 0.1
 
 

@@ -1,21 +1,8 @@
-"""Residual channels: what the recording and the twin are compared on, row by row within each window.
+"""Residual channels: what the recording and the twin are compared on, period by period within each window.
 
-Each channel is a per-period quantity, so that a mismatch shows where it
-happens instead of accumulating along the window:
-
-- wheel_l, wheel_r: encoder ticks counted in the period (the wheel's speed);
-- forward, lateral, heading_rate: the body's motion in the period, in the
-  frame of its heading at the period's start (m, m, rad) — tracked only;
-- ir_0..ir_7: each sensor's reflected light (on − off, ADC counts) — tracked,
-  in a world with walls;
-- amb_0..amb_7: each sensor's ambient reading (counts) — likewise;
-- vbat: the battery voltage (V) against the twin's.
-
-Pose channels (x, y, phi at the window's end) give the fit of the whole
-trajectory; they are compared, not located (their residuals accumulate).
-"count_l", "count_r", "travel" and "turn" are wheel_l, wheel_r, forward and
-heading_rate summed over each window: they are judged (fit %) and located
-(a proportional error, locate.locate_scale), never per period.
+Per period: each wheel's counts, the body's motion, each IR sensor's reflected and ambient light, the
+battery; per window: the pose at its end and the totals (travel, turn, counts).  The channel table and
+the fit %: docs/diagnosis.md, "Channels".
 """
 from __future__ import annotations
 

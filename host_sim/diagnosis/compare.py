@@ -1,14 +1,9 @@
 """Compare: the twin against a recording, channel by channel, on held-out windows; locate what is not noise.
 
-    cmp = compare(rec, params, world)        # windows of 1 s and 5 s
-    cmp.fit["wheel_l"]                        # held-out fit %, 1 s windows
-    cmp.findings                              # located mismatches
+    cmp = compare(rec, params, world)        # 1 s windows; compare_all adds the 5 s ones
+    cmp.fit["wheel_l"], cmp.findings         # held-out fit %, located mismatches
 
-Windows where the recorded robot touches a wall are a channel of their own
-("contact": the wheels' fit in those windows) and are left out of the drive's
-channels, so a collision cannot swamp a slow effect elsewhere.  The IR and
-ambient channels are judged there too: the twin's sensors read the recorded
-track, not the twin's motion (channels.judged_windows).
+Windows at a wall are judged apart (channel "contact").  See docs/diagnosis.md, "Compare".
 """
 from __future__ import annotations
 
@@ -126,9 +121,9 @@ def _locate(cmp: Comparison, rec: Recording, p: RobotParams, world: World | None
         if found is not None:
             _add(cmp, rec, found, resid, keep)
     # A wheel that runs behind the twin, only where nothing else located the drive: many drive effects
-    # leave a small lag (blind 0153's larger wheel, 0004's finer encoder, 0022's narrower track: 10-16 ms),
-    # and beside the finding that names them it only blurs what the fit must improve (the three went from
-    # named to unexplained).
+    # (a larger wheel, a finer encoder, a narrower track) leave a small lag, and beside the finding that
+    # names them it only blurs what the fit must improve
+    # (tests/test_diagnosis.py::test_a_lag_beside_another_drive_finding_is_not_located).
     if not any(drive_channel(f.channel) for f in cmp.findings):
         free = ~cmp.contact
         for name in WHEELS:
@@ -140,9 +135,8 @@ def _locate(cmp: Comparison, rec: Recording, p: RobotParams, world: World | None
 def _longer_scale(longer: Comparison | None, name: str, rec: Recording) -> Finding | None:
     """locate_scale on the longer windows' channel.  A proportional error grows with the window while what
     its start cannot say does not: a count 1.5 % off shows as 0.8 % over 1 s, as 1.3 % over 5 s (the twin
-    enters each window at the recorded ticks' nominal speed).  Blind 0086's finer encoder, 1.8 %, was
-    located so; on the twin's own manoeuvre a 1.8 % encoder showed as 0.8 % over 1 s before the windows'
-    lead-in, as 1.0 % since."""
+    enters each window at the recorded ticks' nominal speed;
+    tests/test_diagnosis.py::test_an_encoder_error_under_the_threshold_over_1_s_is_located_over_5_s)."""
     if longer is None:
         return None
     return locate_scale(longer.channel(name), ~longer.contact, rec.t[longer.windows.index[:, :-1]])

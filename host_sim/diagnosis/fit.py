@@ -1,41 +1,8 @@
 """Fit and choose: which effects of the library explain the located mismatch, and how large they are.
 
-Candidates are the library's effects at the sites the located channels point
-to (a wheel channel: the drive's effects; sensor k: that sensor's effects
-and the ring's latency; the battery: its resistance).  Each is fitted by
-bounded nonlinear least squares (scipy.optimize.least_squares) on the
-training windows, the residuals weighted by each channel's noise (the
-travel and the turn also by window: their totals are where an
-odometry-sized error shows); the Jacobian comes from one batch run of the
-twin with every parameter nudged (the batch path: all windows and all
-nudges at once).
-
-Forward selection adds at most MAX_EFFECTS effects, one at a time, each the
-candidate with the lowest BIC on the training windows (of candidates within
-TIE_BIC of it, which the data cannot tell apart, the first in the
-candidates' order: the plainer physics) among those that pass two tests:
-it is significant against the twin without it (F test) AND it improves the
-fit on the held-out windows by at least MIN_HELD_OUT_GAIN, or the located
-channels' part of it by MIN_LOCATED_GAIN (an effect that shows in one
-channel, such as a track's in the turn of each window, is a small part of
-all the held-out residuals, most of which are noise).  Candidates that
-explain the held-out data as well as the chosen one (within AMBIGUITY) are
-reported beside it.  Selection stops once the twin fitted so far leaves
-nothing located (select's `still_located`): a further effect would fit the
-noise.  While something is left located, the next effect is judged on what
-is left, not on what the nominal twin showed: its located gain on those
-channels, and every residual weighed by the noise the twin fitted so far
-leaves (report.objective_sigma).  Without a locator, selection stops once
-the twin matches the held-out windows to within their noise (mean weighted
-squared residual below WITHIN_NOISE); with one, that sum does not decide,
-since a second effect seen in one channel hides in it.  Screening tries each
-candidate's one linear step from absent and, for one-parameter effects, a few
-values across its range outright (SCREEN_STEPS: threshold effects such as a
-gear's play barely move the residuals near absent; a range that spans orders
-of magnitude, a grip's or a current limit's, in even ratios, LOG_TRIALS);
-one whose cost rose every way the screening looked is not fitted (zoom).
-Backward elimination then drops an effect that a later one made redundant
-(the refitted twin without it is as good by the same two tests).
+Candidates at the sites the located channels point to are screened in one batch run, the most promising
+fitted by bounded least squares on the training windows, and chosen by forward selection (F test, held-out
+gain, BIC) then backward elimination.  The rules and their thresholds: docs/diagnosis.md, "Name and fit".
 """
 from __future__ import annotations
 
@@ -63,25 +30,27 @@ MAX_EFFECTS = 3
 # (fit_totals): a window's count carries its start's speed error, which the periods judge well enough.
 FITTED_TOTALS = ("forward", "heading_rate")
 SHORTLIST = 4  # candidates fitted in full after screening
-MIN_SHARE = 16  # robots: a batch's own cost (its steps in Python) is about that many robots' (blind ice case 0077:
-# 0.4 s for 1 robot, 3.3 s for 122), so workers share no smaller pieces of one
+MIN_SHARE = 16  # robots: a batch's own cost (its steps in Python) is about that many robots', so workers share
+# no smaller pieces of one (tests/test_diagnosis.py::test_workers_share_a_large_batch_in_runs_of_neighbours)
 WITHIN_NOISE = 1.0  # held-out cost per weighted residual below which no further effect is sought
 SCREEN_STEPS = (0.02, 0.05, 0.1, 0.2, 0.35, 0.6)  # of the span from a one-parameter effect's start to each bound:
-# the values the screening also tries outright, about 2x apart (a dry friction's cost has a valley 2x wide, blind
-# case 0168: 14k at 1 mN m, 176k at 0.5, 222k at 2; the earlier 2 %, 15 % and 50 % of the range stepped over it)
+# the values the screening also tries outright, about 2x apart, since a dry friction's cost has a valley about
+# 2x wide.  Tested: tests/test_diagnosis.py::
+# test_screening_tries_each_effect_about_twice_as_far_each_time_then_zooms_in_on_the_best
 ZOOM_POINTS = 8  # values between a shortlisted effect's best trial and its neighbours, tried before its fit
 LOG_TRIALS = 8  # a range with 0 < lower <= upper / 10 is tried at lower * (upper / lower) ** (k / 8), k = 1..7: a
-# grip's cost has a narrow valley (ice at mu 0.1: 20 % off costs 6-17 times more), so the trials must not step over it
+# grip's cost has a narrow valley, and trials spaced evenly would step over it
 P_MAX = 1e-4  # F test against the twin without the effect
 MIN_HELD_OUT_GAIN = 0.10  # relative drop of the held-out weighted sum of squares
 MIN_LOCATED_GAIN = 0.30  # or of the located channels' part of it alone
 START_INSIDE = 0.01  # of a parameter's range: how far inside its bounds a fit starts
 FIT_FTOL = 1e-4  # a fit ends when a step lowers its cost by less than this share of it: a BIC change of n 1e-4,
-# under TIE_BIC for the ~9000 residuals of a 90 s recording.  scipy's 1e-8 went on for twice the twin runs
-# (blind 0009's battery: the same 1.4989 ohm in 3 runs either way; its rival backlash fits 10-19 runs against 3-4)
+# under TIE_BIC for the ~9000 residuals of a 90 s recording; scipy's 1e-8 goes on stepping where nothing more is
+# to be had (tests/test_diagnosis.py::test_a_fit_ends_once_its_steps_gain_little)
 FIT_XTOL = 1e-4  # and when the steps it tries shrink below this share of its parameters (in their ranges): on a
 # rough cost (a gear's play, a slippery twin) most steps are refused, each shrinking the next 4x, and scipy's
-# 1e-8 went on refusing a dozen times to move a value by under a millionth of its range
+# 1e-8 goes on refusing to move a value by under a millionth of its range
+# (tests/test_diagnosis.py::test_a_fit_stops_once_the_steps_it_tries_are_tiny)
 TIE_BIC = 2.0  # a BIC difference below this is no evidence either way (Kass & Raftery 1995)
 AMBIGUITY = 0.02  # held-out costs within 2 % of the chosen one: "explains it equally well"
 DRIVE_EFFECTS = ("dry_friction", "viscous_friction", "wheel_radius", "torque_constant", "encoder_scale", "backlash",
@@ -178,7 +147,7 @@ class Objective:
         part: "train" or "test" runs those windows alone (the other comes back with no columns): each
         window's twin starts on its own, so its residuals are the same either way.
         A twin asked for twice runs once: the screening asks for the current model again as each candidate's
-        start (blind case 0006's first screening: 327 robots, 291 distinct)."""
+        start (tests/test_diagnosis.py::test_a_twin_asked_for_twice_in_one_batch_runs_once)."""
         distinct, where = _distinct(robots)
         if len(distinct) < len(robots):
             train, test = self.residuals(distinct, part)
@@ -260,12 +229,11 @@ def _distinct(robots: list[RobotParams]) -> tuple[list[RobotParams], np.ndarray]
 
 def worker_shares(groups: list[list[int]], workers: int) -> list[list[int]]:
     """Groups of robots cut so that none holds more than its share of them all (1 / workers), largest first,
-    for the workers to take in turn: on a slippery floor or with a gear's play, the screening's robots are
-    mostly of one machinery (blind case 0020's second step: 311 of 319, 15 s on one worker while the other
-    had 1 s)."""
+    for the workers to take in turn: on a slippery floor or with a gear's play, nearly all of a screening's
+    robots are of one machinery (tests/test_diagnosis.py::test_workers_share_a_large_batch_in_runs_of_neighbours)."""
     share = max(-(-sum(len(ix) for ix in groups) // max(workers, 1)), MIN_SHARE)
     # in runs of neighbours, not every n-th robot: a batch steps as its dearest robot needs, and neighbours
-    # are one candidate's values (0020's second step: 11 s of CPU in runs, 17 s every other robot; 15 s whole)
+    # are one candidate's values, which step alike
     pieces = [[int(i) for i in piece] for ix in groups for piece in np.array_split(ix, -(-len(ix) // share))]
     return sorted(pieces, key=len, reverse=True)
 
@@ -416,15 +384,16 @@ def zoom(obj: Objective, base: RobotParams, current: Model,
          ) -> list[tuple[Candidate, list[float]]]:
     """Each shortlisted one-parameter effect whose best screening value was a trial starts its fit from the
     best of ZOOM_POINTS more values between that trial's neighbours (one batch run for all): a gear's play
-    or a latency has a rough cost, and a fit stays in the dip it starts in (blind case 0165: a 0.052 rad
-    play fitted 0.060 from the trial at 0.060, 0.052 from one at 0.045).
+    or a latency has a rough cost, and a fit stays in the dip it starts in
+    (tests/test_diagnosis.py::test_screening_tries_each_effect_about_twice_as_far_each_time_then_zooms_in_on_the_best).
 
     One whose start is the linear step's (a promise, not a cost) is tried where its fit would start, in the
     same run.  If that costs no less than the twin without it, nor does any value the screening tried, it
     is not fitted: its cost rises every way the screening looked, and a fit from there only climbs back
-    down towards absent (blind ice case 0077: two gears' plays started at 0.003 rad, 3x the cost of none,
-    and their fits took over half the diagnosis's CPU to end at 0.0032).  More parameters are fitted as
-    screened: a linear step along several can overshoot and still lead the fit to the value."""
+    down towards absent, at a high price on a slippery twin
+    (tests/test_diagnosis.py::test_an_effect_whose_cost_rises_every_way_the_screening_looked_is_not_fitted).
+    More parameters are fitted as screened: a linear step along several can overshoot and still lead the
+    fit to the value."""
     robots, grids = [], []
     for cand, start, seen in shortlist:
         xs = [x for x, _c in seen]
@@ -475,6 +444,7 @@ def _pinned(base: RobotParams, model: Model) -> bool:
     for v, a, b, off in zip(values, lo, hi, absent):
         # 1 % of the range, or a tenth of a bound that is small against it: a driver's 36 mA limit is 26 mA
         # above the bound 10 mA, under 1 % of the range 10 mA..3 A, and no stand-in
+        # (tests/test_diagnosis.py::test_a_value_near_a_small_bound_is_a_measurement_not_a_pin)
         near_a, near_b = min(0.01 * (b - a), 0.1 * abs(a) or math.inf), min(0.01 * (b - a), 0.1 * abs(b) or math.inf)
         if (v - a < near_a and abs(off - a) > near_a) or (b - v < near_b and abs(b - off) > near_b):
             return True
@@ -634,8 +604,9 @@ def choose(obj: Objective, current: Model, tried: list[Model], cands: list[Candi
            located: list[str]) -> Model | None:
     """Of the fitted models that pass the two tests against `current`, the plainest of the lowest BIC (None
     if none passes).  One that fits the training windows a little better and fails held out is no reason
-    to stop: blind case 0004's viscous friction beat its encoder scale on the training windows and made
-    the held-out counts worse.  Sets each model's p_value and located_gain."""
+    to stop: the next best may pass
+    (tests/test_diagnosis.py::test_the_chosen_effect_is_the_best_of_those_that_pass_held_out).  Sets each
+    model's p_value and located_gain."""
     passing = []
     for m in tried:
         m.p_value = f_test(current.cost_train, m.cost_train, _sizes(m.values) - _sizes(current.values), m.n_train,
@@ -662,9 +633,8 @@ def _constant_in_disguise(rec: Recording, m: Model, passing: list[Model]) -> boo
     """True for an ambient leakage that varies by less than a reading's noise over the recording while the
     same sensor's offset passes too, and is not LEAK_STRONG_BIC lower in BIC than it.  Under a steady light
     the two are one constant, and a small edge for the leak comes as easily from the twin's model of the
-    room's light as from a leak (blind case 0187: a -29-count offset on S7, under a manoeuvre whose ambient
-    spread 10 counts, was named a -0.185 leakage, 3.5 lower in BIC and 0.4 % worse held out; the twin's own
-    0.2 leak on S1, 1.5 counts of variation in 30 s, is 17.9 lower in BIC and stays a leak)."""
+    room's light as from a leak
+    (tests/test_diagnosis.py::test_a_leak_that_varies_less_than_a_readings_noise_is_an_offset)."""
     newest = m.effects[-1]
     if newest.name != "ambient_leakage" or leak_swing(rec, int(newest.site), m.values[-1][0]) >= LEAK_DISTINCT_COUNTS:
         return False

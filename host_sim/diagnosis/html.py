@@ -1,10 +1,6 @@
-"""The diagnosis as a self-contained HTML page: the verdict, the effects, and the pictures that show them.
-
-Pictures (matplotlib, embedded as PNG):
-- each located channel's residual against time, before and after the fit;
-- the same residual by the regime that gives it away (mean per bin; RMS for a wheel that scatters; for a
-  wheel that runs behind the twin, each 0.2 s block's residual count against the twin's change of speed);
-- the recorded trajectory with the twin's prediction from the start of each long window, before and after.
+"""The diagnosis as a self-contained HTML page (`twinbot diagnose --html`): the verdict, the effects, and
+the pictures that show them, embedded as PNG: each located channel's residual against time and by regime,
+before and after the fit, and the trajectory with the twin's prediction.  docs/diagnosis.md, "Output".
 """
 from __future__ import annotations
 

@@ -1,38 +1,9 @@
-"""Locate: where and when the residuals are not noise, said in words.
+"""Locate: where and when a channel's residuals are not noise, by regime and by time.
 
-For every channel the residual (recorded minus twin, per period) is cut by
-regime — the wheel's speed, accelerating or cruising, turning or straight,
-direction of motion, sign of the command, heading in the world, battery
-level, distance to the wall seen by a sensor — and by time.  A regime bin is
-a mismatch when its mean residual is significant against the channel's
-noise (|z| >= Z_MIN, counting one sample per window and period), large
-against that noise (|mean| >= EFFECT_MIN noise levels) and large against
-the signal (|mean| >= RELATIVE_MIN of the recorded values' mean size): a
-long recording makes a tiny bias significant, and a tiny bias is no finding.  Spans are the
-stretches of time where the residual, smoothed over half a second, stays
-beyond the same size.
-
-Per-period bins cannot see an odometry-sized error: a path 3 % longer than
-the twin's is a fraction of the tracker's noise in one period.  Over whole
-windows it is not, so the wheels and the motion are also judged accumulated
-(`locate_scale`): "count_l", "count_r" (each encoder's count), "travel" (the
-distance along the path) and "turn" (the angle turned), each window's
-recorded total against the twin's, as a proportional error (recorded =
-(1 + a) twin) significant at |z| >= Z_MIN and at least SCALE_MIN; the
-comparison asks it of its longer windows too (compare._longer_scale).
-
-A wheel can also disagree without a bias: a slipping wheel spins ahead of the
-twin's and falls back, burst by burst, so its residual averages out in every
-regime bin while its RMS is many times its noise (`scatter_finding`,
-SCATTER_MIN noise levels, or SCATTER_FLOOR_MIN times the encoder's rounding
-for a wheel that chatters period to period).  And a wheel that answers
-late (an actuator's delay, a heavier body) lags the twin by a fixed time
-whenever its speed changes: over blocks of LAG_BLOCK periods its residual
-count is proportional to the twin's change of speed (`lag_finding`).
-
-Whiteness (Ljung-Box) and the cross-correlation of the residual with the
-command (a peak at a lag k > 0 means the robot answers k periods late) are
-reported as evidence.
+Five rules, each deciding through a margin (its weakest test over its threshold; at 1 it locates): a
+regime bin's bias, a window total's proportional error (locate_scale), a wheel's scatter without a bias,
+the IR ring's readings running behind the pose, and a wheel that lags the twin.  The rules, their
+thresholds and why: docs/diagnosis.md, "Locate".
 """
 from __future__ import annotations
 
@@ -58,7 +29,7 @@ TIMING_RATE = 0.05  # m/s along a sensor's axis: slower is steady
 TIMING_SENSORS_MIN = 3  # sensors that must show a reading running behind before it is located
 TIMING_Z = 3.0  # each half on each sensor: three sensors at 3 pool (Stouffer, sum z / sqrt 3) to 5.2 >= Z_MIN
 REGIME_SHARE_MIN = 0.05  # a regime variable must explain this share of the residual's variation to be named
-READING_LAG_Z = 4.0  # each sensor's lag (reading_lag_findings): the blind controls' largest was 3.1, on one sensor
+READING_LAG_Z = 4.0  # each sensor's lag (reading_lag_findings), on TIMING_SENSORS_MIN sensors at least
 READING_LAG_SPREAD = 0.5  # of the median lag: the sensors that show a latency show the same one
 READING_LAG_REGIME = "as it changes"  # "sensor S5 back's reading runs 25 ms behind the tracked pose's as it changes"
 SCALE_MIN = 0.02  # a path or turn 2 % off the twin's: an odometry error worth naming
@@ -154,9 +125,10 @@ def timing_findings(chans: list[Channel], resids: dict[str, np.ndarray], keep: n
     """IR sensors whose readings run behind (or ahead of) the pose: below the twin's while closing on a
     wall and above it while drawing away (or the reverse), each half a mismatch at |z| >= TIMING_Z.  A
     latency is the whole ring's, so this is located only when TIMING_SENSORS_MIN sensors show it the
-    same way round (one sensor alone showed it on a blind control); their evidence pools, so each
-    sensor is held to less than Z_MIN: one that sees a wall for a few dozen periods gives each half a
-    small z.  One finding per sensor, in its larger bin."""
+    same way round (one sensor alone is not a latency); their evidence pools, so each sensor is held to
+    less than Z_MIN: one that sees a wall for a few dozen periods gives each half a small z.  One finding
+    per sensor, in its larger bin.
+    Tested: tests/test_diagnosis.py::test_readings_that_run_behind_the_pose_are_located_on_the_ring."""
     found: dict[bool, list[Finding]] = {True: [], False: []}  # behind the pose / ahead of it
     for ch, regime, words, r, lab, y, sigma in _timing_sensors(chans, resids, keep, reg):
         closing, receding = (_bin_stats(r[lab == v], sigma, y[lab == v], TIMING_Z) for v in (0, 2))
@@ -201,7 +173,8 @@ def reading_lag_findings(chans: list[Channel], resids: dict[str, np.ndarray], ke
     READING_LAG_SPREAD of the median's (a latency is the ring's; an offset or a turned sensor skews one
     sensor's lag, or several by unlike amounts).  Where closing and drawing-away periods are few (a
     manoeuvre that meets walls in a few dozen periods), their means are noise (timing_findings) while the
-    reading's proportion to its change is not (blind 0234, 23 ms)."""
+    reading's proportion to its change is not
+    (tests/test_diagnosis.py::test_readings_in_proportion_to_their_change_give_the_rings_latency)."""
     lags = [(ch, tau, z) for ch, tau, z in _reading_lags(chans, resids, keep, unjudged) if abs(z) >= READING_LAG_Z]
     for late in (True, False):
         same = [(ch, tau, z) for ch, tau, z in lags if (tau > 0) == late]

@@ -1,4 +1,4 @@
-"""Findings in words a robotics engineer reads at a glance."""
+"""Findings in words a robotics engineer reads at a glance (docs/diagnosis.md, "Output")."""
 from __future__ import annotations
 
 from host_sim.diagnosis.channels import SENSOR_NAMES

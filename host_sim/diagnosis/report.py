@@ -1,9 +1,7 @@
-"""The verdict and its evidence: a terminal summary and a stable JSON document (docs/diagnosis.md).
+"""The verdict and its evidence: a terminal summary and a stable JSON document.
 
-Verdicts: "match" (nothing located: the twin reproduces the recording to
-its noise), "explained" (every located mismatch removed by named effects),
-"partly explained", "unexplained" (located, and nothing names it — never a
-wrong name).
+diagnose() runs the whole diagnosis: compare, locate, fit, then judge the fitted twin on the same held-out
+windows.  Verdicts, refusals and the JSON keys: docs/diagnosis.md, "Verdict" and "Output".
 """
 from __future__ import annotations
 
@@ -188,8 +186,9 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     except TooLittleData as thin:
         little_data = True
         # Too little to call it a match: that nothing is located there is no evidence.  A mismatch located
-        # all the same is (a few seconds of driving can show a weak motor: blind 0042, 0237), and is
-        # diagnosed, said to rest on little data.
+        # all the same is (a few seconds of driving can show a weak motor), and is diagnosed, said to rest on
+        # little data.  Tested: tests/test_diagnosis.py::
+        # test_too_little_to_call_a_match_still_shows_a_mismatch_and_names_it_only_if_it_explains_it
         if not result.located:
             raise
         result.notes.append(f"little data: {thin.shortfall}; a mismatch is located all the same, and what "
@@ -212,8 +211,8 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     result.fit_after = dict(after.fit)
     remaining = [_located(after, f) for f in after.findings]
     if little_data and final.effects and remaining:
-        # With little data, effects that leave the mismatch located are no evidence of their names (blind
-        # 0109, an IR offset seen in 5 windows: a latency took a part of it).
+        # With little data, effects that leave the mismatch located are no evidence of their names: a
+        # partial fit on a few windows says nothing of what the rest is (the same test).
         result.notes.append(f"with so little data, what the library fits best "
                             f"({', '.join(c.label() for c in final.effects)}) leaves the mismatch located: "
                             f"no name is given")
@@ -301,8 +300,8 @@ def objective_sigma(cmp: Comparison, names: list[str], totals: tuple[str, ...]) 
     and each window total's (fit.Objective) by how far the totals stray from a proportion (locate.total_noise).
     Taken from the nominal twin for the first effect, and again from the twin fitted so far for each further
     one: a first effect's mismatch spreads the totals about their proportion, and weighed by that spread a
-    second effect's turn or travel counts for little (blind pair 0043, the tyres' scrub beside wheels 4.4 %
-    large: the turn's totals strayed 0.2 rad from a proportion with the scrub unknown, 0.007 with it)."""
+    second effect's turn or travel counts for little
+    (tests/test_diagnosis.py::test_a_blind_pair_is_named_in_full_on_the_reference_plant)."""
     sigma = {c.name: noise_level(c, c.residual()[judged_windows(c.name, cmp.contact)])
              for c in cmp.channels if c.name in names}
     sigma |= {ACCUMULATED[c.name]: total_noise(c, judged_windows(c.name, cmp.contact)) for c in cmp.channels

@@ -1,19 +1,8 @@
-"""What would tell two effects apart: the identification manoeuvre run on both fitted twins.
+"""What would tell two effects apart that explain a recording equally well.
 
-When two effects explain a recording equally well, the data at hand cannot
-choose; other data can.  For drive effects the answer is found, not looked
-up: each fitted twin runs the identification manoeuvre (host_sim/loops/excitation.py,
-what `twinbot serial PORT --excite --record F.csv` runs on the robot) with
-the firmware in the loop, on an open floor, noise-free; the manoeuvre's
-segment where the two twins differ most, in what a recording holds (the
-firmware's current references and the robot's motion), is the one that
-tells them apart.  A segment's separation is a z: the RMS difference over
-its periods, against one period's noise, times the square root of their
-number (a steady difference over n periods stands out sqrt(n) times more
-than in one).  It is decisive from SEPARATION_MIN.
-
-IR effects cannot be separated on an open floor; for them the sentence
-comes from the physics of the pair (IR_APART).
+Drive effects: both fitted twins run the identification manoeuvre, and the segment where they differ most
+(as a z against what a recording resolves) is named.  IR effects: a sentence from the pair's physics
+(IR_APART).  docs/diagnosis.md, "Equally good rivals".
 """
 from __future__ import annotations
 

@@ -1,16 +1,8 @@
 """Multiple shooting: the twin replays a recording in short windows, each from the recorded state.
 
-A long open-loop replay drifts, and after a few seconds it says more about
-the drift than about the robot.  Windows restart the twin from what the
-recording says (tracker pose where there is one, wheel angles and speeds
-from the encoders) LEAD_ROWS rows before their first, and drive it open
-loop with the recorded current references, so each window's residuals
-speak of the physics of those few seconds.  All windows run at once, one robot of a
-host_sim.robot.batch.BatchSim each (host_sim/replay.replay_batch is the one-window
-case): the batch path does the heavy lifting.
-
-Without a tracker the twin starts every window at the origin of an empty
-world: its wheels and encoders are still comparable, its IR readings are not.
+Each window's twin starts LEAD_ROWS rows early from the recorded state and runs open loop on the recorded
+current references; all windows run at once on the batch path (host_sim.robot.batch.BatchSim).  Without a
+tracker every window starts at the origin of an empty world.  See docs/diagnosis.md, "Windows".
 """
 from __future__ import annotations
 
@@ -40,9 +32,9 @@ POSE_DOUBT_COUNTS = 50.0
 CONTACT_MARGIN = 0.005  # m beyond the body's radius: within it, the robot touches a wall
 FACING_COS = -0.17  # a sensor whose axis is within 100 degrees of the way to a touched wall faces it
 # The twin steps SUBSTEPS times a period; a robot that slides over the floor (ice) spins its wheels up and
-# down within milliseconds, which 5 ms steps blur: fits on blind case 0214 (a grip of 0.12) then needed a
-# 1.3 ms actuator delay that the plant did not have, and none at 16 steps a period (0.5 ms, 3 % of the cost).
-# So where the tracker sees slides in SLIDING_SHARE of the windows away from the walls, FINE_SUBSTEPS.
+# down within milliseconds, which 5 ms steps blur, and a fit then reads the blur as an actuator delay.  So
+# where the tracker sees slides in SLIDING_SHARE of the windows away from the walls, FINE_SUBSTEPS
+# (tests/test_slides.py::test_windows_step_finer_where_the_robot_slides).
 FINE_SUBSTEPS = 16
 SLIDING_SHARE = 0.05
 # Each window's twin starts LEAD_ROWS rows early and replays them (run_windows), so that it enters the window
@@ -50,8 +42,7 @@ SLIDING_SHARE = 0.05
 # difference at a command step is off by B * di * T / 4, B the wheel's acceleration per ampere), a gear's gap,
 # a slide, the commands on their way through a delay.  Its wheel speeds are then set right by the slope of
 # the counts' residual over the lead-in.  Only rows before the window are used: a held-out window stays held
-# out.  On blind suite recordings, held-out wheel fit: manoeuvre controls 94.5 -> 98.4 (a perfect twin 98.7),
-# ice (with its fitted grip) 87 -> 95; the firmware controls, at their encoders' limit, by 0.1.
+# out (tests/test_diagnosis.py::test_each_window_twin_enters_from_its_lead_in).
 LEAD_ROWS = 6
 
 
@@ -257,12 +248,12 @@ def _lead_in(rec: Recording, windows: Windows, sim: BatchSim, inputs: Any, n_set
 
     The slope is a speed error the wheels carry on only where they roll free.  A wheel spinning on ice has
     its speed set by the floor within milliseconds: where the recorded robot or its twin slides, the twin
-    enters as the lead-in leaves it (with the correction, ice 0046 fitted a delay it did not have).  A
-    lead-in at a wall starts the twin from a tracked pose that may be a millimetre into the wall, and its
-    contact throws the wheels: where the recorded robot comes within CONTACT_MARGIN of a wall, or its twin
-    touches one, the twin enters rolling at the wheel speeds the encoders give on the window's first row
-    (`cold`, (W * N, 2)), as without a lead-in (blind control 0075's firmware backed out of a stall at
-    39 counts a period, its twin at 67)."""
+    enters as the lead-in leaves it
+    (tests/test_slides.py::test_the_lead_in_counts_steer_the_twin_only_where_it_rolls).  A lead-in at a wall
+    starts the twin from a tracked pose that may be a millimetre into the wall, and its contact throws the
+    wheels: where the recorded robot comes within CONTACT_MARGIN of a wall, or its twin touches one, the twin
+    enters rolling at the wheel speeds the encoders give on the window's first row (`cold`, (W * N, 2)), as
+    without a lead-in (tests/test_diagnosis.py::test_a_window_whose_lead_in_is_at_a_wall_starts_as_without_one)."""
     lead = windows.lead
     rows = windows.lead_index[:, :-1]  # (W, lead)
     n_win = len(windows)
@@ -360,11 +351,10 @@ def unjudged_readings(rec: Recording, rows: np.ndarray, p: RobotParams, world: W
     +-POSE_DOUBT_RAD.
 
     Nor is a sensor that faces a wall the robot touches (FACING_COS): it reads the wall within millimetres
-    of its mount, where the contact decides the reading (a hull pressed into the wall, a bumper's give), and
-    the twin's goes from 4 to 134 counts over the tracker's -2..+2 mm of gap (blind control 0007's S2,
-    where the robot read a steady 11-12).  Nor is a wall nearer the sensor than the response's maximum
-    (ir_near_peak): on that branch the law is double-valued and steep, and a robot 5-7 mm from a wall read
-    430 counts where the twin read 1000 (blind control 0122's S8).
+    of its mount, where the contact decides the reading (a hull pressed into the wall, a bumper's give) more
+    than the IR law.  Nor is a wall nearer the sensor than the response's maximum (ir_near_peak): on that
+    branch the law is double-valued and steep.  The grazing rule is
+    tests/test_diagnosis.py::test_a_reading_the_recorded_pose_cannot_settle_is_not_judged.
     """
     assert rec.pose is not None
     inputs = replay_inputs(rec)

@@ -1,35 +1,8 @@
-"""`twinbot bench diagnose`: diagnosis proven blind on recordings from an independent robot.
+"""`twinbot bench diagnose`: diagnosis proven blind on recordings from the reference plant.
 
-  1. Generate: --cases blind cases on the proving ground's MuJoCo robot
-     (tools/reference_plant/cases.make_case, seeds --seed, --seed + 1, ...):
-     one random effect in its realistic range or none (the generator's
-     share of effect-free controls; with --effects K, K effects at once in
-     each in-library case), a random world, start and excitation
-     (the firmware's exploration, or an IR-guarded excitation program),
-     --duration seconds each.  The suite holds at least one control and one
-     effect outside the library (floor_tilt): if the seeds drew none, the
-     last cases are swapped for the next seeds that do.  Recordings go to
-     DIR/recordings, answer keys apart to DIR/answer_keys.
-  2. Diagnose blind: host_sim.diagnosis.diagnose on each recording, with the
-     robot and the world of its sidecar, nothing else (the worker is given
-     the recording's path only); timed per recording.
-  3. SINDy beside it: PySINDy with control on the nominal twin's wheel
-     residuals, same windows (tools/bench/sindy_baseline.py).
-  4. Score: tools/bench/diagnose_scoring.py, the only reader of the keys.
-
-With --out DIR each case's diagnosis (its JSON document, or why it was
-refused, its timings and SINDy's result) is kept in DIR/diagnoses as it
-comes; --rescore DIR scores such a suite again without generating or
-diagnosing anything, for a change of the scorer.
-
-Generation and diagnosis run on --jobs worker processes (one core each;
---workers K gives each diagnosis K processes, as twinbot diagnose
---workers).  A case's seconds are the CPU time of its diagnosis's
-processes (one BLAS thread each), scaled to a 90 s recording; its wall
-time is kept too, but on a shared machine it measures the other load as
-much as diagnosis.
-The scoreboard: a row per case, the totals, the targets of issue 9
-(MET / MISSED), and with --json FILE every figure.
+Generates a suite of cases (tools/reference_plant/cases.py), diagnoses each recording knowing only its
+sidecar, runs the SINDy baseline beside it, and scores both against the answer keys
+(diagnose_scoring.py).  docs/proving-ground.md, "The blind suite".
 """
 from __future__ import annotations
 
@@ -56,9 +29,42 @@ TARGET_UNLISTED = 0.90  # share of out-of-library effects called unexplained / p
 TARGET_SECONDS = 30.0  # CPU seconds per 90 s recording (median), all of a diagnosis's processes
 REFERENCE_SECONDS = 90.0
 
+DESCRIPTION = """\
+  1. Generate: --cases blind cases on the reference plant, the MuJoCo robot
+     (tools/reference_plant/cases.make_case, seeds --seed, --seed + 1, ...):
+     one random effect in its realistic range or none (an effect-free
+     control; with --effects K, K effects at once in each in-library case),
+     a random built-in world and start, and the firmware driving (its
+     exploration, or the identification manoeuvre), --duration seconds each.
+     The suite holds at least one control and one effect outside the
+     library (floor_tilt): if the seeds drew none, the last cases are
+     swapped for the next seeds that do.  Recordings go to DIR/recordings,
+     answer keys apart to DIR/answer_keys.
+  2. Diagnose blind: host_sim.diagnosis.diagnose on each recording, with the
+     robot and the world of its sidecar, nothing else (the worker is given
+     the recording's path only); timed per recording.
+  3. SINDy beside it: PySINDy with control on the nominal twin's wheel
+     residuals, same windows (tools/bench/sindy_baseline.py).
+  4. Score: tools/bench/diagnose_scoring.py, the only reader of the keys.
+
+With --out DIR each case's diagnosis (its JSON document, or why it was
+refused, its timings and SINDy's result) is kept in DIR/diagnoses as it
+comes; --rescore DIR scores such a suite again without generating or
+diagnosing anything, for a change of the scorer.
+
+Generation and diagnosis run on --jobs worker processes (one core each;
+--workers K gives each diagnosis K processes, as twinbot diagnose
+--workers).  A case's seconds are the CPU time of its diagnosis's
+processes (one BLAS thread each), scaled to a 90 s recording; its wall
+time is kept too, but on a shared machine it measures the other load as
+much as diagnosis.
+The scoreboard: a row per case, the totals, the targets (MET / MISSED),
+and with --json FILE every figure.
+"""
+
 
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
-    p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1],
+    p = sub.add_parser(name, help=summary, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     from tools.arguments import float_range, int_range, output_file, output_folder, suite_folder
 

@@ -1,39 +1,9 @@
 """The scorer of `twinbot bench diagnose`: the only code that reads the answer keys.
 
-A blind case is a recording (what diagnosis sees) and an answer key written
-apart by cases.make_case (what was concealed in the plant).  `score_case`
-puts a diagnosis (its JSON document, docs/diagnosis.md) beside the key:
-
-- the effect named correctly: the diagnosis's FIRST effect (forward
-  selection's strongest) has the key's name (the plant and the library
-  share effect names by design) and sits at the key's site (left / right /
-  both wheel, sensor index; robot-wide effects have no side); a case that
-  conceals k effects (bench diagnose --effects k) has each named when it
-  is among the diagnosis's first k, and is right when all are;
-- the parameter error: the fitted value against the true one, both in the
-  library's terms (PARAMS below converts the plant's true physical value);
-- effect-free controls: any verdict but "match" is a false alarm;
-- out of the library (floor_tilt): "unexplained" or "partly explained",
-  with a mismatch located on a drive channel (the wheels or the body's
-  motion), is right; a name is wrong;
-- effects the recording cannot show (a current limit the references never
-  exceed, a floor the tyres can never slip on, an IR pair that never sees
-  a wall, an ambient leakage under a steady light, which is then one
-  constant with an offset) are "not excited": judged from the recording itself
-  (`not_excited`), reported apart, not counted as misses.  A current limit
-  or a grip shown only while the robot touches a wall counts as not
-  excited too: diagnosis does not judge the drive there (the twin's wall
-  contact is not the plant's; docs/diagnosis.md), so the periods counted
-  are those in 1 s blocks clear of every wall.
-
-The wheel-fit target is judged where it can be met: `perfect_twin_fit`
-scores the plant's own unrounded encoder positions (truth_file) as a
-twin's prediction, on the windows the diagnosis judged its fit on.  No twin
-does better; where even it scores under the target, the encoders' rounding
-is most of what the wheels' counts vary by, and the case is listed apart.
-
-`score_sindy` judges the SINDy baseline (sindy_baseline.py) on the same
-case: whether one of its terms could name the concealed effect.
+`score_case` puts a diagnosis's JSON document beside the key of its case: named right (first k effects,
+right site), parameter error in the library's terms (PARAMS), false alarms, out-of-library calls, effects
+the recording cannot show (`not_excited`), and the wheel fit against a perfect twin (`perfect_twin_fit`).
+`score_sindy` judges the SINDy baseline the same way.  The rules: docs/proving-ground.md, "The scorer".
 """
 from __future__ import annotations
 
@@ -54,7 +24,7 @@ from tools.reference_plant.robot_model import CASTER_X
 
 G = 9.81
 DRIVE_CHANNELS = ("wheel_l", "wheel_r", "forward", "lateral", "heading_rate", "travel", "turn")
-PARAM_TOLERANCE = 0.15  # relative parameter error counted as right (issue 9's target)
+PARAM_TOLERANCE = 0.15  # relative parameter error counted as right (the parameter target)
 MIN_EXCITED_SHARE = 0.01  # an effect shown in fewer than 1 % of the periods is "not excited"
 TRACTION_MARGIN = 0.8  # demand within 80 % of mu N may already slip: weight shifts as the robot accelerates
 WALL_SEEN_COUNTS = 50  # reflected counts (on - off) from which an IR pair "sees a wall"
@@ -112,7 +82,7 @@ PARAMS: dict[str, ParamMap] = {
 
 def load_key(path: str | Path) -> dict[str, Any]:
     """The answer key, with the plant's unrounded encoder positions (n, 2) as "encoders" where
-    cases.make_case kept them beside it (suites generated before session 28 have none)."""
+    cases.make_case kept them beside it (a suite kept without its truth files has none)."""
     key: dict[str, Any] = json.loads(Path(path).read_text())
     truth = truth_file(Path(path).parent, Path(path).name.removesuffix(".answer.json"))
     if truth.exists():

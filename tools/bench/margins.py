@@ -1,5 +1,27 @@
 """`twinbot bench margins`: how far each of the diagnosis's locate rules stands from its threshold.
 
+On every recording of a blind suite, the nominal twin is compared in 1 s windows and each locate rule's
+margin taken (host_sim.diagnosis.compare.rule_margins).  docs/diagnosis.md, "How near the rules come".
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+from tools.bench.report import print_targets
+
+RULES = ("bias", "scale", "scatter", "timing", "lag")
+# The concealed effects (tools/reference_plant/effects.py) each rule is there to find; bias: the rest of the library.
+MEANT_FOR = {"scale": ("wheel_radius", "track_width", "encoder_scale"), "scatter": ("traction_limit", "backlash"),
+             "timing": ("ir_latency",), "lag": ("actuator_delay",)}
+
+DESCRIPTION = """\
 On every recording of a blind suite (generated as `twinbot bench diagnose`
 generates it, or one it kept: --suite DIR, its --out DIR), the nominal twin
 is compared with the recording in 1 s windows, and each locate rule's
@@ -31,27 +53,10 @@ the thresholds were set in.
     twinbot bench diagnose --cases 40 --seed 80 --out suite80
     twinbot bench margins --suite suite80        # the same recordings, no new ones
 """
-from __future__ import annotations
-
-import argparse
-import json
-import sys
-import tempfile
-import time
-from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
-from typing import Any
-
-from tools.bench.report import print_targets
-
-RULES = ("bias", "scale", "scatter", "timing", "lag")
-# The concealed effects (tools/reference_plant/effects.py) each rule is there to find; bias: the rest of the library.
-MEANT_FOR = {"scale": ("wheel_radius", "track_width", "encoder_scale"), "scatter": ("traction_limit", "backlash"),
-             "timing": ("ir_latency",), "lag": ("actuator_delay",)}
 
 
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
-    p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1],
+    p = sub.add_parser(name, help=summary, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     from tools.arguments import float_range, int_range, output_file, output_folder, suite_folder
 

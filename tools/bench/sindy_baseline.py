@@ -1,27 +1,8 @@
 """The baseline beside diagnosis: SINDy with control (PySINDy) on the nominal twin's residual.
 
-What a SINDy-style discrepancy model does with the same data: the nominal
-twin replays the recording in the same 1 s windows as diagnosis
-(host_sim.diagnosis.compare, the same held-out windows 2, 5, 8, ...), and
-SINDy learns the per-period residual of each wheel's encoder increment
-(recorded - twin, in rad/s, the "state derivative" it is given) as a
-sparse sum of library terms in
-
-- w_l, w_r: the twin's own wheel speeds in the period (rad/s), and
-- i_l, i_r: the recorded current references (A), the control inputs,
-
-the library being all polynomials of degree <= 2 in them plus tanh of
-each wheel speed (a smooth sign, so that dry friction has a term to land
-on).  Only what the open-loop twin has is used: never the recorded speed
-of the same or an earlier period, which would make it a one-step predictor.
-Features and residuals are scaled to unit RMS on the training windows.
-
-The sparsity threshold (STLSQ) is chosen on the training windows alone: the
-training windows are split again (every 4th held aside), and the sparsest
-threshold within 2 % of the best validation error is kept.  The model is
-then refitted on every training window and judged on the held-out ones:
-held-out fit % of the twin + SINDy's correction, per wheel, with the same
-formula as diagnosis.  Its active terms are listed for the scorer.
+Each wheel's per-period residual (recorded - twin, rad/s) on diagnosis's training windows, as a sparse sum of
+polynomial terms (degree <= 2) in the twin's wheel speeds and the recorded current references, plus tanh of
+each speed; judged on the same held-out windows.  docs/proving-ground.md, "The SINDy baseline".
 """
 from __future__ import annotations
 

@@ -1,30 +1,4 @@
-"""`twinbot diagnose`: where a recording and the twin disagree, in physical terms.
-
-The twin replays the recording in windows (1 s and 5 s) from the recorded
-state, driven open loop by the recorded current references.  Every channel
-(each wheel's encoder, the body's motion and pose where a tracker recorded
-it, each IR sensor's reflected and ambient light, the battery) is judged on
-held-out windows; where the residuals are not noise, the mismatch is located
-by regime (speed, acceleration, turning, direction, command, heading, battery,
-distance to the walls) and by time, and said in words.
-
-Verdicts: match (the twin reproduces the recording to its noise), explained,
-partly explained, unexplained (located, but nothing in the library of effects
-names it).  The JSON document is described in docs/diagnosis.md.
-
-What it needs: 6 s at least (60-90 s is better), with the wheels turning
-(or driven, away from the walls) in a fifth of the periods, and 6 windows
-of 1 s away from the walls; a tracker's pose for the body's motion and the
-IR sensors.  Less is refused with a one-line reason and exit status 2.  The
-identification manoeuvre records all of it in 46 s:
-twinbot serial PORT --excite --record run.csv (twinbot sim --excite on the twin).
-A 90 s recording takes about 6 s on two cores (the median of twinbot
-bench diagnose --seed N --jobs 1 --workers 2 over eight suites of 40);
-a slippery floor up to a minute.  --workers (default on Linux: one
-process per core) screens the library and fits the shortlisted effects
-side by side: the same verdict and figures, sooner.  A progress line per
-step.
-"""
+"""`twinbot diagnose`: where a recording and the twin disagree, in physical terms (docs/diagnosis.md)."""
 from __future__ import annotations
 
 import argparse
@@ -36,9 +10,34 @@ from pathlib import Path
 from tools.arguments import input_file, int_range, output_file
 from tools.arguments import CliError
 
+DESCRIPTION = """\
+The twin replays the recording in windows (1 s and 5 s) from the recorded
+state, driven open loop by the recorded current references.  Every channel
+(each wheel's encoder, the body's motion and pose where a tracker recorded
+it, each IR sensor's reflected and ambient light, the battery) is judged on
+held-out windows; where the residuals are not noise, the mismatch is located
+by regime (speed, acceleration, turning, direction, command, heading, battery,
+distance to the walls) and by time, and said in words.  Effects from the
+library are then fitted and kept only if they improve the held-out windows.
+
+Verdicts: match (the twin reproduces the recording to its noise), explained,
+partly explained, unexplained (located, but nothing in the library of effects
+names it).  The JSON document is described in docs/diagnosis.md.
+
+What it needs: 6 s at least (60-90 s is better), with the wheels turning
+(or driven, away from the walls) in a fifth of the periods, and 6 windows
+of 1 s away from the walls; a tracker's pose for the body's motion and the
+IR sensors.  Less is refused with a one-line reason and exit status 2.  The
+identification manoeuvre records all of it:
+twinbot serial PORT --excite --record run.csv (twinbot sim --excite on the twin).
+--workers screens the library and fits the shortlisted effects side by side:
+the same verdict and figures, sooner.  A progress line per step goes to
+stderr (--quiet: none).  How long it takes: twinbot bench diagnose.
+"""
+
 
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
-    p = sub.add_parser(name, help=summary, description=__doc__.split("\n\n", 1)[1],
+    p = sub.add_parser(name, help=summary, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter,
                        epilog="examples:\n  twinbot diagnose run.csv\n"
                               "  twinbot diagnose run.csv --params my_robot.json --json verdict.json")

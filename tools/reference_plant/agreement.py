@@ -1,13 +1,8 @@
-"""How closely the twin replays a plant recording: the evidence that the nominal plant is the twin's robot.
+"""How closely the twin replays a recording of the nominal plant: the evidence that the plant is the twin's robot.
 
-Multiple shooting, as diagnosis will do it: windows of `window_s` started
-from the recorded state (tracker pose, encoder angles and speeds: host_sim.recordings.replay),
-driven open loop by the recorded current references.  Per window: the
-encoder increments per control period (twin minus recording) and the pose
-error at the window's end.  Windows in which the robot comes within
-`clearance` of a wall are left out (contacts are a channel of their own).
-
-`twinbot`'s replay is the thing under test here; this module only compares.
+`python -m tools.reference_plant.agreement`: records the plant, replays it through the twin in windows from
+the recorded state (host_sim.recordings.replay) away from the walls, and prints the tick, position and heading
+errors.  docs/proving-ground.md, "With no effect on, the twin replays the plant".
 """
 from __future__ import annotations
 

@@ -1,28 +1,9 @@
-"""Blind cases: a random effect, magnitude, world, start and excitation, recorded on the plant.
+"""Blind cases: a random effect, magnitude, world, start and drive, recorded on the plant.
 
     rec_path, key_path = make_case(seed, out_dir)
 
-draws, from `seed` alone:
-
-- the effect: none (an effect-free control, probability CONTROL_SHARE) or
-  one of effects.EFFECTS, with its site (wheel or sensor) and a value from
-  its realistic ranges (floor_tilt also draws the downhill direction);
-  with `n_effects` 2 or 3, an in-library case conceals that many: each
-  effect after the first is another in-library one, drawn from a stream of
-  its own, so the first effect, the world, the start and the excitation
-  are those of the one-effect case of the same seed;
-- the world (a built-in one) and a start pose clear of the walls;
-- the excitation: the firmware in SIL (either rule set) exploring on its own, or
-  driven through the identification manoeuvre in HOST mode
-  (host_sim/loops/excitation.py, what `twinbot serial PORT --excite` does to a robot);
-
-runs the plant for `duration` seconds and writes the recording
-(out_dir/case_NNNN.csv, source "robot", plant "mujoco", the nominal robot
-in its sidecar) and, apart, the answer key
-(key_dir/case_NNNN.answer.json, default out_dir/answer_keys/): what was
-concealed and the plant's true values, with beside it
-case_NNNN.truth.npz: the encoders' unrounded positions at every reading
-(`truth_file`; the scorer's perfect twin).  Only a scorer should read them.
+Everything is drawn from the seed; the recording's sidecar holds the nominal robot, and the answer key
+(with the plant's unrounded encoder positions beside it) is written apart.  docs/proving-ground.md, "Blind cases".
 """
 from __future__ import annotations
 

@@ -1,22 +1,11 @@
 """Named physical effects, switched on inside the plant (never by editing its outputs).
 
-Each effect changes one TRUE value of the plant's PlantSpec - a joint's
-friction, a wheel's radius, the floor's friction, the driver's delay, an IR
-pair's optics, gravity's direction - so the MuJoCo physics, the motors or
-the sensor law produce the consequences.  An effect has:
-
-- name: as issue 9's library names it (snake_case);
-- applies_to: "wheel" (left / right / both), "robot" (the whole robot),
-  "sensor" (one IR sensor 0..7), "ring" (all eight IR sensors);
-- param, unit: the true physical value it sets;
-- absent: the value meaning "no effect" (the nominal robot, host_sim's DEFAULT);
-- ranges: one or two intervals of realistic values away from `absent`
-  (two when the robot may err either way);
-- in_library: False for the effects deliberately outside diagnosis's
-  library (floor_tilt), which a diagnosis must call "unexplained".
+Each effect sets one true value of the plant's PlantSpec, so that MuJoCo, the motors or the sensor law
+produce its consequences; it has a site (wheel, robot, sensor, ring), an absent value and realistic ranges.
 
     spec = apply(nominal_spec(), "dry_friction", 4e-3, "left")
-    spec = apply(spec, "ir_gain", 1.4, 3)
+
+The table: docs/proving-ground.md, "Effects".
 """
 from __future__ import annotations
 

@@ -1,11 +1,8 @@
 """Random open-loop excitation: current-reference programs that make the physics show itself.
 
-A program is a list of (left, right) current references (A), one per
-control period, built from segments of 0.4-1.6 s: straight steps, spins,
-arcs, slow creeps near the friction threshold, short hard bursts, chirps
-and coasting, each followed by its mirror image (the same segment with the
-currents negated) so the robot wanders little from where it started.
-`ProgramController(program, guard=...)` plays it with an IR guard.
+Segments of 0.4-1.6 s (steps, spins, arcs, creeps, bursts, chirps, coasting), each followed by its mirror
+image so the robot wanders little; `ProgramController(program, guard=...)` plays one with an IR guard
+(tools/reference_plant/recorder.py).  Used by the agreement check (docs/proving-ground.md).
 """
 from __future__ import annotations
 

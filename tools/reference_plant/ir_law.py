@@ -1,17 +1,7 @@
-"""The paper's IR law (section 3.3), written afresh from docs/ir-sensor.md for the plant.
+"""The paper's IR law (section 3.3), written afresh for the plant from docs/ir-sensor.md.
 
-reflected = C * P(L) * A(angle) * F(x)   [ADC counts]
-
-- P(L) = min(L/100, saturation): the emitter's light at pulse width L %;
-- A: two 5th-degree polynomials in |angle| (small dome near normal incidence,
-  big dome beyond), blended by a smoothstep of |angle| over angle_blend,
-  never below 0;
-- F: x^2/x_p^4 near, 1/x^2 far, between x_p/k and k x_p their geometric
-  mean weighted by a smootherstep of ln x (F = x_p^-2 (x/x_p)^(2-4s)),
-  faded to 0 by a smoothstep over the last 20 % of the range.
-
-Only numbers are shared with the twin (the constants in PlantSpec.ir), not
-code.  Plain floats: the plant reads eight sensors per control period.
+reflected = C * P(L) * A(angle) * F(x) [ADC counts]; only the constants (PlantSpec.ir) are shared with the
+twin, not code.  Plain floats: the plant reads eight sensors per control period.
 """
 from __future__ import annotations
 

@@ -1,33 +1,8 @@
-"""The plant: the MuJoCo robot stepped with its motors, battery, encoders, IR ring and tracker.
+"""The plant: the MuJoCo robot stepped with its drivers, battery, encoders, IR ring and tracker.
 
-Each MuJoCo step (1 ms) the plant's own drivers turn the current references
-into wheel torques:
-
-    i   = clip(i_ref, -I_lim, I_lim), then clip to [(-V - k_e N w) / R, (V - k_e N w) / R]
-    tau = eta N k_t i            (data.ctrl of the motor on the drive joint)
-
-w the drive joint's speed (the wheel's, or its rotor's when the gear has
-play), k_e = k_t per wheel, V the battery's terminal voltage
-V_oc - R_int * I_batt, I_batt = I_q + sum(u i) / V_oc from the step before
-(u = R i + k_e N w, the motor's terminal voltage).  The axle friction is
-MuJoCo's own: frictionloss (dry) and damping (viscous) on the drive joint.
-A new current reference reaches the driver actuator_delay seconds late.
-
-`sense()` and `actuate()` speak host_sim's Sense / Actuate, so any of the
-twin's controllers (SilController = the firmware in-process, a replay of
-current references) drives the plant as it drives the twin's SimRobot:
-
-- encoders: floor(theta * ticks_per_rev / 2 pi) of the drive joint's angle
-  (on the motor shaft: behind any gear play);
-- IR: a ray per sensor along its axis, mujoco.mj_ray against the walls' IR
-  surfaces; a misalignment turns the pair about its mount on the rim (the
-  ray starts one body radius behind the mount, at C when it is aligned), the hit's face normal for the
-  incidence angle; ir_law for the light; ambient (global + visible lamps,
-  flicker) at t for the emitter-off and t + on_delay for the emitter-on
-  reading; per-sensor gain, offset, ambient leakage; Gaussian noise; the
-  ADC's rounding and ceiling; readings of the pose ir_latency seconds old;
-- battery: the terminal voltage plus measurement noise, in mV;
-- tracker (`tracker_pose()`): the pose of C with Gaussian noise.
+Each 1 ms MuJoCo step its own drivers turn the current references into wheel torques; `sense()` and
+`actuate()` speak host_sim's Sense / Actuate, so any of the twin's controllers drives it as it drives the
+twin's SimRobot.  Equations and readings: docs/proving-ground.md, "The robot in MuJoCo".
 """
 from __future__ import annotations
 

@@ -3,17 +3,8 @@
     run(plant, controller, duration, writer)      # one control period at a time -> Truth
     record(path, spec, world, controller, ...)    # a recording (source "robot", plant "mujoco") -> Truth
 
-Each control period (40 ms): the plant's readings go to the controller
-(anything with `cycle(Sense) -> Actuate`: host_sim's SilController, or
-`ProgramController` below), its currents to the plant, one row to the
-recording (t, the references, the encoders, IR on/ambient, vbat, the emitter power, and the
-tracker's noisy pose of C taken at the readings), then the physics runs on.
-
-The sidecar says source "robot" and plant "mujoco", with the twin's
-nominal robot parameters (what a user would believe their robot is) and
-the world; the plant's true values and effects never go in it.  What
-only the plant knows (`Truth`: the true pose of C and the encoders'
-unrounded positions at each reading) is returned, for an answer key.
+The sidecar holds the twin's nominal robot, never the plant's true values; `Truth` (the true pose and the
+encoders' unrounded positions) is returned for an answer key.  docs/proving-ground.md.
 """
 from __future__ import annotations
 

@@ -1,32 +1,8 @@
-"""The robot as MuJoCo sees it: PlantSpec (true physical values) -> MJCF -> MjModel.
+"""The robot as MuJoCo sees it: PlantSpec (true physical values, SI, per wheel and per sensor) -> MJCF -> MjModel.
 
-PlantSpec holds every value the plant's physics uses, in SI units, per wheel
-((left, right) tuples) and per IR sensor (8-tuples) where a real robot's
-parts differ.  `nominal_spec()` fills it from host_sim.physics.params.DEFAULT - read
-as numbers, no host_sim physics is called - plus what the twin does not
-describe (heights, the caster, the floor and wall contacts), chosen so that
-the nominal plant behaves like the twin's ideal model: wheels that roll
-without slip, a frictionless caster, a level floor.
-
-The bodies:
-
-- chassis: free body, frame origin at C (the centre of the wheel axle, at
-  axle height), centre of mass G a distance d ahead of C, yaw inertia I_c
-  about G; a front caster ball carries part of its weight (frictionless
-  when nominal) and a rear skid 1 mm off the floor stops it tipping back;
-  a vertical capsule of radius body_radius is what touches walls;
-- two wheels at C +- b (left = +y), spheres of radius r on hinge joints
-  about y (positive = forward), mass m_w, spin inertia about the axle, the
-  motor rotor's reflected inertia as the joint's armature;
-- with backlash on a wheel, the rotor becomes its own body on a coaxial
-  hinge, coupled to the wheel through a fixed tendon whose limits are the
-  gear's play (a deadband), and the motor and the gear friction act on it.
-
-Walls come from a host_sim world file (segments and convex polygons):
-each wall segment is a capsule of radius WALL_RADIUS for contacts (the
-robot's capsule is body_radius - WALL_RADIUS, so contact starts when C is
-body_radius from the wall line, as in the twin's world) and a thin box
-whose face lies on the wall line for the IR rays (geom group IR_GROUP).
+`nominal_spec()` fills PlantSpec from host_sim.physics.params.DEFAULT (as numbers) plus what the twin does
+not describe (heights, the caster, the floor and wall contacts), so that the nominal plant rolls without
+slip on a level floor.  The bodies and contacts: docs/proving-ground.md, "The robot in MuJoCo".
 """
 from __future__ import annotations
 
