@@ -4,7 +4,7 @@ The core of identification: N candidate robots in the same recorded state, fed t
 references, their encoders, IR ring and pose compared with the recording.  `BatchSim` takes one
 RobotParams, a sequence of them or a ParamBatch; `run_inputs` applies one row of references per
 control period and returns a `BatchResult`.  The same physics as SimRobot, to rounding error.
-Equations: docs/dynamics.md ("Batch"), docs/contact.md; the effects: docs/effects.md.
+Equations: docs/dynamics.md ("One robot and the batch"), docs/contact.md; the effects: docs/effects.md.
 """
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ N_SENSORS = ir_sensor.N_SENSORS
 IR_FIELDS = tuple(f.name for f in dataclasses.fields(RobotParams)
                   if f.name.startswith("ir_") or f.name in ("body_radius", "sensor_range", "adc_bits",
                                                              "ambient_leakage"))
-# What BatchSim takes as its robots' parameters (the module docstring says how each is read)
+# What BatchSim takes as its robots' parameters (docs/dynamics.md, "One robot and the batch")
 ParamSets = Union[RobotParams, Sequence[RobotParams], ParamBatch]
 
 
@@ -105,7 +105,7 @@ class BatchSim:
                  base: RobotParams | None = None, cycle_s: float = CYCLE_S, substeps: int = SUBSTEPS,
                  emitter_pct: float = 60.0, initial_emitter_pct: float | None = None) -> None:
         """
-        world: the walls (None: no walls).  params: see the module docstring.
+        world: the walls (None: no walls).  params: one RobotParams (shared), N of them, or a ParamBatch.
         poses: (N, 3) x, y, phi of C, wheel angles 0, at rest; or q (N, 5) and
         v (N, 2) directly (default: every robot at the world's start pose).
         base: the non-scalar parameters (IR polynomial coefficients) when

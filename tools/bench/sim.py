@@ -135,7 +135,7 @@ COMPONENTS = {
         ("IR sensors + encoders (SimRobot.sense)", "host_sim/robot/sim_robot.py", "sense"),
         ("8 physics steps (SimRobot.advance)", "host_sim/robot/sim_robot.py", "advance"),
         ("  of which the wall test (_walls_in_reach)", "host_sim/robot/sim_robot.py", "_walls_in_reach"),
-        ("  of which motors + dynamics (drive.drive_step)", "host_sim/physics/drivetrain.py", "drive_step"),
+        ("  of which motors + dynamics (drivetrain.drive_step)", "host_sim/physics/drivetrain.py", "drive_step"),
         ("  of which the grip test (contact.traction_ok)", "host_sim/physics/contact.py", "traction_ok"),
         ("  of which contact steps (contact.slip_step)", "host_sim/physics/contact.py", "slip_step"),
     ],
