@@ -60,23 +60,10 @@ def test_the_walk_sees_the_packages() -> None:
 # Module docstrings still being cut down to the limit in other branches; each entry
 # must leave this set once its docstring is short (test_the_trimming_set_names_only_long_docstrings).
 DOCSTRINGS_BEING_TRIMMED: set[str] = {
-    "host_sim/diagnosis/channels.py", "host_sim/diagnosis/compare.py", "host_sim/diagnosis/fit.py",
-    "host_sim/diagnosis/locate.py", "host_sim/diagnosis/tell_apart.py", "host_sim/diagnosis/windows.py",
-    "host_sim/physics/backlash.py", "host_sim/physics/contact.py", "host_sim/physics/drivetrain.py",
-    "host_sim/physics/drivetrain_effects.py", "host_sim/physics/dynamics.py", "host_sim/physics/effects.py",
-    "host_sim/physics/friction.py", "host_sim/physics/motors.py", "host_sim/physics/params.py",
-    "host_sim/physics/world.py", "host_sim/robot/batch.py", "host_sim/robot/sim_robot.py",
-    "host_sim/sensors/ir_sensor.py",
-    "tools/bench/diagnose.py", "tools/bench/diagnose_scoring.py", "tools/bench/dynamics.py",
-    "tools/bench/firmware.py", "tools/bench/fuzz_wire.py", "tools/bench/fuzzy.py", "tools/bench/gui.py",
-    "tools/bench/late_signal.py", "tools/bench/margins.py", "tools/bench/mp/mp_heap_firmware.py",
-    "tools/bench/mp/mp_protocol.py", "tools/bench/protocol.py", "tools/bench/sensors.py", "tools/bench/sim.py",
-    "tools/bench/sindy_baseline.py",
-    "tools/cli/diagnose.py", "tools/cli/gui.py",
-    "tools/gui/__init__.py", "tools/gui/render.py", "tools/gui/robots.py", "tools/gui/user_input.py",
-    "tools/reference_plant/__init__.py", "tools/reference_plant/agreement.py", "tools/reference_plant/cases.py",
-    "tools/reference_plant/effects.py", "tools/reference_plant/ir_law.py", "tools/reference_plant/plant.py",
-    "tools/reference_plant/recorder.py", "tools/reference_plant/robot_model.py",
+    "host_sim/physics/backlash.py",
+    "host_sim/physics/drivetrain_effects.py",
+    "host_sim/physics/effects.py",
+    "host_sim/physics/params.py",
 }
 # Only modules of these folders (and these two commands) may be in the set above.
 TRIMMED_ELSEWHERE = ("host_sim/physics/", "host_sim/sensors/", "host_sim/robot/", "host_sim/diagnosis/",
