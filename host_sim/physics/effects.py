@@ -125,8 +125,7 @@ def _sensor(name: str, field: str, unit: str, lower: float, upper: float, absent
 # (the plainer physics; fit._plainest).
 LIBRARY: dict[str, Effect] = {e.name: e for e in (
     _drive("dry_friction", "coulomb_friction_delta", "N m", -1.5e-3, 1e-2,
-           "dry (Coulomb) friction at the wheel's axle beyond the nominal (smoothed like it over 0.1 rad/s: "
-           "no stick-slip yet, docs/effects.md)", total_at_least_zero("coulomb_friction")),
+           "dry (Coulomb) friction at the wheel's axle beyond the nominal", total_at_least_zero("coulomb_friction")),
     _drive("viscous_friction", "viscous_friction_delta", "N m s/rad", -2e-4, 2e-3,
            "viscous friction at the wheel's axle beyond the nominal", total_at_least_zero("viscous_friction")),
     _drive("wheel_radius", "wheel_radius_delta", "m", -3e-3, 3e-3, "the wheel's radius minus the nominal",
