@@ -27,7 +27,7 @@ RobotLike = TypeVar("RobotLike")  # a RobotParams (this module sits below params
 @dataclass(frozen=True)
 class Admits:
     """The values a parameter file may give a field; params.params_from_dict refuses others, and a fit's
-    bounds stay inside them (fit_bounds).  The value checked is the field's, or for a delta the total
+    bounds stay inside them (`bounds`).  The value checked is the field's, or for a delta the total
     `added_to` + field; its ends are multiples of the field `per` (if any) and excluded when `strict`."""
 
     lowest: float = -math.inf
@@ -79,7 +79,7 @@ class Param:
     name: str  # as reported ("torque", "radius", ...)
     field: str  # RobotParams field; "{w}" is replaced by l / r for a drive effect
     unit: str
-    lower: float  # declared bounds of the fitted value, in the field's own terms (fit_bounds narrows them)
+    lower: float  # declared bounds of the fitted value, in the field's own terms (`bounds` narrows them)
     upper: float
     absent: float | None = None  # None: the nominal robot's own value of the field
     admits: Admits = ANY
