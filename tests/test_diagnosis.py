@@ -801,7 +801,7 @@ def test_an_effect_whose_cost_rises_every_way_the_screening_looked_is_not_fitted
 
 
 def test_workers_share_a_large_batch_in_runs_of_neighbours():
-    """A screening's robots are mostly of one machinery on ice or with a gear's play: the group is cut into
+    """A screening's robots are mostly of one set of step parts on ice or with a gear's play: the group is cut into
     pieces of at most its share (all the robots / workers, but not under MIN_SHARE), each a run of
     neighbours (one candidate's values step alike), largest first."""
     from host_sim.diagnosis.fit import MIN_SHARE, worker_shares
@@ -874,15 +874,15 @@ def test_an_effect_seen_in_two_fitted_windows_only_is_judged_on_one_of_them(tmp_
     assert abs(limit - 0.1) < 0.005, limit
 
 
-def test_robots_run_in_one_batch_per_machinery_as_they_would_together(nominal_run):
-    """A gear's play sets the whole batch through its substep, so run_windows batches robots by machinery
-    (batch.machinery); each robot's replay is the one it gets in a single batch, to rounding, in its place."""
-    from host_sim.diagnosis.windows import Windows, _run_windows, by_machinery, run_windows
+def test_robots_run_in_one_batch_per_step_parts_as_they_would_together(nominal_run):
+    """A gear's play sets the whole batch through its substep, so run_windows batches robots by step parts
+    (batch.step_parts); each robot's replay is the one it gets in a single batch, to rounding, in its place."""
+    from host_sim.diagnosis.windows import Windows, _run_windows, by_step_parts, run_windows
 
     robots = [E.apply(DEFAULT, "backlash", "left", [0.05]), DEFAULT, E.apply(DEFAULT, "actuator_delay", "both", [0.03]),
               E.apply(DEFAULT, "dry_friction", "right", [2e-3]), E.apply(DEFAULT, "backlash", "right", [0.08]),
               E.apply(DEFAULT, "wheel_radius", "left", [1e-3])]
-    assert by_machinery(robots) == [[0, 4], [1], [2], [3, 5]]
+    assert by_step_parts(robots) == [[0, 4], [1], [2], [3, 5]]
     windows = Windows(np.array([25, 150, 400]), 26, np.array([False, True, False]))
     grouped = run_windows(nominal_run, windows, robots, ROOM)
     together = _run_windows(nominal_run, windows, robots, ROOM, None, None)

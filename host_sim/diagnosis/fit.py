@@ -20,8 +20,8 @@ from scipy import optimize, stats
 from host_sim.physics import effects as E
 from host_sim.diagnosis.channels import (ACCUMULATED, AMBIENT, IR, MOTION, WHEELS, Channel, build_channels,
                                         drive_channel, judged_windows, sensor_channel, sensor_channels)
-from host_sim.diagnosis.windows import Windows, by_machinery, run_windows
-from host_sim.physics.params import RobotParams
+from host_sim.diagnosis.windows import Windows, by_step_parts, run_windows
+from host_sim.physics.params import DEFAULT, RobotParams
 from host_sim.recordings.recording import Recording
 from host_sim.physics.world import World
 
@@ -53,10 +53,9 @@ FIT_XTOL = 1e-4  # and when the steps it tries shrink below this share of its pa
 # (tests/test_diagnosis.py::test_a_fit_stops_once_the_steps_it_tries_are_tiny)
 TIE_BIC = 2.0  # a BIC difference below this is no evidence either way (Kass & Raftery 1995)
 AMBIGUITY = 0.02  # held-out costs within 2 % of the chosen one: "explains it equally well"
-DRIVE_EFFECTS = ("dry_friction", "viscous_friction", "wheel_radius", "torque_constant", "encoder_scale", "backlash",
-                 "track_width", "actuator_delay", "current_limit", "battery_resistance", "traction_limit",
-                 "caster_drag", "turning_resistance", "com_offset", "mass")
-SENSOR_EFFECTS = ("ir_offset", "ir_gain", "ambient_leakage", "ir_misalignment")  # plainest first: ties go to it
+DRIVE_EFFECTS = E.names_of_kind("drive", "robot")  # the library's order, plainest first: ties go to it
+SENSOR_EFFECTS = E.names_of_kind("sensor")
+RING_EFFECTS = E.names_of_kind("ring")
 LEAK_DISTINCT_COUNTS = 3.0  # counts (one reading's noise): a leak that varies less over the recording is a constant
 LEAK_STRONG_BIC = 10.0  # BIC by which such a leak must beat the sensor's offset to be named (Kass & Raftery)
 AMBIENT_SMOOTH_S = 0.5  # s: the ambient light is judged on a running mean (the readings' own noise is not light)
@@ -98,7 +97,7 @@ def candidates_for(channels: list[str]) -> list[Candidate]:
     for k in sensors:
         out += [Candidate(name, k) for name in SENSOR_EFFECTS]
     if sensors:
-        out.append(Candidate("ir_latency", "both"))
+        out += [Candidate(name, "both") for name in RING_EFFECTS]
     return out
 
 
@@ -141,9 +140,9 @@ class Objective:
         self.test_columns: dict[str, np.ndarray] = {}  # channel (or window total) -> its held-out residuals' columns
 
     def residuals(self, robots: list[RobotParams], part: str = "both") -> tuple[np.ndarray, np.ndarray]:
-        """(train (N, n), test (N, m)) weighted residuals of N twins: with workers (select), the robots of
-        each machinery (windows.by_machinery), cut into shares (worker_shares), in processes of their own;
-        a robot's figures do not depend on the others in its batch.
+        """(train (N, n), test (N, m)) weighted residuals of N twins: with workers (select), the robots
+        grouped by step parts (windows.by_step_parts), cut into shares (worker_shares), in processes of their
+        own; a robot's figures do not depend on the others in its batch.
         part: "train" or "test" runs those windows alone (the other comes back with no columns): each
         window's twin starts on its own, so its residuals are the same either way.
         A twin asked for twice runs once: the screening asks for the current model again as each candidate's
@@ -153,7 +152,7 @@ class Objective:
             train, test = self.residuals(distinct, part)
             return train[where], test[where]
         workers = self.workers
-        groups = (worker_shares(by_machinery(robots), self.worker_count)
+        groups = (worker_shares(by_step_parts(robots), self.worker_count)
                   if workers is not None and not self.sensors_only else [])
         if workers is not None and len(groups) > 1:
             self.evaluations += len(robots)
@@ -230,7 +229,7 @@ def _distinct(robots: list[RobotParams]) -> tuple[list[RobotParams], np.ndarray]
 def worker_shares(groups: list[list[int]], workers: int) -> list[list[int]]:
     """Groups of robots cut so that none holds more than its share of them all (1 / workers), largest first,
     for the workers to take in turn: on a slippery floor or with a gear's play, nearly all of a screening's
-    robots are of one machinery (tests/test_diagnosis.py::test_workers_share_a_large_batch_in_runs_of_neighbours)."""
+    robots share one set of step parts (tests/test_diagnosis.py::test_workers_share_a_large_batch_in_runs_of_neighbours)."""
     share = max(-(-sum(len(ix) for ix in groups) // max(workers, 1)), MIN_SHARE)
     # in runs of neighbours, not every n-th robot: a batch steps as its dearest robot needs, and neighbours
     # are one candidate's values, which step alike
@@ -255,8 +254,8 @@ def _apply_all(base: RobotParams, effects: list[Candidate], values: list[list[fl
 def fit_model(obj: Objective, base: RobotParams, effects: list[Candidate], start: list[list[float]]) -> Model:
     """Bounded least squares of the effects' parameters on the training windows."""
     sizes = [len(E.LIBRARY[c.name].params) for c in effects]
-    lo, hi = _bounds(effects)
-    x0 = fit_start(effects, start)
+    lo, hi = _bounds(effects, base)
+    x0 = fit_start(effects, start, base)
     step = 1e-3 * (hi - lo)
 
     def unpack(x: np.ndarray) -> list[list[float]]:
@@ -289,16 +288,17 @@ def fit_model(obj: Objective, base: RobotParams, effects: list[Candidate], start
     return model
 
 
-def _bounds(effects: list[Candidate]) -> tuple[np.ndarray, np.ndarray]:
-    return (np.concatenate([E.bounds(c.name)[0] for c in effects]),
-            np.concatenate([E.bounds(c.name)[1] for c in effects]))
+def _bounds(effects: list[Candidate], base: RobotParams) -> tuple[np.ndarray, np.ndarray]:
+    """The fit's bounds: the library's, narrowed to what base's parameter checks admit (E.bounds)."""
+    return (np.concatenate([E.bounds(c.name, base)[0] for c in effects]),
+            np.concatenate([E.bounds(c.name, base)[1] for c in effects]))
 
 
-def fit_start(effects: list[Candidate], start: list[list[float]]) -> np.ndarray:
+def fit_start(effects: list[Candidate], start: list[list[float]], base: RobotParams = DEFAULT) -> np.ndarray:
     """Where a fit of these effects from `start` really starts: a little inside the bounds.  scipy's trust
     region starts with a radius in proportion to x0 (scaled), so a start on a bound of 0 (an absent latency,
     backlash, drag...) would never leave it."""
-    lo, hi = _bounds(effects)
+    lo, hi = _bounds(effects, base)
     inside = START_INSIDE * (hi - lo)
     return np.clip(np.concatenate(start), lo + inside, hi - inside)
 
@@ -350,14 +350,14 @@ def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candid
     robots = [current.params]
     slots = []
     for cand in cands:
-        lo, hi = (np.array(b) for b in E.bounds(cand.name))
+        lo, hi = (np.array(b) for b in E.bounds(cand.name, base))
         x0 = np.array(_start_values(base, cand))
         h = np.where(x0 + 1e-2 * (hi - lo) <= hi, 1e-2 * (hi - lo), -1e-2 * (hi - lo))
         first = len(robots)
         robots.append(E.apply(current.params, cand.name, cand.site, list(x0)))
         robots += [E.apply(current.params, cand.name, cand.site, list(x0 + np.eye(len(x0))[i] * h[i]))
                    for i in range(len(x0))]
-        trials = screen_trials(cand.name, float(x0[0]))
+        trials = screen_trials(cand.name, float(x0[0]), base)
         robots += [E.apply(current.params, cand.name, cand.site, [x]) for x in trials]
         slots.append((first, x0, h, lo - x0, hi - x0, trials))
     train, _test = obj.residuals(robots, part="train")
@@ -400,11 +400,11 @@ def zoom(obj: Objective, base: RobotParams, current: Model,
         if len(start) != 1:
             grids.append([])
         elif start[0] not in xs:  # a linear step's start
-            grids.append([float(fit_start([cand], [start])[0])])
+            grids.append([float(fit_start([cand], [start], base)[0])])
         else:
             k = xs.index(start[0])
             lo, hi = xs[max(k - 1, 0)], xs[min(k + 1, len(xs) - 1)]
-            grid = (np.geomspace(lo, hi, ZOOM_POINTS + 2) if lo > 0 and E.bounds(cand.name)[0][0] > 0
+            grid = (np.geomspace(lo, hi, ZOOM_POINTS + 2) if lo > 0 and E.bounds(cand.name, base)[0][0] > 0
                     else np.linspace(lo, hi, ZOOM_POINTS + 2))[1:-1]
             grids.append([float(x) for x in grid if x != start[0]])
         robots += [E.apply(current.params, cand.name, cand.site, [x]) for x in grids[-1]]
@@ -425,10 +425,10 @@ def zoom(obj: Objective, base: RobotParams, current: Model,
     return out
 
 
-def screen_trials(name: str, start: float) -> list[float]:
+def screen_trials(name: str, start: float, base: RobotParams = DEFAULT) -> list[float]:
     """The values of a one-parameter effect the screening tries outright (none for more parameters): in even
     ratios across a range of orders of magnitude, else SCREEN_STEPS of the way from its start to each bound."""
-    (lo, *more), (hi, *_) = E.bounds(name)
+    (lo, *more), (hi, *_) = E.bounds(name, base)
     if more:
         return []
     if 0 < lo <= hi / 10:
@@ -439,7 +439,7 @@ def screen_trials(name: str, start: float) -> list[float]:
 def _pinned(base: RobotParams, model: Model) -> bool:
     """The newest effect's value sits at a bound of its range that is not its absent value."""
     cand, values = model.effects[-1], model.values[-1]
-    lo, hi = E.bounds(cand.name)
+    lo, hi = E.bounds(cand.name, base)
     absent = E.absent_values(base, cand.name)
     for v, a, b, off in zip(values, lo, hi, absent):
         # 1 % of the range, or a tenth of a bound that is small against it: a driver's 36 mA limit is 26 mA
@@ -521,7 +521,7 @@ def select(obj: Objective, base: RobotParams, cands: list[Candidate],
            progress: Callable[[str], None] | None = None, located: list[str] | None = None,
            workers: int = 1, still_located: Callable[[Model, Objective], list[str]] | None = None) -> list[Model]:
     """Forward selection, then backward elimination: the chain of accepted models, nominal first.
-    workers > 1: each step's screening (by machinery, in shares) and its shortlist's fits run in that many
+    workers > 1: each step's screening (by step parts, in shares) and its shortlist's fits run in that many
     processes (forked: where a platform cannot fork, in this one).
     still_located(model, obj): the channels the locator still finds with that twin (report.diagnose); none,
     and no further effect is sought; some, and the next effect's located gain is taken on them.  It may set

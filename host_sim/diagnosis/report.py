@@ -313,14 +313,14 @@ def _effect_entry(model: Model, i: int, chain: list[Model]) -> dict[str, Any]:
     cand = model.effects[i]
     effect = E.LIBRARY[cand.name]
     entry: dict[str, Any] = {"name": cand.name}
-    if effect.site == "wheel":
+    if effect.kind == "drive":
         entry["wheel"] = cand.site
-    elif effect.site == "sensor":
+    elif effect.kind == "sensor":
         entry["sensor"] = cand.site
     entry["params"] = {prm.name: {"value": model.values[i][j], "unit": prm.unit,
                                   "ci95": list(model.ci95[i][j]) if model.ci95 else None,
                                   "field": prm.field.format(w="l" if cand.site == "left" else "r")
-                                  if effect.site == "wheel" and cand.site != "both" else prm.field}
+                                  if effect.kind == "drive" and cand.site != "both" else prm.field}
                        for j, prm in enumerate(effect.params)}
     step = chain[i + 1] if i + 1 < len(chain) else model
     before = chain[i]

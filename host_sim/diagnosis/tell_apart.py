@@ -85,7 +85,7 @@ def separation(a: ManoeuvreRun, b: ManoeuvreRun) -> list[tuple[str, float, str]]
 def tell_apart(chosen: tuple[str, RobotParams], rival: tuple[str, RobotParams]) -> str:
     """A sentence: what data would separate the chosen effect from a rival that explains the data as well."""
     (name_a, p_a), (name_b, p_b) = chosen, rival
-    kinds = {E.LIBRARY[n.split("(")[0]].site == "sensor" for n in (name_a, name_b)}
+    kinds = {E.LIBRARY[n.split("(")[0]].kind == "sensor" for n in (name_a, name_b)}
     if True in kinds:
         pair = frozenset(n.split("(")[0] for n in (name_a, name_b))
         data, why = IR_APART.get(pair, IR_DEFAULT)

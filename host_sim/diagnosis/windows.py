@@ -13,7 +13,7 @@ import numpy as np
 
 from host_sim.physics import dynamics, motors
 from host_sim.sensors import ir_sensor
-from host_sim.robot.batch import SUBSTEPS, BatchSim, machinery, robot_params
+from host_sim.robot.batch import SUBSTEPS, BatchSim, robot_params, step_parts
 from host_sim.physics.params import RobotParams
 from host_sim.recordings.recording import Recording
 from host_sim.recordings.replay import (SEED_ROWS, ReplayError, replay_inputs, sliding_rows, starts_at_rest, state_at,
@@ -176,12 +176,12 @@ def initial_states(rec: Recording, rows: np.ndarray, p: RobotParams) -> tuple[np
 def run_windows(rec: Recording, windows: Windows, params: Any, world: World | None, *,
                 base: RobotParams | None = None, substeps: int | None = None) -> WindowRun:
     """Replay every window for every parameter set (physics only; see sensors_on_track): in one batch
-    per machinery (batch.machinery), so that a few robots with a gear's play do not slow the rest.
+    per set of step parts (batch.step_parts), so that a few robots with a gear's play do not slow the rest.
 
     params: one RobotParams, a sequence of N, or a ParamBatch of N (with base).
     world: the walls (without a tracker the twin drives in an empty world).
     """
-    groups = by_machinery(params) if isinstance(params, (list, tuple)) else []
+    groups = by_step_parts(params) if isinstance(params, (list, tuple)) else []
     if len(groups) > 1:
         runs = [_run_windows(rec, windows, [params[i] for i in ix], world, base, substeps) for ix in groups]
         order = np.argsort(np.concatenate(groups))
@@ -190,11 +190,11 @@ def run_windows(rec: Recording, windows: Windows, params: Any, world: World | No
     return _run_windows(rec, windows, params, world, base, substeps)
 
 
-def by_machinery(robots: list[RobotParams] | tuple[RobotParams, ...]) -> list[list[int]]:
-    """The robots' indices grouped by the parts of the step they set going (batch.machinery), in order."""
+def by_step_parts(robots: list[RobotParams] | tuple[RobotParams, ...]) -> list[list[int]]:
+    """The robots' indices grouped by the parts of the step they set going (batch.step_parts), in order."""
     groups: dict[tuple[bool, ...], list[int]] = {}
     for i, p in enumerate(robots):
-        groups.setdefault(machinery(p), []).append(i)
+        groups.setdefault(step_parts(p), []).append(i)
     return list(groups.values())
 
 

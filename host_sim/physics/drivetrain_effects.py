@@ -1,27 +1,9 @@
-"""The drive with the library's effects switched on (host_sim/physics/effects.py, docs/effects.md): N robots, numpy.
+"""The drive with the library's effects switched on: N robots, numpy.
 
-The nominal twin's drive (host_sim/physics/drivetrain.py, motors.py, dynamics.py) is the
-fast path, and it stays exactly as it is while every drive effect holds its
-"absent" value.  When any of them is set, host_sim/batch.BatchSim takes this
-path instead, and host_sim/sim_robot.SimRobot runs its one robot through a
-BatchSim of one (so the single-robot and the batch twin are the same code
-and agree bit for bit).  The equations are the nominal ones, generalised:
-
-* per wheel i: radius r_i = r + dr_i, torque (= back-EMF) constant
-  k_i = k_t + dk_i, dry friction T_i = T_c + dT_i (stick-slip, solved in the step:
-  host_sim/physics/friction.py, as drive.drive_step), viscous c_i = c_v + dc_i;
-* the supply V = V_bat - R_int (|i_l| + |i_r|), solved with the currents it
-  allows (Newton on a piecewise-linear equation, `supply`);
-* body forces: a caster at C - a e (a = CASTER_BEHIND) dragged against its
-  velocity, F = -F_c tanh(|v_c| / eps_v) v_c / |v_c|; a scrub torque
-  M = -T_s tanh(omega / eps_w); as generalised forces on (u, omega);
-* the reduced dynamics in (u, omega) with H no longer diagonal when the
-  radii differ (docs/effects.md, "wheel_radius"), the same linearly implicit
-  midpoint step as dynamics.step and the same midpoint torque and dry friction
-  solve as drive.drive_step.
-
-With every delta at 0 these are the nominal formulas (equal to the fast path
-to rounding error): an effect's value enters continuously from "absent".
+While every drive effect is absent BatchSim takes the nominal drive (drivetrain.py), unchanged; with any
+present it takes this one, whose equations are the nominal ones generalised per wheel and with the supply,
+the caster and the tyres' scrub (docs/effects.md, "Where the effects are computed").  SimRobot runs its
+robot through a BatchSim of one here, so both twins are the same code.
 """
 from __future__ import annotations
 
@@ -32,23 +14,20 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from host_sim.physics import friction
+from host_sim.physics import effects, friction
 
 if TYPE_CHECKING:  # annotations only
     from host_sim.physics.dynamics import ParamBatch, Params, PerRobot
 
 SMOOTHING_SPEED = 0.1  # rad/s at the wheel: the caster's drag is smoothed over it
 SCRUB_SMOOTHING_SPEED = 0.01  # rad/s at the wheel: and the tyres' scrub over this, a near-Coulomb torque (stepped
-# linearly implicitly: yaw_damping).  Over 0.1 a fitted twin of MuJoCo's torsional friction stayed 5-6 points short
-# of a perfect one on the wheels (blind cases 0060 and 0080: 86 and 88 against 92 and 93); over 0.01, 92 and 93
+# linearly implicitly: yaw_damping).  Smoothed over 0.1, a fitted twin of the reference plant's torsional friction
+# stayed 5-6 fit points short of a perfect twin on the wheels; over 0.01 it matches it
 CASTER_BEHIND = 0.045  # m: the caster sits on the body's axis this far behind C (3/4 of the body radius)
 MIN_ROTOR_SHARE = 0.05  # the motor side's inertia is at least this share of wheel_inertia (backlash)
 SUPPLY_NEWTON = 8  # Newton steps on the supply voltage (converged to 1e-12 V_bat once the limits in force are found)
-# RobotParams fields that switch this path on when any robot has them away from 0.
-FIELDS = ("coulomb_friction_delta_l", "coulomb_friction_delta_r", "viscous_friction_delta_l",
-          "viscous_friction_delta_r", "wheel_radius_delta_l", "wheel_radius_delta_r", "torque_constant_delta_l",
-          "torque_constant_delta_r", "battery_resistance", "caster_drag", "turning_resistance", "backlash_l",
-          "backlash_r")
+# RobotParams fields that switch this path on when any robot has them away from 0: the library's (effects.py).
+FIELDS = effects.fields_needing("drivetrain_effects")
 
 
 def active(p: Params) -> bool:
@@ -85,7 +64,7 @@ class Drive:
     cap: np.ndarray  # (N,) mu N per wheel
     play: np.ndarray  # (N, 2) rad, half the backlash: the gear's gap is in [-play, play]
     j_b: np.ndarray  # (N,) kg m^2, the body's yaw inertia about C without the wheels' spin (H's C = j_b + ...)
-    i_r: np.ndarray  # (N, 1) kg m^2, the motor side (rotor through the gear) at the wheel: gear_play.py
+    i_r: np.ndarray  # (N, 1) kg m^2, the motor side (rotor through the gear) at the wheel: backlash.py
 
     @classmethod
     def of(cls, p: ParamBatch) -> Drive:
@@ -274,7 +253,7 @@ def drive_step(q: np.ndarray, v: np.ndarray, i_ref: ArrayLike, dt: PerRobot, d: 
 
     torque(w) -> (wheel torques, currents, V) at wheel speeds w (default wheel_torque), h the inertia in
     (u, omega) (default d.h) and t_c (N, 2) the dry friction on the wheels (default d.t_c): the backlash's
-    open gear (gear_play.py) drives a wheel with none of them."""
+    open gear (backlash.py) drives a wheel with none of them."""
     torque = torque or (lambda w: wheel_torque(i_ref, w, d))
     a, bb, c = d.h if h is None else h
     t_c = d.t_c if t_c is None else t_c
@@ -328,7 +307,7 @@ def _advance(q: np.ndarray, v: np.ndarray, v1: np.ndarray, u: np.ndarray, om: np
 
 def traction_ok(v0: np.ndarray, v1: np.ndarray, tau: np.ndarray, dt: PerRobot, d: Drive, iw: np.ndarray | None = None) -> np.ndarray:
     """contact.traction_ok_batch with per-wheel radii; the caster carries its own sideways force.  tau: the
-    torques on the wheels as iw (default d.iw, both) turn with them (gear_play.py: the gear's, on the wheel's own)."""
+    torques on the wheels as iw (default d.iw, both) turn with them (backlash.py: the gear's, on the wheel's own)."""
     iw = d.iw[:, None] if iw is None else iw
     f = (tau - iw * (v1 - v0) / (dt if np.ndim(dt) == 0 else np.asarray(dt)[:, None])) / d.radius
     u0, w0 = _uw(v0, d)

@@ -1,124 +1,235 @@
-"""The library of effects: physics the nominal twin leaves out, each a set of robot parameters.
+"""The library of effects: physics the nominal twin leaves out, each one entry of LIBRARY.
 
-An effect is real physics inside the twin (host_sim's motors, dynamics,
-contact and sensor models read these parameters on the single-robot and the
-batch path alike), not a correction of its outputs.  Every effect is absent
-by default: its parameters hold the value that means "not there", so the
-nominal twin is unchanged.  A parameter file (host_sim/physics/params.py) can set
-any of them; `twinbot diagnose --write-params` writes the ones it fitted.
-
-    p = apply(DEFAULT, "dry_friction", "left", [0.002])   # 2 mN m more at the left axle
-    values(p, "dry_friction", "left")                      # [0.002]
-
-Each effect: its name (as diagnosis reports it), where it sits ("wheel":
-left/right/both, "sensor": 0..7, "robot", "ring": all eight sensors), and its
-parameters: the RobotParams field each one sets (per wheel: *_l / *_r; per
-sensor: an element of an 8-tuple), unit, bounds for fitting, and the absent
-value.  docs/effects.md gives the equation of each.
+An entry declares everything about its effect but the physics: its kind, the
+RobotParams fields it sets, their units, fitting bounds and absent values, the
+values a parameter file may give them, and the optional parts of the step it
+needs.  params.py, drivetrain_effects.FIELDS, batch.step_parts, the fit and the
+bench's scorer derive from it.  Reference: docs/effects.md.
 """
 from __future__ import annotations
 
 import dataclasses
+import functools
+import math
 from dataclasses import dataclass
-
-from host_sim.physics.params import RobotParams
+from typing import TypeVar
 
 WHEEL_SITES = ("left", "right", "both")
+KINDS = ("drive", "robot", "sensor", "ring")
+# The optional parts of the robot's step an effect sets going while present (batch.step_parts): the drive
+# with effects (drivetrain_effects.py), the gear's play (backlash.py), the delayed current reference.
+STEP_PARTS = ("drivetrain_effects", "backlash", "delayed_reference")
+STRICT_MARGIN = 1e-6  # of a parameter's declared range: how far inside an excluded end its fit bounds stay
+
+RobotLike = TypeVar("RobotLike")  # a RobotParams (this module sits below params.py, which checks through it)
+
+
+@dataclass(frozen=True)
+class Admits:
+    """The values a parameter file may give a field; params.params_from_dict refuses others, and a fit's
+    bounds stay inside them (`bounds`).  The value checked is the field's, or for a delta the total
+    `added_to` + field; its ends are multiples of the field `per` (if any) and excluded when `strict`."""
+
+    lowest: float = -math.inf
+    highest: float = math.inf
+    strict: bool = False
+    added_to: str | None = None  # the nominal field a delta is added to
+    per: str | None = None  # com_offset: its ends are multiples of body_radius
+    says: str = ""  # the refusal's wording where the ends alone do not say it
+
+    def ends(self, p: object) -> tuple[float, float]:
+        """The values the field itself may hold in robot p (excluded ends when strict)."""
+        scale = float(getattr(p, self.per)) if self.per else 1.0
+        shift = float(getattr(p, self.added_to)) if self.added_to else 0.0
+        return self.lowest * scale - shift, self.highest * scale - shift
+
+    def refusal(self, field: str, p: object) -> str | None:
+        """Why robot p's value of `field` is refused, or None."""
+        value = float(getattr(p, field))
+        total = float(getattr(p, self.added_to)) + value if self.added_to else value
+        scale = float(getattr(p, self.per)) if self.per else 1.0
+        lo, hi = self.lowest * scale, self.highest * scale
+        if (lo < total < hi) if self.strict else (lo <= total <= hi):
+            return None
+        if self.added_to:
+            return (f"'{field}' leaves {self.added_to} + {field} = {total:g}, which must be "
+                    f"{'positive' if self.strict else '>= 0'}")
+        if self.says:
+            return f"'{field}' must {self.says}, got {value}"
+        if math.isfinite(hi):
+            return f"'{field}' must be in {lo:g}..{hi:g}, got {value}"
+        return f"'{field}' must be {'positive' if self.strict else '>= 0'}, got {value}"
+
+
+ANY = Admits()
+AT_LEAST_ZERO = Admits(0.0)
+POSITIVE = Admits(0.0, strict=True)
+
+
+def total_at_least_zero(nominal: str) -> Admits:
+    return Admits(0.0, added_to=nominal)
+
+
+def total_above(lowest: float, nominal: str) -> Admits:
+    return Admits(lowest, strict=True, added_to=nominal)
 
 
 @dataclass(frozen=True)
 class Param:
     name: str  # as reported ("torque", "radius", ...)
-    field: str  # RobotParams field; "{w}" is replaced by l / r for a wheel effect
+    field: str  # RobotParams field; "{w}" is replaced by l / r for a drive effect
     unit: str
-    lower: float  # bounds of the fitted value, in the field's own terms
+    lower: float  # declared bounds of the fitted value, in the field's own terms (`bounds` narrows them)
     upper: float
     absent: float | None = None  # None: the nominal robot's own value of the field
+    admits: Admits = ANY
+    in_proportion: tuple[str, ...] = ()  # fields scaled by the same ratio as this one (the body's inertia)
 
 
 @dataclass(frozen=True)
 class Effect:
     name: str
-    site: str  # "wheel" | "sensor" | "robot" | "ring"
+    kind: str  # "drive": at a wheel (left, right or both); "robot": the whole robot; "sensor": one IR pair
+    # (0..7); "ring": all eight IR pairs at once
     params: tuple[Param, ...]
     doc: str
+    step_parts: tuple[str, ...] = ()  # of STEP_PARTS: what the step needs while the effect is present
 
     def sites(self) -> tuple[str | int, ...]:
-        if self.site == "wheel":
+        if self.kind == "drive":
             return WHEEL_SITES
-        if self.site == "sensor":
+        if self.kind == "sensor":
             return tuple(range(8))
         return ("both",)
 
+    def fields(self, prm: Param) -> tuple[str, ...]:
+        """The RobotParams fields the parameter sets: both wheels' for a drive effect."""
+        return tuple(prm.field.format(w=w) for w in "lr") if self.kind == "drive" else (prm.field,)
 
-def _wheel(name: str, field: str, unit: str, lower: float, upper: float, doc: str) -> Effect:
-    return Effect(name, "wheel", (Param(name, field + "_{w}", unit, lower, upper, 0.0),), doc)
+
+def _drive(name: str, field: str, unit: str, lower: float, upper: float, doc: str, admits: Admits,
+           step_parts: tuple[str, ...] = ("drivetrain_effects",)) -> Effect:
+    return Effect(name, "drive", (Param(name, field + "_{w}", unit, lower, upper, 0.0, admits),), doc, step_parts)
 
 
 def _robot(name: str, pname: str, field: str, unit: str, lower: float, upper: float, doc: str,
-           absent: float | None = 0.0) -> Effect:
-    return Effect(name, "robot", (Param(pname, field, unit, lower, upper, absent),), doc)
+           admits: Admits, absent: float | None = 0.0, step_parts: tuple[str, ...] = ()) -> Effect:
+    return Effect(name, "robot", (Param(pname, field, unit, lower, upper, absent, admits),), doc, step_parts)
 
 
 def _sensor(name: str, field: str, unit: str, lower: float, upper: float, absent: float, doc: str) -> Effect:
     return Effect(name, "sensor", (Param(name, field, unit, lower, upper, absent),), doc)
 
 
+# The order is the fit's order of candidates: of effects the data cannot tell apart, the first is named
+# (the plainer physics; fit._plainest).
 LIBRARY: dict[str, Effect] = {e.name: e for e in (
-    _wheel("dry_friction", "coulomb_friction_delta", "N m", -1.5e-3, 1e-2,
-           "dry (Coulomb) friction at the wheel's axle beyond the nominal (smoothed like it over 0.1 rad/s: "
-           "no stick-slip yet, docs/effects.md)"),
-    _wheel("viscous_friction", "viscous_friction_delta", "N m s/rad", -2e-4, 2e-3,
-           "viscous friction at the wheel's axle beyond the nominal"),
-    _wheel("wheel_radius", "wheel_radius_delta", "m", -3e-3, 3e-3, "the wheel's radius minus the nominal"),
-    _wheel("torque_constant", "torque_constant_delta", "N m/A", -1.5e-3, 1.5e-3,
-           "the motor's torque (= back-EMF) constant minus the nominal"),
-    _wheel("encoder_scale", "ticks_per_rev_delta", "ticks", -150.0, 150.0,
-           "encoder counts per wheel turn minus the nominal"),
-    _wheel("backlash", "backlash", "rad", 0.0, 0.3, "play in the gear between the motor (and encoder) and "
-                                                  "the wheel"),
+    _drive("dry_friction", "coulomb_friction_delta", "N m", -1.5e-3, 1e-2,
+           "dry (Coulomb) friction at the wheel's axle beyond the nominal", total_at_least_zero("coulomb_friction")),
+    _drive("viscous_friction", "viscous_friction_delta", "N m s/rad", -2e-4, 2e-3,
+           "viscous friction at the wheel's axle beyond the nominal", total_at_least_zero("viscous_friction")),
+    _drive("wheel_radius", "wheel_radius_delta", "m", -3e-3, 3e-3, "the wheel's radius minus the nominal",
+           total_above(0.0, "wheel_radius")),
+    _drive("torque_constant", "torque_constant_delta", "N m/A", -1.5e-3, 1.5e-3,
+           "the motor's torque (= back-EMF) constant minus the nominal", total_above(0.0, "torque_constant")),
+    _drive("encoder_scale", "ticks_per_rev_delta", "ticks", -150.0, 150.0,
+           "encoder counts per wheel turn minus the nominal", total_above(0.5, "ticks_per_rev"), step_parts=()),
+    _drive("backlash", "backlash", "rad", 0.0, 0.3, "play in the gear between the motor (and encoder) and the wheel",
+           AT_LEAST_ZERO, step_parts=("drivetrain_effects", "backlash")),
     _robot("track_width", "half_axle", "half_axle", "m", 0.035, 0.065,
-           "half the distance between the wheels' contact points", absent=None),
+           "half the distance between the wheels' contact points", POSITIVE, absent=None),
     _robot("actuator_delay", "delay", "actuator_delay", "s", 0.0, 0.2,
-           "a new current reference reaches the drivers this late"),
-    _robot("current_limit", "limit", "current_limit", "A", 0.01, 3.0, "the drivers' current limit", absent=None),
+           "a new current reference reaches the drivers this late", AT_LEAST_ZERO,
+           step_parts=("delayed_reference",)),
+    _robot("current_limit", "limit", "current_limit", "A", 0.01, 3.0, "the drivers' current limit",
+           Admits(0.0, 1e3), absent=None),
     _robot("battery_resistance", "resistance", "battery_resistance", "ohm", 0.0, 10.0,
-           "the battery's internal resistance: its voltage sags with the current drawn"),
+           "the battery's internal resistance: its voltage sags with the current drawn", AT_LEAST_ZERO,
+           step_parts=("drivetrain_effects",)),
     _robot("traction_limit", "mu", "wheel_friction", "-", 0.02, 2.0,
-           "tyre-floor friction coefficient: beyond it the wheels slip", absent=None),
-    _robot("caster_drag", "force", "caster_drag", "N", 0.0, 0.5, "the caster's drag, against the motion"),
+           "tyre-floor friction coefficient: beyond it the wheels slip", AT_LEAST_ZERO, absent=None),
+    _robot("caster_drag", "force", "caster_drag", "N", 0.0, 0.5, "the caster's drag, against the motion",
+           AT_LEAST_ZERO, step_parts=("drivetrain_effects",)),
     _robot("turning_resistance", "torque", "turning_resistance", "N m", 0.0, 0.01,
-           "the tyres' scrub torque, against turning"),
-    _robot("com_offset", "d", "com_offset", "m", -0.03, 0.05, "the centre of mass ahead of the axle centre (behind it: negative)",
-           absent=None),
-    _robot("mass", "mass", "body_mass", "kg", 0.2, 1.2, "the body's mass (its yaw inertia in proportion)",
-           absent=None),
-    _sensor("ir_gain", "ir_gain_scale", "-", 0.2, 3.0, 1.0, "the IR pair's optical efficiency, relative"),
-    _sensor("ir_misalignment", "ir_misalignment", "rad", -0.5, 0.5, 0.0,
-            "the IR pair's axis turned counter-clockwise from its bearing"),
+           "the tyres' scrub torque, against turning", AT_LEAST_ZERO, step_parts=("drivetrain_effects",)),
+    _robot("com_offset", "d", "com_offset", "m", -0.03, 0.05,
+           "the centre of mass ahead of the axle centre (behind it: negative)",
+           Admits(-1.0, 1.0, strict=True, per="body_radius",
+                  says="lie inside the body, between -body_radius and body_radius (G ahead of C, or behind it "
+                       "if negative)"), absent=None),
+    Effect("mass", "robot", (Param("mass", "body_mass", "kg", 0.2, 1.2, None, POSITIVE, ("body_inertia",)),),
+           "the body's mass (its yaw inertia in proportion)"),
     _sensor("ir_offset", "ir_offset", "counts", -300.0, 300.0, 0.0, "added to the emitter-on reading"),
+    _sensor("ir_gain", "ir_gain_scale", "-", 0.2, 3.0, 1.0, "the IR pair's optical efficiency, relative"),
     _sensor("ambient_leakage", "ambient_leakage", "-", -0.5, 0.5, 0.0,
             "fraction of the ambient light the emitter-on reading sees on top of the emitter-off one"),
+    _sensor("ir_misalignment", "ir_misalignment", "rad", -0.5, 0.5, 0.0,
+            "the IR pair's axis turned counter-clockwise from its bearing"),
     Effect("ir_latency", "ring", (Param("latency", "ir_latency", "s", 0.0, 0.2, 0.0),),
            "the IR readings describe the robot's pose this long ago"),
 )}
 
 
+def names_of_kind(*kinds: str) -> tuple[str, ...]:
+    """The library's effects of these kinds, in its order."""
+    return tuple(name for name, e in LIBRARY.items() if e.kind in kinds)
+
+
+@functools.cache
+def fields_needing(part: str) -> tuple[str, ...]:
+    """The RobotParams fields of the effects that need this part of the step (STEP_PARTS)."""
+    return tuple(f for e in LIBRARY.values() if part in e.step_parts for prm in e.params for f in e.fields(prm))
+
+
+def ranges() -> dict[str, tuple[float, float]]:
+    """The fields whose admitted values are a plain closed range (params checks these with its own ranges)."""
+    return {f: (prm.admits.lowest, prm.admits.highest) for e in LIBRARY.values() for prm in e.params
+            for f in e.fields(prm) if prm.admits == Admits(prm.admits.lowest, prm.admits.highest)
+            and math.isfinite(prm.admits.lowest) and math.isfinite(prm.admits.highest)}
+
+
+def refusal(p: object) -> str | None:
+    """Why robot p's effect fields are refused (the first reason, in the library's order), or None."""
+    for effect in LIBRARY.values():
+        for prm in effect.params:
+            if prm.admits == ANY:
+                continue
+            for field in effect.fields(prm):
+                if (why := prm.admits.refusal(field, p)) is not None:
+                    return why
+    return None
+
+
+def bounds(name: str, base: object | None = None) -> tuple[list[float], list[float]]:
+    """The fit's bounds of each parameter: the declared ones, narrowed for robot `base` to what its
+    checks admit (Admits), so that a fitted twin always loads (tests/test_effects_library.py)."""
+    lower, upper = [], []
+    for prm in LIBRARY[name].params:
+        lo, hi = prm.lower, prm.upper
+        if base is not None and prm.admits != ANY:
+            end_lo, end_hi = prm.admits.ends(base)
+            margin = STRICT_MARGIN * (prm.upper - prm.lower) if prm.admits.strict else 0.0
+            lo, hi = max(lo, end_lo + margin), min(hi, end_hi - margin)
+        lower.append(lo)
+        upper.append(hi)
+    return lower, upper
+
+
 def _fields(effect: Effect, site: str | int) -> list[tuple[Param, list[tuple[str, int | None]]]]:
     """Per parameter: the (field, tuple index) it sets at this site."""
-    out = []
+    out: list[tuple[Param, list[tuple[str, int | None]]]] = []
     for prm in effect.params:
-        if effect.site == "wheel":
+        if effect.kind == "drive":
             wheels = ("l", "r") if site == "both" else (str(site)[0],)
             out.append((prm, [(prm.field.format(w=w), None) for w in wheels]))
-        elif effect.site == "sensor":
+        elif effect.kind == "sensor":
             out.append((prm, [(prm.field, int(site))]))
         else:
             out.append((prm, [(prm.field, None)]))
     return out
 
 
-def apply(p: RobotParams, name: str, site: str | int, values: list[float]) -> RobotParams:
+def apply(p: RobotLike, name: str, site: str | int, values: list[float]) -> RobotLike:
     """p with effect `name` at `site` set to `values` (one per parameter)."""
     effect = LIBRARY[name]
     if len(values) != len(effect.params):
@@ -132,12 +243,12 @@ def apply(p: RobotParams, name: str, site: str | int, values: list[float]) -> Ro
                 current = list(changes.get(field, getattr(p, field)))  # type: ignore[call-overload]
                 current[index] = float(value)
                 changes[field] = tuple(current)
-    if name == "mass":
-        changes["body_inertia"] = p.body_inertia * float(values[0]) / p.body_mass
-    return dataclasses.replace(p, **changes)  # type: ignore[arg-type]
+        for other in prm.in_proportion:
+            changes[other] = getattr(p, other) * float(value) / getattr(p, prm.field)
+    return dataclasses.replace(p, **changes)  # type: ignore[type-var]
 
 
-def values(p: RobotParams, name: str, site: str | int) -> list[float]:
+def values(p: object, name: str, site: str | int) -> list[float]:
     """The effect's parameter values in p at site (for "both" wheels: the left's)."""
     out = []
     for _prm, targets in _fields(LIBRARY[name], site):
@@ -147,11 +258,6 @@ def values(p: RobotParams, name: str, site: str | int) -> list[float]:
     return out
 
 
-def absent_values(p: RobotParams, name: str) -> list[float]:
+def absent_values(p: object, name: str) -> list[float]:
     """The values meaning "not there": fixed ones, or the nominal robot's own."""
     return [prm.absent if prm.absent is not None else float(getattr(p, prm.field)) for prm in LIBRARY[name].params]
-
-
-def bounds(name: str) -> tuple[list[float], list[float]]:
-    params = LIBRARY[name].params
-    return [q.lower for q in params], [q.upper for q in params]

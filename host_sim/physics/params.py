@@ -1,17 +1,9 @@
-"""The robot's parameters: one documented set, with units.
+"""The robot's parameters: one documented set, with units, and the checks of a parameter file.
 
-Every other layer reads them from here: the dynamics, the motors, the IR
-sensor model, the encoders, the simulator's hardware link and the
-identification tools (which see them as a plain vector with names, see
-`to_vector` / `from_vector`).  The firmware cannot import this (it runs on
-a microcontroller); firmware/config.py repeats the geometry it needs and a
-test checks that the two agree.
-
-Values describe a robot of about 12 cm diameter: two N20-class gear motors
-(50:1) on 42 mm wheels, eight IR emitter/phototransistor pairs on the rim,
-a 2S LiPo battery.  A parameter file is JSON: {"name": value, ...} with any
-subset of the names below; `load_params` says precisely what is wrong with
-a bad one.
+Every layer reads them from here (identification sees them as a named vector:
+`to_vector` / `from_vector`); firmware/config.py repeats the geometry it needs.
+A parameter file is JSON {"name": value, ...} with any subset of the names
+below.  References: docs/dynamics.md, docs/effects.md (the effects' fields).
 """
 from __future__ import annotations
 
@@ -21,6 +13,8 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, TypeVar
+
+from host_sim.physics import effects
 
 T = TypeVar("T")
 
@@ -106,6 +100,7 @@ class RobotParams:
 
     # --- effects (host_sim/physics/effects.py, docs/effects.md): physics the nominal twin leaves out.
     # Each holds the value meaning "absent" by default; diagnosis fits them, a parameter file sets them.
+    # The library declares their checks (tests/test_effects_library.py: its fields and units agree with these).
     coulomb_friction_delta_l: float = _p(0.0, "N m", "left axle's dry friction beyond coulomb_friction")
     coulomb_friction_delta_r: float = _p(0.0, "N m", "right axle's dry friction beyond coulomb_friction")
     viscous_friction_delta_l: float = _p(0.0, "N m s/rad", "left axle's viscous friction beyond viscous_friction")
@@ -191,12 +186,14 @@ class ParamsError(ValueError):
 
 # What a parameter file may say beyond "finite and positive": whole numbers
 # where the hardware counts, and ranges outside which the models overflow or
-# stop meaning anything (readings travel as 16-bit fields on the wire).
+# stop meaning anything (readings travel as 16-bit fields on the wire).  The
+# fields an effect of the library sets are checked as it declares (effects.Admits).
 INTEGER_PARAMS = {"adc_bits": (8, 16), "ticks_per_rev": (1, 1_000_000)}
 PARAM_RANGES = {
     "ir_saturation": (0.0, 1.0), "ir_on_delay": (0.0, 0.04), "ir_noise": (0.0, 1e4),
-    "viscous_friction": (0.0, 1e3), "coulomb_friction": (0.0, 1e3), "current_limit": (0.0, 1e3),
+    "viscous_friction": (0.0, 1e3), "coulomb_friction": (0.0, 1e3),
     "ir_blend": (1.0, 1e3), "ir_gain": (0.0, 1e6), "ir_ambient": (0.0, 1e6), "ir_near_peak": (0.0, 1.0),
+    **effects.ranges(),  # the library's fields with a range of their own (current_limit), checked as these
 }
 MAX_MAGNITUDE = 1e9  # any other scalar, in its unit
 
@@ -226,39 +223,19 @@ def params_from_dict(data: object, where: str = "parameters") -> RobotParams:
             changes[name] = float(value)
     _check_ranges(changes, where)
     params = dataclasses.replace(RobotParams(), **changes)  # type: ignore[arg-type]
-    for name in ("wheel_radius", "half_axle", "body_radius", "body_mass", "wheel_mass", "body_inertia",
+    for name in ("wheel_radius", "body_radius", "wheel_mass", "body_inertia",
                  "wheel_inertia", "torque_constant", "armature_resistance", "gear_ratio", "ticks_per_rev",
                  "battery_voltage", "sensor_range", "adc_bits"):
         if getattr(params, name) <= 0:
             raise ParamsError(f"{where}: '{name}' must be positive, got {getattr(params, name)}")
-    if not -params.body_radius < params.com_offset < params.body_radius:
-        raise ParamsError(f"{where}: 'com_offset' must lie inside the body, between -body_radius and body_radius "
-                          f"(G ahead of C, or behind it if negative), got {params.com_offset}")
-    for name in ("wheel_friction", "wall_friction"):
-        if getattr(params, name) < 0:
-            raise ParamsError(f"{where}: '{name}' must be >= 0, got {getattr(params, name)}")
+    if params.wall_friction < 0:
+        raise ParamsError(f"{where}: 'wall_friction' must be >= 0, got {params.wall_friction}")
     if not 0 < params.gear_efficiency <= 1:
         raise ParamsError(f"{where}: 'gear_efficiency' must be in (0, 1], got {params.gear_efficiency}")
-    _check_effects(params, where)
+    why = effects.refusal(params)
+    if why is not None:
+        raise ParamsError(f"{where}: {why}")
     return params
-
-
-def _check_effects(p: RobotParams, where: str) -> None:
-    """The library's effects (host_sim/physics/effects.py) must leave a robot that exists."""
-    for w in ("l", "r"):
-        for base, delta, lowest in (("wheel_radius", "wheel_radius_delta", 0.0),
-                                    ("torque_constant", "torque_constant_delta", 0.0),
-                                    ("ticks_per_rev", "ticks_per_rev_delta", 0.5),
-                                    ("coulomb_friction", "coulomb_friction_delta", -1e-300),
-                                    ("viscous_friction", "viscous_friction_delta", -1e-300)):
-            total = getattr(p, base) + getattr(p, f"{delta}_{w}")
-            if not total > lowest:
-                raise ParamsError(f"{where}: '{delta}_{w}' leaves {base} + {delta}_{w} = {total:g}, which must be "
-                                  f"{'positive' if lowest >= 0 else '>= 0'}")
-    for name in ("backlash_l", "backlash_r", "actuator_delay", "battery_resistance", "caster_drag",
-                 "turning_resistance"):
-        if getattr(p, name) < 0:
-            raise ParamsError(f"{where}: '{name}' must be >= 0, got {getattr(p, name)}")
 
 
 def _check_ranges(changes: dict[str, object], where: str) -> None:

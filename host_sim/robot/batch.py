@@ -16,7 +16,7 @@ from typing import Any, TypeGuard, Union, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
-from host_sim.physics import contact, drivetrain, drivetrain_effects, dynamics, backlash, motors
+from host_sim.physics import contact, drivetrain, drivetrain_effects, dynamics, backlash, effects, motors
 from host_sim.sensors import ir_sensor
 from host_sim.physics.dynamics import ParamBatch, Params, PerRobot
 from host_sim.controller.hardware_io import CYCLE_S
@@ -581,12 +581,13 @@ class BatchSim:
 # --------------------------------------------------------------------------- #
 # Identification: N parameter sets replaying one recording
 # --------------------------------------------------------------------------- #
-def machinery(p: RobotParams) -> tuple[bool, bool, bool]:
-    """The optional parts of BatchSim's step a robot sets going: the drive with effects, a gear's play, an
-    actuator delay.  A batch runs every robot through each part one of them needs (a gear's play is the
-    dearest), so robots batched by their machinery run faster (diagnosis.windows.run_windows).  A robot's
-    figures do not depend on its batch: each robot's contact solve stops where its own impulses settle."""
-    return (drivetrain_effects.active(p), bool(p.backlash_l or p.backlash_r), bool(p.actuator_delay))
+def step_parts(p: RobotParams) -> tuple[bool, ...]:
+    """Which optional parts of BatchSim's step (effects.STEP_PARTS) robot p sets going: the drive with
+    effects, a gear's play, an actuator delay; each when an effect of the library that needs it is present.
+    A batch runs every robot through each part one of them needs (a gear's play is the dearest), so robots
+    batched by their step parts run faster (diagnosis.windows.run_windows).  A robot's figures do not depend
+    on its batch: each robot's contact solve stops where its own impulses settle."""
+    return tuple(any(getattr(p, f) != 0.0 for f in effects.fields_needing(part)) for part in effects.STEP_PARTS)
 
 
 def robot_params(params: ParamSets, base: RobotParams | None
@@ -600,4 +601,4 @@ def robot_params(params: ParamSets, base: RobotParams | None
     return robots, robots
 
 
-__all__ = ["BatchSim", "BatchResult", "machinery", "robot_params", "IR_FIELDS", "CYCLE_S", "SUBSTEPS"]
+__all__ = ["BatchSim", "BatchResult", "step_parts", "robot_params", "IR_FIELDS", "CYCLE_S", "SUBSTEPS"]

@@ -19,6 +19,7 @@ from host_sim.physics import effects as library
 from host_sim.physics.params import RobotParams
 from host_sim.recordings.recording import Recording
 from host_sim.physics.world import world_from_dict
+from tools.reference_plant import effects as plant_effects
 from tools.reference_plant.cases import truth_file
 from tools.reference_plant.robot_model import CASTER_X
 
@@ -44,9 +45,10 @@ class ParamMap:
     relative_to: str  # the error's denominator: "change" |true - absent| or "value" |true|
 
 
-# One row per plant effect (tools/reference_plant/effects.py) -> the library effect of the same name.
-#   same:          the library parameter is the same physical quantity
-#   minus nominal: the library holds a delta from the nominal RobotParams field (true - nominal)
+# How each plant effect's true value reads in the library's terms, derived from the two libraries by name
+# (tools/reference_plant/effects.py, host_sim/physics/effects.py):
+#   same:          the library parameter is the same physical quantity (the default)
+#   minus nominal: the library holds a delta added to a nominal RobotParams field (true - nominal)
 #   caster load:   the library holds the caster's drag FORCE (N): mu_caster x the caster's normal load,
 #                  N_c = m_body g d / CASTER_X (moments about the axle, level floor; d = com_offset)
 #   scrub load:    the library holds the scrub TORQUE (N m): the plant's torsional friction (m) x the
@@ -54,30 +56,20 @@ class ParamMap:
 #   wheel load:    the library's mu grips with the whole weight (the twin's wheels carry it all): the
 #                  plant's tyre friction x the tyres' share of the weight, ((m_body + 2 m_wheel) g - N_c) / that
 # The error is |fitted - true| / denominator:
-#   change: |true - absent|, the size of the effect (a fit that stays at nominal scores 100 %)
+#   change: |true - absent|, the size of the effect (a fit that stays at nominal scores 100 %) (the default)
 #   value:  |true|, for limits whose absent value is "no limit in practice" (0.5 A, mu = 1)
-PARAMS: dict[str, ParamMap] = {
-    "dry_friction": ParamMap("coulomb_friction", "dry_friction", "minus nominal", "change"),
-    "viscous_friction": ParamMap("viscous_friction", "viscous_friction", "minus nominal", "change"),
-    "wheel_radius": ParamMap("wheel_radius", "wheel_radius", "minus nominal", "change"),
-    "torque_constant": ParamMap("torque_constant", "torque_constant", "minus nominal", "change"),
-    "encoder_scale": ParamMap("ticks_per_rev", "encoder_scale", "minus nominal", "change"),
-    "backlash": ParamMap("backlash", "backlash", "same", "change"),
-    "track_width": ParamMap("half_axle", "half_axle", "same", "change"),
-    "actuator_delay": ParamMap("actuator_delay", "delay", "same", "change"),
-    "current_limit": ParamMap("current_limit", "limit", "same", "value"),
-    "battery_resistance": ParamMap("battery_resistance", "resistance", "same", "change"),
-    "traction_limit": ParamMap("floor_friction", "mu", "wheel load", "value"),
-    "caster_drag": ParamMap("caster_friction", "force", "caster load", "change"),
-    "turning_resistance": ParamMap("torsional_friction", "torque", "scrub load", "change"),
-    "com_offset": ParamMap("com_offset", "d", "same", "change"),
-    "mass": ParamMap("body_mass", "mass", "same", "change"),
-    "ir_gain": ParamMap("ir_gain_scale", "ir_gain", "same", "change"),
-    "ir_misalignment": ParamMap("ir_misalignment", "ir_misalignment", "same", "change"),
-    "ir_offset": ParamMap("ir_offset", "ir_offset", "same", "change"),
-    "ambient_leakage": ParamMap("ambient_leakage", "ambient_leakage", "same", "change"),
-    "ir_latency": ParamMap("ir_latency", "latency", "same", "change"),
-}
+CONVERSIONS = {"caster_drag": "caster load", "turning_resistance": "scrub load", "traction_limit": "wheel load"}
+RELATIVE_TO_VALUE = ("current_limit", "traction_limit")
+
+
+def _param_map(name: str) -> ParamMap:
+    prm = library.LIBRARY[name].params[0]
+    conversion = CONVERSIONS.get(name, "minus nominal" if prm.admits.added_to else "same")
+    return ParamMap(plant_effects.EFFECTS[name].param, prm.name, conversion,
+                    "value" if name in RELATIVE_TO_VALUE else "change")
+
+
+PARAMS: dict[str, ParamMap] = {name: _param_map(name) for name, e in plant_effects.EFFECTS.items() if e.in_library}
 
 
 def load_key(path: str | Path) -> dict[str, Any]:
@@ -111,7 +103,8 @@ def perfect_twin_fit(exact: np.ndarray, rec: Recording, judged: list[list[float]
 
 def _nominal_field(nominal: RobotParams, library_name: str) -> float:
     """The nominal RobotParams value a "minus nominal" delta is taken from (dry_friction -> coulomb_friction)."""
-    field = library.LIBRARY[library_name].params[0].field.replace("_delta_{w}", "")
+    field = library.LIBRARY[library_name].params[0].admits.added_to
+    assert field is not None, f"{library_name} is no delta from a nominal field"
     return float(getattr(nominal, field))
 
 

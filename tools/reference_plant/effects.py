@@ -1,4 +1,4 @@
-"""Named physical effects, switched on inside the plant (never by editing its outputs).
+"""The plant's effects: named physics switched on inside the reference plant (never by editing its outputs).
 
 Each effect sets one true value of the plant's PlantSpec, so that MuJoCo, the motors or the sensor law
 produce its consequences; it has a site (wheel, robot, sensor, ring), an absent value and realistic ranges.
@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from host_sim.physics.effects import LIBRARY
 from tools.reference_plant.robot_model import PlantSpec, nominal_spec
 
 Where = str | int  # "left" | "right" | "both", or a sensor index
@@ -23,14 +24,18 @@ Where = str | int  # "left" | "right" | "both", or a sensor index
 @dataclass(frozen=True)
 class Effect:
     name: str
-    applies_to: str  # "wheel" | "robot" | "sensor" | "ring"
-    param: str
+    applies_to: str  # "wheel" (left / right / both) | "robot" | "sensor" (0..7) | "ring" (all eight)
+    param: str  # the PlantSpec value it sets (its true physical value)
     unit: str
-    absent: float
-    ranges: tuple[tuple[float, float], ...]
-    in_library: bool
+    absent: float  # the value meaning "no effect": the nominal plant's
+    ranges: tuple[tuple[float, float], ...]  # realistic values away from absent: two when it may err either way
     doc: str
     setter: Callable[[PlantSpec, float, Where], PlantSpec]
+
+    @property
+    def in_library(self) -> bool:
+        """The twin's library has an effect of this name (the scorer compares the two by name)."""
+        return self.name in LIBRARY
 
     def draw(self, rng: np.random.Generator) -> float:
         lo, hi = self.ranges[int(rng.integers(len(self.ranges)))]
@@ -77,58 +82,58 @@ def _mass(s: PlantSpec, v: float, w: Where) -> PlantSpec:
 _N = nominal_spec()
 EFFECTS: dict[str, Effect] = {e.name: e for e in (
     Effect("dry_friction", "wheel", "coulomb_friction", "N m", _N.coulomb_friction[0],
-           ((0.4e-3, 0.9e-3), (2.2e-3, 3.5e-3)), True,
+           ((0.4e-3, 0.9e-3), (2.2e-3, 3.5e-3)),
            "dry friction torque at the axle (MuJoCo joint frictionloss: holds below breakaway)",
            _wheel_field("coulomb_friction")),
     Effect("viscous_friction", "wheel", "viscous_friction", "N m s/rad", _N.viscous_friction[0],
-           ((0.5e-4, 1.2e-4), (3.0e-4, 5e-4)), True, "viscous friction at the axle (joint damping)",
+           ((0.5e-4, 1.2e-4), (3.0e-4, 5e-4)), "viscous friction at the axle (joint damping)",
            _wheel_field("viscous_friction")),
     Effect("wheel_radius", "wheel", "wheel_radius", "m", _N.wheel_radius[0],
-           ((0.0198, 0.0206), (0.0214, 0.0222)), True, "the tyre's radius (worn, or another tyre)",
+           ((0.0198, 0.0206), (0.0214, 0.0222)), "the tyre's radius (worn, or another tyre)",
            _wheel_field("wheel_radius")),
-    Effect("track_width", "robot", "half_axle", "m", _N.half_axle, ((0.0445, 0.0465), (0.0495, 0.0515)), True,
+    Effect("track_width", "robot", "half_axle", "m", _N.half_axle, ((0.0445, 0.0465), (0.0495, 0.0515)),
            "half the distance between the wheels' contact points", _robot_field("half_axle")),
-    Effect("actuator_delay", "robot", "actuator_delay", "s", 0.0, ((0.01, 0.06),), True,
+    Effect("actuator_delay", "robot", "actuator_delay", "s", 0.0, ((0.01, 0.06),),
            "a new current reference reaches the drivers this late", _robot_field("actuator_delay")),
     Effect("torque_constant", "wheel", "torque_constant", "N m/A", _N.torque_constant[0],
-           ((0.0029, 0.0035), (0.0041, 0.0047)), True,
+           ((0.0029, 0.0035), (0.0041, 0.0047)),
            "the motor's torque constant (= its back-EMF constant)", _wheel_field("torque_constant")),
-    Effect("current_limit", "robot", "current_limit", "A", _N.current_limit, ((0.025, 0.045),), True,
+    Effect("current_limit", "robot", "current_limit", "A", _N.current_limit, ((0.025, 0.045),),
            "the drivers' current limit set low (a wrong current-sense resistor): shows when the references "
            "exceed it", _robot_field("current_limit")),
-    Effect("battery_resistance", "robot", "battery_resistance", "ohm", 0.0, ((0.5, 3.0),), True,
+    Effect("battery_resistance", "robot", "battery_resistance", "ohm", 0.0, ((0.5, 3.0),),
            "the battery's internal resistance: the voltage sags with the current drawn",
            _robot_field("battery_resistance")),
-    Effect("traction_limit", "robot", "floor_friction", "-", _N.floor_friction, ((0.08, 0.25),), True,
+    Effect("traction_limit", "robot", "floor_friction", "-", _N.floor_friction, ((0.08, 0.25),),
            "tyre/floor friction coefficient: the wheels slip when pushed harder", _robot_field("floor_friction")),
-    Effect("caster_drag", "robot", "caster_friction", "-", 0.0, ((0.01, 0.04),), True,
+    Effect("caster_drag", "robot", "caster_friction", "-", 0.0, ((0.01, 0.04),),
            "the caster's sliding friction coefficient on the floor", _robot_field("caster_friction")),
-    Effect("turning_resistance", "robot", "torsional_friction", "m", 0.0, ((0.0002, 0.001),), True,
+    Effect("turning_resistance", "robot", "torsional_friction", "m", 0.0, ((0.0002, 0.001),),
            "spin (scrub) friction of the tyres' contact patches: torque = this x normal force",
            _robot_field("torsional_friction")),
-    Effect("com_offset", "robot", "com_offset", "m", _N.com_offset, ((0.0, 0.008), (0.022, 0.032)), True,
+    Effect("com_offset", "robot", "com_offset", "m", _N.com_offset, ((0.0, 0.008), (0.022, 0.032)),
            "the body's centre of mass ahead of the axle centre C", _robot_field("com_offset")),
-    Effect("mass", "robot", "body_mass", "kg", _N.body_mass, ((0.34, 0.41), (0.52, 0.62)), True,
+    Effect("mass", "robot", "body_mass", "kg", _N.body_mass, ((0.34, 0.41), (0.52, 0.62)),
            "the body's mass (its yaw inertia in proportion)", _mass),
     Effect("encoder_scale", "wheel", "ticks_per_rev", "ticks", _N.ticks_per_rev[0],
-           ((1150.0, 1185.0), (1215.0, 1250.0)), True, "encoder counts per wheel turn",
+           ((1150.0, 1185.0), (1215.0, 1250.0)), "encoder counts per wheel turn",
            _wheel_field("ticks_per_rev")),
-    Effect("backlash", "wheel", "backlash", "rad", 0.0, ((0.03, 0.12),), True,
+    Effect("backlash", "wheel", "backlash", "rad", 0.0, ((0.03, 0.12),),
            "play in the gear between the motor (and its encoder) and the wheel", _wheel_field("backlash")),
-    Effect("ir_gain", "sensor", "ir_gain_scale", "-", 1.0, ((0.55, 0.8), (1.25, 1.6)), True,
+    Effect("ir_gain", "sensor", "ir_gain_scale", "-", 1.0, ((0.55, 0.8), (1.25, 1.6)),
            "the IR pair's optical efficiency relative to the nominal sensor", _sensor_field("ir_gain_scale")),
-    Effect("ir_misalignment", "sensor", "ir_misalignment", "rad", 0.0, ((-0.3, -0.08), (0.08, 0.3)), True,
+    Effect("ir_misalignment", "sensor", "ir_misalignment", "rad", 0.0, ((-0.3, -0.08), (0.08, 0.3)),
            "the IR pair's axis turned counter-clockwise from its nominal bearing",
            _sensor_field("ir_misalignment")),
-    Effect("ir_offset", "sensor", "ir_offset", "counts", 0.0, ((-60.0, -15.0), (15.0, 60.0)), True,
+    Effect("ir_offset", "sensor", "ir_offset", "counts", 0.0, ((-60.0, -15.0), (15.0, 60.0)),
            "the emitter's pulse coupling into the receiver: added to the emitter-on reading",
            _sensor_field("ir_offset")),
-    Effect("ambient_leakage", "sensor", "ambient_leakage", "-", 0.0, ((-0.25, -0.06), (0.06, 0.25)), True,
+    Effect("ambient_leakage", "sensor", "ambient_leakage", "-", 0.0, ((-0.25, -0.06), (0.06, 0.25)),
            "fraction of the ambient light the emitter-on reading sees on top of the emitter-off one",
            _sensor_field("ambient_leakage")),
-    Effect("ir_latency", "ring", "ir_latency", "s", 0.0, ((0.02, 0.1),), True,
+    Effect("ir_latency", "ring", "ir_latency", "s", 0.0, ((0.02, 0.1),),
            "the IR readings describe the robot's pose this long ago", _robot_field("ir_latency")),
-    Effect("floor_tilt", "robot", "floor_tilt", "rad", 0.0, ((0.005, 0.02),), False,
+    Effect("floor_tilt", "robot", "floor_tilt", "rad", 0.0, ((0.005, 0.02),),
            "the floor slopes (gravity not normal to it); downhill direction drawn at random",
            lambda s, v, w: s.replace(floor_tilt=v)),
 )}
