@@ -57,18 +57,6 @@ def test_the_walk_sees_the_packages() -> None:
     assert "firmware/fuzzy.py::direction_weight" in lengths
 
 
-# Module docstrings still being cut down to the limit in other branches; each entry
-# must leave this set once its docstring is short (test_the_trimming_set_names_only_long_docstrings).
-DOCSTRINGS_BEING_TRIMMED: set[str] = {
-    "host_sim/physics/backlash.py",
-    "host_sim/physics/drivetrain_effects.py",
-    "host_sim/physics/effects.py",
-    "host_sim/physics/params.py",
-}
-# Only modules of these folders (and these two commands) may be in the set above.
-TRIMMED_ELSEWHERE = ("host_sim/physics/", "host_sim/sensors/", "host_sim/robot/", "host_sim/diagnosis/",
-                     "tools/bench/", "tools/reference_plant/", "tools/gui/", "tools/cli/diagnose.py",
-                     "tools/cli/gui.py")
 
 
 def module_docstring_lengths() -> dict[str, int]:
@@ -88,19 +76,9 @@ def module_docstring_lengths() -> dict[str, int]:
 def test_no_module_docstring_is_longer_than_10_lines() -> None:
     """A module docstring says what the module is for and links its doc page; derivations live in docs/."""
     long = {k: n for k, n in module_docstring_lengths().items()
-            if n > MAX_DOCSTRING_LINES and k not in DOCSTRINGS_BEING_TRIMMED}
+            if n > MAX_DOCSTRING_LINES}
     assert not long, "shorten these module docstrings (over 10 lines; move the detail to docs/): " + ", ".join(
         f"{k} ({n})" for k, n in sorted(long.items(), key=lambda kv: -kv[1]))
-
-
-def test_the_trimming_set_names_only_long_docstrings() -> None:
-    """A module whose docstring is short now (or that is gone) must leave DOCSTRINGS_BEING_TRIMMED."""
-    lengths = module_docstring_lengths()
-    for key in DOCSTRINGS_BEING_TRIMMED:
-        assert key.startswith(TRIMMED_ELSEWHERE), f"{key}: not a module being trimmed elsewhere"
-        assert key in lengths, f"{key}: no such module any more; remove it from DOCSTRINGS_BEING_TRIMMED"
-        assert lengths[key] > MAX_DOCSTRING_LINES, (
-            f"{key}: docstring now {lengths[key]} lines; remove it from DOCSTRINGS_BEING_TRIMMED")
 
 
 def test_the_docstring_walk_sees_the_packages() -> None:

@@ -1,26 +1,8 @@
 """Backlash: the play in each gear between the motor side (rotor, encoder) and the wheel.  N robots, numpy.
 
-Model and equations: docs/effects.md ("backlash").  Each gear has a gap
-delta = motor angle / N - wheel angle in [-play, play] (play = backlash / 2) and the motor side is a
-body of its own: the rotor seen through the gear, inertia I_r at the wheel (Drive.i_r: wheel_inertia
-less the wheel's own spin inertia 2 I_m).  The motor torque eta N k i, the axle's viscous and dry
-friction and the encoder are on the motor side.  Each substep, per wheel:
-
-* engaged (the gap closed on one side and the gear pushing into it): rotor and wheel turn as one,
-  the nominal drive step (drivetrain_effects.drive_step), inertia I_w = wheel_inertia;
-* open: the rotor turns alone under the motor and the friction (the drive step's midpoint scheme, its
-  dry friction by friction.solve_batch with a diagonal response), the wheel with its own inertia
-  I_w - I_r, neither the motor nor the friction on it;
-* an engaged gear opens when the torque it would transmit (lambda = the motor side's torque less
-  I_r times the pair's acceleration) pulls instead of pushing: the substep is taken again with it open;
-* an open gap that closes within the substep splits it at the closing time (the gap's rate taken
-  linear over the substep), where an inelastic impact conserves the momentum of rotor and wheel side:
-  the wheel side answers an impulse P through the robot's reduced mass, W = J H^-1 J^T (the wheel
-  speeds' response to wheel torque impulses, rolling without slip), the rotor through 1 / I_r;
-  (W + diag(1 / I_r)) P = w_m - w on the closing gears; the rest of the substep follows.
-
-With the play -> 0 the open stretches and the impacts shrink to nothing and the step is the
-engaged one: continuous in the backlash.
+Each gear's gap lives in [-play, play]; engaged, rotor and wheel turn as one; open, each turns on its own;
+a gap that closes within a substep splits it at an inelastic impact.  Continuous in the play: with the
+play -> 0 the step is the engaged one.  Model and equations: docs/effects.md, "backlash".
 """
 from __future__ import annotations
 
