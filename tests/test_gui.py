@@ -398,3 +398,47 @@ def test_the_real_robots_ghost_is_drawn_ahead_of_its_late_pose(make_window: Any,
     finally:
         proc.terminate()
         proc.wait(10)
+
+
+def test_the_link_lost_keeps_the_window_and_its_walls_and_reconnects(make_window: Any, tmp_path: Path,
+                                                                    monkeypatch: Any) -> None:
+    """The port goes away (its far end closed: EIO, as a killed board or an unplugged Pico): the window says
+    "link lost", runs on with its walls, and reopens the port when it is back (a symlink, like /dev/ttyACM0)."""
+    from tests.helpers import Pty
+    from tools.gui import real_robot
+
+    monkeypatch.setattr(real_robot, "RECONNECT_S", 0.0)
+    first, port = Pty(), tmp_path / "ttyROBOT"
+    port.symlink_to(first.path)
+    window = make_window(port=str(port))
+    app = window.app
+    enc = FrameEncoder()
+    for k in range(5):
+        first.write(telemetry(enc, k))
+    run_until(window, 5)
+    assert app.real is not None and app.real.frames == 5
+    drag(app, (1.012, 1.188), (1.41, 1.205))
+    loop.run(window, 1)
+    walls = list(app.editor.walls)
+    shown = app.real.pose
+    first.close()  # the board is gone
+    port.unlink()
+    loop.run(window, 5)
+    assert app.real.lost is not None and "link lost" in app.message
+    assert app.editor.walls == walls and not window.quit
+    t = app.sim.sim.robot.t
+    loop.run(window, 6)
+    assert app.sim.sim.robot.t > t  # the window runs on
+    second = Pty()
+    try:
+        port.symlink_to(second.path)  # the port is back
+        loop.run(window, 2)
+        assert app.real.lost is None and app.real.reconnects == 1 and "link back" in app.message
+        enc = FrameEncoder()  # the robot restarted: its odometry from 0
+        for k in range(3):
+            second.write(telemetry(enc, k))
+        run_until(window, 8)
+        assert app.real.frames == 8
+        assert app.real.trail[-3][:2] == pytest.approx(shown[:2], abs=1e-6)  # it goes on from where it was shown
+    finally:
+        second.close()

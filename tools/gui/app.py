@@ -20,7 +20,8 @@ from host_sim.physics.params import RobotParams
 from host_sim.recordings.recording import RecordingWriter
 from host_sim.physics.world import World, WorldError
 from protocol import messages as M
-from tools.gui.robots import RealBot, SimBot
+from tools.gui.real_robot import RealBot
+from tools.gui.robots import SimBot
 from tools.gui.user_input import UserControl
 from tools.gui.view import Viewport
 from tools.gui.world_edit import WallEditor
@@ -131,11 +132,24 @@ class App:
         if self.running:
             self.advance((dt if self.s.realtime else min(dt, MAX_CATCH_UP)) * self.s.speed)
         if self.real is not None:
-            self.real.orders = orders if self.user_drives_real else None
-            self.real.poll()
+            self.poll_real(orders)
         for bot in self.sim_bots:
             bot.after_frame()
         self.clock.tick(self.sim.sim.robot.t)
+
+    def poll_real(self, orders: tuple[int, int]) -> None:
+        """The real robot's frames; the link lost or back is said once, and the window runs on."""
+        real = self.real
+        assert real is not None
+        real.orders = orders if self.user_drives_real else None
+        real.world = self.editor.world
+        was_lost = real.lost is not None
+        real.poll()
+        if real.lost is not None and not was_lost:
+            self.user_drives_real = False
+            self.say(f"real robot: link lost ({real.lost}); reconnecting to {real.port}, walls kept")
+        elif real.lost is None and was_lost:
+            self.say(f"real robot: link back on {real.port}")
 
     def sync_world(self) -> None:
         """The simulated robots move into the room as edited (before any step, and before drawing)."""

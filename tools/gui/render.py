@@ -13,7 +13,8 @@ from protocol import messages as M
 from tools.gui import draw
 from tools.gui.app import App
 from tools.gui.controls import PANEL_X, Controls
-from tools.gui.robots import RealBot, SimBot, rays
+from tools.gui.real_robot import RealBot
+from tools.gui.robots import SimBot, rays
 
 ADC_FULL = 4095.0
 BAR_FULL = 1500.0  # counts at the top of a bar: reflections rarely reach the ADC's full scale
@@ -149,6 +150,10 @@ class Renderer:
                 p.text("current references, mA", (x + 212, y + 20), draw.DIM, 16)
                 i_l, i_r = bot.currents()
                 p.setpoints(rect, i_l, i_r, int(1000 * self.app.s.params.current_limit), colour)
+        elif bot.lost is not None:
+            p.text("LINK LOST: reconnecting", (x + 212, y + 24), draw.RED, 18)
+            p.text(bot.lost[:34], (x + 212, y + 42), draw.RED, 16)
+            p.text("walls and trail kept", (x + 212, y + 58), draw.DIM, 16)
         else:
             p.text(bot.source, (x + 212, y + 24), draw.DIM, 16)
             p.text(f"{bot.frames} TELEMETRY frames", (x + 212, y + 40), draw.DIM, 16)
@@ -178,7 +183,8 @@ class Renderer:
         factor = app.clock.factor()
         rtf = f"{factor:.2f}x real time" if factor is not None else "-"
         exit_text = f"exit found at {sim.exit_time:.1f} s" if sim.exit_time is not None else "no exit yet"
-        real = "real robot: " + (f"on {app.s.port}" if app.real is not None else app.real_error)
+        real = "real robot: " + (app.real_error if app.real is None else f"on {app.s.port}" if app.real.lost is None
+                                 else f"LINK LOST on {app.s.port}, reconnecting")
         line1 = (f"t = {sim.robot.t:7.2f} s   {rtf}   speed {app.s.speed:g}x   "
                  f"{'real time (clock Dt)' if app.s.realtime else 'fixed step'}   "
                  f"{'RUNNING' if app.running else 'PAUSED'}   rules {app.s.rules}   L {app.s.emitter_pct} %   "
