@@ -341,7 +341,7 @@ def test_the_real_robots_own_odometry_is_used_when_telemetry_carries_it(make_win
 
 def test_headless_command_writes_a_screenshot(tmp_path: Path) -> None:
     out = tmp_path / "gui.png"
-    r = run_twinbot("gui", "--frames", "30", "--screenshot", str(out), "--out", str(tmp_path))
+    r = run_twinbot("gui", "--frames", "30", "--screenshot", str(out), "--out", str(tmp_path), "--size", "1280x780")
     assert r.returncode == 0, r.stderr
     img = pygame.image.load(str(out))
     assert img.get_size() == (1280, 780)
@@ -442,3 +442,58 @@ def test_the_link_lost_keeps_the_window_and_its_walls_and_reconnects(make_window
         assert app.real.trail[-3][:2] == pytest.approx(shown[:2], abs=1e-6)  # it goes on from where it was shown
     finally:
         second.close()
+
+
+def test_the_sensors_and_the_map_are_readable(make_window: Any, tmp_path: Path) -> None:
+    """Each sensor named on its robot's body and its count beside it; bars to the ADC's full scale; the rays'
+    legend; axes, a scale bar and the cursor's coordinates on the map; the coverage plot's axes labelled."""
+    from tools.gui.robots import rays
+
+    window = make_window()
+    app = window.app
+    loop.run(window, 30)
+    app.view.zoom(3.0, app.view.to_screen(*app.sim.pose[:2]))  # close enough for S1..S8 on a body
+    cursor = (app.view.rect[2] // 2, app.view.rect[3] // 2)
+    post(pygame.MOUSEMOTION, pos=cursor, rel=(0, 0), buttons=(0, 0, 0))
+    key(pygame.K_SPACE)
+    loop.run(window, 1)
+    drawn = window.renderer.p.drawn
+    for i in range(1, 9):
+        assert drawn.count(f"S{i}") >= 4  # under both robots' bars, and on both bodies
+    for count in app.sim.counts():
+        assert drawn.count(str(count)) >= 2  # above its bar, and beside its sensor in the room
+    x, y = app.view.to_world(*cursor)
+    assert f"cursor ({x:.3f}, {y:.3f}) m" in drawn
+    assert {"x, m", "y, m", "IR ray shade: counts", "4095", "coverage, %", "time, s", "90 %"} <= set(drawn)
+    assert any(t.endswith(" cm") and t[:-3].isdigit() for t in drawn)  # the scale bar
+    # rays end at the sensor's range, counted from the sensor on the rim
+    r, reach = DEFAULT.body_radius, DEFAULT.sensor_range
+    x0, y0, x1, y1 = rays(builtin_world("arena"), (1.0, 1.0, 0.3), DEFAULT).T
+    assert np.hypot(x1 - x0, y1 - y0) == pytest.approx(np.full(8, reach))
+    assert np.hypot(x0 - 1.0, y0 - 1.0) == pytest.approx(np.full(8, r))
+    # the bars reach the ADC's full scale: 1000 counts is a quarter of a bar, not two thirds of it
+    app.user.counts = lambda: [1000, 4095, 0, 0, 0, 0, 0, 0]  # type: ignore[method-assign]
+    loop.run(window, 1)
+    shot = pygame.image.load(str(app.screenshot(tmp_path / "bars.png")))
+    bars = window.renderer.bar_rects["user"]
+    column = bars.x + bars.width // 16
+    assert tuple(shot.get_at((column, bars.bottom - bars.height // 5)))[:3] == draw.COLOURS["user"]
+    assert tuple(shot.get_at((column, bars.bottom - bars.height // 2)))[:3] == (255, 255, 255)
+    assert tuple(shot.get_at((column + bars.width // 8, bars.y + 3 * bars.height // 4)))[:3] == draw.COLOURS["user"]
+
+
+def test_the_window_fits_a_laptop_and_can_be_resized(make_window: Any) -> None:
+    window = make_window()
+    app = window.app
+    w, h = app.surface.get_size()
+    assert w <= 1366 and h <= 720  # a 1366 x 768 screen, with room for the window's title bar
+    post(pygame.VIDEORESIZE, w=1500, h=900, size=(1500, 900))
+    loop.run(window, 1)
+    assert app.surface.get_size() == (1500, 900)
+    assert app.view.rect[2:] == (1500 - 380, 900 - 40)  # the room's area grows, the panel moves right
+    assert all(rect.right <= 1500 and rect.bottom <= 900 - 40 for rect, _ in window.controls.buttons)
+    assert min(rect.x for rect, _ in window.controls.buttons) > app.view.rect[2]
+    post(pygame.VIDEORESIZE, w=400, h=300, size=(400, 300))  # too small: held at the minimum
+    loop.run(window, 1)
+    assert app.surface.get_size() == (960, 700)
+    assert all(rect.bottom <= 700 - 40 for rect, _ in window.controls.buttons)

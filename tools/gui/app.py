@@ -26,12 +26,19 @@ from tools.gui.user_input import UserControl
 from tools.gui.view import Viewport
 from tools.gui.world_edit import WallEditor
 
-SIZE = (1280, 780)
-ROOM_RECT = (0, 0, 900, 740)
+SIZE = (1280, 720)  # the default window: fits a 1366 x 768 laptop screen with its title bar
+MIN_SIZE = (960, 700)  # smaller, and the panel's buttons would not fit
+PANEL_W = 380  # the panel on the right
+STATUS_H = 40  # the status bar below
 SPEEDS = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0)
 TOOLS = ("wall", "box", "polygon")
 MAX_CATCH_UP = 0.1  # s of wall time a fixed-step frame makes up at most: a slow frame must not snowball
 MAX_SPEED = M.param_by_name("max_speed")[4]  # mm/s, the firmware's default wheel-speed limit
+
+
+def room_rect(size: tuple[int, int]) -> tuple[int, int, int, int]:
+    """The room's area of a window this size: all but the panel and the status bar."""
+    return (0, 0, size[0] - PANEL_W, size[1] - STATUS_H)
 
 
 @dataclass
@@ -50,6 +57,7 @@ class Settings:
     out_dir: Path = Path(".")  # recordings and screenshots
     grid: float = 0.05  # m, the snapping grid
     link_floor_s: float = 0.0  # the real robot's link: its fastest delivery (the ghost's latency floor)
+    size: tuple[int, int] = SIZE  # the window's size at start, pixels
 
 
 @dataclass
@@ -75,7 +83,7 @@ class App:
         self.s = settings
         self.surface = surface
         self.editor = WallEditor(settings.world, settings.grid)
-        self.view = Viewport(ROOM_RECT)
+        self.view = Viewport(room_rect(surface.get_size()))
         self.view.fit(*settings.world.size)
         self.user_control = UserControl(MAX_SPEED)
         self.running = True
@@ -178,6 +186,15 @@ class App:
         for bot in self.sim_bots:
             bot.stepper.step_period()
         self.say(f"one step: t = {self.sim.sim.robot.t:.2f} s")
+
+    def resize(self, surface: pygame.Surface) -> None:
+        """The window was resized: the room's area follows, showing the same part of the room."""
+        self.surface = surface
+        x0, y0 = self.view.to_world(*self.view.rect[:2])
+        self.view.rect = room_rect(surface.get_size())
+        self.view.ox = x0
+        self.view.oy = y0 - self.view.rect[3] / self.view.scale
+        self.view.version += 1
 
     # -- settings the user changes -------------------------------------------------
     def say(self, text: str) -> None:

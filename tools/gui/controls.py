@@ -11,11 +11,11 @@ from typing import Any, Callable
 
 import pygame
 
-from tools.gui.app import App
+from tools.gui.app import MIN_SIZE, PANEL_W, App
 
-PANEL_X = 900
-BUTTON_TOP = 470
-BUTTON_SIZE = (88, 26)
+BUTTON_TOP = 462  # the panel's robots and coverage plot are above
+BUTTON_SIZE = (70, 24)
+BUTTON_COLUMNS = 5
 PICK_PX = 7  # a wall within this many pixels of the cursor is under it
 
 
@@ -57,7 +57,7 @@ def actions(app: App, controls: Controls) -> list[Action]:
         Action((k.K_g,), "g", "ghost", "the real robot's ghost (where it is now, its signal being late) on / off",
                app_toggle(app, "show_ghost"), lambda: app.show_ghost),
         Action((k.K_o,), "o", "tool", "drawing tool: wall / box / convex polygon", controls.next_tool,
-               lambda: app.tool != "wall", lambda: f"tool: {app.tool}"),
+               lambda: app.tool != "wall", lambda: f"{app.tool}"),
         Action((k.K_s,), "s", "save", "save the world file", app.save_world),
         Action((k.K_l,), "l", "load", "load the world file", app.load_world),
         Action((k.K_z,), "z", "undo", "undo the last change to the walls", lambda: app.editor.undo()),
@@ -80,15 +80,34 @@ class Controls:
         self.actions = actions(app, self)
         self.by_key = {key: a for a in self.actions for key in a.keys}
         self.buttons: list[tuple[pygame.Rect, Action]] = []
-        for i, a in enumerate(x for x in self.actions if x.label):
-            col, row = i % 4, i // 4
-            rect = pygame.Rect(PANEL_X + 10 + col * (BUTTON_SIZE[0] + 4), BUTTON_TOP + row * (BUTTON_SIZE[1] + 4),
-                               *BUTTON_SIZE)
-            self.buttons.append((rect, a))
+        self.layout()
         self.drag: tuple[Any, ...] | None = None  # ("draw", a, b) | ("move", i, wall, start) | ("pan", pos)
         self.corners: list[tuple[float, float]] = []  # the polygon being drawn
         self.pointer = (0.0, 0.0)  # world point under the mouse
+        self.pointer_px = (-1, -1)  # the mouse on screen (off the window until it moves)
         self.quit = False
+
+    @property
+    def panel_x(self) -> int:
+        return self.app.surface.get_width() - PANEL_W
+
+    def layout(self) -> None:
+        """The buttons in the panel, in rows of BUTTON_COLUMNS, wherever the panel is now."""
+        self.buttons = []
+        for i, a in enumerate(x for x in self.actions if x.label):
+            col, row = i % BUTTON_COLUMNS, i // BUTTON_COLUMNS
+            rect = pygame.Rect(self.panel_x + 10 + col * (BUTTON_SIZE[0] + 3), BUTTON_TOP + row * (BUTTON_SIZE[1] + 3),
+                               *BUTTON_SIZE)
+            self.buttons.append((rect, a))
+
+    def resize(self, width: int, height: int) -> None:
+        """The window's new size (at least MIN_SIZE): the room's area, the panel and its buttons follow."""
+        size = (max(MIN_SIZE[0], width), max(MIN_SIZE[1], height))
+        surface = pygame.display.get_surface()
+        if surface is None or surface.get_size() != size:  # SDL resized it already, unless under the minimum
+            surface = pygame.display.set_mode(size, pygame.RESIZABLE)
+        self.app.resize(surface)
+        self.layout()
 
     def next_tool(self) -> None:
         """The next drawing tool; a polygon's corners clicked so far are dropped."""
@@ -101,6 +120,8 @@ class Controls:
             return
         if event.type == pygame.QUIT:
             self.quit = True
+        elif event.type == pygame.VIDEORESIZE:
+            self.resize(event.w, event.h)
         elif event.type == pygame.KEYDOWN:
             self.key(event)
         elif event.type == pygame.MOUSEBUTTONDOWN:
@@ -173,6 +194,7 @@ class Controls:
     def motion(self, pos: tuple[int, int], rel: tuple[int, int]) -> None:
         app, drag = self.app, self.drag
         self.pointer = app.view.to_world(*pos)
+        self.pointer_px = pos
         if drag is None:
             return
         if drag[0] == "pan":

@@ -12,12 +12,13 @@ import pygame
 from protocol import messages as M
 from tools.gui import draw
 from tools.gui.app import App
-from tools.gui.controls import PANEL_X, Controls
+from tools.gui import overlays
+from tools.gui.controls import Controls
 from tools.gui.real_robot import RealBot
 from tools.gui.robots import SimBot, rays
 
 ADC_FULL = 4095.0
-BAR_FULL = 1500.0  # counts at the top of a bar: reflections rarely reach the ADC's full scale
+BAR_FULL = ADC_FULL  # counts at the top of a bar: readings reach the ADC's full scale
 
 
 class Renderer:
@@ -28,12 +29,15 @@ class Renderer:
         self._exit: tuple[object, tuple[float, float]] = (None, (0.0, 0.0))
         self._t90: tuple[object, int, float | None] = (None, 0, None)
         self.ghost_drawn: tuple[float, float, float] | None = None  # where the last frame drew the ghost
+        self.bar_rects: dict[str, pygame.Rect] = {}  # each robot's IR bars in the panel
 
     def draw(self) -> None:
-        surf = self.app.surface
+        surf = self.p.surface = self.app.surface  # a new surface after a resize
+        self.p.drawn.clear()
         surf.fill(draw.BG)
         self.room()
-        pygame.draw.rect(surf, draw.PANEL, (PANEL_X, 0, surf.get_width() - PANEL_X, surf.get_height()))
+        px = self.controls.panel_x
+        pygame.draw.rect(surf, draw.PANEL, (px, 0, surf.get_width() - px, surf.get_height()))
         self.panel()
         self.status()
         if self.app.show_help:
@@ -66,6 +70,10 @@ class Renderer:
         if app.sim.sim.exit_time is not None:
             x, y = self.exit_point()
             p.flag(view, x, y)
+        overlays.axes(p, view)
+        overlays.scale_bar(p, view)
+        overlays.ray_legend(p, view, BAR_FULL, app.s.params.sensor_range)
+        overlays.cursor(p, view, self.controls.pointer_px)
         surf.set_clip(None)
 
     def exit_point(self) -> tuple[float, float]:
@@ -98,6 +106,7 @@ class Renderer:
         p.rays(app.view, rays(app.editor.world, pose, app.s.params), bot.counts(), colour, BAR_FULL)
         contact = isinstance(bot, SimBot) and bot.sim.robot.in_contact
         p.robot(app.view, pose, app.s.params.body_radius, colour, contact)
+        overlays.sensors(p, app.view, pose, app.s.params.body_radius, bot.counts(), colour)
         if isinstance(bot, SimBot):
             p.marks(app.view, bot.collision_marks, draw.RED)
 
@@ -114,22 +123,23 @@ class Renderer:
     # -- the panel ---------------------------------------------------------------
     def panel(self) -> None:
         app, p = self.app, self.p
-        x = PANEL_X + 10
-        y = 8
+        x = self.controls.panel_x + 10
+        p.text(f"IR bars: reflected counts, 0 .. {BAR_FULL:.0f} (the ADC's full scale)", (x, 5), draw.DIM, 16)
+        y = 22
         for bot, name in ((app.sim, "simulated"), (app.user, "user"), (app.real, "real")):
             self.robot_block(bot, name, x, y)
-            y += 100
+            y += 96
         cov = app.sim.sim.coverage
         t = app.sim.sim._t  # noqa: SLF001
         t90 = self.time_to_90()
-        p.text(f"coverage of the simulated robot: {100 * cov.fraction:.1f} %", (x, y + 4), draw.TEXT, 20)
-        p.plot(pygame.Rect(x, y + 24, 360, 120), t, cov.fractions, t90)
+        p.text(f"coverage of the simulated robot: {100 * cov.fraction:.1f} %", (x, y + 2), draw.TEXT, 20)
+        p.plot(pygame.Rect(x + 22, y + 20, 338, 100), t, cov.fractions, t90)
         for rect, action in self.controls.buttons:
             on = bool(action.on and action.on())
             label = action.caption() if action.caption else action.label
             p.button(rect, label, on, rect.collidepoint(pygame.mouse.get_pos()))
-        rows = (len(self.controls.buttons) + 3) // 4
-        p.text("h: all keys and mouse controls", (x, rows * 30 + self.controls.buttons[0][0].y + 6), draw.DIM, 16)
+        last = self.controls.buttons[-1][0]
+        p.text("h: all keys and mouse controls", (x, last.bottom + 4), draw.DIM, 16)
 
     def robot_block(self, bot: SimBot | RealBot | None, name: str, x: int, y: int) -> None:
         p = self.p
@@ -139,7 +149,8 @@ class Renderer:
             p.text(f"real robot: {self.app.real_error}", (x + 18, y), draw.DIM, 20)
             return
         p.text(self.robot_line(bot, name), (x + 18, y + 1), draw.TEXT, 18)
-        p.bars(pygame.Rect(x, y + 22, 200, 54), bot.counts(), colour, BAR_FULL)
+        self.bar_rects[name] = pygame.Rect(x, y + 22, 200, 54)
+        p.bars(self.bar_rects[name], bot.counts(), colour, BAR_FULL)
         if isinstance(bot, SimBot):
             sp = bot.setpoints()
             rect = pygame.Rect(x + 212, y + 34, 148, 42)
