@@ -497,3 +497,77 @@ def test_the_window_fits_a_laptop_and_can_be_resized(make_window: Any) -> None:
     loop.run(window, 1)
     assert app.surface.get_size() == (960, 700)
     assert all(rect.bottom <= 700 - 40 for rect, _ in window.controls.buttons)
+
+
+def ctrl_key(k: int, mod: int) -> None:
+    post(pygame.KEYDOWN, key=k, mod=mod, unicode="", scancode=0)
+    post(pygame.KEYUP, key=k, mod=mod, unicode="", scancode=0)
+
+
+def test_redo_feedback_and_quitting_with_unsaved_walls_asks_first(make_window: Any) -> None:
+    window = make_window()
+    app = window.app
+    n0 = len(app.editor.walls)
+    key(pygame.K_q)  # nothing edited: quits at once
+    loop.run(window, 1)
+    assert window.quit
+    window.controls.quit = False
+    drag(app, (1.0, 1.2), (1.4, 1.2))
+    key(pygame.K_z)
+    loop.run(window, 1)
+    assert len(app.editor.walls) == n0 and app.message == f"undo: {n0} walls now"
+    ctrl_key(pygame.K_y, pygame.KMOD_CTRL)  # redo
+    loop.run(window, 1)
+    assert app.editor.walls[-1] == {"segment": [1.0, 1.2, 1.4, 1.2]} and "redo" in app.message
+    key(pygame.K_z)
+    ctrl_key(pygame.K_z, pygame.KMOD_CTRL | pygame.KMOD_SHIFT)  # redo, the other way
+    loop.run(window, 1)
+    assert len(app.editor.walls) == n0 + 1
+    ctrl_key(pygame.K_y, pygame.KMOD_CTRL)
+    loop.run(window, 1)
+    assert app.message == "nothing to redo"
+    app.editor.selected = None
+    key(pygame.K_DELETE)
+    loop.run(window, 1)
+    assert "nothing selected" in app.message
+    app.editor.selected = len(app.editor.walls) - 1
+    key(pygame.K_DELETE)
+    loop.run(window, 1)
+    assert app.message.startswith("wall deleted") and len(app.editor.walls) == n0
+    key(pygame.K_z)
+    for k, said in ((pygame.K_v, "coverage overlay hidden"), (pygame.K_g, "the real robot's ghost hidden")):
+        key(k)
+        loop.run(window, 1)
+        assert app.message == said
+    key(pygame.K_ESCAPE)  # unsaved walls: the first press asks
+    loop.run(window, 1)
+    assert not window.quit and "again to quit" in app.message
+    key(pygame.K_h)  # another key in between: the next Esc asks again
+    key(pygame.K_ESCAPE)
+    loop.run(window, 1)
+    assert not window.quit
+    key(pygame.K_q)  # the second press in a row quits
+    loop.run(window, 1)
+    assert window.quit
+
+
+def test_reset_rtf_fps_and_stop_at_the_exit(make_window: Any) -> None:
+    window = make_window(speed=16.0)
+    app = window.app
+    loop.run(window, 20)
+    key(pygame.K_r)
+    loop.run(window, 3)
+    factor = app.clock.factor()
+    assert factor is not None and factor >= 0  # not the negative jump across the reset
+    assert app.clock.fps() is not None and " fps " in " ".join(window.renderer.p.drawn)  # in the status bar
+    assert app.stop_at_exit  # on by default; the paper's room has an exit: run until the robot finds it
+    for _ in range(400):
+        loop.run(window, 10)
+        if not app.running:
+            break
+    sim = app.sim.sim
+    assert sim.exit_time is not None and not app.running and "found the exit" in app.message
+    assert sim.robot.t - sim.exit_time <= sim.cycle_s + 1e-9  # paused in the period it left
+    key(pygame.K_x)  # off: a later run goes on past the exit
+    loop.run(window, 1)
+    assert not app.stop_at_exit

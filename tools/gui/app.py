@@ -67,7 +67,16 @@ class Clock:
     samples: collections.deque[tuple[float, float]] = field(default_factory=lambda: collections.deque(maxlen=240))
 
     def tick(self, sim_t: float) -> None:
+        if self.samples and sim_t < self.samples[-1][1]:  # a reset: the simulated time starts again
+            self.samples.clear()
         self.samples.append((time.perf_counter(), sim_t))
+
+    def fps(self) -> float | None:
+        """Frames per wall second over the last second (the samples are one a frame)."""
+        if len(self.samples) < 2:
+            return None
+        (w0, _), (w1, _) = self.samples[0], self.samples[-1]
+        return (len(self.samples) - 1) / (w1 - w0) if w1 > w0 else None
 
     def factor(self) -> float | None:
         if len(self.samples) < 2:
@@ -93,6 +102,8 @@ class App:
         self.tool = "wall"  # what the mouse draws: "wall", "box" or "polygon"
         self.user_drives_sim = False
         self.user_drives_real = False
+        self.stop_at_exit = True  # pause when the simulated robot leaves the room (as `sim --stop-at-exit`)
+        self.quit_asked = False  # Esc or q pressed once with unsaved walls: a second press quits
         self.recording: list[Path] = []
         self.message = ""
         self.clock = Clock()
@@ -102,6 +113,7 @@ class App:
             self._open_real(settings.port)
         self._make_bots()
         self._world_version = self.editor.version
+        self.saved_walls = [dict(w) for w in self.editor.walls]
 
     # -- robots -----------------------------------------------------------------
     def _make_bots(self) -> None:
@@ -173,11 +185,27 @@ class App:
         self.sync_world()
         passes = max(1, math.ceil(sim_seconds / self.sim.sim.cycle_s - 1e-9))
         for bot in self.sim_bots:
-            if self.s.realtime:
+            if bot is self.sim and self.stop_at_exit and bot.sim.exit_time is None:
+                self._advance_to_exit(bot, sim_seconds, passes)
+            elif self.s.realtime:
                 for _ in range(passes):
                     bot.stepper.clock(sim_seconds / passes)
             else:
                 bot.stepper.fixed(sim_seconds)
+
+    def _advance_to_exit(self, bot: SimBot, sim_seconds: float, passes: int) -> None:
+        """The simulated robot in passes of at most a period, paused in the period it leaves the room."""
+        for _ in range(passes):
+            if self.s.realtime:
+                bot.stepper.clock(sim_seconds / passes)
+            else:
+                bot.stepper.fixed(sim_seconds / passes)
+            if bot.sim.exit_time is not None:
+                bot.stepper.owed = 0.0
+                self.running = False
+                self.say(f"the simulated robot found the exit at t = {bot.sim.exit_time:.2f} s: paused "
+                         "(space runs on; x: stop at the exit off)")
+                return
 
     def single_step(self) -> None:
         """One 40 ms control period of both simulated robots (pauses the run)."""
@@ -208,6 +236,37 @@ class App:
         k = min(range(len(SPEEDS)), key=lambda i: abs(SPEEDS[i] - self.s.speed))
         self.s.speed = SPEEDS[max(0, min(len(SPEEDS) - 1, k + direction))]
         self.say(f"speed {self.s.speed:g}x real time")
+
+    def toggle_stop_at_exit(self) -> None:
+        self.stop_at_exit = not self.stop_at_exit
+        self.say("pause when the simulated robot finds the exit" if self.stop_at_exit
+                 else "the simulated robot runs on past the exit")
+
+    def toggle_view(self, name: str, what: str) -> None:
+        """Show or hide one part of the room (show_coverage, show_ghost), and say which."""
+        setattr(self, name, not getattr(self, name))
+        self.say(f"{what} {'shown' if getattr(self, name) else 'hidden'}")
+
+    def undo(self, redo: bool = False) -> None:
+        done = self.editor.redo() if redo else self.editor.undo()
+        verb = "redo" if redo else "undo"
+        self.say(f"{verb}: {len(self.editor.walls)} walls now" if done else f"nothing to {verb}")
+
+    def delete_selected(self) -> None:
+        self.say("wall deleted (z undoes)" if self.editor.delete() else "nothing selected: click a wall first")
+
+    @property
+    def unsaved(self) -> bool:
+        """The walls differ from the world file last saved or loaded (or from the start's room)."""
+        return self.editor.walls != self.saved_walls
+
+    def ask_quit(self) -> bool:
+        """Esc or q: True to quit now; with unsaved walls only on the second press in a row."""
+        if not self.unsaved or self.quit_asked:
+            return True
+        self.quit_asked = True
+        self.say("the walls are not saved: press Esc or q again to quit without saving (s saves)")
+        return False
 
     def toggle_realtime(self) -> None:
         self.s.realtime = not self.s.realtime
@@ -299,6 +358,7 @@ class App:
 
     def save_world(self) -> None:
         self.editor.save(self.s.world_file)
+        self.saved_walls = [dict(w) for w in self.editor.walls]
         self.say(f"world saved: {self.s.world_file}")
 
     def load_world(self) -> None:
@@ -308,6 +368,7 @@ class App:
             self.say(f"not loaded: {exc}")
             return
         self.view.fit(*self.editor.world.size)
+        self.saved_walls = [dict(w) for w in self.editor.walls]
         self.reset()
         self.say(f"world loaded: {self.s.world_file}")
 

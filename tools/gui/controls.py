@@ -52,16 +52,19 @@ def actions(app: App, controls: Controls) -> list[Action]:
                lambda: app.user_drives_sim),
         Action((k.K_i,), "i", "user->real", "the user's orders drive the real robot too", app.toggle_user_drives_real,
                lambda: app.user_drives_real),
-        Action((k.K_v,), "v", "coverage", "coverage overlay on / off", app_toggle(app, "show_coverage"),
-               lambda: app.show_coverage),
+        Action((k.K_v,), "v", "coverage", "coverage overlay on / off",
+               lambda: app.toggle_view("show_coverage", "coverage overlay"), lambda: app.show_coverage),
         Action((k.K_g,), "g", "ghost", "the real robot's ghost (where it is now, its signal being late) on / off",
-               app_toggle(app, "show_ghost"), lambda: app.show_ghost),
+               lambda: app.toggle_view("show_ghost", "the real robot's ghost"), lambda: app.show_ghost),
+        Action((k.K_x,), "x", "stop@exit", "pause when the simulated robot finds the exit (as sim --stop-at-exit)",
+               app.toggle_stop_at_exit, lambda: app.stop_at_exit),
         Action((k.K_o,), "o", "tool", "drawing tool: wall / box / convex polygon", controls.next_tool,
                lambda: app.tool != "wall", lambda: f"{app.tool}"),
         Action((k.K_s,), "s", "save", "save the world file", app.save_world),
         Action((k.K_l,), "l", "load", "load the world file", app.load_world),
-        Action((k.K_z,), "z", "undo", "undo the last change to the walls", lambda: app.editor.undo()),
-        Action((k.K_DELETE, k.K_BACKSPACE), "del", "delete", "delete the selected wall", lambda: app.editor.delete()),
+        Action((k.K_z,), "z", "undo", "undo the last change to the walls", app.undo),
+        Action((k.K_y,), "ctrl+y", "redo", "redo what undo took back (also shift+ctrl+z)", lambda: app.undo(redo=True)),
+        Action((k.K_DELETE, k.K_BACKSPACE), "del", "delete", "delete the selected wall", app.delete_selected),
         Action((k.K_0,), "0", "fit", "fit the room in the view", lambda: app.view.fit(*app.editor.world.size)),
         Action((k.K_h,), "h", "help", "this help", app_toggle(app, "show_help"), lambda: app.show_help),
     ]
@@ -119,7 +122,7 @@ class Controls:
         if app.user_control.handle(event):
             return
         if event.type == pygame.QUIT:
-            self.quit = True
+            self.quit = app.ask_quit()
         elif event.type == pygame.VIDEORESIZE:
             self.resize(event.w, event.h)
         elif event.type == pygame.KEYDOWN:
@@ -140,7 +143,12 @@ class Controls:
             self.polygon_key(event.key)
             return
         if event.key in (pygame.K_ESCAPE, pygame.K_q):
-            self.quit = True
+            self.quit = self.app.ask_quit()
+            return
+        self.app.quit_asked = False  # any other key: a later Esc asks again
+        mods = getattr(event, "mod", 0)
+        if event.key == pygame.K_z and mods & pygame.KMOD_CTRL and mods & pygame.KMOD_SHIFT:
+            self.app.undo(redo=True)
             return
         action = self.by_key.get(event.key)
         if action is not None:

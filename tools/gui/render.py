@@ -193,6 +193,8 @@ class Renderer:
         sim = app.sim.sim
         factor = app.clock.factor()
         rtf = f"{factor:.2f}x real time" if factor is not None else "-"
+        fps = app.clock.fps()
+        rtf += f"   {fps:.0f} fps" if fps is not None else ""
         exit_text = f"exit found at {sim.exit_time:.1f} s" if sim.exit_time is not None else "no exit yet"
         real = "real robot: " + (app.real_error if app.real is None else f"on {app.s.port}" if app.real.lost is None
                                  else f"LINK LOST on {app.s.port}, reconnecting")
@@ -216,5 +218,5 @@ MOUSE_HELP: Sequence[str] = (
     "mouse: drag on the floor draws a wall, snapped to the grid (o: box, or polygon: click corners, Enter);",
     "       drag a wall moves it;",
     "       right click deletes a wall; wheel zooms; middle drag or shift+drag pans",
-    "esc, q: quit",
+    "esc, q: quit (with unsaved walls: press twice)",
 )
