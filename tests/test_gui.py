@@ -571,3 +571,49 @@ def test_reset_rtf_fps_and_stop_at_the_exit(make_window: Any) -> None:
     key(pygame.K_x)  # off: a later run goes on past the exit
     loop.run(window, 1)
     assert not app.stop_at_exit
+
+
+def test_robots_and_the_start_are_dragged_and_turned_never_drawn_over(make_window: Any, pty_pair: Any) -> None:
+    from tools.gui.placing import start_handle
+
+    window = make_window(port=pty_pair.path)
+    app = window.app
+    key(pygame.K_SPACE)  # paused: only the mouse moves them
+    loop.run(window, 1)
+    r = DEFAULT.body_radius
+    assert app.real is not None and app.real.pose == pytest.approx(WORLD.start)  # the twin's start
+    ux, uy, _ = app.user.pose
+    assert math.hypot(ux - WORLD.start[0], uy - WORLD.start[1]) >= 2 * r  # the user's robot beside it
+    n0 = len(app.editor.walls)
+    sx, sy, sphi = app.sim.pose
+    drag(app, (sx, sy), (sx + 0.2, sy + 0.25))  # dragging from a robot moves it and draws no wall
+    loop.run(window, 1)
+    assert len(app.editor.walls) == n0
+    assert app.sim.pose[:2] == pytest.approx((sx + 0.2, sy + 0.25), abs=0.01)
+    pygame.mouse.set_pos(app.view.to_screen(sx + 0.2, sy + 0.25))
+    post(pygame.MOUSEWHEEL, x=0, y=2, flipped=False, precise_x=0.0, precise_y=2.0, touch=False)
+    loop.run(window, 1)
+    assert app.sim.pose[2] == pytest.approx(sphi + math.radians(30), abs=1e-6)  # the wheel over it turns it
+    key(pygame.K_PERIOD)  # it runs from there
+    loop.run(window, 1)
+    assert app.sim.pose[:2] == pytest.approx((sx + 0.2, sy + 0.25), abs=0.01)
+    rx, ry, _ = app.real.pose
+    drag(app, (rx, ry), (rx, ry + 0.3))  # the real robot's shown pose too
+    loop.run(window, 1)
+    assert app.real.pose[:2] == pytest.approx((rx, ry + 0.3), abs=0.01)
+    ux, uy, _ = app.user.pose
+    key(pygame.K_o)  # a box over the user's robot is refused
+    drag(app, (ux - 0.1, uy - 0.1), (ux + 0.1, uy + 0.1))
+    loop.run(window, 1)
+    assert len(app.editor.walls) == n0 and "no box over a robot" in app.message
+    key(pygame.K_o)
+    key(pygame.K_o)  # back to walls
+    handle = start_handle(app.editor.world.start, r)
+    drag(app, handle, (handle[0] + 0.5, handle[1]))  # the start, by its handle
+    loop.run(window, 1)
+    start = app.editor.world.start
+    assert start[0] == pytest.approx(WORLD.start[0] + 0.5, abs=0.01) and len(app.editor.walls) == n0
+    drag(app, (start[0], start[1] - 0.3), (start[0], start[1] + 0.3))  # a wall across the start: a warning
+    loop.run(window, 1)
+    assert len(app.editor.walls) == n0 + 1 and "crosses the start" in app.message
+    assert "start: a wall crosses it" in window.renderer.p.drawn

@@ -20,6 +20,7 @@ from host_sim.physics.params import RobotParams
 from host_sim.recordings.recording import RecordingWriter
 from host_sim.physics.world import World, WorldError
 from protocol import messages as M
+from tools.gui import placing
 from tools.gui.real_robot import RealBot
 from tools.gui.robots import SimBot
 from tools.gui.user_input import UserControl
@@ -124,7 +125,9 @@ class App:
             if old is not None:
                 old.close()
         self.sim = SimBot("simulated", world, s.params, rule_set, user=False, pil=s.pil, **common)  # type: ignore[arg-type]
-        self.user = SimBot("user", world, s.params, rule_set, user=True, **common)  # type: ignore[arg-type]
+        self.user = SimBot("user", world.with_changes(start=self.user_start()), s.params, rule_set, user=True,
+                           **common)  # type: ignore[arg-type]
+        self.user.set_world(world)
 
     def _open_real(self, port: str) -> None:
         from host_sim.board.serial_link import LinkError
@@ -134,6 +137,37 @@ class App:
         except LinkError as exc:
             self.real_error = f"absent: {exc}"
             raise
+
+    def user_start(self) -> placing.Pose:
+        """Where the user's robot starts: beside the start, so that it hides neither the simulated robot nor
+        the real one (those two start together there, to show where they part ways)."""
+        return placing.beside(self.editor.world, self.editor.world.start, self.s.params.body_radius)
+
+    def poses(self) -> dict[str, placing.Pose]:
+        """Every robot's pose and the start's, by name (what the mouse may grab)."""
+        out = {"simulated": self.sim.pose, "user": self.user.pose}
+        if self.real is not None:
+            out["real"] = self.real.pose
+        return out | {"start": self.editor.world.start}
+
+    def place(self, name: str, pose: placing.Pose) -> bool:
+        """Put a robot or the start at pose (dragged or turned); False, nothing moved, where a wall is."""
+        r = self.s.params.body_radius
+        if name in ("simulated", "user") and not placing.clear_of_walls(self.editor.world, pose[0], pose[1], r):
+            return False
+        if name == "start":
+            self.editor.set_start(pose)
+            self.warn_start()
+        elif name == "real" and self.real is not None:
+            self.real.place(pose)
+        else:
+            (self.sim if name == "simulated" else self.user).place(pose)
+        return True
+
+    def warn_start(self) -> None:
+        """Say so when a wall crosses the start: the robots' next reset would put them in it."""
+        if self.editor.start_blocked(self.s.params.body_radius) and "crosses the start" not in self.message:
+            self.say(f"{self.message}   WARNING: a wall crosses the start pose (drag its handle to move it)")
 
     @property
     def sim_bots(self) -> tuple[SimBot, SimBot]:
@@ -177,6 +211,7 @@ class App:
             for bot in self.sim_bots:
                 bot.set_world(self.editor.world)
             self._world_version = self.editor.version
+            self.warn_start()
 
     def advance(self, sim_seconds: float) -> None:
         """Fixed step: whole periods worth sim_seconds.  Real time: the frame's Dt in passes of at most

@@ -6,17 +6,20 @@ mouse gesture is listed in docs/gui.md.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Callable
 
 import pygame
 
+from tools.gui import placing
 from tools.gui.app import MIN_SIZE, PANEL_W, App
 
 BUTTON_TOP = 462  # the panel's robots and coverage plot are above
 BUTTON_SIZE = (70, 24)
 BUTTON_COLUMNS = 5
 PICK_PX = 7  # a wall within this many pixels of the cursor is under it
+TURN_STEP = math.radians(15)  # one notch of the wheel over a robot or the start's handle turns it this much
 
 
 @dataclass
@@ -136,7 +139,7 @@ class Controls:
         elif event.type == pygame.MOUSEWHEEL:
             pos = pygame.mouse.get_pos()
             if app.view.contains(*pos):
-                app.view.zoom(1.15 ** event.y, pos)
+                self.wheel(pos, event.y)
 
     def key(self, event: pygame.event.Event) -> None:
         if self.corners and event.key in (pygame.K_RETURN, pygame.K_KP_ENTER, pygame.K_BACKSPACE, pygame.K_ESCAPE):
@@ -167,6 +170,11 @@ class Controls:
         if button == 2 or (button == 1 and shift):
             self.drag = ("pan", pos)
             return
+        grabbed = self.robot_at(pos) if button == 1 and app.tool != "polygon" else None
+        if grabbed is not None:  # a robot or the start: dragging it moves it, never draws a wall
+            x, y, _phi = app.poses()[grabbed]
+            self.drag = ("robot", grabbed, (world_pt[0] - x, world_pt[1] - y))
+            return
         picked = app.editor.pick(*world_pt, PICK_PX / app.view.scale)
         if button == 3:
             if picked is not None:
@@ -186,6 +194,31 @@ class Controls:
             app.editor.selected = None
             start = app.editor.snap(*world_pt)
             self.drag = ("box" if app.tool == "box" else "draw", start, start)
+
+    def wheel(self, pos: tuple[int, int], notches: int) -> None:
+        """Over a robot or the start's handle: turn it; elsewhere: zoom about the cursor."""
+        app = self.app
+        name = self.robot_at(pos)
+        if name is None:
+            app.view.zoom(1.15 ** notches, pos)
+            return
+        x, y, phi = app.poses()[name]
+        if app.place(name, (x, y, phi + notches * TURN_STEP)):
+            app.say(f"{name} turned to {math.degrees(phi + notches * TURN_STEP) % 360:.0f} deg")
+
+    def robot_at(self, pos: tuple[int, int]) -> str | None:
+        """The robot under the cursor (the one drawn on top first), or "start" on the start's handle."""
+        app = self.app
+        x, y = app.view.to_world(*pos)
+        r = app.s.params.body_radius
+        poses = app.poses()
+        hx, hy = placing.start_handle(poses["start"], r)
+        if math.hypot(x - hx, y - hy) <= max(r / 2, PICK_PX / app.view.scale):
+            return "start"
+        for name in ("simulated", "user", "real"):
+            if name in poses and math.hypot(x - poses[name][0], y - poses[name][1]) <= r:
+                return name
+        return None
 
     def polygon_key(self, k: int) -> None:
         app = self.app
@@ -213,6 +246,10 @@ class Controls:
         elif drag[0] == "move":
             x, y = app.view.to_world(*pos)
             app.editor.move_to(drag[1], drag[2], x - drag[3][0], y - drag[3][1])
+        elif drag[0] == "robot":
+            x, y = self.pointer
+            phi = app.poses()[drag[1]][2]
+            app.place(drag[1], (x - drag[2][0], y - drag[2][1], phi))
 
     def release(self, pos: tuple[int, int], button: int) -> None:
         app, drag = self.app, self.drag
@@ -225,10 +262,19 @@ class Controls:
                 app.say(f"wall {len(app.editor.walls) - 1}: {drag[1]} -> {end}")
         elif drag[0] == "box" and button == 1:
             end = app.editor.snap(*app.view.to_world(*pos))
-            if app.editor.add_box(drag[1], end):
+            r = app.s.params.body_radius
+            under = [n for n, (x, y, _) in app.poses().items() if n != "start" and placing.box_covers(drag[1], end, x, y, r)]
+            if under:
+                app.say(f"no box over a robot: it would cover the {', '.join(under)} robot (drag the robot away first)")
+            elif app.editor.add_box(drag[1], end):
                 app.say(f"obstacle {len(app.editor.walls) - 1}: box {drag[1]} - {end}")
         elif drag[0] == "move" and app.editor.version == drag[4]:
             app.editor.drop_undo()  # a click that selected without moving: nothing to undo
+        elif drag[0] == "robot":
+            x, y, phi = app.poses()[drag[1]]
+            app.say(f"{drag[1]}{' pose' if drag[1] == 'start' else ' robot'} at ({x:.2f}, {y:.2f}) m, "
+                    f"{math.degrees(phi) % 360:.0f} deg (the wheel over it turns it)")
+            app.warn_start()
 
     def preview(self) -> tuple[str, tuple[float, float], tuple[float, float]] | None:
         """The wall or box being drawn: (kind, a, b)."""

@@ -188,6 +188,16 @@ class Painter:
             pygame.draw.line(self.surface, shade, view.to_screen(x0, y0), view.to_screen(x1, y1),
                              1 + int(2 * strength))
 
+    def start(self, view: Viewport, pose: tuple[float, float, float], handle: tuple[float, float], radius: float,
+              blocked: bool) -> None:
+        """The start pose: its outline, an arrow along its heading to the handle the mouse grabs; red if blocked."""
+        colour = RED if blocked else DIM
+        centre, tip = view.to_screen(pose[0], pose[1]), view.to_screen(*handle)
+        pygame.draw.circle(self.surface, colour, centre, max(3, int(radius * view.scale)), 1)
+        pygame.draw.line(self.surface, colour, centre, tip, 2)
+        pygame.draw.circle(self.surface, colour, tip, 5)
+        self.text("start: a wall crosses it" if blocked else "start", (tip[0] + 7, tip[1]), colour, 16, "midleft")
+
     def marks(self, view: Viewport, points: Sequence[tuple[float, float]], colour: tuple[int, int, int]) -> None:
         for x, y in points[-200:]:
             sx, sy = view.to_screen(x, y)

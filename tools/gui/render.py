@@ -12,7 +12,7 @@ import pygame
 from protocol import messages as M
 from tools.gui import draw
 from tools.gui.app import App
-from tools.gui import overlays
+from tools.gui import overlays, placing
 from tools.gui.controls import Controls
 from tools.gui.real_robot import RealBot
 from tools.gui.robots import SimBot, rays
@@ -59,6 +59,8 @@ class Renderer:
             p.preview(view, *preview)
         if self.controls.corners:
             p.corners(view, self.controls.corners, app.editor.snap(*self.controls.pointer))
+        r = app.s.params.body_radius
+        p.start(view, world.start, placing.start_handle(world.start, r), r, app.editor.start_blocked(r))
         bots: list[tuple[SimBot | RealBot, str]] = [(app.user, "user"), (app.sim, "simulated")]
         if app.real is not None:
             bots.insert(0, (app.real, "real"))

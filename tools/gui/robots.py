@@ -97,6 +97,14 @@ class SimBot:
         for x, y, _phi in sim._pose:  # noqa: SLF001 - the trail Simulation keeps
             sim.coverage.add(x, y)
 
+    def place(self, pose: Pose) -> None:
+        """Put the robot at pose (dragged or turned by the user); its wheels' angles, so its encoders, go on."""
+        from host_sim.physics.dynamics import q_from_axle_pose
+
+        robot = self.sim.robot
+        robot.q = q_from_axle_pose(*pose, self.params, robot.q[3], robot.q[4])
+        robot.set_world(robot.world)  # the broad phase's gap was measured from where it was
+
     # -- what is drawn ---------------------------------------------------
     @property
     def firmware(self) -> Any:

@@ -169,6 +169,16 @@ class WallEditor:
         self._set(self._redo.pop())
         return True
 
+    def set_start(self, pose: tuple[float, float, float]) -> None:
+        """Move the start pose (where a reset puts the robots, saved with the room)."""
+        self.world = self.world.with_changes(start=tuple(round(v, 6) for v in pose))
+        self.version += 1
+
+    def start_blocked(self, body_radius: float) -> bool:
+        """A wall crosses the body of a robot standing at the start."""
+        x, y, _phi = self.world.start
+        return bool(self.world.nearest_wall(np.array([[x, y]]))[0][0] < body_radius)
+
     def save(self, path: str | Path) -> None:
         save_world(self.world, path)
 
