@@ -617,3 +617,34 @@ def test_robots_and_the_start_are_dragged_and_turned_never_drawn_over(make_windo
     loop.run(window, 1)
     assert len(app.editor.walls) == n0 + 1 and "crosses the start" in app.message
     assert "start: a wall crosses it" in window.renderer.p.drawn
+
+
+def test_the_real_robots_slot_autonomous_stop_odometry_and_where_it_parts_from_the_twin(make_window: Any,
+                                                                                       pty_pair: Any) -> None:
+    window = make_window(port=pty_pair.path)
+    app = window.app
+    assert app.real is not None
+    x0, y0, phi0 = WORLD.start
+    c, s = math.cos(phi0), math.sin(phi0)
+    ahead = (x0 + 0.05 * c, y0 + 0.05 * s)  # a wall across its way, 5 cm ahead: the twin would stop at it
+    drag(app, (ahead[0] + 0.15 * s, ahead[1] - 0.15 * c), (ahead[0] - 0.15 * s, ahead[1] + 0.15 * c))
+    key(pygame.K_a)  # AUTONOMOUS
+    loop.run(window, 2)
+    enc = FrameEncoder()
+    for k in range(12):  # 11 mm a frame straight ahead: through the wall
+        pty_pair.write(telemetry(enc, k))
+    run_until(window, 12)
+    sent = FrameDecoder().decode_all(pty_pair.read_available())
+    modes = [M.unpack_payload(t, p)["mode"] for t, _s, p in sent if t == M.COMMAND]
+    assert modes == [M.MODE_AUTONOMOUS] and "AUTONOMOUS sent" in app.message
+    assert len(app.real.crossings) == 1
+    cx, cy = app.real.crossings[0]
+    assert (cx - x0) * c + (cy - y0) * s == pytest.approx(0.05, abs=0.012)
+    drawn = window.renderer.p.drawn
+    assert any(t.startswith("the real robot passed through a wall here") for t in drawn)
+    assert any(t.startswith("real  AUTONOMOUS") and t.endswith("pose: odometry only") for t in drawn)
+    assert "trail through 1 walls" in drawn
+    key(pygame.K_b)  # STOP
+    loop.run(window, 1)
+    sent = FrameDecoder().decode_all(pty_pair.read_available())
+    assert [M.unpack_payload(t, p)["mode"] for t, _s, p in sent if t == M.COMMAND] == [M.MODE_STOP]

@@ -350,6 +350,19 @@ class App:
         self.say("the user's orders drive the real robot (HOST mode)" if self.user_drives_real
                  else "the real robot is released (STOP)")
 
+    def real_mode(self, mode: int) -> None:
+        """The real robot's AUTONOMOUS or STOP button: the mode now, and the user's orders no longer go to it."""
+        if self.real is None:
+            self.say("no real robot: start with --port PORT")
+            return
+        self.user_drives_real = False
+        sent = self.real.set_mode(mode)
+        self.say(f"real robot: {M.MODE_NAMES[mode]} sent" if sent else "real robot: link lost, nothing sent")
+
+    def real_in_mode(self, mode: int) -> bool:
+        """The real robot's last TELEMETRY says it is in this mode."""
+        return self.real is not None and self.real.last is not None and int(self.real.last["mode"]) == mode  # type: ignore[call-overload]
+
     def reset(self) -> None:
         """Both simulated robots back at the room's start, fresh firmware; the real robot shown at the start."""
         if self.recording:

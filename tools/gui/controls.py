@@ -12,6 +12,7 @@ from typing import Any, Callable
 
 import pygame
 
+from protocol import messages as M
 from tools.gui import placing
 from tools.gui.app import MIN_SIZE, PANEL_W, App
 
@@ -55,6 +56,10 @@ def actions(app: App, controls: Controls) -> list[Action]:
                lambda: app.user_drives_sim),
         Action((k.K_i,), "i", "user->real", "the user's orders drive the real robot too", app.toggle_user_drives_real,
                lambda: app.user_drives_real),
+        Action((k.K_a,), "a", "real: auto", "the real robot explores on its own (AUTONOMOUS)",
+               lambda: app.real_mode(M.MODE_AUTONOMOUS), lambda: app.real_in_mode(M.MODE_AUTONOMOUS)),
+        Action((k.K_b,), "b", "real: STOP", "the real robot stops (STOP mode)", lambda: app.real_mode(M.MODE_STOP),
+               lambda: app.real_in_mode(M.MODE_STOP)),
         Action((k.K_v,), "v", "coverage", "coverage overlay on / off",
                lambda: app.toggle_view("show_coverage", "coverage overlay"), lambda: app.show_coverage),
         Action((k.K_g,), "g", "ghost", "the real robot's ghost (where it is now, its signal being late) on / off",

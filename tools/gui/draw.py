@@ -204,6 +204,14 @@ class Painter:
             pygame.draw.line(self.surface, colour, (sx - 4, sy - 4), (sx + 4, sy + 4), 2)
             pygame.draw.line(self.surface, colour, (sx - 4, sy + 4), (sx + 4, sy - 4), 2)
 
+    def crossings(self, view: Viewport, points: Sequence[tuple[float, float]], label: str) -> None:
+        """Rings where a trail crossed a wall; the first one labelled."""
+        for k, (x, y) in enumerate(points[-200:]):
+            centre = view.to_screen(x, y)
+            pygame.draw.circle(self.surface, RED, centre, 7, 2)
+            if k == 0:
+                self.text(label, (centre[0] + 9, centre[1]), RED, 16, "midleft")
+
     def flag(self, view: Viewport, x: float, y: float) -> None:
         sx, sy = view.to_screen(x, y)
         pygame.draw.line(self.surface, TEXT, (sx, sy), (sx, sy - 26), 2)

@@ -111,6 +111,8 @@ class Renderer:
         overlays.sensors(p, app.view, pose, app.s.params.body_radius, bot.counts(), colour)
         if isinstance(bot, SimBot):
             p.marks(app.view, bot.collision_marks, draw.RED)
+        elif bot.crossings:  # where its odometry and the room disagree
+            p.crossings(app.view, bot.crossings, "the real robot passed through a wall here: the twin stops at it")
 
     def ghost(self, real: RealBot) -> None:
         """The real robot's ghost over everything in the room, labelled with the link's lateness."""
@@ -170,6 +172,8 @@ class Renderer:
         else:
             p.text(bot.source, (x + 212, y + 24), draw.DIM, 16)
             p.text(f"{bot.frames} TELEMETRY frames", (x + 212, y + 40), draw.DIM, 16)
+            if bot.crossings:
+                p.text(f"trail through {len(bot.crossings)} walls", (x + 212, y + 84), draw.RED, 16)
             latency = bot.ghost.latency_s
             if latency is not None:
                 p.text(f"link late {1000 * latency:.0f} ms", (x + 212, y + 56), draw.GHOST, 16)
@@ -184,7 +188,7 @@ class Renderer:
             mode = M.MODE_NAMES[m] if m is not None else "?"
             return f"{name}{' (PIL)' if bot.pil else ''}  {mode}  {where}  {bot.sim.robot.collisions} coll."
         mode = M.MODE_NAMES[int(bot.last["mode"])] if bot.last is not None else "?"  # type: ignore[call-overload]
-        return f"real  {mode}  {where}"
+        return f"real  {mode}  {where}  pose: odometry only"
 
     # -- status bar and help ---------------------------------------------------------
     def status(self) -> None:
