@@ -341,7 +341,7 @@ def test_the_real_robots_own_odometry_is_used_when_telemetry_carries_it(make_win
 
 def test_headless_command_writes_a_screenshot(tmp_path: Path) -> None:
     out = tmp_path / "gui.png"
-    r = run_twinbot("gui", "--frames", "30", "--screenshot", str(out), "--out", str(tmp_path))
+    r = run_twinbot("gui", "--frames", "30", "--screenshot", str(out), "--out", str(tmp_path), "--size", "1280x780")
     assert r.returncode == 0, r.stderr
     img = pygame.image.load(str(out))
     assert img.get_size() == (1280, 780)
@@ -398,3 +398,253 @@ def test_the_real_robots_ghost_is_drawn_ahead_of_its_late_pose(make_window: Any,
     finally:
         proc.terminate()
         proc.wait(10)
+
+
+def test_the_link_lost_keeps_the_window_and_its_walls_and_reconnects(make_window: Any, tmp_path: Path,
+                                                                    monkeypatch: Any) -> None:
+    """The port goes away (its far end closed: EIO, as a killed board or an unplugged Pico): the window says
+    "link lost", runs on with its walls, and reopens the port when it is back (a symlink, like /dev/ttyACM0)."""
+    from tests.helpers import Pty
+    from tools.gui import real_robot
+
+    monkeypatch.setattr(real_robot, "RECONNECT_S", 0.0)
+    first, port = Pty(), tmp_path / "ttyROBOT"
+    port.symlink_to(first.path)
+    window = make_window(port=str(port))
+    app = window.app
+    enc = FrameEncoder()
+    for k in range(5):
+        first.write(telemetry(enc, k))
+    run_until(window, 5)
+    assert app.real is not None and app.real.frames == 5
+    drag(app, (1.012, 1.188), (1.41, 1.205))
+    loop.run(window, 1)
+    walls = list(app.editor.walls)
+    shown = app.real.pose
+    first.close()  # the board is gone
+    port.unlink()
+    loop.run(window, 5)
+    assert app.real.lost is not None and "link lost" in app.message
+    assert app.editor.walls == walls and not window.quit
+    t = app.sim.sim.robot.t
+    loop.run(window, 6)
+    assert app.sim.sim.robot.t > t  # the window runs on
+    second = Pty()
+    try:
+        port.symlink_to(second.path)  # the port is back
+        loop.run(window, 2)
+        assert app.real.lost is None and app.real.reconnects == 1 and "link back" in app.message
+        enc = FrameEncoder()  # the robot restarted: its odometry from 0
+        for k in range(3):
+            second.write(telemetry(enc, k))
+        run_until(window, 8)
+        assert app.real.frames == 8
+        assert app.real.trail[-3][:2] == pytest.approx(shown[:2], abs=1e-6)  # it goes on from where it was shown
+    finally:
+        second.close()
+
+
+def test_the_sensors_and_the_map_are_readable(make_window: Any, tmp_path: Path) -> None:
+    """Each sensor named on its robot's body and its count beside it; bars to the ADC's full scale; the rays'
+    legend; axes, a scale bar and the cursor's coordinates on the map; the coverage plot's axes labelled."""
+    from tools.gui.robots import rays
+
+    window = make_window()
+    app = window.app
+    loop.run(window, 30)
+    app.view.zoom(3.0, app.view.to_screen(*app.sim.pose[:2]))  # close enough for S1..S8 on a body
+    cursor = (app.view.rect[2] // 2, app.view.rect[3] // 2)
+    post(pygame.MOUSEMOTION, pos=cursor, rel=(0, 0), buttons=(0, 0, 0))
+    key(pygame.K_SPACE)
+    loop.run(window, 1)
+    drawn = window.renderer.p.drawn
+    for i in range(1, 9):
+        assert drawn.count(f"S{i}") >= 4  # under both robots' bars, and on both bodies
+    for count in app.sim.counts():
+        assert drawn.count(str(count)) >= 2  # above its bar, and beside its sensor in the room
+    x, y = app.view.to_world(*cursor)
+    assert f"cursor ({x:.3f}, {y:.3f}) m" in drawn
+    assert {"x, m", "y, m", "IR ray shade: counts", "4095", "coverage, %", "time, s", "90 %"} <= set(drawn)
+    assert any(t.endswith(" cm") and t[:-3].isdigit() for t in drawn)  # the scale bar
+    # rays end at the sensor's range, counted from the sensor on the rim
+    r, reach = DEFAULT.body_radius, DEFAULT.sensor_range
+    x0, y0, x1, y1 = rays(builtin_world("arena"), (1.0, 1.0, 0.3), DEFAULT).T
+    assert np.hypot(x1 - x0, y1 - y0) == pytest.approx(np.full(8, reach))
+    assert np.hypot(x0 - 1.0, y0 - 1.0) == pytest.approx(np.full(8, r))
+    # the bars reach the ADC's full scale: 1000 counts is a quarter of a bar, not two thirds of it
+    app.user.counts = lambda: [1000, 4095, 0, 0, 0, 0, 0, 0]  # type: ignore[method-assign]
+    loop.run(window, 1)
+    shot = pygame.image.load(str(app.screenshot(tmp_path / "bars.png")))
+    bars = window.renderer.bar_rects["user"]
+    column = bars.x + bars.width // 16
+    assert tuple(shot.get_at((column, bars.bottom - bars.height // 5)))[:3] == draw.COLOURS["user"]
+    assert tuple(shot.get_at((column, bars.bottom - bars.height // 2)))[:3] == (255, 255, 255)
+    assert tuple(shot.get_at((column + bars.width // 8, bars.y + 3 * bars.height // 4)))[:3] == draw.COLOURS["user"]
+
+
+def test_the_window_fits_a_laptop_and_can_be_resized(make_window: Any) -> None:
+    window = make_window()
+    app = window.app
+    w, h = app.surface.get_size()
+    assert w <= 1366 and h <= 720  # a 1366 x 768 screen, with room for the window's title bar
+    post(pygame.VIDEORESIZE, w=1500, h=900, size=(1500, 900))
+    loop.run(window, 1)
+    assert app.surface.get_size() == (1500, 900)
+    assert app.view.rect[2:] == (1500 - 380, 900 - 40)  # the room's area grows, the panel moves right
+    assert all(rect.right <= 1500 and rect.bottom <= 900 - 40 for rect, _ in window.controls.buttons)
+    assert min(rect.x for rect, _ in window.controls.buttons) > app.view.rect[2]
+    post(pygame.VIDEORESIZE, w=400, h=300, size=(400, 300))  # too small: held at the minimum
+    loop.run(window, 1)
+    assert app.surface.get_size() == (960, 700)
+    assert all(rect.bottom <= 700 - 40 for rect, _ in window.controls.buttons)
+
+
+def ctrl_key(k: int, mod: int) -> None:
+    post(pygame.KEYDOWN, key=k, mod=mod, unicode="", scancode=0)
+    post(pygame.KEYUP, key=k, mod=mod, unicode="", scancode=0)
+
+
+def test_redo_feedback_and_quitting_with_unsaved_walls_asks_first(make_window: Any) -> None:
+    window = make_window()
+    app = window.app
+    n0 = len(app.editor.walls)
+    key(pygame.K_q)  # nothing edited: quits at once
+    loop.run(window, 1)
+    assert window.quit
+    window.controls.quit = False
+    drag(app, (1.0, 1.2), (1.4, 1.2))
+    key(pygame.K_z)
+    loop.run(window, 1)
+    assert len(app.editor.walls) == n0 and app.message == f"undo: {n0} walls now"
+    ctrl_key(pygame.K_y, pygame.KMOD_CTRL)  # redo
+    loop.run(window, 1)
+    assert app.editor.walls[-1] == {"segment": [1.0, 1.2, 1.4, 1.2]} and "redo" in app.message
+    key(pygame.K_z)
+    ctrl_key(pygame.K_z, pygame.KMOD_CTRL | pygame.KMOD_SHIFT)  # redo, the other way
+    loop.run(window, 1)
+    assert len(app.editor.walls) == n0 + 1
+    ctrl_key(pygame.K_y, pygame.KMOD_CTRL)
+    loop.run(window, 1)
+    assert app.message == "nothing to redo"
+    app.editor.selected = None
+    key(pygame.K_DELETE)
+    loop.run(window, 1)
+    assert "nothing selected" in app.message
+    app.editor.selected = len(app.editor.walls) - 1
+    key(pygame.K_DELETE)
+    loop.run(window, 1)
+    assert app.message.startswith("wall deleted") and len(app.editor.walls) == n0
+    key(pygame.K_z)
+    for k, said in ((pygame.K_v, "coverage overlay hidden"), (pygame.K_g, "the real robot's ghost hidden")):
+        key(k)
+        loop.run(window, 1)
+        assert app.message == said
+    key(pygame.K_ESCAPE)  # unsaved walls: the first press asks
+    loop.run(window, 1)
+    assert not window.quit and "again to quit" in app.message
+    key(pygame.K_h)  # another key in between: the next Esc asks again
+    key(pygame.K_ESCAPE)
+    loop.run(window, 1)
+    assert not window.quit
+    key(pygame.K_q)  # the second press in a row quits
+    loop.run(window, 1)
+    assert window.quit
+
+
+def test_reset_rtf_fps_and_stop_at_the_exit(make_window: Any) -> None:
+    window = make_window(speed=16.0)
+    app = window.app
+    loop.run(window, 20)
+    key(pygame.K_r)
+    loop.run(window, 3)
+    factor = app.clock.factor()
+    assert factor is not None and factor >= 0  # not the negative jump across the reset
+    assert app.clock.fps() is not None and " fps " in " ".join(window.renderer.p.drawn)  # in the status bar
+    assert app.stop_at_exit  # on by default; the paper's room has an exit: run until the robot finds it
+    for _ in range(400):
+        loop.run(window, 10)
+        if not app.running:
+            break
+    sim = app.sim.sim
+    assert sim.exit_time is not None and not app.running and "found the exit" in app.message
+    assert sim.robot.t - sim.exit_time <= sim.cycle_s + 1e-9  # paused in the period it left
+    key(pygame.K_x)  # off: a later run goes on past the exit
+    loop.run(window, 1)
+    assert not app.stop_at_exit
+
+
+def test_robots_and_the_start_are_dragged_and_turned_never_drawn_over(make_window: Any, pty_pair: Any) -> None:
+    from tools.gui.placing import start_handle
+
+    window = make_window(port=pty_pair.path)
+    app = window.app
+    key(pygame.K_SPACE)  # paused: only the mouse moves them
+    loop.run(window, 1)
+    r = DEFAULT.body_radius
+    assert app.real is not None and app.real.pose == pytest.approx(WORLD.start)  # the twin's start
+    ux, uy, _ = app.user.pose
+    assert math.hypot(ux - WORLD.start[0], uy - WORLD.start[1]) >= 2 * r  # the user's robot beside it
+    n0 = len(app.editor.walls)
+    sx, sy, sphi = app.sim.pose
+    drag(app, (sx, sy), (sx + 0.2, sy + 0.25))  # dragging from a robot moves it and draws no wall
+    loop.run(window, 1)
+    assert len(app.editor.walls) == n0
+    assert app.sim.pose[:2] == pytest.approx((sx + 0.2, sy + 0.25), abs=0.01)
+    pygame.mouse.set_pos(app.view.to_screen(sx + 0.2, sy + 0.25))
+    post(pygame.MOUSEWHEEL, x=0, y=2, flipped=False, precise_x=0.0, precise_y=2.0, touch=False)
+    loop.run(window, 1)
+    assert app.sim.pose[2] == pytest.approx(sphi + math.radians(30), abs=1e-6)  # the wheel over it turns it
+    key(pygame.K_PERIOD)  # it runs from there
+    loop.run(window, 1)
+    assert app.sim.pose[:2] == pytest.approx((sx + 0.2, sy + 0.25), abs=0.01)
+    rx, ry, _ = app.real.pose
+    drag(app, (rx, ry), (rx, ry + 0.3))  # the real robot's shown pose too
+    loop.run(window, 1)
+    assert app.real.pose[:2] == pytest.approx((rx, ry + 0.3), abs=0.01)
+    ux, uy, _ = app.user.pose
+    key(pygame.K_o)  # a box over the user's robot is refused
+    drag(app, (ux - 0.1, uy - 0.1), (ux + 0.1, uy + 0.1))
+    loop.run(window, 1)
+    assert len(app.editor.walls) == n0 and "no box over a robot" in app.message
+    key(pygame.K_o)
+    key(pygame.K_o)  # back to walls
+    handle = start_handle(app.editor.world.start, r)
+    drag(app, handle, (handle[0] + 0.5, handle[1]))  # the start, by its handle
+    loop.run(window, 1)
+    start = app.editor.world.start
+    assert start[0] == pytest.approx(WORLD.start[0] + 0.5, abs=0.01) and len(app.editor.walls) == n0
+    drag(app, (start[0], start[1] - 0.3), (start[0], start[1] + 0.3))  # a wall across the start: a warning
+    loop.run(window, 1)
+    assert len(app.editor.walls) == n0 + 1 and "crosses the start" in app.message
+    assert "start: a wall crosses it" in window.renderer.p.drawn
+
+
+def test_the_real_robots_slot_autonomous_stop_odometry_and_where_it_parts_from_the_twin(make_window: Any,
+                                                                                       pty_pair: Any) -> None:
+    window = make_window(port=pty_pair.path)
+    app = window.app
+    assert app.real is not None
+    x0, y0, phi0 = WORLD.start
+    c, s = math.cos(phi0), math.sin(phi0)
+    ahead = (x0 + 0.05 * c, y0 + 0.05 * s)  # a wall across its way, 5 cm ahead: the twin would stop at it
+    drag(app, (ahead[0] + 0.15 * s, ahead[1] - 0.15 * c), (ahead[0] - 0.15 * s, ahead[1] + 0.15 * c))
+    key(pygame.K_a)  # AUTONOMOUS
+    loop.run(window, 2)
+    enc = FrameEncoder()
+    for k in range(12):  # 11 mm a frame straight ahead: through the wall
+        pty_pair.write(telemetry(enc, k))
+    run_until(window, 12)
+    sent = FrameDecoder().decode_all(pty_pair.read_available())
+    modes = [M.unpack_payload(t, p)["mode"] for t, _s, p in sent if t == M.COMMAND]
+    assert modes == [M.MODE_AUTONOMOUS] and "AUTONOMOUS sent" in app.message
+    assert len(app.real.crossings) == 1
+    cx, cy = app.real.crossings[0]
+    assert (cx - x0) * c + (cy - y0) * s == pytest.approx(0.05, abs=0.012)
+    drawn = window.renderer.p.drawn
+    assert any(t.startswith("the real robot passed through a wall here") for t in drawn)
+    assert any(t.startswith("real  AUTONOMOUS") and t.endswith("pose: odometry only") for t in drawn)
+    assert "trail through 1 walls" in drawn
+    key(pygame.K_b)  # STOP
+    loop.run(window, 1)
+    sent = FrameDecoder().decode_all(pty_pair.read_available())
+    assert [M.unpack_payload(t, p)["mode"] for t, _s, p in sent if t == M.COMMAND] == [M.MODE_STOP]

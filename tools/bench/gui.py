@@ -110,12 +110,14 @@ def run(args: argparse.Namespace) -> int:
 def print_report(args: argparse.Namespace, rows: list[tuple[str, dict[str, Any]]]) -> None:
     import pygame
 
+    from tools.gui.app import SIZE
+
     print("twinbot bench gui")
     print(f"command:  twinbot bench gui --frames {args.frames} --prerun {args.prerun:g}"
           f"{' --no-board' if args.no_board else ''}")
     print(f"machine:  {machine_line()}")
     print(f"pygame-ce {pygame.version.ver} (SDL {'.'.join(map(str, pygame.get_sdl_version()))}), "
-          f"video driver {os.environ.get('SDL_VIDEODRIVER')}, window 1280 x 780, paper_room, coverage overlay, "
+          f"video driver {os.environ.get('SDL_VIDEODRIVER')}, window {SIZE[0]} x {SIZE[1]}, paper_room, coverage overlay, "
           f"rays and trails on; trails {args.prerun:g} s long before timing; frames started at 60 Hz")
     print()
     head = f"{'workload':<46}| median ms | p90 ms | max ms | 1/median | sim s | TELEMETRY rx"

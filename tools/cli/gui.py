@@ -23,6 +23,18 @@ def screenshot_file(text: str) -> str:
     return text
 
 
+def window_size(text: str) -> tuple[int, int]:
+    """WIDTHxHEIGHT in pixels, at least the window's minimum."""
+    from tools.gui.app import MIN_SIZE
+
+    w, _, h = text.lower().partition("x")
+    if not (w.isdigit() and h.isdigit()):
+        raise argparse.ArgumentTypeError(f"{text!r}: give WIDTHxHEIGHT in pixels, e.g. 1280x720")
+    if int(w) < MIN_SIZE[0] or int(h) < MIN_SIZE[1] or int(w) > 16384 or int(h) > 16384:
+        raise argparse.ArgumentTypeError(f"{text!r}: from {MIN_SIZE[0]}x{MIN_SIZE[1]} to 16384x16384")
+    return int(w), int(h)
+
+
 def existing_folder(text: str) -> str:
     if not Path(text).is_dir():
         raise argparse.ArgumentTypeError(f"{text}: no such folder")
@@ -80,6 +92,8 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
                    help="the world file that s saves and l loads (default: --world if a file, else NAME.json)")
     p.add_argument("--out", metavar="DIR", type=existing_folder, default=".",
                    help="folder for recordings and screenshots (default .)")
+    p.add_argument("--size", type=window_size, default=None, metavar="WxH",
+                   help="the window's size in pixels at start (default 1280x720; the window can be resized)")
     p.add_argument("--frames", type=int_range(1, MAX_FRAMES), help="headless: run this many frames of 1/60 s, then stop")
     p.add_argument("--screenshot", metavar="FILE", type=screenshot_file,
                    help="with --frames: write the last frame (.png, .bmp, .tga, .jpg)")
@@ -99,7 +113,8 @@ def settings_from(args: argparse.Namespace):  # type: ignore[no-untyped-def]
                                               else out / f"{world.name}.json")
     return Settings(world=world, params=params, rules=args.rules, port=args.port, pil=args.pil, speed=args.speed,
                     realtime=args.realtime, noise=not args.no_noise, emitter_pct=args.emitter, seed=args.seed,
-                    world_file=save, out_dir=out, link_floor_s=args.link_floor / 1000.0)
+                    world_file=save, out_dir=out, link_floor_s=args.link_floor / 1000.0,
+                    **({"size": args.size} if args.size else {}))
 
 
 def run(args: argparse.Namespace) -> int:

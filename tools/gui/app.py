@@ -20,17 +20,26 @@ from host_sim.physics.params import RobotParams
 from host_sim.recordings.recording import RecordingWriter
 from host_sim.physics.world import World, WorldError
 from protocol import messages as M
-from tools.gui.robots import RealBot, SimBot
+from tools.gui import placing
+from tools.gui.real_robot import RealBot
+from tools.gui.robots import SimBot
 from tools.gui.user_input import UserControl
 from tools.gui.view import Viewport
 from tools.gui.world_edit import WallEditor
 
-SIZE = (1280, 780)
-ROOM_RECT = (0, 0, 900, 740)
+SIZE = (1280, 720)  # the default window: fits a 1366 x 768 laptop screen with its title bar
+MIN_SIZE = (960, 700)  # smaller, and the panel's buttons would not fit
+PANEL_W = 380  # the panel on the right
+STATUS_H = 40  # the status bar below
 SPEEDS = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0)
 TOOLS = ("wall", "box", "polygon")
 MAX_CATCH_UP = 0.1  # s of wall time a fixed-step frame makes up at most: a slow frame must not snowball
 MAX_SPEED = M.param_by_name("max_speed")[4]  # mm/s, the firmware's default wheel-speed limit
+
+
+def room_rect(size: tuple[int, int]) -> tuple[int, int, int, int]:
+    """The room's area of a window this size: all but the panel and the status bar."""
+    return (0, 0, size[0] - PANEL_W, size[1] - STATUS_H)
 
 
 @dataclass
@@ -49,6 +58,7 @@ class Settings:
     out_dir: Path = Path(".")  # recordings and screenshots
     grid: float = 0.05  # m, the snapping grid
     link_floor_s: float = 0.0  # the real robot's link: its fastest delivery (the ghost's latency floor)
+    size: tuple[int, int] = SIZE  # the window's size at start, pixels
 
 
 @dataclass
@@ -58,7 +68,16 @@ class Clock:
     samples: collections.deque[tuple[float, float]] = field(default_factory=lambda: collections.deque(maxlen=240))
 
     def tick(self, sim_t: float) -> None:
+        if self.samples and sim_t < self.samples[-1][1]:  # a reset: the simulated time starts again
+            self.samples.clear()
         self.samples.append((time.perf_counter(), sim_t))
+
+    def fps(self) -> float | None:
+        """Frames per wall second over the last second (the samples are one a frame)."""
+        if len(self.samples) < 2:
+            return None
+        (w0, _), (w1, _) = self.samples[0], self.samples[-1]
+        return (len(self.samples) - 1) / (w1 - w0) if w1 > w0 else None
 
     def factor(self) -> float | None:
         if len(self.samples) < 2:
@@ -74,7 +93,7 @@ class App:
         self.s = settings
         self.surface = surface
         self.editor = WallEditor(settings.world, settings.grid)
-        self.view = Viewport(ROOM_RECT)
+        self.view = Viewport(room_rect(surface.get_size()))
         self.view.fit(*settings.world.size)
         self.user_control = UserControl(MAX_SPEED)
         self.running = True
@@ -84,6 +103,8 @@ class App:
         self.tool = "wall"  # what the mouse draws: "wall", "box" or "polygon"
         self.user_drives_sim = False
         self.user_drives_real = False
+        self.stop_at_exit = True  # pause when the simulated robot leaves the room (as `sim --stop-at-exit`)
+        self.quit_asked = False  # Esc or q pressed once with unsaved walls: a second press quits
         self.recording: list[Path] = []
         self.message = ""
         self.clock = Clock()
@@ -93,6 +114,7 @@ class App:
             self._open_real(settings.port)
         self._make_bots()
         self._world_version = self.editor.version
+        self.saved_walls = [dict(w) for w in self.editor.walls]
 
     # -- robots -----------------------------------------------------------------
     def _make_bots(self) -> None:
@@ -103,7 +125,9 @@ class App:
             if old is not None:
                 old.close()
         self.sim = SimBot("simulated", world, s.params, rule_set, user=False, pil=s.pil, **common)  # type: ignore[arg-type]
-        self.user = SimBot("user", world, s.params, rule_set, user=True, **common)  # type: ignore[arg-type]
+        self.user = SimBot("user", world.with_changes(start=self.user_start()), s.params, rule_set, user=True,
+                           **common)  # type: ignore[arg-type]
+        self.user.set_world(world)
 
     def _open_real(self, port: str) -> None:
         from host_sim.board.serial_link import LinkError
@@ -113,6 +137,37 @@ class App:
         except LinkError as exc:
             self.real_error = f"absent: {exc}"
             raise
+
+    def user_start(self) -> placing.Pose:
+        """Where the user's robot starts: beside the start, so that it hides neither the simulated robot nor
+        the real one (those two start together there, to show where they part ways)."""
+        return placing.beside(self.editor.world, self.editor.world.start, self.s.params.body_radius)
+
+    def poses(self) -> dict[str, placing.Pose]:
+        """Every robot's pose and the start's, by name (what the mouse may grab)."""
+        out = {"simulated": self.sim.pose, "user": self.user.pose}
+        if self.real is not None:
+            out["real"] = self.real.pose
+        return out | {"start": self.editor.world.start}
+
+    def place(self, name: str, pose: placing.Pose) -> bool:
+        """Put a robot or the start at pose (dragged or turned); False, nothing moved, where a wall is."""
+        r = self.s.params.body_radius
+        if name in ("simulated", "user") and not placing.clear_of_walls(self.editor.world, pose[0], pose[1], r):
+            return False
+        if name == "start":
+            self.editor.set_start(pose)
+            self.warn_start()
+        elif name == "real" and self.real is not None:
+            self.real.place(pose)
+        else:
+            (self.sim if name == "simulated" else self.user).place(pose)
+        return True
+
+    def warn_start(self) -> None:
+        """Say so when a wall crosses the start: the robots' next reset would put them in it."""
+        if self.editor.start_blocked(self.s.params.body_radius) and "crosses the start" not in self.message:
+            self.say(f"{self.message}   WARNING: a wall crosses the start pose (drag its handle to move it)")
 
     @property
     def sim_bots(self) -> tuple[SimBot, SimBot]:
@@ -131,11 +186,24 @@ class App:
         if self.running:
             self.advance((dt if self.s.realtime else min(dt, MAX_CATCH_UP)) * self.s.speed)
         if self.real is not None:
-            self.real.orders = orders if self.user_drives_real else None
-            self.real.poll()
+            self.poll_real(orders)
         for bot in self.sim_bots:
             bot.after_frame()
         self.clock.tick(self.sim.sim.robot.t)
+
+    def poll_real(self, orders: tuple[int, int]) -> None:
+        """The real robot's frames; the link lost or back is said once, and the window runs on."""
+        real = self.real
+        assert real is not None
+        real.orders = orders if self.user_drives_real else None
+        real.world = self.editor.world
+        was_lost = real.lost is not None
+        real.poll()
+        if real.lost is not None and not was_lost:
+            self.user_drives_real = False
+            self.say(f"real robot: link lost ({real.lost}); reconnecting to {real.port}, walls kept")
+        elif real.lost is None and was_lost:
+            self.say(f"real robot: link back on {real.port}")
 
     def sync_world(self) -> None:
         """The simulated robots move into the room as edited (before any step, and before drawing)."""
@@ -143,6 +211,7 @@ class App:
             for bot in self.sim_bots:
                 bot.set_world(self.editor.world)
             self._world_version = self.editor.version
+            self.warn_start()
 
     def advance(self, sim_seconds: float) -> None:
         """Fixed step: whole periods worth sim_seconds.  Real time: the frame's Dt in passes of at most
@@ -151,11 +220,27 @@ class App:
         self.sync_world()
         passes = max(1, math.ceil(sim_seconds / self.sim.sim.cycle_s - 1e-9))
         for bot in self.sim_bots:
-            if self.s.realtime:
+            if bot is self.sim and self.stop_at_exit and bot.sim.exit_time is None:
+                self._advance_to_exit(bot, sim_seconds, passes)
+            elif self.s.realtime:
                 for _ in range(passes):
                     bot.stepper.clock(sim_seconds / passes)
             else:
                 bot.stepper.fixed(sim_seconds)
+
+    def _advance_to_exit(self, bot: SimBot, sim_seconds: float, passes: int) -> None:
+        """The simulated robot in passes of at most a period, paused in the period it leaves the room."""
+        for _ in range(passes):
+            if self.s.realtime:
+                bot.stepper.clock(sim_seconds / passes)
+            else:
+                bot.stepper.fixed(sim_seconds / passes)
+            if bot.sim.exit_time is not None:
+                bot.stepper.owed = 0.0
+                self.running = False
+                self.say(f"the simulated robot found the exit at t = {bot.sim.exit_time:.2f} s: paused "
+                         "(space runs on; x: stop at the exit off)")
+                return
 
     def single_step(self) -> None:
         """One 40 ms control period of both simulated robots (pauses the run)."""
@@ -164,6 +249,15 @@ class App:
         for bot in self.sim_bots:
             bot.stepper.step_period()
         self.say(f"one step: t = {self.sim.sim.robot.t:.2f} s")
+
+    def resize(self, surface: pygame.Surface) -> None:
+        """The window was resized: the room's area follows, showing the same part of the room."""
+        self.surface = surface
+        x0, y0 = self.view.to_world(*self.view.rect[:2])
+        self.view.rect = room_rect(surface.get_size())
+        self.view.ox = x0
+        self.view.oy = y0 - self.view.rect[3] / self.view.scale
+        self.view.version += 1
 
     # -- settings the user changes -------------------------------------------------
     def say(self, text: str) -> None:
@@ -177,6 +271,37 @@ class App:
         k = min(range(len(SPEEDS)), key=lambda i: abs(SPEEDS[i] - self.s.speed))
         self.s.speed = SPEEDS[max(0, min(len(SPEEDS) - 1, k + direction))]
         self.say(f"speed {self.s.speed:g}x real time")
+
+    def toggle_stop_at_exit(self) -> None:
+        self.stop_at_exit = not self.stop_at_exit
+        self.say("pause when the simulated robot finds the exit" if self.stop_at_exit
+                 else "the simulated robot runs on past the exit")
+
+    def toggle_view(self, name: str, what: str) -> None:
+        """Show or hide one part of the room (show_coverage, show_ghost), and say which."""
+        setattr(self, name, not getattr(self, name))
+        self.say(f"{what} {'shown' if getattr(self, name) else 'hidden'}")
+
+    def undo(self, redo: bool = False) -> None:
+        done = self.editor.redo() if redo else self.editor.undo()
+        verb = "redo" if redo else "undo"
+        self.say(f"{verb}: {len(self.editor.walls)} walls now" if done else f"nothing to {verb}")
+
+    def delete_selected(self) -> None:
+        self.say("wall deleted (z undoes)" if self.editor.delete() else "nothing selected: click a wall first")
+
+    @property
+    def unsaved(self) -> bool:
+        """The walls differ from the world file last saved or loaded (or from the start's room)."""
+        return self.editor.walls != self.saved_walls
+
+    def ask_quit(self) -> bool:
+        """Esc or q: True to quit now; with unsaved walls only on the second press in a row."""
+        if not self.unsaved or self.quit_asked:
+            return True
+        self.quit_asked = True
+        self.say("the walls are not saved: press Esc or q again to quit without saving (s saves)")
+        return False
 
     def toggle_realtime(self) -> None:
         self.s.realtime = not self.s.realtime
@@ -225,6 +350,19 @@ class App:
         self.say("the user's orders drive the real robot (HOST mode)" if self.user_drives_real
                  else "the real robot is released (STOP)")
 
+    def real_mode(self, mode: int) -> None:
+        """The real robot's AUTONOMOUS or STOP button: the mode now, and the user's orders no longer go to it."""
+        if self.real is None:
+            self.say("no real robot: start with --port PORT")
+            return
+        self.user_drives_real = False
+        sent = self.real.set_mode(mode)
+        self.say(f"real robot: {M.MODE_NAMES[mode]} sent" if sent else "real robot: link lost, nothing sent")
+
+    def real_in_mode(self, mode: int) -> bool:
+        """The real robot's last TELEMETRY says it is in this mode."""
+        return self.real is not None and self.real.last is not None and int(self.real.last["mode"]) == mode  # type: ignore[call-overload]
+
     def reset(self) -> None:
         """Both simulated robots back at the room's start, fresh firmware; the real robot shown at the start."""
         if self.recording:
@@ -268,6 +406,7 @@ class App:
 
     def save_world(self) -> None:
         self.editor.save(self.s.world_file)
+        self.saved_walls = [dict(w) for w in self.editor.walls]
         self.say(f"world saved: {self.s.world_file}")
 
     def load_world(self) -> None:
@@ -277,6 +416,7 @@ class App:
             self.say(f"not loaded: {exc}")
             return
         self.view.fit(*self.editor.world.size)
+        self.saved_walls = [dict(w) for w in self.editor.walls]
         self.reset()
         self.say(f"world loaded: {self.s.world_file}")
 

@@ -6,17 +6,21 @@ mouse gesture is listed in docs/gui.md.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Callable
 
 import pygame
 
-from tools.gui.app import App
+from protocol import messages as M
+from tools.gui import placing
+from tools.gui.app import MIN_SIZE, PANEL_W, App
 
-PANEL_X = 900
-BUTTON_TOP = 470
-BUTTON_SIZE = (88, 26)
+BUTTON_TOP = 462  # the panel's robots and coverage plot are above
+BUTTON_SIZE = (70, 24)
+BUTTON_COLUMNS = 5
 PICK_PX = 7  # a wall within this many pixels of the cursor is under it
+TURN_STEP = math.radians(15)  # one notch of the wheel over a robot or the start's handle turns it this much
 
 
 @dataclass
@@ -52,16 +56,23 @@ def actions(app: App, controls: Controls) -> list[Action]:
                lambda: app.user_drives_sim),
         Action((k.K_i,), "i", "user->real", "the user's orders drive the real robot too", app.toggle_user_drives_real,
                lambda: app.user_drives_real),
-        Action((k.K_v,), "v", "coverage", "coverage overlay on / off", app_toggle(app, "show_coverage"),
-               lambda: app.show_coverage),
+        Action((k.K_a,), "a", "real: auto", "the real robot explores on its own (AUTONOMOUS)",
+               lambda: app.real_mode(M.MODE_AUTONOMOUS), lambda: app.real_in_mode(M.MODE_AUTONOMOUS)),
+        Action((k.K_b,), "b", "real: STOP", "the real robot stops (STOP mode)", lambda: app.real_mode(M.MODE_STOP),
+               lambda: app.real_in_mode(M.MODE_STOP)),
+        Action((k.K_v,), "v", "coverage", "coverage overlay on / off",
+               lambda: app.toggle_view("show_coverage", "coverage overlay"), lambda: app.show_coverage),
         Action((k.K_g,), "g", "ghost", "the real robot's ghost (where it is now, its signal being late) on / off",
-               app_toggle(app, "show_ghost"), lambda: app.show_ghost),
+               lambda: app.toggle_view("show_ghost", "the real robot's ghost"), lambda: app.show_ghost),
+        Action((k.K_x,), "x", "stop@exit", "pause when the simulated robot finds the exit (as sim --stop-at-exit)",
+               app.toggle_stop_at_exit, lambda: app.stop_at_exit),
         Action((k.K_o,), "o", "tool", "drawing tool: wall / box / convex polygon", controls.next_tool,
-               lambda: app.tool != "wall", lambda: f"tool: {app.tool}"),
+               lambda: app.tool != "wall", lambda: f"{app.tool}"),
         Action((k.K_s,), "s", "save", "save the world file", app.save_world),
         Action((k.K_l,), "l", "load", "load the world file", app.load_world),
-        Action((k.K_z,), "z", "undo", "undo the last change to the walls", lambda: app.editor.undo()),
-        Action((k.K_DELETE, k.K_BACKSPACE), "del", "delete", "delete the selected wall", lambda: app.editor.delete()),
+        Action((k.K_z,), "z", "undo", "undo the last change to the walls", app.undo),
+        Action((k.K_y,), "ctrl+y", "redo", "redo what undo took back (also shift+ctrl+z)", lambda: app.undo(redo=True)),
+        Action((k.K_DELETE, k.K_BACKSPACE), "del", "delete", "delete the selected wall", app.delete_selected),
         Action((k.K_0,), "0", "fit", "fit the room in the view", lambda: app.view.fit(*app.editor.world.size)),
         Action((k.K_h,), "h", "help", "this help", app_toggle(app, "show_help"), lambda: app.show_help),
     ]
@@ -80,15 +91,34 @@ class Controls:
         self.actions = actions(app, self)
         self.by_key = {key: a for a in self.actions for key in a.keys}
         self.buttons: list[tuple[pygame.Rect, Action]] = []
-        for i, a in enumerate(x for x in self.actions if x.label):
-            col, row = i % 4, i // 4
-            rect = pygame.Rect(PANEL_X + 10 + col * (BUTTON_SIZE[0] + 4), BUTTON_TOP + row * (BUTTON_SIZE[1] + 4),
-                               *BUTTON_SIZE)
-            self.buttons.append((rect, a))
+        self.layout()
         self.drag: tuple[Any, ...] | None = None  # ("draw", a, b) | ("move", i, wall, start) | ("pan", pos)
         self.corners: list[tuple[float, float]] = []  # the polygon being drawn
         self.pointer = (0.0, 0.0)  # world point under the mouse
+        self.pointer_px = (-1, -1)  # the mouse on screen (off the window until it moves)
         self.quit = False
+
+    @property
+    def panel_x(self) -> int:
+        return self.app.surface.get_width() - PANEL_W
+
+    def layout(self) -> None:
+        """The buttons in the panel, in rows of BUTTON_COLUMNS, wherever the panel is now."""
+        self.buttons = []
+        for i, a in enumerate(x for x in self.actions if x.label):
+            col, row = i % BUTTON_COLUMNS, i // BUTTON_COLUMNS
+            rect = pygame.Rect(self.panel_x + 10 + col * (BUTTON_SIZE[0] + 3), BUTTON_TOP + row * (BUTTON_SIZE[1] + 3),
+                               *BUTTON_SIZE)
+            self.buttons.append((rect, a))
+
+    def resize(self, width: int, height: int) -> None:
+        """The window's new size (at least MIN_SIZE): the room's area, the panel and its buttons follow."""
+        size = (max(MIN_SIZE[0], width), max(MIN_SIZE[1], height))
+        surface = pygame.display.get_surface()
+        if surface is None or surface.get_size() != size:  # SDL resized it already, unless under the minimum
+            surface = pygame.display.set_mode(size, pygame.RESIZABLE)
+        self.app.resize(surface)
+        self.layout()
 
     def next_tool(self) -> None:
         """The next drawing tool; a polygon's corners clicked so far are dropped."""
@@ -100,7 +130,9 @@ class Controls:
         if app.user_control.handle(event):
             return
         if event.type == pygame.QUIT:
-            self.quit = True
+            self.quit = app.ask_quit()
+        elif event.type == pygame.VIDEORESIZE:
+            self.resize(event.w, event.h)
         elif event.type == pygame.KEYDOWN:
             self.key(event)
         elif event.type == pygame.MOUSEBUTTONDOWN:
@@ -112,14 +144,19 @@ class Controls:
         elif event.type == pygame.MOUSEWHEEL:
             pos = pygame.mouse.get_pos()
             if app.view.contains(*pos):
-                app.view.zoom(1.15 ** event.y, pos)
+                self.wheel(pos, event.y)
 
     def key(self, event: pygame.event.Event) -> None:
         if self.corners and event.key in (pygame.K_RETURN, pygame.K_KP_ENTER, pygame.K_BACKSPACE, pygame.K_ESCAPE):
             self.polygon_key(event.key)
             return
         if event.key in (pygame.K_ESCAPE, pygame.K_q):
-            self.quit = True
+            self.quit = self.app.ask_quit()
+            return
+        self.app.quit_asked = False  # any other key: a later Esc asks again
+        mods = getattr(event, "mod", 0)
+        if event.key == pygame.K_z and mods & pygame.KMOD_CTRL and mods & pygame.KMOD_SHIFT:
+            self.app.undo(redo=True)
             return
         action = self.by_key.get(event.key)
         if action is not None:
@@ -137,6 +174,11 @@ class Controls:
         shift = bool(pygame.key.get_mods() & pygame.KMOD_SHIFT)
         if button == 2 or (button == 1 and shift):
             self.drag = ("pan", pos)
+            return
+        grabbed = self.robot_at(pos) if button == 1 and app.tool != "polygon" else None
+        if grabbed is not None:  # a robot or the start: dragging it moves it, never draws a wall
+            x, y, _phi = app.poses()[grabbed]
+            self.drag = ("robot", grabbed, (world_pt[0] - x, world_pt[1] - y))
             return
         picked = app.editor.pick(*world_pt, PICK_PX / app.view.scale)
         if button == 3:
@@ -158,6 +200,31 @@ class Controls:
             start = app.editor.snap(*world_pt)
             self.drag = ("box" if app.tool == "box" else "draw", start, start)
 
+    def wheel(self, pos: tuple[int, int], notches: int) -> None:
+        """Over a robot or the start's handle: turn it; elsewhere: zoom about the cursor."""
+        app = self.app
+        name = self.robot_at(pos)
+        if name is None:
+            app.view.zoom(1.15 ** notches, pos)
+            return
+        x, y, phi = app.poses()[name]
+        if app.place(name, (x, y, phi + notches * TURN_STEP)):
+            app.say(f"{name} turned to {math.degrees(phi + notches * TURN_STEP) % 360:.0f} deg")
+
+    def robot_at(self, pos: tuple[int, int]) -> str | None:
+        """The robot under the cursor (the one drawn on top first), or "start" on the start's handle."""
+        app = self.app
+        x, y = app.view.to_world(*pos)
+        r = app.s.params.body_radius
+        poses = app.poses()
+        hx, hy = placing.start_handle(poses["start"], r)
+        if math.hypot(x - hx, y - hy) <= max(r / 2, PICK_PX / app.view.scale):
+            return "start"
+        for name in ("simulated", "user", "real"):
+            if name in poses and math.hypot(x - poses[name][0], y - poses[name][1]) <= r:
+                return name
+        return None
+
     def polygon_key(self, k: int) -> None:
         app = self.app
         if k == pygame.K_BACKSPACE:
@@ -173,6 +240,7 @@ class Controls:
     def motion(self, pos: tuple[int, int], rel: tuple[int, int]) -> None:
         app, drag = self.app, self.drag
         self.pointer = app.view.to_world(*pos)
+        self.pointer_px = pos
         if drag is None:
             return
         if drag[0] == "pan":
@@ -183,6 +251,10 @@ class Controls:
         elif drag[0] == "move":
             x, y = app.view.to_world(*pos)
             app.editor.move_to(drag[1], drag[2], x - drag[3][0], y - drag[3][1])
+        elif drag[0] == "robot":
+            x, y = self.pointer
+            phi = app.poses()[drag[1]][2]
+            app.place(drag[1], (x - drag[2][0], y - drag[2][1], phi))
 
     def release(self, pos: tuple[int, int], button: int) -> None:
         app, drag = self.app, self.drag
@@ -195,10 +267,19 @@ class Controls:
                 app.say(f"wall {len(app.editor.walls) - 1}: {drag[1]} -> {end}")
         elif drag[0] == "box" and button == 1:
             end = app.editor.snap(*app.view.to_world(*pos))
-            if app.editor.add_box(drag[1], end):
+            r = app.s.params.body_radius
+            under = [n for n, (x, y, _) in app.poses().items() if n != "start" and placing.box_covers(drag[1], end, x, y, r)]
+            if under:
+                app.say(f"no box over a robot: it would cover the {', '.join(under)} robot (drag the robot away first)")
+            elif app.editor.add_box(drag[1], end):
                 app.say(f"obstacle {len(app.editor.walls) - 1}: box {drag[1]} - {end}")
         elif drag[0] == "move" and app.editor.version == drag[4]:
             app.editor.drop_undo()  # a click that selected without moving: nothing to undo
+        elif drag[0] == "robot":
+            x, y, phi = app.poses()[drag[1]]
+            app.say(f"{drag[1]}{' pose' if drag[1] == 'start' else ' robot'} at ({x:.2f}, {y:.2f}) m, "
+                    f"{math.degrees(phi) % 360:.0f} deg (the wheel over it turns it)")
+            app.warn_start()
 
     def preview(self) -> tuple[str, tuple[float, float], tuple[float, float]] | None:
         """The wall or box being drawn: (kind, a, b)."""

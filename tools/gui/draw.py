@@ -42,9 +42,11 @@ class Painter:
         self._cov: pygame.Surface | None = None
         self._trails: dict[tuple[Any, ...], list[tuple[int, int]]] = {}
         self._discs: dict[tuple[int, tuple[int, int, int]], pygame.Surface] = {}
+        self.drawn: list[str] = []  # every text drawn since the frame began (what the tests read)
 
     def text(self, s: str, pos: tuple[int, int], colour: tuple[int, int, int] = TEXT, size: int = 20,
              anchor: str = "topleft") -> pygame.Rect:
+        self.drawn.append(s)
         key = (s, colour, size)
         img = self._text.get(key)
         if img is None:
@@ -186,11 +188,29 @@ class Painter:
             pygame.draw.line(self.surface, shade, view.to_screen(x0, y0), view.to_screen(x1, y1),
                              1 + int(2 * strength))
 
+    def start(self, view: Viewport, pose: tuple[float, float, float], handle: tuple[float, float], radius: float,
+              blocked: bool) -> None:
+        """The start pose: its outline, an arrow along its heading to the handle the mouse grabs; red if blocked."""
+        colour = RED if blocked else DIM
+        centre, tip = view.to_screen(pose[0], pose[1]), view.to_screen(*handle)
+        pygame.draw.circle(self.surface, colour, centre, max(3, int(radius * view.scale)), 1)
+        pygame.draw.line(self.surface, colour, centre, tip, 2)
+        pygame.draw.circle(self.surface, colour, tip, 5)
+        self.text("start: a wall crosses it" if blocked else "start", (tip[0] + 7, tip[1]), colour, 16, "midleft")
+
     def marks(self, view: Viewport, points: Sequence[tuple[float, float]], colour: tuple[int, int, int]) -> None:
         for x, y in points[-200:]:
             sx, sy = view.to_screen(x, y)
             pygame.draw.line(self.surface, colour, (sx - 4, sy - 4), (sx + 4, sy + 4), 2)
             pygame.draw.line(self.surface, colour, (sx - 4, sy + 4), (sx + 4, sy - 4), 2)
+
+    def crossings(self, view: Viewport, points: Sequence[tuple[float, float]], label: str) -> None:
+        """Rings where a trail crossed a wall; the first one labelled."""
+        for k, (x, y) in enumerate(points[-200:]):
+            centre = view.to_screen(x, y)
+            pygame.draw.circle(self.surface, RED, centre, 7, 2)
+            if k == 0:
+                self.text(label, (centre[0] + 9, centre[1]), RED, 16, "midleft")
 
     def flag(self, view: Viewport, x: float, y: float) -> None:
         sx, sy = view.to_screen(x, y)
@@ -207,6 +227,7 @@ class Painter:
             h = int(rect.height * min(1.0, c / full_scale))
             pygame.draw.rect(self.surface, colour, (int(rect.x + i * w + 2), rect.bottom - h, int(w - 4), h))
             self.text(f"S{i + 1}", (int(rect.x + i * w + w / 2), rect.bottom + 1), DIM, 16, "midtop")
+            self.text(f"{c}", (int(rect.x + i * w + w / 2), rect.y + 2), TEXT, 16, "midtop")
         pygame.draw.rect(self.surface, DIM, rect, 1)
 
     def setpoints(self, rect: pygame.Rect, left: int, right: int, limit: int, colour: tuple[int, int, int]) -> None:
@@ -224,10 +245,16 @@ class Painter:
         pygame.draw.rect(self.surface, DIM, rect, 1)
 
     def plot(self, rect: pygame.Rect, t: list[float], frac: list[float], t90: float | None) -> None:
-        """Coverage against time, 0..100 %, with the 90 % line."""
+        """Coverage against time, 0..100 %, with the 90 % line; both axes labelled."""
         pygame.draw.rect(self.surface, (255, 255, 255), rect)
         y90 = rect.bottom - int(0.9 * rect.height)
         pygame.draw.line(self.surface, GRID_MAJOR, (rect.x, y90), (rect.right, y90))
+        self.text("90 %", (rect.right - 2, y90 + 1), DIM, 16, "topright")
+        for pct in (0, 50, 100):
+            self.text(f"{pct}", (rect.x - 2, rect.bottom - int(pct / 100 * rect.height)), DIM, 16, "midright")
+        self.text("coverage, %", (rect.x + 2, rect.y + 2), DIM, 16)
+        self.text("0", (rect.x, rect.bottom + 1), DIM, 16, "midtop")
+        self.text("time, s", (rect.centerx, rect.bottom + 1), DIM, 16, "midtop")
         if len(t) >= 2:
             step = max(1, len(t) // 400)
             tt = np.asarray(t[::step] + [t[-1]])
@@ -236,7 +263,7 @@ class Painter:
             xs = rect.x + tt / span * rect.width
             ys = rect.bottom - ff * rect.height
             pygame.draw.lines(self.surface, COLOURS["simulated"], False, np.stack([xs, ys], 1).tolist(), 2)
-            self.text(f"{span:.0f} s", (rect.right - 2, rect.bottom - 2), DIM, 16, "bottomright")
+            self.text(f"{span:.0f} s", (rect.right, rect.bottom + 1), DIM, 16, "topright")
         if t90 is not None:
             self.text(f"90 % at {t90:.1f} s", (rect.x + 4, y90 - 14), TEXT, 16)
         pygame.draw.rect(self.surface, DIM, rect, 1)

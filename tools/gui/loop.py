@@ -12,7 +12,7 @@ import time
 
 import pygame
 
-from tools.gui.app import SIZE, App, Settings
+from tools.gui.app import MIN_SIZE, App, Settings
 from tools.gui.window import Window
 
 FRAME_S = 1.0 / 60.0
@@ -31,7 +31,8 @@ def open_window(settings: Settings, headless: bool) -> Window:
         raise pygame.error("no display found")
     pygame.font.init()
     pygame.joystick.init()
-    surface = pygame.display.set_mode(SIZE)
+    size = (max(MIN_SIZE[0], settings.size[0]), max(MIN_SIZE[1], settings.size[1]))
+    surface = pygame.display.set_mode(size, pygame.RESIZABLE)
     pygame.display.set_caption(f"twinbot gui - {settings.world.name}")
     return Window(App(settings, surface))
 

@@ -12,11 +12,13 @@ import pygame
 from protocol import messages as M
 from tools.gui import draw
 from tools.gui.app import App
-from tools.gui.controls import PANEL_X, Controls
-from tools.gui.robots import RealBot, SimBot, rays
+from tools.gui import overlays, placing
+from tools.gui.controls import Controls
+from tools.gui.real_robot import RealBot
+from tools.gui.robots import SimBot, rays
 
 ADC_FULL = 4095.0
-BAR_FULL = 1500.0  # counts at the top of a bar: reflections rarely reach the ADC's full scale
+BAR_FULL = ADC_FULL  # counts at the top of a bar: readings reach the ADC's full scale
 
 
 class Renderer:
@@ -27,12 +29,15 @@ class Renderer:
         self._exit: tuple[object, tuple[float, float]] = (None, (0.0, 0.0))
         self._t90: tuple[object, int, float | None] = (None, 0, None)
         self.ghost_drawn: tuple[float, float, float] | None = None  # where the last frame drew the ghost
+        self.bar_rects: dict[str, pygame.Rect] = {}  # each robot's IR bars in the panel
 
     def draw(self) -> None:
-        surf = self.app.surface
+        surf = self.p.surface = self.app.surface  # a new surface after a resize
+        self.p.drawn.clear()
         surf.fill(draw.BG)
         self.room()
-        pygame.draw.rect(surf, draw.PANEL, (PANEL_X, 0, surf.get_width() - PANEL_X, surf.get_height()))
+        px = self.controls.panel_x
+        pygame.draw.rect(surf, draw.PANEL, (px, 0, surf.get_width() - px, surf.get_height()))
         self.panel()
         self.status()
         if self.app.show_help:
@@ -54,6 +59,8 @@ class Renderer:
             p.preview(view, *preview)
         if self.controls.corners:
             p.corners(view, self.controls.corners, app.editor.snap(*self.controls.pointer))
+        r = app.s.params.body_radius
+        p.start(view, world.start, placing.start_handle(world.start, r), r, app.editor.start_blocked(r))
         bots: list[tuple[SimBot | RealBot, str]] = [(app.user, "user"), (app.sim, "simulated")]
         if app.real is not None:
             bots.insert(0, (app.real, "real"))
@@ -65,6 +72,10 @@ class Renderer:
         if app.sim.sim.exit_time is not None:
             x, y = self.exit_point()
             p.flag(view, x, y)
+        overlays.axes(p, view)
+        overlays.scale_bar(p, view)
+        overlays.ray_legend(p, view, BAR_FULL, app.s.params.sensor_range)
+        overlays.cursor(p, view, self.controls.pointer_px)
         surf.set_clip(None)
 
     def exit_point(self) -> tuple[float, float]:
@@ -97,8 +108,11 @@ class Renderer:
         p.rays(app.view, rays(app.editor.world, pose, app.s.params), bot.counts(), colour, BAR_FULL)
         contact = isinstance(bot, SimBot) and bot.sim.robot.in_contact
         p.robot(app.view, pose, app.s.params.body_radius, colour, contact)
+        overlays.sensors(p, app.view, pose, app.s.params.body_radius, bot.counts(), colour)
         if isinstance(bot, SimBot):
             p.marks(app.view, bot.collision_marks, draw.RED)
+        elif bot.crossings:  # where its odometry and the room disagree
+            p.crossings(app.view, bot.crossings, "the real robot passed through a wall here: the twin stops at it")
 
     def ghost(self, real: RealBot) -> None:
         """The real robot's ghost over everything in the room, labelled with the link's lateness."""
@@ -113,22 +127,23 @@ class Renderer:
     # -- the panel ---------------------------------------------------------------
     def panel(self) -> None:
         app, p = self.app, self.p
-        x = PANEL_X + 10
-        y = 8
+        x = self.controls.panel_x + 10
+        p.text(f"IR bars: reflected counts, 0 .. {BAR_FULL:.0f} (the ADC's full scale)", (x, 5), draw.DIM, 16)
+        y = 22
         for bot, name in ((app.sim, "simulated"), (app.user, "user"), (app.real, "real")):
             self.robot_block(bot, name, x, y)
-            y += 100
+            y += 96
         cov = app.sim.sim.coverage
         t = app.sim.sim._t  # noqa: SLF001
         t90 = self.time_to_90()
-        p.text(f"coverage of the simulated robot: {100 * cov.fraction:.1f} %", (x, y + 4), draw.TEXT, 20)
-        p.plot(pygame.Rect(x, y + 24, 360, 120), t, cov.fractions, t90)
+        p.text(f"coverage of the simulated robot: {100 * cov.fraction:.1f} %", (x, y + 2), draw.TEXT, 20)
+        p.plot(pygame.Rect(x + 22, y + 20, 338, 100), t, cov.fractions, t90)
         for rect, action in self.controls.buttons:
             on = bool(action.on and action.on())
             label = action.caption() if action.caption else action.label
             p.button(rect, label, on, rect.collidepoint(pygame.mouse.get_pos()))
-        rows = (len(self.controls.buttons) + 3) // 4
-        p.text("h: all keys and mouse controls", (x, rows * 30 + self.controls.buttons[0][0].y + 6), draw.DIM, 16)
+        last = self.controls.buttons[-1][0]
+        p.text("h: all keys and mouse controls", (x, last.bottom + 4), draw.DIM, 16)
 
     def robot_block(self, bot: SimBot | RealBot | None, name: str, x: int, y: int) -> None:
         p = self.p
@@ -138,7 +153,8 @@ class Renderer:
             p.text(f"real robot: {self.app.real_error}", (x + 18, y), draw.DIM, 20)
             return
         p.text(self.robot_line(bot, name), (x + 18, y + 1), draw.TEXT, 18)
-        p.bars(pygame.Rect(x, y + 22, 200, 54), bot.counts(), colour, BAR_FULL)
+        self.bar_rects[name] = pygame.Rect(x, y + 22, 200, 54)
+        p.bars(self.bar_rects[name], bot.counts(), colour, BAR_FULL)
         if isinstance(bot, SimBot):
             sp = bot.setpoints()
             rect = pygame.Rect(x + 212, y + 34, 148, 42)
@@ -149,9 +165,15 @@ class Renderer:
                 p.text("current references, mA", (x + 212, y + 20), draw.DIM, 16)
                 i_l, i_r = bot.currents()
                 p.setpoints(rect, i_l, i_r, int(1000 * self.app.s.params.current_limit), colour)
+        elif bot.lost is not None:
+            p.text("LINK LOST: reconnecting", (x + 212, y + 24), draw.RED, 18)
+            p.text(bot.lost[:34], (x + 212, y + 42), draw.RED, 16)
+            p.text("walls and trail kept", (x + 212, y + 58), draw.DIM, 16)
         else:
             p.text(bot.source, (x + 212, y + 24), draw.DIM, 16)
             p.text(f"{bot.frames} TELEMETRY frames", (x + 212, y + 40), draw.DIM, 16)
+            if bot.crossings:
+                p.text(f"trail through {len(bot.crossings)} walls", (x + 212, y + 84), draw.RED, 16)
             latency = bot.ghost.latency_s
             if latency is not None:
                 p.text(f"link late {1000 * latency:.0f} ms", (x + 212, y + 56), draw.GHOST, 16)
@@ -166,7 +188,7 @@ class Renderer:
             mode = M.MODE_NAMES[m] if m is not None else "?"
             return f"{name}{' (PIL)' if bot.pil else ''}  {mode}  {where}  {bot.sim.robot.collisions} coll."
         mode = M.MODE_NAMES[int(bot.last["mode"])] if bot.last is not None else "?"  # type: ignore[call-overload]
-        return f"real  {mode}  {where}"
+        return f"real  {mode}  {where}  pose: odometry only"
 
     # -- status bar and help ---------------------------------------------------------
     def status(self) -> None:
@@ -177,8 +199,11 @@ class Renderer:
         sim = app.sim.sim
         factor = app.clock.factor()
         rtf = f"{factor:.2f}x real time" if factor is not None else "-"
+        fps = app.clock.fps()
+        rtf += f"   {fps:.0f} fps" if fps is not None else ""
         exit_text = f"exit found at {sim.exit_time:.1f} s" if sim.exit_time is not None else "no exit yet"
-        real = "real robot: " + (f"on {app.s.port}" if app.real is not None else app.real_error)
+        real = "real robot: " + (app.real_error if app.real is None else f"on {app.s.port}" if app.real.lost is None
+                                 else f"LINK LOST on {app.s.port}, reconnecting")
         line1 = (f"t = {sim.robot.t:7.2f} s   {rtf}   speed {app.s.speed:g}x   "
                  f"{'real time (clock Dt)' if app.s.realtime else 'fixed step'}   "
                  f"{'RUNNING' if app.running else 'PAUSED'}   rules {app.s.rules}   L {app.s.emitter_pct} %   "
@@ -199,5 +224,5 @@ MOUSE_HELP: Sequence[str] = (
     "mouse: drag on the floor draws a wall, snapped to the grid (o: box, or polygon: click corners, Enter);",
     "       drag a wall moves it;",
     "       right click deletes a wall; wheel zooms; middle drag or shift+drag pans",
-    "esc, q: quit",
+    "esc, q: quit (with unsaved walls: press twice)",
 )

@@ -1,24 +1,19 @@
-"""The three robots of the paper's application (§4, Fig. 14), as the window sees them.
+"""The two simulated robots of the paper's application (§4, Fig. 14), as the window sees them.
 
 `SimBot`: the simulated robot (AUTONOMOUS, the fuzzy explorer) and the user robot (HOST, the user's
-orders), each running the firmware itself; `RealBot`: a robot on a serial port.  See docs/gui.md.
+orders), each running the firmware itself; the real robot is tools/gui/real_robot.py.  See docs/gui.md.
 """
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 
-from firmware.odometry import EXACT, HEADING_TURN, Odometry
-from host_sim.loops.late_signal_twin import Ghost
-from host_sim.controller.hardware_io import firmware_geometry
 from host_sim.sensors.ir_sensor import BEARINGS
 from host_sim.loops.live import LiveStepper
 from host_sim.physics.params import RobotParams
 from host_sim.board.pil import PilController
 from host_sim.recordings.recording import RecordingWriter
-from host_sim.board.serial_link import SerialLink
 from host_sim.controller.sil import SilController
 from host_sim.loops.simulation import Simulation
 from host_sim.physics.world import World
@@ -102,6 +97,14 @@ class SimBot:
         for x, y, _phi in sim._pose:  # noqa: SLF001 - the trail Simulation keeps
             sim.coverage.add(x, y)
 
+    def place(self, pose: Pose) -> None:
+        """Put the robot at pose (dragged or turned by the user); its wheels' angles, so its encoders, go on."""
+        from host_sim.physics.dynamics import q_from_axle_pose
+
+        robot = self.sim.robot
+        robot.q = q_from_axle_pose(*pose, self.params, robot.q[3], robot.q[4])
+        robot.set_world(robot.world)  # the broad phase's gap was measured from where it was
+
     # -- what is drawn ---------------------------------------------------
     @property
     def firmware(self) -> Any:
@@ -166,141 +169,3 @@ class SimBot:
             self.controller.telemetry()  # start clean: only frames from now on
             self.sim.record_to(writer)
         self.recorder = writer
-
-
-def compose(base: Pose, rel: Pose) -> Pose:
-    """rel (a pose in base's frame) in the world frame."""
-    c, s = math.cos(base[2]), math.sin(base[2])
-    return (base[0] + c * rel[0] - s * rel[1], base[1] + s * rel[0] + c * rel[1], base[2] + rel[2])
-
-
-def relative(base: Pose, pose: Pose) -> Pose:
-    """pose in base's frame (the inverse of compose)."""
-    c, s = math.cos(base[2]), math.sin(base[2])
-    dx, dy = pose[0] - base[0], pose[1] - base[1]
-    return (c * dx + s * dy, -s * dx + c * dy, pose[2] - base[2])
-
-
-GHOST_HORIZON_S = 2.0  # the ghost runs on at most this long past the last frame: beyond, the signal is lost
-
-
-class RealBot:
-    """A robot on a serial port: pose from its TELEMETRY odometry, IR readings as they arrive, and its ghost.
-
-    A Pico, or a virtual board's pty.  Its pose: odo_x, odo_y, odo_heading when the firmware sends
-    them, else its encoders integrated here by the firmware's own odometry with the robot's geometry;
-    placed at the room's start pose.
-    """
-
-    def __init__(self, link: SerialLink, start: Pose, params: RobotParams, floor_s: float = 0.0) -> None:
-        self.link = link
-        diameter_um, base_um, ticks = firmware_geometry(params)
-        self.ghost = Ghost(base_um / 1e6, diameter_um / 1e6, ticks, floor_s=floor_s)
-        self.start = start
-        self.odometry = Odometry(int(round(2e6 * params.wheel_radius)), int(round(2e6 * params.half_axle)),
-                                 int(round(params.ticks_per_rev)), EXACT)
-        self.odo: Pose = (0.0, 0.0, 0.0)  # the robot's own odometry (its frame: where it started)
-        self.anchor: Pose = (0.0, 0.0, 0.0)  # odometry pose that is shown at `start`
-        self.source = "no TELEMETRY yet"
-        self.trail: list[Pose] = []
-        self.ir_counts = [0] * 8
-        self.last: dict[str, object] | None = None
-        self.frames = 0
-        self.last_rx = -math.inf  # link clock, s
-        self.orders: tuple[int, int] | None = None
-        self._last_order = -math.inf
-        self.recorder: RecordingWriter | None = None
-
-    @classmethod
-    def open(cls, port: str, start: Pose, params: RobotParams, floor_s: float = 0.0) -> RealBot:
-        return cls(SerialLink.open(port), start, params, floor_s)
-
-    @property
-    def pose(self) -> Pose:
-        """The raw pose: where the robot was when it sent its last frame."""
-        return compose(self.start, relative(self.anchor, self.odo))
-
-    def ghost_pose(self) -> Pose | None:
-        """Where the ghost says the robot is now (placed like `pose`); None before the first frame."""
-        now = min(self.link.now(), self.last_rx + GHOST_HORIZON_S)
-        odo = self.ghost.predict(now)
-        return None if odo is None else compose(self.start, relative(self.anchor, odo))
-
-    def reset(self, start: Pose) -> None:
-        """Show the robot at `start` from here on (its odometry goes on counting)."""
-        self.start = start
-        self.anchor = self.odo
-        self.trail.clear()
-
-    def poll(self) -> int:
-        """Take the frames that have arrived (never waits); returns how many TELEMETRY."""
-        n = 0
-        for frame in self.link.poll(0.0):
-            if frame.msg_type == M.TELEMETRY:
-                self.telemetry(frame.fields)
-                self.last_rx = frame.t
-                self.ghost.on_telemetry(self._ghost_frame(frame.fields), frame.t)
-                n += 1
-        self._send_orders()
-        return n
-
-    def telemetry(self, f: dict[str, object]) -> None:
-        self.frames += 1
-        self.last = f
-        on, amb = list(f["ir_on"]), list(f["ir_amb"])  # type: ignore[call-overload]
-        self.ir_counts = [max(0, int(a) - int(b)) for a, b in zip(on, amb)]
-        if "odo_heading" in f:
-            self.odo = (int(f["odo_x"]) / 1e6, int(f["odo_y"]) / 1e6,  # type: ignore[call-overload]
-                        2 * math.pi * int(f["odo_heading"]) / HEADING_TURN)  # type: ignore[call-overload]
-            self.source = "TELEMETRY odometry"
-        else:
-            o = self.odometry
-            o.update(int(f["enc_l"]), int(f["enc_r"]))  # type: ignore[call-overload]
-            self.odo = (o.x_um / 1e6, o.y_um / 1e6, 2 * math.pi * o.heading / HEADING_TURN)
-            self.source = "encoders integrated on the host"
-        self.trail.append(self.pose)
-        if self.recorder is not None:
-            self.recorder.telemetry(f)
-
-    def _ghost_frame(self, f: dict[str, object]) -> dict[str, object]:
-        """The frame as the ghost needs it: the odometry shown (the host's when the firmware sends none)."""
-        if "odo_heading" in f and "sp_l" in f:
-            return f
-        g = dict(f)
-        g.setdefault("sp_l", 0)
-        g.setdefault("sp_r", 0)
-        if "odo_heading" not in g:
-            o = self.odometry
-            g.update(odo_x=o.x_um, odo_y=o.y_um, odo_heading=o.heading)
-        return g
-
-    def _send_orders(self) -> None:
-        """HOST-mode orders at 10 Hz while the user drives it (its watchdog stops it 200 ms after they end)."""
-        now = self.link.now()
-        if self.orders is not None and now - self._last_order >= 0.1:
-            sent = self.link.send(M.COMMAND, {"mode": M.MODE_HOST, "left": self.orders[0], "right": self.orders[1]})
-            self.ghost.on_command(sent.t, *self.orders)
-            self.ghost.forget_before(sent.t - 5.0)
-            self._last_order = now
-
-    def release(self) -> None:
-        """The user lets go: stop the robot now rather than at its watchdog."""
-        self.orders = None
-        sent = self.link.send(M.COMMAND, {"mode": M.MODE_STOP, "left": 0, "right": 0})
-        self.ghost.on_command(sent.t, 0, 0)  # STOP: the wheels' set-points are zero from now on
-
-    def set_param(self, name: str, value: int) -> None:
-        self.link.send(M.PARAM_SET, {"param": M.param_by_name(name)[0], "value": int(value)})
-
-    def counts(self) -> list[int]:
-        return self.ir_counts
-
-    def record(self, writer: RecordingWriter | None) -> None:
-        if self.recorder is not None and writer is None:
-            self.recorder.close()
-        self.recorder = writer
-
-    def close(self) -> None:
-        if self.recorder is not None:
-            self.recorder.close()
-        self.link.close()

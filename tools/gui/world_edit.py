@@ -60,6 +60,8 @@ class WallEditor:
         self.selected: int | None = None
         self.version = 0  # bumped by every change: caches of the drawn room key on it
         self._undo: list[list[dict[str, Any]]] = []
+        self._redo: list[list[dict[str, Any]]] = []  # what undo took back; any new change forgets it
+        self._redo_before_move: list[list[dict[str, Any]]] = []
 
     @property
     def walls(self) -> list[dict[str, Any]]:
@@ -72,6 +74,7 @@ class WallEditor:
     def _change(self, walls: list[dict[str, Any]]) -> None:
         self._undo.append([dict(w) for w in self.world.walls])
         del self._undo[:-UNDO_DEPTH]
+        self._redo.clear()
         self._set(walls)
 
     def _set(self, walls: list[dict[str, Any]]) -> None:
@@ -123,11 +126,13 @@ class WallEditor:
     def begin_move(self) -> None:
         """Before a drag: one undo step for the whole drag."""
         self._undo.append([dict(w) for w in self.world.walls])
+        self._redo_before_move, self._redo = self._redo, []
 
     def drop_undo(self) -> None:
         """Forget the undo step of a drag that moved nothing."""
         if self._undo:
             self._undo.pop()
+        self._redo = self._redo_before_move  # nothing changed: what could be redone still can
 
     def move_to(self, index: int, original: dict[str, Any], dx: float, dy: float) -> None:
         """Place wall `index` at `original` shifted by (dx, dy) snapped to whole grid steps."""
@@ -151,8 +156,28 @@ class WallEditor:
         if not self._undo:
             return False
         self.selected = None
+        self._redo.append([dict(w) for w in self.world.walls])
         self._set(self._undo.pop())
         return True
+
+    def redo(self) -> bool:
+        """Make again the change the last undo took back."""
+        if not self._redo:
+            return False
+        self.selected = None
+        self._undo.append([dict(w) for w in self.world.walls])
+        self._set(self._redo.pop())
+        return True
+
+    def set_start(self, pose: tuple[float, float, float]) -> None:
+        """Move the start pose (where a reset puts the robots, saved with the room)."""
+        self.world = self.world.with_changes(start=tuple(round(v, 6) for v in pose))
+        self.version += 1
+
+    def start_blocked(self, body_radius: float) -> bool:
+        """A wall crosses the body of a robot standing at the start."""
+        x, y, _phi = self.world.start
+        return bool(self.world.nearest_wall(np.array([[x, y]]))[0][0] < body_radius)
 
     def save(self, path: str | Path) -> None:
         save_world(self.world, path)
@@ -161,6 +186,7 @@ class WallEditor:
         """Replace the room by a world file (validated; WorldError says what is wrong and where)."""
         world = load_world(path, body_radius)
         self._undo.append([dict(w) for w in self.world.walls])
+        self._redo.clear()
         self.world = world
         self.selected = None
         self.version += 1
