@@ -22,6 +22,7 @@ from host_sim.physics.world import World, WorldError
 from protocol import messages as M
 from tools.gui import placing
 from tools.gui.real_robot import RealBot
+from tools.gui.replay import Replay
 from tools.gui.robots import SimBot
 from tools.gui.user_input import UserControl
 from tools.gui.view import Viewport
@@ -31,15 +32,21 @@ SIZE = (1280, 720)  # the default window: fits a 1366 x 768 laptop screen with i
 MIN_SIZE = (960, 700)  # smaller, and the panel's buttons would not fit
 PANEL_W = 380  # the panel on the right
 STATUS_H = 40  # the status bar below
+REPLAY_H = 250  # the replay panel, under the room while it is open
 SPEEDS = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0)
 TOOLS = ("wall", "box", "polygon")
 MAX_CATCH_UP = 0.1  # s of wall time a fixed-step frame makes up at most: a slow frame must not snowball
 MAX_SPEED = M.param_by_name("max_speed")[4]  # mm/s, the firmware's default wheel-speed limit
 
 
-def room_rect(size: tuple[int, int]) -> tuple[int, int, int, int]:
-    """The room's area of a window this size: all but the panel and the status bar."""
-    return (0, 0, size[0] - PANEL_W, size[1] - STATUS_H)
+def room_rect(size: tuple[int, int], replay: bool = False) -> tuple[int, int, int, int]:
+    """The room's area of a window this size: all but the panel, the status bar and the replay panel."""
+    return (0, 0, size[0] - PANEL_W, size[1] - STATUS_H - (REPLAY_H if replay else 0))
+
+
+def replay_rect(size: tuple[int, int]) -> tuple[int, int, int, int]:
+    """The replay panel's area (while it is open): under the room, as wide as it."""
+    return (0, size[1] - STATUS_H - REPLAY_H, size[0] - PANEL_W, REPLAY_H)
 
 
 @dataclass
@@ -59,6 +66,7 @@ class Settings:
     grid: float = 0.05  # m, the snapping grid
     link_floor_s: float = 0.0  # the real robot's link: its fastest delivery (the ghost's latency floor)
     size: tuple[int, int] = SIZE  # the window's size at start, pixels
+    replay: Path | None = None  # a recording to show in the replay panel at start
 
 
 @dataclass
@@ -115,6 +123,9 @@ class App:
         self._make_bots()
         self._world_version = self.editor.version
         self.saved_walls = [dict(w) for w in self.editor.walls]
+        self.replay = Replay(settings.replay)
+        if settings.replay is not None:
+            self.open_replay(settings.replay)
 
     # -- robots -----------------------------------------------------------------
     def _make_bots(self) -> None:
@@ -190,6 +201,10 @@ class App:
         for bot in self.sim_bots:
             bot.after_frame()
         self.clock.tick(self.sim.sim.robot.t)
+        self.replay.advance(dt, self.s.speed)
+        verdict = self.replay.finished()
+        if verdict is not None:
+            self.say(verdict)
 
     def poll_real(self, orders: tuple[int, int]) -> None:
         """The real robot's frames; the link lost or back is said once, and the window runs on."""
@@ -254,7 +269,7 @@ class App:
         """The window was resized: the room's area follows, showing the same part of the room."""
         self.surface = surface
         x0, y0 = self.view.to_world(*self.view.rect[:2])
-        self.view.rect = room_rect(surface.get_size())
+        self.view.rect = room_rect(surface.get_size(), self.replay.open)
         self.view.ox = x0
         self.view.oy = y0 - self.view.rect[3] / self.view.scale
         self.view.version += 1
@@ -372,6 +387,49 @@ class App:
         if self.real is not None:
             self.real.reset(self.editor.world.start)
         self.say("reset to the start pose")
+
+    # -- replay and diagnosis ---------------------------------------------------------
+    def open_replay(self, path: Path | None = None) -> None:
+        """Show a recording in the replay panel: path, else the next one (the --replay file, then --out's)."""
+        path = path or self.replay.next_file(self.s.out_dir)
+        if path is None:
+            self.say(f"replay: no recording in {self.s.out_dir} (record one with c, give --replay FILE, "
+                     "or drop a file on the window)")
+            return
+        was_open = self.replay.open
+        self.say(self.replay.load(Path(path), self.s.params, self.editor.world.start))
+        if self.replay.open != was_open:
+            self._fit_room()
+
+    def close_replay(self) -> None:
+        if self.replay.open:
+            self.replay.close()
+            self._fit_room()
+            self.say("replay panel closed (e opens it again)")
+
+    def _fit_room(self) -> None:
+        """The replay panel opened or closed: the room's area changes, and the room is fitted in it."""
+        self.view.rect = room_rect(self.surface.get_size(), self.replay.open)
+        self.view.fit(*self.editor.world.size)
+
+    def toggle_replay_play(self) -> None:
+        if not self.replay.open:
+            self.say("no recording to play: e loads one")
+            return
+        shown = self.replay.shown
+        assert shown is not None
+        if not self.replay.playing and self.replay.time >= shown.t[-1]:
+            self.replay.seek(float(shown.t[0]))  # at the end: play again from the start
+        self.replay.playing = not self.replay.playing
+        self.say(f"replay {'playing' if self.replay.playing else 'paused'} at {self.s.speed:g}x")
+
+    def scrub(self, seconds: float) -> None:
+        """The slider seconds on (or back); +-inf: to an end."""
+        self.replay.playing = False
+        self.replay.seek(self.replay.time + seconds)
+
+    def diagnose_replay(self) -> None:
+        self.say(self.replay.diagnose())
 
     # -- files -------------------------------------------------------------------
     def toggle_record(self) -> None:

@@ -13,14 +13,19 @@ from typing import Any, Callable
 import pygame
 
 from protocol import messages as M
-from tools.gui import placing
-from tools.gui.app import MIN_SIZE, PANEL_W, App
+from pathlib import Path
+
+from tools.gui import placing, replay_panel
+from tools.gui.app import MIN_SIZE, PANEL_W, App, replay_rect
+from tools.gui.replay import SCRUB_STEP_S
 
 BUTTON_TOP = 462  # the panel's robots and coverage plot are above
 BUTTON_SIZE = (70, 24)
 BUTTON_COLUMNS = 5
 PICK_PX = 7  # a wall within this many pixels of the cursor is under it
 TURN_STEP = math.radians(15)  # one notch of the wheel over a robot or the start's handle turns it this much
+SCRUB_KEYS = {pygame.K_PAGEUP: -SCRUB_STEP_S, pygame.K_PAGEDOWN: SCRUB_STEP_S, pygame.K_HOME: -math.inf,
+              pygame.K_END: math.inf}  # the replay panel's slider
 
 
 @dataclass
@@ -74,6 +79,13 @@ def actions(app: App, controls: Controls) -> list[Action]:
         Action((k.K_y,), "ctrl+y", "redo", "redo what undo took back (also shift+ctrl+z)", lambda: app.undo(redo=True)),
         Action((k.K_DELETE, k.K_BACKSPACE), "del", "delete", "delete the selected wall", app.delete_selected),
         Action((k.K_0,), "0", "fit", "fit the room in the view", lambda: app.view.fit(*app.editor.world.size)),
+        Action((k.K_e,), "e", "replay", "replay a recording: the --replay file, then the next in --out (or drop one here)",
+               lambda: app.open_replay(), lambda: app.replay.open),
+        Action((k.K_j,), "j", "play rec", "play / pause the recording in the replay panel", app.toggle_replay_play,
+               lambda: app.replay.playing),
+        Action((k.K_d,), "d", "diagnose", "diagnose the recording in the replay panel (in the background)",
+               app.diagnose_replay, lambda: app.replay.job is not None and app.replay.job.running),
+        Action((k.K_k,), "k", "", "close the replay panel (or its x)", app.close_replay),
         Action((k.K_h,), "h", "help", "this help", app_toggle(app, "show_help"), lambda: app.show_help),
     ]
 
@@ -141,6 +153,8 @@ class Controls:
             self.motion(event.pos, event.rel)
         elif event.type == pygame.MOUSEBUTTONUP:
             self.release(event.pos, event.button)
+        elif event.type == pygame.DROPFILE:  # a file dropped on the window: a recording to replay
+            app.open_replay(Path(event.file))
         elif event.type == pygame.MOUSEWHEEL:
             pos = pygame.mouse.get_pos()
             if app.view.contains(*pos):
@@ -158,6 +172,9 @@ class Controls:
         if event.key == pygame.K_z and mods & pygame.KMOD_CTRL and mods & pygame.KMOD_SHIFT:
             self.app.undo(redo=True)
             return
+        if event.key in SCRUB_KEYS:
+            self.app.scrub(SCRUB_KEYS[event.key])
+            return
         action = self.by_key.get(event.key)
         if action is not None:
             action.do()
@@ -168,6 +185,9 @@ class Controls:
             if rect.collidepoint(pos) and button == 1:
                 action.do()
                 return
+        if app.replay.open and pygame.Rect(replay_rect(app.surface.get_size())).collidepoint(pos):
+            self.press_replay(pos, button)
+            return
         if not app.view.contains(*pos):
             return
         world_pt = app.view.to_world(*pos)
@@ -199,6 +219,24 @@ class Controls:
             app.editor.selected = None
             start = app.editor.snap(*world_pt)
             self.drag = ("box" if app.tool == "box" else "draw", start, start)
+
+    def press_replay(self, pos: tuple[int, int], button: int) -> None:
+        """On the replay panel: its x closes it; elsewhere a press (and a drag) puts the slider there."""
+        strip = pygame.Rect(replay_rect(self.app.surface.get_size()))
+        if button != 1:
+            return
+        if replay_panel.close_box(strip).collidepoint(pos):
+            self.app.close_replay()
+            return
+        self.drag = ("scrub",)
+        self.scrub_to(pos[0])
+
+    def scrub_to(self, x: int) -> None:
+        shown = self.app.replay.shown
+        if shown is not None:
+            self.app.replay.playing = False
+            strip = pygame.Rect(replay_rect(self.app.surface.get_size()))
+            self.app.replay.seek(replay_panel.time_at(strip, x, float(shown.t[0]), float(shown.t[-1])))
 
     def wheel(self, pos: tuple[int, int], notches: int) -> None:
         """Over a robot or the start's handle: turn it; elsewhere: zoom about the cursor."""
@@ -243,7 +281,9 @@ class Controls:
         self.pointer_px = pos
         if drag is None:
             return
-        if drag[0] == "pan":
+        if drag[0] == "scrub":
+            self.scrub_to(pos[0])
+        elif drag[0] == "pan":
             app.view.pan(pos[0] - drag[1][0], pos[1] - drag[1][1])
             self.drag = ("pan", pos)
         elif drag[0] in ("draw", "box"):

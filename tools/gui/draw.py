@@ -276,16 +276,18 @@ class Painter:
         pygame.draw.rect(self.surface, DIM, rect, 1, border_radius=4)
         self.text(label, rect.center, TEXT, 16, "center")
 
-    def overlay(self, lines: Sequence[str], rect: pygame.Rect) -> None:
+    def overlay(self, lines: Sequence[str], rect: pygame.Rect, pitch: int = 19) -> None:
+        """Lines of text on a white box, pitch pixels apart (a smaller font below 18)."""
         box = pygame.Surface(rect.size, pygame.SRCALPHA)
         box.fill((255, 255, 255, 235))
         self.surface.blit(box, rect)
         pygame.draw.rect(self.surface, DIM, rect, 1)
+        size = 20 if pitch >= 18 else 18
         for i, line in enumerate(lines):
-            y = rect.y + 10 + 19 * i
+            y = rect.y + 10 + pitch * i
             if "\t" in line:  # key \t what it does: two columns
                 k, what = line.split("\t", 1)
-                self.text(k, (rect.x + 70, y), TEXT, 20, "topright")
-                self.text(what, (rect.x + 86, y), TEXT, 20)
+                self.text(k, (rect.x + 70, y), TEXT, size, "topright")
+                self.text(what, (rect.x + 86, y), TEXT, size)
             else:
-                self.text(line, (rect.x + 14, y), TEXT, 20)
+                self.text(line, (rect.x + 14, y), TEXT, size)

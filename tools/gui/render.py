@@ -11,8 +11,8 @@ import pygame
 
 from protocol import messages as M
 from tools.gui import draw
-from tools.gui.app import App
-from tools.gui import overlays, placing
+from tools.gui.app import App, replay_rect
+from tools.gui import overlays, placing, replay_panel
 from tools.gui.controls import Controls
 from tools.gui.real_robot import RealBot
 from tools.gui.robots import SimBot, rays
@@ -30,12 +30,15 @@ class Renderer:
         self._t90: tuple[object, int, float | None] = (None, 0, None)
         self.ghost_drawn: tuple[float, float, float] | None = None  # where the last frame drew the ghost
         self.bar_rects: dict[str, pygame.Rect] = {}  # each robot's IR bars in the panel
+        self.replay = replay_panel.ReplayView(self.p)
 
     def draw(self) -> None:
         surf = self.p.surface = self.app.surface  # a new surface after a resize
         self.p.drawn.clear()
         surf.fill(draw.BG)
         self.room()
+        if self.app.replay.open:
+            self.replay.strip(pygame.Rect(replay_rect(surf.get_size())), self.app.replay)
         px = self.controls.panel_x
         pygame.draw.rect(surf, draw.PANEL, (px, 0, surf.get_width() - px, surf.get_height()))
         self.panel()
@@ -66,6 +69,8 @@ class Renderer:
             bots.insert(0, (app.real, "real"))
         for bot, name in bots:
             self.robot(bot, name)
+        if app.replay.open:
+            self.replay.room(view, app.replay, world, app.s.params)
         self.ghost_drawn = None
         if app.real is not None and app.show_ghost:
             self.ghost(app.real)
@@ -216,7 +221,9 @@ class Renderer:
         lines: list[str] = ["twinbot gui: keys (buttons on the right do the same)", ""]
         lines += [f"{a.key_label}\t{a.help}" for a in self.controls.actions]
         lines += ["", *MOUSE_HELP]
-        self.p.overlay(lines, pygame.Rect(60, 30, 780, 19 * len(lines) + 24))
+        room = self.app.surface.get_height() - 20  # the lines closer together where the window is short
+        pitch = max(14, min(19, (room - 24) // len(lines)))
+        self.p.overlay(lines, pygame.Rect(60, 10, 780, pitch * len(lines) + 24), pitch)
 
 
 MOUSE_HELP: Sequence[str] = (
@@ -224,5 +231,6 @@ MOUSE_HELP: Sequence[str] = (
     "mouse: drag on the floor draws a wall, snapped to the grid (o: box, or polygon: click corners, Enter);",
     "       drag a wall moves it;",
     "       right click deletes a wall; wheel zooms; middle drag or shift+drag pans",
+    "replay panel (e): drag its slider or a plot; PgUp / PgDn: 1 s; Home / End; drop a recording on the window",
     "esc, q: quit (with unsaved walls: press twice)",
 )
