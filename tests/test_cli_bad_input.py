@@ -43,6 +43,10 @@ CASES: list[tuple[str, list[str], str]] = [
     ("gui-port-missing", ["gui", "--frames", "1", "--port", "{case}/ttyNOPE"], "ttyNOPE"),
     ("gui-link-floor-negative", ["gui", "--link-floor", "-5"], "'-5'"),
     ("gui-pil-port-missing", ["gui", "--frames", "1", "--pil", "--port", "{case}/ttyNOPE"], "ttyNOPE"),
+    ("gui-replay-missing", ["gui", "--frames", "1", "--replay", "{case}/nope.csv"], "nope.csv"),
+    ("gui-replay-folder", ["gui", "--frames", "1", "--replay", "{case}/adir"], "adir"),
+    ("gui-replay-not-a-recording", ["gui", "--frames", "1", "--replay", "{in}/bad.csv"], "bad.csv"),
+    ("gui-replay-garbage", ["gui", "--frames", "1", "--replay", "{in}/garbage.img"], "garbage.img"),
     # sim
     ("sim-duration-nan", ["sim", "--duration", "nan"], "'nan'"),
     ("sim-duration-inf", ["sim", "--duration", "inf"], "'inf'"),

@@ -648,3 +648,170 @@ def test_the_real_robots_slot_autonomous_stop_odometry_and_where_it_parts_from_t
     loop.run(window, 1)
     sent = FrameDecoder().decode_all(pty_pair.read_available())
     assert [M.unpack_payload(t, p)["mode"] for t, _s, p in sent if t == M.COMMAND] == [M.MODE_STOP]
+
+
+# -- the replay panel and the diagnosis ----------------------------------------------------------------------
+
+def record_twin(path: Path, seconds: float = 8.0, params: Any = DEFAULT) -> Path:
+    """A fixed-step recording of the twin exploring WORLD with `params`, its sidecar naming the nominal robot."""
+    from host_sim.controller.sil import SilController
+    from host_sim.loops.simulation import Simulation
+    from host_sim.recordings.recording import RecordingWriter
+
+    with RecordingWriter(path, source="simulator", sample_period=0.04, robot=DEFAULT.to_json(), world=WORLD.to_dict(),
+                         extra={"mode": "fixed"}) as w:
+        Simulation(WORLD, params, SilController(1), seed=4, recorder=w).run_fixed(seconds)
+    return path
+
+
+def without_tracker(path: Path, out: Path) -> Path:
+    """The same recording with its tracker columns (x, y, phi) emptied: as a real robot records itself."""
+    import shutil
+
+    lines = path.read_text().split("\n")
+    rows = [",".join(line.split(",")[:-3] + ["", "", ""]) if line else line for line in lines[1:]]
+    out.write_text("\n".join([lines[0], *rows]))
+    shutil.copy(str(path) + ".json", str(out) + ".json")
+    return out
+
+
+def scrub(window: Window, fraction: float) -> None:
+    """A press on the replay panel's slider at this fraction of its length."""
+    from tools.gui.app import replay_rect
+    from tools.gui.replay_panel import plot_rects
+
+    strip = pygame.Rect(replay_rect(window.app.surface.get_size()))
+    track = plot_rects(strip)[0]
+    pos = (track.x + round(fraction * (track.width - 1)), strip.y + 52)
+    post(pygame.MOUSEBUTTONDOWN, pos=pos, button=1)
+    post(pygame.MOUSEBUTTONUP, pos=pos, button=1)
+
+
+def test_a_recording_loads_and_scrubbing_moves_the_drawn_robot_and_the_cursor(make_window: Any,
+                                                                             tmp_path: Path) -> None:
+    rec_path = record_twin(tmp_path / "run.csv")
+    window = make_window()
+    app = window.app
+    key(pygame.K_SPACE)  # the live robots paused: only the replay moves
+    key(pygame.K_e)  # the newest recording in --out
+    loop.run(window, 1)
+    assert app.replay.open and app.replay.shown is not None and app.replay.shown.path == rec_path
+    assert "replay: run.csv" in app.message and app.replay.shown.pose_source == "tracker"
+    assert app.view.rect[3] == app.surface.get_height() - 40 - 250  # the room's area makes way for the panel
+    rec = load_recording(rec_path)
+    drawn = window.renderer.p.drawn
+    assert {"IR, reflected counts", "time, s", "d: diagnose this recording (the verdict and where it disagrees "
+            "with the twin show here)"} <= set(drawn)
+    seen = []
+    for fraction in (0.0, 0.5, 1.0):
+        scrub(window, fraction)
+        loop.run(window, 1)
+        k = app.replay.shown.index(app.replay.time)
+        assert app.replay.time == pytest.approx(rec.t[0] + fraction * (rec.t[-1] - rec.t[0]), abs=0.02)
+        assert window.renderer.replay.robot_drawn == pytest.approx(tuple(rec.pose[k]))  # the tracker's pose then
+        assert f"recorded, t = {rec.t[k]:.2f} s" in window.renderer.p.drawn
+        seen.append((window.renderer.replay.robot_drawn, window.renderer.replay.cursor_x))
+    assert seen[0][0][:2] != pytest.approx(seen[2][0][:2], abs=0.05)  # the robot moved along its path
+    assert seen[0][1] < seen[1][1] < seen[2][1]  # the cursor with it
+    shot = pygame.image.load(str(app.screenshot(tmp_path / "replay.png")))
+    from tools.gui.app import replay_rect
+    from tools.gui.replay_panel import CURSOR, plot_rects
+
+    plot = plot_rects(pygame.Rect(replay_rect(app.surface.get_size())))[1]
+    assert tuple(shot.get_at((seen[2][1], plot.centery)))[:3] == CURSOR
+    key(pygame.K_PAGEUP)  # the keys: 1 s back, then the start
+    loop.run(window, 1)
+    assert app.replay.time == pytest.approx(rec.t[-1] - 1.0)
+    key(pygame.K_HOME)
+    key(pygame.K_j)  # play: the slider runs at the speed factor
+    loop.run(window, 30)
+    assert app.replay.playing and app.replay.time == pytest.approx(rec.t[0] + 30 / 60, abs=0.02)
+    key(pygame.K_k)  # closed: the room has its area back
+    loop.run(window, 1)
+    assert not app.replay.open and app.view.rect[3] == app.surface.get_height() - 40
+
+
+def test_a_recording_without_a_tracker_draws_the_firmwares_odometry(make_window: Any, tmp_path: Path) -> None:
+    from tools.gui.real_robot import compose
+
+    blind = without_tracker(record_twin(tmp_path / "run.csv"), tmp_path / "blind.csv")
+    window = make_window(replay=blind)
+    app = window.app
+    loop.run(window, 1)
+    rec = load_recording(blind)
+    assert rec.pose is None and rec.firmware is not None
+    shown = app.replay.shown
+    assert shown is not None and "odometry" in shown.pose_source
+    scrub(window, 1.0)
+    loop.run(window, 1)
+    odo = tuple(rec.firmware[-1, 3:6])
+    assert window.renderer.replay.robot_drawn == pytest.approx(compose(WORLD.start, odo))  # from the start pose
+    truth = load_recording(tmp_path / "run.csv").pose
+    assert truth is not None and math.dist(window.renderer.replay.robot_drawn[:2], truth[-1, :2]) < 0.05
+    assert any("robot drawn from: the firmware's odometry" in t for t in window.renderer.p.drawn)
+
+
+def test_a_bad_recording_is_a_message_not_a_crash(make_window: Any, tmp_path: Path) -> None:
+    bad = tmp_path / "bad.csv"
+    bad.write_text("not,a,recording\n")
+    window = make_window(replay=bad)
+    app = window.app
+    loop.run(window, 1)
+    assert not app.replay.open and app.message.startswith("replay: not loaded:") and "sidecar" in app.message
+    good = record_twin(tmp_path / "good.csv", seconds=2.0)
+    post(pygame.DROPFILE, file=str(good))  # a file dropped on the window
+    loop.run(window, 1)
+    assert app.replay.open
+    post(pygame.DROPFILE, file=str(tmp_path / "missing.csv"))  # a bad one leaves the panel as it was
+    loop.run(window, 1)
+    assert app.replay.shown is not None and app.replay.shown.path == good and "not loaded" in app.message
+    key(pygame.K_d)  # 2 s: too short to diagnose, said in the panel
+    for _ in range(200):
+        loop.run(window, 1)
+        if app.replay.job is not None and not app.replay.job.running:
+            break
+    loop.run(window, 1)
+    assert "too short to diagnose" in app.message and not window.quit
+    r = run_twinbot("gui", "--replay", str(bad), "--frames", "1")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "--replay" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_diagnosis_runs_in_the_background_and_its_verdict_and_spans_appear(make_window: Any, tmp_path: Path) -> None:
+    """A recording of a twin whose left wheel is 1.5 mm larger, diagnosed with the nominal one (its sidecar)."""
+    import time
+
+    from host_sim.physics import effects as E
+    from tools.gui.replay_panel import BANDS
+
+    rec_path = record_twin(tmp_path / "wheel.csv", params=E.apply(DEFAULT, "wheel_radius", "left", [1.5e-3]))
+    window = make_window(replay=rec_path)
+    app = window.app
+    loop.run(window, 1)
+    key(pygame.K_d)
+    loop.run(window, 1)
+    job = app.replay.job
+    assert job is not None and job.running and "in the background" in app.message
+    t = app.sim.sim.robot.t
+    loop.run(window, 3)
+    assert app.sim.sim.robot.t > t  # the window runs on meanwhile
+    assert any(s.startswith("diagnosing... ") for s in window.renderer.p.drawn)
+    end = time.monotonic() + 240
+    while job.running and time.monotonic() < end:
+        loop.run(window, 1)
+    loop.run(window, 1)
+    assert not job.running and job.result is not None, job.error
+    assert app.message.startswith("diagnosis: explained: wheel_radius (left wheel)")
+    assert any(s.startswith("diagnosis: explained") for s in window.renderer.p.drawn)
+    bands = window.renderer.replay.bands
+    located = job.located()
+    assert located and len(bands) == sum(len(spans) for _c, spans in located)
+    assert located[0][0] in window.renderer.p.drawn  # the bands' legend names the channel
+    shot = pygame.image.load(str(app.screenshot(tmp_path / "bands.png")))
+    channel, a, b, rect = bands[0]
+    column = [tuple(shot.get_at((rect.centerx, y)))[:3] for y in range(rect.y, rect.bottom)]
+    assert BANDS[0][0] in column  # the band's tint behind the lines, over the plots' time axis
+    from tools.gui.replay_panel import x_at, plot_rects
+    from tools.gui.app import replay_rect
+
+    track = plot_rects(pygame.Rect(replay_rect(app.surface.get_size())))[0]
+    assert rect.x == x_at(track, a, float(app.replay.shown.t[0]), float(app.replay.shown.t[-1]))

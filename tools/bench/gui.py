@@ -11,6 +11,7 @@ import os
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -30,7 +31,10 @@ time x the speed factor, the real robot's frames, and drawing everything
 coverage plot, buttons, status bar) into the window.  The real robot is a
 virtual board (`twinbot board`, MicroPython running the firmware, its own
 twin as hardware, in real time, on this machine's cores too) set
-exploring (AUTONOMOUS) before the timing starts.
+exploring (AUTONOMOUS) before the timing starts.  The replay workload
+has the replay panel open on a recording of the simulated robot
+(90 s, recorded first) and plays it, so that each frame also draws
+the recorded robot, the slider, the plots and their cursor.
 
 The dummy driver has no display to show the frame on: a real display's
 flip (a copy to the compositor) comes on top and is not measured here.
@@ -38,6 +42,7 @@ flip (a copy to the compositor) comes on top and is not measured here.
 
 TARGET_FPS = 60.0
 PRERUN = 200.0  # simulated seconds before timing: 5000 control periods, trails at their longest
+REPLAY_S = 90.0  # s, the replay workload's recording (DESCRIPTION says 90 s): as long as a diagnosis likes them
 REPO = Path(__file__).resolve().parents[2]
 
 
@@ -63,17 +68,36 @@ def start_board(*options: str) -> tuple[subprocess.Popen[str], str]:
     return proc, line.split(": ", 1)[1].strip()
 
 
-def workload(frames: int, speed: float, port: str | None, prerun: float) -> dict[str, Any]:
+def record_replay(folder: Path, seconds: float) -> Path:
+    """A recording of the twin exploring the paper's room (fixed step), for the replay workload."""
+    from host_sim.controller.sil import SilController
+    from host_sim.loops.simulation import Simulation
+    from host_sim.physics.params import DEFAULT
+    from host_sim.physics.world import builtin_world
+    from host_sim.recordings.recording import RecordingWriter
+
+    world, path = builtin_world("paper_room"), folder / "replay.csv"
+    with RecordingWriter(path, source="simulator", sample_period=0.04, robot=DEFAULT.to_json(), world=world.to_dict(),
+                         extra={"mode": "fixed"}) as w:
+        Simulation(world, DEFAULT, SilController(1), seed=0, recorder=w).run_fixed(seconds)
+    return path
+
+
+def workload(frames: int, speed: float, port: str | None, prerun: float, replay: Path | None = None
+             ) -> dict[str, Any]:
     from host_sim.physics.world import builtin_world
     from host_sim.physics.params import DEFAULT
     from protocol import messages as M
     from tools.gui import loop
     from tools.gui.app import Settings
 
-    settings = Settings(world=builtin_world("paper_room"), params=DEFAULT, speed=speed, port=port)
+    settings = Settings(world=builtin_world("paper_room"), params=DEFAULT, speed=speed, port=port, replay=replay)
     window = loop.open_window(settings, headless=True)
     app = window.app
     try:
+        if replay is not None:
+            assert app.replay.open, app.message
+            app.toggle_replay_play()  # the slider, the cursor and the recorded robot move every frame
         if app.real is not None:
             app.real.link.send(M.COMMAND, {"mode": M.MODE_AUTONOMOUS, "left": 0, "right": 0})
             time.sleep(0.5)
@@ -95,6 +119,10 @@ def run(args: argparse.Namespace) -> int:
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
     rows: list[tuple[str, dict[str, Any]]] = []
     rows.append(("simulated + user robot, speed 1", workload(args.frames, 1.0, None, args.prerun)))
+    with tempfile.TemporaryDirectory(prefix="twinbot-bench-gui-") as folder:
+        recording = record_replay(Path(folder), REPLAY_S)
+        rows.append(("simulated + user robot + replay panel, speed 1",
+                     workload(args.frames, 1.0, None, args.prerun, recording)))
     if not args.no_board:
         proc, pty = start_board()
         try:

@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from tools.arguments import float_range, int_range, non_negative_int, output_file
+from tools.arguments import float_range, input_file, int_range, non_negative_int, output_file
 from tools.arguments import CliError
 
 MAX_SPEED = 64.0  # x real time: beyond, a frame's catch-up is whole seconds of two firmwares
@@ -51,6 +51,9 @@ the real robot on a serial port (a Pico, or a virtual board's pty from
 arrive, and its ghost: where the late-signal twin says it is now, its
 signal being late (--link-floor; `twinbot board --late MS` to try it).
 The user's orders can drive the simulated and the real robot too.
+The replay panel (--replay FILE, or e in the window) scrubs a recording
+with a time slider over plots of its IR readings, wheel speeds and
+commands, and d diagnoses it in the background (as `twinbot diagnose`).
 Press h in the window for every key.
 
 Headless: --frames N runs N frames of 1/60 s without a display
@@ -64,6 +67,7 @@ examples:
   twinbot gui --world maze --rules first --speed 4
   twinbot gui --world my_room.json --port /dev/pts/3
   twinbot gui --frames 300 --screenshot gui.png # headless: 5 s of the run, one picture
+  twinbot gui --replay run.csv                  # scrub a recording; d diagnoses it
   twinbot bench gui                             # frame time with the three robots
 """
 
@@ -94,6 +98,8 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
                    help="folder for recordings and screenshots (default .)")
     p.add_argument("--size", type=window_size, default=None, metavar="WxH",
                    help="the window's size in pixels at start (default 1280x720; the window can be resized)")
+    p.add_argument("--replay", metavar="REC.csv", type=input_file,
+                   help="a recording (with its sidecar) to show in the replay panel at start (docs/recordings.md)")
     p.add_argument("--frames", type=int_range(1, MAX_FRAMES), help="headless: run this many frames of 1/60 s, then stop")
     p.add_argument("--screenshot", metavar="FILE", type=screenshot_file,
                    help="with --frames: write the last frame (.png, .bmp, .tga, .jpg)")
@@ -108,13 +114,26 @@ def settings_from(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     params, world = load_inputs(args)
     if args.screenshot and args.frames is None:
         raise CliError("--screenshot needs --frames N (headless run)")
+    if args.replay:
+        check_recording(args.replay)
     out = Path(args.out)
     save = Path(args.save) if args.save else (Path(args.world) if args.world not in BUILTIN_NAMES
                                               else out / f"{world.name}.json")
     return Settings(world=world, params=params, rules=args.rules, port=args.port, pil=args.pil, speed=args.speed,
                     realtime=args.realtime, noise=not args.no_noise, emitter_pct=args.emitter, seed=args.seed,
                     world_file=save, out_dir=out, link_floor_s=args.link_floor / 1000.0,
-                    **({"size": args.size} if args.size else {}))
+                    replay=Path(args.replay) if args.replay else None, **({"size": args.size} if args.size else {}))
+
+
+def check_recording(path: str) -> None:
+    """--replay: a bad recording is one line and exit 2 before a window opens (in the window: a message)."""
+    from host_sim.physics.params import DEFAULT
+    from tools.gui.replay import load_replay
+
+    try:
+        load_replay(Path(path), DEFAULT, (0.0, 0.0, 0.0))
+    except (OSError, ValueError) as exc:
+        raise CliError(f"--replay: {exc}") from None
 
 
 def run(args: argparse.Namespace) -> int:
