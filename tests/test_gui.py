@@ -815,3 +815,25 @@ def test_diagnosis_runs_in_the_background_and_its_verdict_and_spans_appear(make_
 
     track = plot_rects(pygame.Rect(replay_rect(app.surface.get_size())))[0]
     assert rect.x == x_at(track, a, float(app.replay.shown.t[0]), float(app.replay.shown.t[-1]))
+
+
+def test_a_recording_with_neither_tracker_nor_odometry_draws_its_encoders_integrated(tmp_path: Path) -> None:
+    """A quarter turn on the spot, then 100 ticks a cycle straight ahead: the pose from the start, by the
+    geometry the firmware uses."""
+    from host_sim.controller.hardware_io import firmware_geometry
+    from host_sim.recordings.recording import RecordingWriter
+    from tools.gui.replay import load_replay
+
+    diameter_um, base_um, ticks = firmware_geometry(DEFAULT)
+    turn = round(math.pi / 2 * base_um / 2 / (math.pi * diameter_um) * ticks)  # each wheel's ticks for 90 degrees
+    path = tmp_path / "open.csv"
+    with RecordingWriter(path, source="robot", sample_period=0.04) as w:
+        for k in range(11):
+            left, right = (-turn, turn) if k else (0, 0)
+            w.row(0.04 * k, (0.0, 0.0), (left + 100 * max(0, k - 1), right + 100 * max(0, k - 1)), [0] * 8, [0] * 8,
+                  7.4)
+    shown = load_replay(path, DEFAULT, (1.0, 0.5, 0.0))
+    assert "encoders integrated" in shown.pose_source
+    ahead = 900 * math.pi * diameter_um / 1e6 / ticks
+    assert shown.pose[-1] == pytest.approx((1.0, 0.5 + ahead, math.pi / 2), abs=2e-3)
+    assert shown.wheels[-1] == pytest.approx([100 / 0.04 * math.pi * diameter_um / 1000 / ticks] * 2)
