@@ -1129,7 +1129,7 @@ def record_jittered(tmp_path, periods, name="jittered.csv"):
 @pytest.mark.parametrize("periods", [
     overrun_periods(750, late_share=0.4, long_share=0.005),  # a lightly loaded board
     np.diff(load_recording(VBOARD_6BUSY).t)[:750],  # the durations of a board with six busy processes
-], ids=["light load", "six busy"])
+], ids=["light_load", "six_busy"])
 def test_the_twin_living_a_boards_late_rows_is_a_match(tmp_path, periods):
     """A board's overruns are its clock, not physics: the twin itself, living those durations, is a match."""
     rec = record_jittered(tmp_path, periods)
