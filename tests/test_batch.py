@@ -241,3 +241,33 @@ def test_a_robot_recording_that_starts_from_rest_starts_the_twin_near_rest(tmp_p
     last = len(rec) - 1
     steady = (rec.enc[last] - rec.enc[last - 1]) * tick / (rec.t[last] - rec.t[last - 1])
     np.testing.assert_allclose(wheel_speeds_at(rec, last, DEFAULT), steady, rtol=0.15)
+
+
+@pytest.mark.parametrize("effect", [{}, {"backlash_l": 0.05, "backlash_r": 0.03}, {"actuator_delay": 0.03},
+                                    {"ir_latency": 0.02}, {"caster_drag": 0.002, "battery_resistance": 1.0}])
+def test_each_robot_lives_its_own_durations(effect):
+    """period (T, N): each robot steps its own row durations (a recorded robot's late rows) and reads its
+    own clock, exactly as it would alone; equal durations as (T, N) are the shared (T,) bit for bit."""
+    rng = np.random.default_rng(1)
+    rows, n = 200, 3
+    cmd = commands(rng, rows, hold=10)
+    cmd[100:140] = 0.6  # into a wall: the contact step too
+    period = 0.04 + rng.choice([0.0, 0.0, 0.003, 0.02, 0.08], size=(rows, n))
+    p = DEFAULT.replace(**effect)
+    starts = np.tile(ROOM.start, (n, 1)) + np.array([0.0, 0.0, 0.7]) * np.arange(n)[:, None]
+    sensors = "ir_latency" in effect  # the IR ring reads along each robot's own clock
+    res = BatchSim(ROOM, p, starts).run_inputs(cmd, period=period, sensors=sensors)
+    assert res.t.shape == (rows, n)
+    for i in range(n):
+        alone = BatchSim(ROOM, p, starts[i:i + 1]).run_inputs(cmd, period=period[:, i], sensors=sensors)
+        np.testing.assert_allclose(res.t[:, i], alone.t, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(res.pose[:, i], alone.pose[:, 0], rtol=0, atol=1e-9)
+        if sensors:
+            assert_adc_match(res.ir_on[:, i], alone.ir_on[:, 0])
+        assert res.collisions[i] == alone.collisions[0]
+    shared = BatchSim(ROOM, p, starts).run_inputs(cmd, period=period[:, 0], sensors=sensors)
+    each = BatchSim(ROOM, p, starts).run_inputs(cmd, period=np.repeat(period[:, :1], n, axis=1), sensors=sensors)
+    assert np.array_equal(shared.pose, each.pose) and np.array_equal(shared.theta, each.theta)
+    assert not sensors or np.array_equal(shared.ir_on, each.ir_on)
+    with pytest.raises(ValueError, match="period must have shape"):
+        BatchSim(ROOM, p, starts).run_inputs(cmd, period=period[:, :2])

@@ -7,6 +7,7 @@ measure it and fit the held-out windows again.  The rules tested: docs/diagnosis
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -1085,3 +1086,62 @@ def test_a_fit_on_the_sensors_alone_runs_no_physics(nominal_run, monkeypatch):
     for a, b in zip(without, with_run):
         np.testing.assert_array_equal(a, b)
     assert np.abs(without[0][1] - without[0][0]).max() > 1  # the gain shows in S1's residuals
+
+
+
+DATA = Path(__file__).parent / "data"
+VBOARD_6BUSY = DATA / "vboard_6busy_46s.csv"  # tests/data/README.md: how it was made
+
+
+def overrun_periods(rows, late_share, long_share, seed=2):
+    """Row durations (s) of a firmware loop paced on a 40 ms tick that sometimes runs late: a pass starts at
+    its tick or when the last one ended (at least 9 ms on), `late_share` of them a few ms late and
+    `long_share` 40-200 ms late (missed ticks); stamped in whole ms."""
+    rng = np.random.default_rng(seed)
+    late = np.where(rng.random(rows) < late_share, rng.exponential(0.004, rows), 0.0)
+    late += np.where(rng.random(rows) < long_share, rng.uniform(0.04, 0.2, rows), 0.0)
+    stamps = np.empty(rows + 1)
+    stamps[0] = 0.0
+    for k in range(1, rows + 1):
+        stamps[k] = np.round(max(0.04 * k, stamps[k - 1] + 0.009) + late[k - 1], 3)
+    return np.diff(stamps)
+
+
+def record_jittered(tmp_path, periods, name="jittered.csv"):
+    """The twin under the identification manoeuvre in the arena, living each control period for the given
+    duration (s) as a board whose loop overruns does: its control instants fall where the durations say, the
+    physics stepped in between at most cycle / 8 at a time; written as a robot's recording (rows at their
+    times)."""
+    from host_sim.loops.excitation import ExcitedController
+
+    path = tmp_path / name
+    with RecordingWriter(path, source="robot", sample_period=0.04, robot=DEFAULT.to_json(),
+                         world=ARENA.to_dict()) as w:
+        sim = Simulation(ARENA, DEFAULT, ExcitedController(SilController(1)), seed=4, recorder=w)
+        for duration in periods:
+            sim.control()
+            steps = int(np.ceil(duration / (0.04 / 8) - 1e-9))
+            for _ in range(steps):
+                sim.robot.advance(duration / steps)
+    return load_recording(path)
+
+
+@pytest.mark.parametrize("periods", [
+    overrun_periods(750, late_share=0.4, long_share=0.005),  # a lightly loaded board
+    np.diff(load_recording(VBOARD_6BUSY).t)[:750],  # the durations of a board with six busy processes
+], ids=["light_load", "six_busy"])
+def test_the_twin_living_a_boards_late_rows_is_a_match(tmp_path, periods):
+    """A board's overruns are its clock, not physics: the twin itself, living those durations, is a match."""
+    rec = record_jittered(tmp_path, periods)
+    assert np.allclose(np.diff(rec.t), periods[:-1], atol=1e-6)
+    d = diagnose(rec, DEFAULT, ARENA)
+    assert d.verdict == "match", d.summary()
+
+
+def test_a_board_whose_loop_overran_matches():
+    """The firmware on `twinbot board`, recorded over the serial link with six busy processes on two cores:
+    its rows are late (70 % not 40 ms apart, up to 248 ms) and each window's twin lives them as recorded."""
+    rec = load_recording(VBOARD_6BUSY)
+    assert (np.abs(np.diff(rec.t) - 0.04) > 5e-4).mean() > 0.5
+    d = diagnose(rec, DEFAULT, None)
+    assert d.verdict == "match", d.summary()

@@ -9,6 +9,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 
 from protocol import messages as M
@@ -299,3 +300,43 @@ def test_board_attached_to_the_twin_explores(tmp_path):
     assert ((end[0] - start[0]) ** 2 + (end[1] - start[1]) ** 2) ** 0.5 > 0.05  # and the twin moved
     ambient = frames[-1].fields["ir_amb"]
     assert all(100 < a < 300 for a in ambient)  # the room's ambient light, with noise
+
+
+@pytest.mark.slow
+def test_the_firmware_on_the_board_is_a_match_idle_and_with_the_cores_oversubscribed(tmp_path):
+    """The virtual board, whose hardware is the nominal twin, is a control: the manoeuvre once (46 s) recorded
+    through the real serial path by `twinbot serial --excite`, idle and with six busy processes on the cores
+    (the board's loop then overruns: its rows come late), is diagnosed a match both times."""
+    import os
+
+    from host_sim.board.board_twin import BoardTwin
+    from host_sim.diagnosis import diagnose
+    from host_sim.physics.params import DEFAULT
+    from host_sim.physics.world import builtin_world
+    from host_sim.recordings.recording import load_recording
+
+    verdicts = {}
+    for busy in (0, 6):
+        twin = BoardTwin(builtin_world("paper_room"), DEFAULT)
+        twin.start()
+        flash = tmp_path / f"flash_{busy}"
+        flash.mkdir()
+        factory_image(flash)
+        vb = VirtualBoard(str(flash), twin.port, tmp_path / f"board_{busy}.log")
+        loads = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(busy)]
+        run = tmp_path / f"busy_{busy}.csv"
+        try:
+            out = run_twinbot("serial", vb.path, "--excite", "--record", str(run), "--duration", "46", "--quiet",
+                              timeout=180)
+        finally:
+            for proc in loads:
+                proc.kill()
+                proc.wait()
+            vb.close()
+            twin.stop()
+        assert out.returncode == 0, out.stderr
+        rec = load_recording(run)
+        late = float(np.mean(np.abs(np.diff(rec.t) - 0.04) > 5e-4))
+        d = diagnose(rec, DEFAULT, None)
+        verdicts[busy] = (d.verdict, f"{late:.0%} of rows late, {os.cpu_count()} cores", d.summary())
+    assert all(v[0] == "match" for v in verdicts.values()), verdicts

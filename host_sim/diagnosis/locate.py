@@ -80,7 +80,7 @@ def regimes(rec: Recording, windows: Windows, p: RobotParams, world: World | Non
         out.add(f"command_{side[0]}", np.sign(cmd).astype(int) + 1,
                 {0: f"with a negative {side} command", 1: f"with no {side} command", 2: f"with a positive {side} command"})
     mean = v.mean(axis=-1)
-    accel = np.diff(np.concatenate([mean[:, :1], mean], axis=1), axis=1) / rec.sample_period
+    accel = np.diff(np.concatenate([mean[:, :1], mean], axis=1), axis=1) / np.diff(rec.t[idx], axis=1)  # recorded
     # signed, not pooled: a slipping wheel runs ahead of the twin's when the speed rises and behind it when
     # the speed falls, and a heavy robot the other way round; pooled, the two halves cancel
     out.add("acceleration", (accel > 0.3).astype(int) + 2 * (accel < -0.3),
@@ -107,6 +107,7 @@ def _wall_regimes(out: Regimes, rec: Recording, rows: np.ndarray, world: World) 
     assert rec.pose is not None
     bearings = [k * np.pi / 4 for k in range(8)]
     dist, _angle, hit = world.cast_robots(rec.pose[rows], bearings, 1.0)
+    period = rec.t[rows + 1] - rec.t[rows]  # each period as long as it was recorded
     after, _angle, hit_after = world.cast_robots(rec.pose[rows + 1], bearings, 1.0)
     for k in range(8):
         d = np.where(hit[..., k], dist[..., k], np.inf)
@@ -114,7 +115,7 @@ def _wall_regimes(out: Regimes, rec: Recording, rows: np.ndarray, world: World) 
                 {0: f"with a wall within 3 cm of {SENSOR_NAMES[k]}", 1: f"with a wall 3-12 cm from {SENSOR_NAMES[k]}",
                  2: f"with no wall near {SENSOR_NAMES[k]}"})
         seen = hit[..., k] & hit_after[..., k] & (d < 0.18)
-        rate = np.subtract(after[..., k], dist[..., k], out=np.zeros(seen.shape), where=seen) / rec.sample_period
+        rate = np.subtract(after[..., k], dist[..., k], out=np.zeros(seen.shape), where=seen) / period
         out.add(f"{TIMING}{k}", np.digitize(rate, [-TIMING_RATE, TIMING_RATE]),
                 {0: f"while {SENSOR_NAMES[k]} closes on a wall", 1: "",
                  2: f"while {SENSOR_NAMES[k]} draws away from a wall"})

@@ -220,10 +220,10 @@ def _run_windows(rec: Recording, windows: Windows, params: Any, world: World | N
     per_robot = robots[0] if n_sets == 1 else [p for _w in range(n_win) for p in robots]
     sim = BatchSim(world if rec.pose is not None else None, per_robot, q=q.reshape(-1, 5), v=v.reshape(-1, 2),
                    base=base, substeps=substeps)
-    # One period per window row for all windows: the robot's clock ticks whole milliseconds, so a
-    # recording's periods are equal but for overruns, which the median over the windows ignores.
-    period = np.median(inputs.period[idx], axis=0)
-    _seed_commands(sim, inputs.cmd, first, n_sets, float(np.median(period)))
+    # Each window's twin lives its own rows' recorded durations, a late row (the board's loop overran) or a
+    # missed cycle as long as it lasted (tests/test_diagnosis.py::test_a_board_whose_loop_overran_matches).
+    period = np.repeat(inputs.period[idx].T, n_sets, axis=1)  # (T, W * N)
+    _seed_commands(sim, rec, inputs.cmd, first, n_sets)
     sim.engage_gears(np.repeat(_last_push(inputs.cmd, first), n_sets, axis=0))
     if windows.sliding is not None and windows.body is not None:  # where the tracker saw the robot slide
         sim.start_sliding(np.repeat(windows.sliding, n_sets), np.repeat(windows.body, n_sets, axis=0))
@@ -258,7 +258,7 @@ def _lead_in(rec: Recording, windows: Windows, sim: BatchSim, inputs: Any, n_set
     rows = windows.lead_index[:, :-1]  # (W, lead)
     n_win = len(windows)
     cmd = np.repeat(inputs.cmd[rows.T][:, :, None, :], n_sets, axis=2).reshape(lead, n_win * n_sets, 2)
-    period = np.median(inputs.period[rows], axis=0)
+    period = np.repeat(inputs.period[rows].T, n_sets, axis=1)  # (lead, W * N): each row's recorded duration
     theta = np.empty((lead + 1, n_win * n_sets, 2))
     slid = np.repeat(windows.lead_slides if windows.lead_slides is not None else np.zeros(n_win, bool), n_sets)
     walled = np.repeat(near_a_wall(rec, windows.lead_index, p, world), n_sets)
@@ -271,9 +271,11 @@ def _lead_in(rec: Recording, windows: Windows, sim: BatchSim, inputs: Any, n_set
     theta[lead] = sim.encoder_angles()
     twin = theta * (tpr / (2 * np.pi))  # (lead + 1, W * N, 2)
     seen = np.repeat(rec.enc[windows.lead_index.T], n_sets, axis=1)
-    n = np.arange(lead + 1, dtype=float) - lead / 2
-    slope = np.einsum("j,jrw->rw", n, seen - twin) / float(n @ n)  # counts per row, each robot and wheel
-    dv = np.where((slid | walled)[:, None], 0.0, slope * (2 * np.pi) / tpr / float(np.median(period)))
+    # the slope over the rows' recorded times: a late row in the lead-in is as long as it was
+    times = np.repeat(rec.t[windows.lead_index.T], n_sets, axis=1)  # (lead + 1, W * N)
+    times = times - times.mean(axis=0)
+    slope = np.einsum("jr,jrw->rw", times, seen - twin) / (times * times).sum(axis=0)[:, None]  # counts per s
+    dv = np.where((slid | walled)[:, None], 0.0, slope * (2 * np.pi) / tpr)
     v = np.where(walled[:, None], cold, sim.v + dv)
     if sim.rotor_speed is not None:  # a gear's motor side turns on with its wheel
         sim.rotor_speed = np.where(walled[:, None], cold, sim.rotor_speed + dv)
@@ -299,11 +301,14 @@ def _last_push(cmd: np.ndarray, start: np.ndarray) -> np.ndarray:
     return np.where(before >= 0, np.sign(cmd[np.maximum(before, 0), [0, 1]]), 0.0)
 
 
-def _seed_commands(sim: BatchSim, cmd: np.ndarray, start: np.ndarray, n_sets: int, period: float) -> None:
-    """The recorded commands of the rows before each window, as sent before the twin's start (actuator_delay)."""
+def _seed_commands(sim: BatchSim, rec: Recording, cmd: np.ndarray, start: np.ndarray, n_sets: int) -> None:
+    """The recorded commands of the rows before each window, as sent before the twin's start (actuator_delay),
+    each at its recorded time before that start (the twin's clock reads 0 there)."""
     rows = start[None, :] - np.arange(SEED_ROWS, 0, -1)[:, None]  # (K, W)
     before = np.where(rows[..., None] >= 0, cmd[np.maximum(rows, 0)], 0.0)  # (K, W, 2)
-    sim.seed_commands(-period * np.arange(SEED_ROWS, 0, -1), np.repeat(before, n_sets, axis=1))
+    # rows before the recording's first: no command, at the nominal period before it
+    at = np.where(rows >= 0, rec.t[np.maximum(rows, 0)], rec.t[0] + rows * rec.sample_period) - rec.t[start]
+    sim.seed_commands(np.repeat(at, n_sets, axis=1), np.repeat(before, n_sets, axis=1))
 
 
 def _ticks_per_rev(robots: list[RobotParams], n_win: int) -> np.ndarray:

@@ -40,7 +40,7 @@ ParamSets = Union[RobotParams, Sequence[RobotParams], ParamBatch]
 class BatchResult:
     """Readings of N robots at T control instants (row j: before row j's command acts)."""
 
-    t: np.ndarray  # (T,) s
+    t: np.ndarray  # (T,) s, or (T, N) where each robot lived its own durations (run_inputs' period (T, N))
     enc: np.ndarray  # (T, N, 2) cumulative encoder ticks, int64
     pose: np.ndarray  # (T, N, 3) x, y (m), phi (rad) of C, the wheel-axle centre
     ir_on: np.ndarray | None  # (T, N, 8) ADC counts, emitters on; None without sensors
@@ -134,7 +134,7 @@ class BatchSim:
         # backlash: the motor sides' speeds (rad/s at the wheel), each turning with its wheel at the start
         self.rotor_speed = self.v.copy() if self.gear_gap is not None else None
         n = self.n
-        self.t = float(t)
+        self.t: PerRobot = float(t)  # s; (N,) once the robots live their own durations (run_inputs)
         self.emitter_now = float(emitter_pct if initial_emitter_pct is None else initial_emitter_pct)
         self.collisions = np.zeros(n, dtype=np.int64)
         self.in_contact = np.zeros(n, dtype=bool)
@@ -183,11 +183,12 @@ class BatchSim:
         self.slipping[slides] = True
         self.body[slides] = np.asarray(body, dtype=float)[slides]
 
-    def seed_commands(self, times: Iterable[float], cmds: Iterable[ArrayLike]) -> None:
-        """The commands issued before now (times ascending, s; cmds (K, N, 2) or (K, 2), A): what a delayed
-        actuator still has on its way when the run starts.  Without it: no current before the first."""
+    def seed_commands(self, times: Iterable[ArrayLike], cmds: Iterable[ArrayLike]) -> None:
+        """The commands issued before now (times ascending, s: (K,), or (K, N) each robot's own; cmds
+        (K, N, 2) or (K, 2), A): what a delayed actuator still has on its way when the run starts.
+        Without it: no current before the first."""
         for t, c in zip(times, cmds):
-            self._hist_t.append(float(t))
+            self._hist_t.append(float(t) if np.ndim(t) == 0 else np.array(t, dtype=float))
             self._hist_i.append(np.broadcast_to(np.asarray(c, dtype=float), (self.n, 2)).copy())
 
     # ------------------------------------------------------------------ set-up
@@ -327,13 +328,15 @@ class BatchSim:
             if idx is None:
                 off[:], on[:] = ir_sensor.read_sensors(self.world, at, self.emitter_now, t, p, rng)
             else:
-                off[idx], on[idx] = ir_sensor.read_sensors(self.world, at[idx], self.emitter_now, t, p, rng)
+                off[idx], on[idx] = ir_sensor.read_sensors(self.world, at[idx], self.emitter_now, _sub(t, idx), p,
+                                                           rng)
         return on, off
 
     # ------------------------------------------------------------------ physics
-    def substep(self, i_ref: ArrayLike, dt: float) -> None:
-        """All N robots by dt seconds with current references i_ref, (2,) or (N, 2) A: SimRobot.advance
-        for each (rolling where the wheels hold and no wall is hit, else the contact step)."""
+    def substep(self, i_ref: ArrayLike, dt: PerRobot) -> None:
+        """All N robots by dt seconds (a float, or (N,) each robot's own) with current references i_ref, (2,)
+        or (N, 2) A: SimRobot.advance for each (rolling where the wheels hold and no wall is hit, else the
+        contact step)."""
         if self._delay is not None:
             i_ref = self._delayed(i_ref, dt)
         q0, v0 = self.q, self.v
@@ -366,9 +369,9 @@ class BatchSim:
                     self._fx.sub(bad))  # type: ignore[union-attr]
             self.gear_gap, self.rotor_speed = gap1, wm1
         self.q, self.v = q1, v1
-        self.t += dt
+        self.t = self.t + dt  # a new value: the actuator delay's history keeps the old one
 
-    def _gear_step(self, q0: np.ndarray, v0: np.ndarray, i_ref: ArrayLike, dt: float
+    def _gear_step(self, q0: np.ndarray, v0: np.ndarray, i_ref: ArrayLike, dt: PerRobot
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
         """The rolling step with the gears' play (backlash.substep): (q1, v1, traction holds, the references a
         contact step takes, (wheel angles, motor-side speeds and gaps at the end of the rolling step))."""
@@ -384,10 +387,11 @@ class BatchSim:
         return q1, v1, ok, i_contact, (q1[:, 3:5].copy(), wm1, gap1)
 
     def _slip_step(self, q0: np.ndarray, v0: np.ndarray, q1: np.ndarray, v1: np.ndarray, bad: np.ndarray,
-                   i_ref: ArrayLike, dt: float, idx: np.ndarray, gaps: np.ndarray, normals: np.ndarray,
+                   i_ref: ArrayLike, dt: PerRobot, idx: np.ndarray, gaps: np.ndarray, normals: np.ndarray,
                    order: np.ndarray) -> None:
         """contact.slip_step_batch for the robots `bad`, written into q1, v1."""
         s = np.flatnonzero(bad)
+        dt = _sub(dt, s)
         i_s = np.asarray(i_ref, dtype=float)
         i_s = i_s[s] if i_s.ndim == 2 else np.broadcast_to(i_s, (len(s), 2))
         tau, slope, body, extra = self._slip_inputs(s, i_s, v0)
@@ -425,11 +429,11 @@ class BatchSim:
         self.in_contact[s[pushed]] = True
 
     def _slip_steps_one_by_one(self, s: np.ndarray, q0: np.ndarray, v0: np.ndarray, body: np.ndarray,
-                               tau: np.ndarray, slope: np.ndarray, dt: float, g: np.ndarray, nrm: np.ndarray,
+                               tau: np.ndarray, slope: np.ndarray, dt: PerRobot, g: np.ndarray, nrm: np.ndarray,
                                walls: np.ndarray, wheel_f: np.ndarray, wall_f: np.ndarray) -> tuple[np.ndarray, ...]:
         """contact.slip_step (the scalar twin of slip_step_batch) for each robot of s, in the batch's layout:
         a few robots in contact cost less this way than a vectorised solve whose sweeps are all
-        overhead."""
+        overhead.  dt: a float, or (K,) one per robot of s."""
         k, width = len(s), g.shape[1]
         qn, vn, bn = np.empty((k, 5)), np.empty((k, 2)), np.empty((k, 3))
         rolled, pushed = np.zeros(k, dtype=bool), np.zeros(k, dtype=bool)
@@ -440,7 +444,8 @@ class BatchSim:
             warm = (wheel_f[:, :, n].tolist(), [wall_f[:, w, n].tolist() for w in near]) if self._warm[j] else None
             q_j, v_j, b_j, pushed[n], (f_wheels, f_walls) = contact.slip_step(
                 q0[j].tolist(), v0[j].tolist(), tuple(body[n].tolist()) if self.slipping[j] else None,
-                tau[n].tolist(), slope[n].tolist(), dt, self._robot_params(int(j)), in_reach, warm)
+                tau[n].tolist(), slope[n].tolist(), float(dt) if np.ndim(dt) == 0 else float(dt[n]),
+                self._robot_params(int(j)), in_reach, warm)
             qn[n], vn[n] = q_j, v_j
             rolled[n] = b_j is None
             bn[n] = body[n] if b_j is None else b_j
@@ -481,7 +486,7 @@ class BatchSim:
             body[:, 2] = np.where(rolling, 0.5 * r * (vs[:, 1] - vs[:, 0]) / b, body[:, 2])
         return tau, slope, body, {}
 
-    def _delayed(self, i_ref: ArrayLike, dt: float) -> np.ndarray:
+    def _delayed(self, i_ref: ArrayLike, dt: PerRobot) -> np.ndarray:
         """The current references the drivers see over this substep, actuator_delay after they were issued
         (a command is issued when it differs from the last; drivetrain_effects.delayed_reference)."""
         i = np.broadcast_to(np.asarray(i_ref, dtype=float), (self.n, 2))
@@ -489,11 +494,11 @@ class BatchSim:
             self._hist_t.append(self.t)
             self._hist_i.append(i.copy())
         oldest = self.t - float(self._delay.max())  # type: ignore[union-attr]
-        while len(self._hist_t) > 1 and self._hist_t[1] <= oldest:
+        while len(self._hist_t) > 1 and np.all(self._hist_t[1] <= oldest):
             del self._hist_t[0], self._hist_i[0]
         return drivetrain_effects.delayed_reference(self._hist_t, self._hist_i, self.t, dt, self._delay)  # type: ignore[arg-type]
 
-    def _walls_in_reach(self, q0: np.ndarray, q1: np.ndarray, ok: np.ndarray, dt: float
+    def _walls_in_reach(self, q0: np.ndarray, q1: np.ndarray, ok: np.ndarray, dt: PerRobot
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(robots tested, their gaps (K, W), normals (K, W, 2), wall indices (K, W)):
         SimRobot._walls_in_reach for every robot
@@ -533,10 +538,12 @@ class BatchSim:
         substeps: physics substeps per period (default the simulator's, 8).
         sensors: read the IR ring at every control instant (False: enc and
         pose only, faster).  seed: sensor noise (None: noise-free; an int or
-        a numpy Generator).  period: seconds per row, a float or (T,) array
-        (default cycle_s).  emitter: (T,) % emitter power of each row's
-        on-reading (default: as the constructor's emitter_pct and
-        initial_emitter_pct say).  The state carries on: call again to continue.
+        a numpy Generator).  period: seconds per row, a float, (T,) array
+        (default cycle_s), or (T, N): each robot lives its own durations (a
+        recorded robot's late rows), its clock `t` then its own (N,).
+        emitter: (T,) % emitter power of each row's on-reading (default: as
+        the constructor's emitter_pct and initial_emitter_pct say).  The state
+        carries on: call again to continue.
         """
         cmd = np.asarray(cmd, dtype=float)
         n = self.n
@@ -546,12 +553,10 @@ class BatchSim:
         substeps = self.substeps if substeps is None else int(substeps)
         if substeps < 1:
             raise ValueError("substeps must be >= 1")
-        periods = np.broadcast_to(np.asarray(self.cycle_s if period is None else period, dtype=float), (n_rows,))
-        if n_rows and not (periods > 0).all():
-            raise ValueError("every period must be > 0")
+        periods = self._periods(period, n_rows)
         rng = seed if isinstance(seed, np.random.Generator) else (
             np.random.default_rng(seed) if seed is not None else None)
-        t_out = np.empty(n_rows)
+        t_out = np.empty((n_rows,) + np.shape(self.t))
         enc = np.empty((n_rows, n, 2), dtype=np.int64)
         theta = np.empty((n_rows, n, 2))
         pose = np.empty((n_rows, n, 3))
@@ -571,11 +576,27 @@ class BatchSim:
                 ir_on[j], ir_amb[j] = self.read_sensors(rng, here)  # type: ignore[index]
             i_ref = cmd[j]
             self.emitter_now = self.emitter_pct  # the actuation of row j sets the emitters
-            dt = float(periods[j]) / substeps
+            dt = float(periods[j]) / substeps if periods.ndim == 1 else periods[j] / substeps
             for _ in range(substeps):
                 self.substep(i_ref, dt)
         return BatchResult(t_out, enc, pose, ir_on, ir_amb, self.collisions - collisions0, substeps, theta=theta,
                            vbat=vbat)
+
+    def _periods(self, period: ArrayLike | None, n_rows: int) -> np.ndarray:
+        """(T,) seconds per row shared by every robot, or (T, N) each robot's own (then the robots' clocks
+        become one per robot: the actuator delay and the IR latency look back along each robot's own)."""
+        given = np.asarray(self.cycle_s if period is None else period, dtype=float)
+        if given.ndim == 2:
+            if given.shape != (n_rows, self.n):
+                raise ValueError(f"period must have shape ({n_rows},) or ({n_rows}, {self.n}), got {given.shape}")
+            if np.ndim(self.t) == 0:
+                self.t = np.full(self.n, float(self.t))
+            periods = given
+        else:
+            periods = np.broadcast_to(given, (n_rows,))
+        if n_rows and not (periods > 0).all():
+            raise ValueError("every period must be > 0")
+        return periods
 
 
 # --------------------------------------------------------------------------- #

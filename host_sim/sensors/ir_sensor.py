@@ -530,17 +530,23 @@ class PoseHistory:
         self.t: list[float] = []
         self.poses: list[np.ndarray] = []
 
-    def add(self, t: float, pose: ArrayLike) -> None:
-        if self.t and t <= self.t[-1]:  # the same instant read again: the newer pose
+    def add(self, t: float | np.ndarray, pose: ArrayLike) -> None:
+        """t: the instant, or (N,) each robot's own (robots that live their own durations)."""
+        if self.t and np.all(t <= self.t[-1]):  # the same instant read again: the newer pose
             self.t.pop()
             self.poses.pop()
-        self.t.append(float(t))
+        self.t.append(float(t) if np.ndim(t) == 0 else np.array(t, dtype=float))
         self.poses.append(np.array(pose, dtype=float))
-        while len(self.t) > 2 and self.t[1] <= t - self.keep:
+        while len(self.t) > 2 and np.all(self.t[1] <= t - self.keep):
             del self.t[0], self.poses[0]
 
-    def at(self, t: float) -> np.ndarray:
-        return pose_at(self.t, self.poses, t)
+    def at(self, t: float | np.ndarray) -> np.ndarray:
+        if all(np.ndim(x) == 0 for x in self.t):
+            return pose_at(self.t, self.poses, t)
+        poses = np.stack(self.poses)  # (K, N, 3), each robot along its own times
+        times = np.stack([np.broadcast_to(x, poses.shape[1:2]) for x in self.t])
+        t = np.broadcast_to(t, poses.shape[1:2])
+        return np.stack([pose_at(times[:, n], poses[:, n], t[n]) for n in range(poses.shape[1])])
 
 
 # --------------------------------------------------------------------------- #
