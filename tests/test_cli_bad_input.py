@@ -116,6 +116,9 @@ CASES: list[tuple[str, list[str], str]] = [
     ("serial-record-in-a-file", ["serial", "loop://", "--record", "{case}/afile/r.csv", "--duration", "1"], "afile"),
     ("serial-port-missing", ["serial", "/dev/ttyTWINBOT_NONE", "--duration", "1"], "/dev/ttyTWINBOT_NONE"),
     ("serial-port-scheme", ["serial", "bogus://x", "--duration", "1"], "bogus://x"),
+    ("serial-restart-with-a-value", ["serial", "loop://", "--restart=yes", "--duration", "1"], "--restart"),
+    ("serial-restart-port-missing", ["serial", "/dev/ttyTWINBOT_NONE", "--restart", "--duration", "1"],
+     "/dev/ttyTWINBOT_NONE"),
     # flash
     ("flash-no-port", ["flash"], "--port"),
     ("flash-port-missing", ["flash", "--port", "/dev/ttyTWINBOT_NONE"], "/dev/ttyTWINBOT_NONE"),
