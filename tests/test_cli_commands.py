@@ -204,3 +204,28 @@ def test_parameter_files_in_range_are_accepted():
     assert params_from_dict({"com_offset": -0.01}).com_offset == -0.01
 
 
+
+
+def _with_file_size_limit(limit: int):  # type: ignore[no-untyped-def]
+    import resource
+
+    def limit_writes() -> None:  # a file grows to `limit` bytes, then every write fails (EFBIG)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    return limit_writes
+
+
+@pytest.mark.parametrize("args,option", [
+    (["sim", "--duration", "0.4", "--png", "{tmp}/run.png"], "--png"),
+    (["sim", "--duration", "8", "--record", "{tmp}/run.csv"], "run.csv"),
+    (["plot", "worlds", "--out", "{tmp}/figs"], "--out"),
+])
+def test_a_failed_write_is_one_line(tmp_path, args, option):
+    """A write that fails after the work (here the file size limit; a full disk alike): one line, status 2."""
+    argv = twinbot_cmd(*[a.replace("{tmp}", str(tmp_path)) for a in args])
+    r = subprocess.run(argv, capture_output=True, text=True, timeout=120, cwd=REPO, check=False,
+                       preexec_fn=_with_file_size_limit(16_000))
+    assert "Traceback" not in r.stderr, r.stderr
+    assert r.returncode == 2, (r.returncode, r.stderr)
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"twinbot {args[0]}") and option in lines[0], r.stderr

@@ -99,24 +99,38 @@ def test_pty_sends_commands_at_the_requested_rate(pty_pair):
     assert commands[0] == {"mode": M.MODE_TELEOP, "left": 200, "right": 180}
 
 
+def _wait_for_frame(pty_pair, msg_type: int, timeout: float) -> bool:
+    """Read the harness's side of the pty until a frame of msg_type comes (False at the timeout)."""
+    dec = FrameDecoder()
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if any(t == msg_type for t, _s, _p in dec.decode_all(pty_pair.read_available(0.2))):
+            return True
+    return False
+
+
 def test_recording_survives_kill(pty_pair, tmp_path):
     """Frames recorded before a SIGKILL are all in the log, each line complete."""
     log = tmp_path / "killed.jsonl"
-    proc = subprocess.Popen(twinbot_cmd("serial", pty_pair.path, "--record", str(log), "--quiet"),
+    proc = subprocess.Popen(twinbot_cmd("serial", pty_pair.path, "--hello", "--record", str(log), "--quiet"),
                             cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    time.sleep(1.0)
-    enc = FrameEncoder()
-    for k in range(50):
-        pty_pair.write(telemetry_frame(enc, k))
-    deadline = time.monotonic() + 20
-    while time.monotonic() < deadline:
-        if log.exists() and log.read_text().count('"kind":"frame"') >= 50:
-            break
-        time.sleep(0.05)
-    os.kill(proc.pid, signal.SIGKILL)
-    proc.wait(timeout=10)
+    try:
+        # Its HELLO says the harness has the port open: what was written before, its opening flushed.
+        # The ceilings are generous (a loaded machine), the waits end on their conditions.
+        assert _wait_for_frame(pty_pair, M.HELLO, 60), "the harness never opened the port"
+        enc = FrameEncoder()
+        for k in range(50):
+            pty_pair.write(telemetry_frame(enc, k))
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            if log.read_text().count('"dir":"rx"') >= 50:
+                break
+            time.sleep(0.05)
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
     frames = [rec for rec in read_frame_log(log) if rec["kind"] == "frame"]
-    assert [f["seq"] for f in frames] == list(range(50))
+    assert [(f["dir"], f["seq"]) for f in frames] == [("tx", 0)] + [("rx", k) for k in range(50)]
 
 
 def test_missing_port_is_a_clear_error():
@@ -205,7 +219,7 @@ def test_record_csv_writes_the_recording_format(pty_pair, tmp_path):
     assert rec.ir_on[3].tolist() == [3] * 8 and rec.vbat[0] == 7.4
 
 
-def _poll_until(link, want: int, timeout: float = 2.0) -> list:
+def _poll_until(link, want: int, timeout: float = 60.0) -> list:
     got: list = []
     deadline = time.monotonic() + timeout
     while len(got) < want and time.monotonic() < deadline:
@@ -220,21 +234,33 @@ def test_host_abandons_a_stale_partial_frame_on_a_pty(pty_pair):
     from host_sim.board.serial_link import IDLE_TIMEOUT_S, SerialLink
 
     link = SerialLink.open(pty_pair.path)
+    # The link's clock is the test's: a loaded machine cannot stretch a short pause past the timeout,
+    # and each pause lasts exactly what it says between bytes that have all been read.
+    clock = [0.0]
+    link.now = lambda: clock[0]  # type: ignore[method-assign]
+    fed = bytearray()
+    feed = link.feed
+
+    def counting_feed(data: bytes) -> list:
+        fed.extend(data)
+        return feed(data)
+
+    link.feed = counting_feed  # type: ignore[method-assign]
     try:
         enc = FrameEncoder()
         frame = telemetry_frame(enc, 1)
         # A pause shorter than the timeout: the frame arrives whole.
         pty_pair.write(frame[:30])
-        assert _poll_until(link, 1, 0.1) == []
-        time.sleep(IDLE_TIMEOUT_S / 4)
+        assert _read_until(link, fed, 30) == [] and link.decoder.partial
+        clock[0] += IDLE_TIMEOUT_S / 4
         pty_pair.write(frame[30:])
         got = _poll_until(link, 1)
         assert [f.seq for f in got] == [0] and link.decoder.abandoned == 0
         # A dead sender: half a frame, silence, then a new sender's bytes without a leading 0x00.
         stale = telemetry_frame(enc, 2)
         pty_pair.write(stale[:30])
-        assert _poll_until(link, 1, 0.1) == [] and link.decoder.partial
-        time.sleep(IDLE_TIMEOUT_S * 2)
+        assert _read_until(link, fed, len(frame) + 30) == [] and link.decoder.partial
+        clock[0] += IDLE_TIMEOUT_S * 2
         fresh = telemetry_frame(enc, 3)[1:]  # no leading 0x00: only the timeout separates it
         pty_pair.write(fresh)
         got = _poll_until(link, 1)
@@ -243,6 +269,16 @@ def test_host_abandons_a_stale_partial_frame_on_a_pty(pty_pair):
         assert got[0].fields["tick_ms"] == 120
     finally:
         link.close()
+
+
+def _read_until(link, fed: bytearray, total: int, timeout: float = 60.0) -> list:
+    """Poll until `total` bytes have been read in all (the pty may hand them over late, or in pieces)."""
+    got: list = []
+    deadline = time.monotonic() + timeout
+    while len(fed) < total and time.monotonic() < deadline:
+        got += link.poll(0.02)
+    assert len(fed) == total, (len(fed), total)
+    return got
 
 
 def test_predict_says_where_the_robot_is_now_from_late_reports(pty_pair):

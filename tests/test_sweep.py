@@ -160,3 +160,34 @@ def test_perturbed_parameters_are_drawn_within_their_range_and_drive_the_plant()
     far = sweep.simulate(big).pose
     near = sweep.simulate(small).pose
     assert np.hypot(*(far[-1, :2] - far[0, :2])) > 1.1 * np.hypot(*(near[-1, :2] - near[0, :2]))
+
+
+def test_ctrl_c_is_one_line(tmp_path: Path) -> None:
+    """A terminal's Ctrl-C (SIGINT to the whole process group) mid-sweep: one line, status 130, no output."""
+    import os
+    import signal
+    import time
+
+    out = tmp_path / "o"
+    sweep_cmd = [sys.executable, "-m", "tools.cli.main", "sweep", "--rules", "first", "--world", "maze", "--seeds",
+                 "4", "--duration", "3600", "--workers", "2", "--out", str(out)]
+    proc = subprocess.Popen(sweep_cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        time.sleep(4)  # into the runs (a Ctrl-C while the workers start is ignored, so repeat it until it lands)
+        deadline = time.monotonic() + 120
+        while proc.poll() is None and time.monotonic() < deadline:
+            os.killpg(proc.pid, signal.SIGINT)
+            try:
+                proc.wait(timeout=2)
+            except subprocess.TimeoutExpired:
+                pass
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "ERROR" not in err, err
+    lines = err.strip().splitlines()
+    assert len(lines) <= 2 and lines[-1].startswith("twinbot sweep: interrupted: "), err
+    assert not out.exists()

@@ -5,6 +5,7 @@ command, as it would with a Pico on /dev/ttyACM0.
 """
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
 import time
@@ -340,3 +341,127 @@ def test_the_firmware_on_the_board_is_a_match_idle_and_with_the_cores_oversubscr
         d = diagnose(rec, DEFAULT, None)
         verdicts[busy] = (d.verdict, f"{late:.0%} of rows late, {os.cpu_count()} cores", d.summary())
     assert all(v[0] == "match" for v in verdicts.values()), verdicts
+
+
+def _break_to_the_repl(link) -> None:
+    """`\\r\\x03` after a quiet cycle stops the firmware at the friendly REPL; wait until its frames stop."""
+    deadline = time.monotonic() + 60  # a generous ceiling: a loaded machine starts MicroPython slowly
+    while time.monotonic() < deadline and not any(f.msg_type == M.TELEMETRY for f in link.poll(0.1)):
+        pass
+    assert time.monotonic() < deadline, "the firmware runs"
+    link.port.write(b"\r\x03")
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and any(f.msg_type == M.TELEMETRY for f in link.poll(0.3)):
+        pass
+
+
+def _repl_lines(stderr: str) -> list[str]:
+    return [line for line in stderr.splitlines() if "MicroPython REPL" in line]
+
+
+def _harness(port: str, *args: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "tools.cli.main", "serial", port, "--quiet", *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _stderr_until(proc: subprocess.Popen, text: str) -> str:
+    """stderr's lines up to the first holding `text` (or all of it, when the harness ends without)."""
+    seen = ""
+    for line in proc.stderr:  # type: ignore[union-attr]
+        seen += line
+        if text in line:
+            break
+    return seen
+
+
+def _stop(proc: subprocess.Popen) -> tuple[int, str]:
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)  # as Ctrl-C: the harness prints its counts and ends with status 0
+    _, err = proc.communicate(timeout=30)
+    return proc.returncode, err
+
+
+def test_serial_recognises_the_repl_and_offers_the_way_back(board):
+    """The firmware stops at the REPL while `twinbot serial` watches: one line says so and names --restart."""
+    import serial
+
+    # The break goes through a handle of the test's own, opened before the harness locks the port.
+    handle = serial.Serial(board.path, timeout=0)
+    proc = _harness(board.path, "--duration", "120")
+    try:
+        line = proc.stdout.readline()  # type: ignore[union-attr]
+        while line and "good frames 0 " in line:  # until the harness reads the firmware's frames
+            line = proc.stdout.readline()  # type: ignore[union-attr]
+        assert line.startswith("status: good frames"), line
+        handle.write(b"\r\x03")
+        err = _stderr_until(proc, "MicroPython REPL")
+        status, rest = _stop(proc)
+    finally:
+        handle.close()
+        if proc.poll() is None:
+            proc.kill()
+    lines = _repl_lines(err + rest)
+    assert status == 0 and len(lines) == 1, err + rest
+    assert lines[0].startswith(f"twinbot serial: the board on {board.path} is at its MicroPython REPL (prompt >>>)")
+    assert "--restart" in lines[0] and "no frames for" not in err + rest, err + rest
+
+
+def test_serial_restarts_a_board_at_its_repl(board):
+    """A board left at its REPL says nothing; --restart asks it (Ctrl-B), recognises the prompt, soft-resets
+    it with Ctrl-B, Ctrl-D, and the firmware's HELLO comes back, then its telemetry."""
+    link = SerialLink.open(board.path)
+    try:
+        _break_to_the_repl(link)
+    finally:
+        link.close()
+    proc = _harness(board.path, "--restart", "--duration", "120")
+    try:
+        err = _stderr_until(proc, "the firmware restarted")
+        line = proc.stdout.readline()  # type: ignore[union-attr]
+        while line and "good frames 0 " in line:
+            line = proc.stdout.readline()  # type: ignore[union-attr]
+        status, rest = _stop(proc)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    lines = [line for line in (err + rest).splitlines() if line.startswith("twinbot serial:")]
+    assert status == 0, err + rest
+    assert len(lines) == 2, err + rest
+    assert lines[0].startswith(f"twinbot serial: the board on {board.path} is at its MicroPython REPL")
+    assert "restarting it with Ctrl-B, Ctrl-D" in lines[0]
+    assert lines[1].startswith(f"twinbot serial: the firmware restarted on {board.path}: HELLO, firmware ")
+    assert line.startswith("status: good frames") and "good frames 0 " not in line, line
+
+
+def test_the_repl_is_told_by_its_prompts():
+    """The prompts a REPL ends with, and nothing a running firmware sends (its bytes end with a frame's 0x00)."""
+    from tools.cli.serial_harness import ReplWatch
+
+    class NoLink:
+        on_bytes = None
+
+    for tail, kind in [(b"MicroPython v1.24.1 on 2024-11-29; linux [GCC 12.2.0] version\r\n>>> ", "prompt >>>"),
+                       (b"\r\n>>> raw REPL; CTRL-B to exit\r\n>", "raw REPL"), (b"OK\x04\x04>", "raw REPL"),
+                       (b"\x05>>> \x00", None), (b"", None)]:
+        watch = ReplWatch(NoLink(), "PORT", restart=False)  # type: ignore[arg-type]
+        watch.received(tail)
+        assert watch.prompt() == kind, tail
+
+
+def test_serial_restart_without_a_main_py_is_one_line(board):
+    """--restart on a board whose flash holds no main.py: the soft reset leaves it at the REPL, no HELLO
+    comes, and the harness says so in one line with status 2."""
+    link = SerialLink.open(board.path)
+    try:
+        _break_to_the_repl(link)
+        link.port.write(b"import os; os.rename('main.py', 'main.off')\r")
+        out = b""
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and not out.endswith(b">>> "):
+            out += link.port.read(link.port.in_waiting or 1)
+    finally:
+        link.close()
+    r = run_twinbot("serial", board.path, "--restart", "--quiet", "--duration", "120", timeout=180)
+    errors = [line for line in r.stderr.splitlines() if "error:" in line]
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert len(errors) == 1 and "no HELLO within 10 s of the soft reset" in errors[0], r.stderr

@@ -9,11 +9,15 @@ output path is checked before anything is computed or written.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import errno
 import math
 import os
+import stat
 import sys
+import tempfile
 from pathlib import Path
-from typing import Callable, NoReturn
+from typing import Callable, Iterator, NoReturn
 
 ArgType = Callable[[str], object]
 
@@ -117,23 +121,63 @@ def speed_factor(text: str) -> str | float:
 
 
 # --------------------------------------------------------------------------- paths
+# A path is proved writable by writing: os.access says yes to root even on /sys or /proc,
+# so each check creates the file (or a probe in the folder) and removes it again
+# (tests/test_cli_bad_input.py, the rows "*-sys" and "*-dev-full").
+PROBE_PREFIX = ".twinbot-write-check-"
+
+
 def _check_folder(folder: Path, what: str) -> None:
     if not folder.exists():
         raise argparse.ArgumentTypeError(f"{what}: folder {folder} does not exist")
     if not folder.is_dir():
         raise argparse.ArgumentTypeError(f"{what}: {folder} is a file, not a folder")
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise argparse.ArgumentTypeError(f"{what}: folder {folder} is not writable")
+
+
+def _cannot_write(what: str, exc: OSError) -> argparse.ArgumentTypeError:
+    return argparse.ArgumentTypeError(f"{what}: cannot write there ({exc.strerror or exc})")
+
+
+def _try_file(path: Path, what: str) -> None:
+    """Create the file and remove it; an existing one is opened for writing, never truncated."""
+    try:
+        if not os.path.lexists(path):
+            os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+            os.unlink(path)
+            return
+        mode = os.stat(path).st_mode
+        # non-blocking: a pipe with no reader yet must not hang the parse
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_NONBLOCK)
+    except OSError as exc:
+        if exc.errno == errno.ENXIO and stat.S_ISFIFO(os.stat(path).st_mode):
+            return  # a pipe whose reader is not there yet: it will be when the output comes
+        raise _cannot_write(what, exc) from None
+    try:
+        if stat.S_ISCHR(mode):
+            os.write(fd, b"")  # zero bytes: /dev/full refuses even these, a terminal or port sees nothing
+    except OSError as exc:
+        raise _cannot_write(what, exc) from None
+    finally:
+        os.close(fd)
+
+
+def _try_folder(folder: Path, what: str) -> None:
+    """Create a probe file in the folder and remove it."""
+    try:
+        fd, probe = tempfile.mkstemp(prefix=PROBE_PREFIX, dir=folder)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise argparse.ArgumentTypeError(f"{what}: cannot write in folder {folder} ({exc.strerror or exc})") from None
 
 
 def output_file(text: str) -> str:
-    """A file to write: not a folder, in a folder that exists and is writable."""
+    """A file to write: not a folder, in a folder that exists, and writable (tried, not asked)."""
     path = Path(text)
     if not text or path.is_dir() or text.endswith(os.sep):
         raise argparse.ArgumentTypeError(f"{text!r} is a folder; give a file name")
     _check_folder(path.parent, text)
-    if path.exists() and not os.access(path, os.W_OK):
-        raise argparse.ArgumentTypeError(f"{text}: not writable")
+    _try_file(path, text)
     return text
 
 
@@ -173,9 +217,19 @@ def output_folder(text: str) -> str:
         probe = probe.parent
     if probe.exists() and not probe.is_dir():
         raise argparse.ArgumentTypeError(f"{text}: {probe} is a file, not a folder")
-    if probe.exists() and not os.access(probe, os.W_OK | os.X_OK):
-        raise argparse.ArgumentTypeError(f"{text}: folder {probe} is not writable")
+    if probe.exists():
+        _try_folder(probe, text)
     return text
+
+
+@contextlib.contextmanager
+def writing(option: str, path: object) -> Iterator[None]:
+    """Around a write that comes after the work: a failure (a full disk, a folder removed meanwhile)
+    is one line and exit 2, not a traceback (tests/test_cli_commands.py::test_a_failed_write_is_one_line)."""
+    try:
+        yield
+    except OSError as exc:
+        raise CliError(f"{option} {path}: could not write it ({exc.strerror or exc})") from None
 
 
 def input_file(text: str) -> str:

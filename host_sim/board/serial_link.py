@@ -9,6 +9,7 @@ from __future__ import annotations
 import errno
 import time
 from dataclasses import dataclass, field
+from typing import Callable
 
 from protocol import messages as M
 from protocol.framing import FrameDecoder, FrameEncoder
@@ -69,6 +70,7 @@ class SerialLink:
         self.encoder = FrameEncoder()
         self.decoder = FrameDecoder()
         self.on_frame = on_frame  # called with every Frame, rx and tx
+        self.on_bytes: Callable[[bytes], None] | None = None  # called with every chunk read, before decoding
         self.t0 = time.monotonic()
         self.sent = 0
         self._buf = bytearray(4096)
@@ -123,6 +125,8 @@ class SerialLink:
             dec.abandon_partial()  # stale: counted in 'abandoned'
         if end:
             self._last_rx = now
+            if self.on_bytes:
+                self.on_bytes(bytes(data))
         while i < end:
             j = dec.feed(data, i, end)
             if dec.ready:

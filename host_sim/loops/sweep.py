@@ -8,15 +8,18 @@ nominal geometry).  `run_cases` runs the cases on Dask distributed; `write_table
 """
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import logging
 import math
 import os
+import signal
+import threading
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -196,9 +199,38 @@ def _client(scheduler: str | None, workers: int | None):  # type: ignore[no-unty
 
     if scheduler:
         return Client(scheduler, timeout="10s"), None
-    cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                           dashboard_address=None, silence_logs=logging.ERROR)
-    return Client(cluster), cluster
+    # The workers are spawned with SIGINT ignored and inherit it: a terminal's Ctrl-C reaches the whole
+    # process group, and the parent alone answers it, shutting them down (tests/test_sweep.py::test_ctrl_c_is_one_line).
+    with _sigint_ignored():
+        cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                               dashboard_address=None, silence_logs=logging.ERROR)
+        return Client(cluster), cluster
+
+
+@contextlib.contextmanager
+def _quiet_shutdown() -> Iterator[None]:
+    """Dask's logs silenced and SIGINT ignored while a cluster shuts down after an interrupt."""
+    log = logging.getLogger("distributed")
+    level = log.level
+    log.setLevel(logging.CRITICAL)
+    try:
+        with _sigint_ignored():
+            yield
+    finally:
+        log.setLevel(level)
+
+
+@contextlib.contextmanager
+def _sigint_ignored() -> Iterator[None]:
+    """SIGINT ignored within (by this process and the processes it starts meanwhile)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield  # signal handlers can only be set from the main thread
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def run_cases(todo: Sequence[Case], scheduler: str | None = None, workers: int | None = None,
@@ -207,6 +239,7 @@ def run_cases(todo: Sequence[Case], scheduler: str | None = None, workers: int |
     from dask.distributed import as_completed
 
     client, cluster = _client(scheduler, workers)
+    interrupted = False
     try:
         futures = client.map(run_case, list(todo), pure=False)
         index = {f.key: i for i, f in enumerate(futures)}
@@ -215,10 +248,16 @@ def run_cases(todo: Sequence[Case], scheduler: str | None = None, workers: int |
             results[index[future.key]] = future.result()
             if progress:
                 progress(1)
+    except KeyboardInterrupt:
+        interrupted = True
+        raise
     finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        # Cut short, the runs are cancelled on purpose: the shutdown has nothing to report, and a second
+        # Ctrl-C must not break it off half way (tests/test_sweep.py::test_ctrl_c_is_one_line).
+        with _quiet_shutdown() if interrupted else contextlib.nullcontext():
+            client.close()
+            if cluster is not None:
+                cluster.close()
     return [r for r in results if r is not None]
 
 

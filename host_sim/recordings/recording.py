@@ -8,6 +8,7 @@ version 1 files still load.
 """
 from __future__ import annotations
 
+import contextlib
 import csv
 import datetime
 import io
@@ -16,6 +17,7 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
@@ -51,7 +53,7 @@ def _heading_rad(heading: int) -> float:
 
 
 class RecordingError(ValueError):
-    """A recording is malformed; the message says file, line, column and problem."""
+    """A recording is malformed (the message says file, line, column and problem), or could not be written."""
 
 
 def sidecar_path(path: str | os.PathLike[str]) -> Path:
@@ -83,15 +85,25 @@ class RecordingWriter:
             "robot": robot or {}, "world": world, "rows": None, "complete": False, **(extra or {}),
         }
         self._write_sidecar()
-        self._file = open(self.path, "w", newline="", encoding="ascii")
-        self._file.write(",".join(COLUMNS) + "\n")
-        self._file.flush()
+        with self._writing():
+            self._file = open(self.path, "w", newline="", encoding="ascii")
+            self._file.write(",".join(COLUMNS) + "\n")
+            self._file.flush()
         self.rows = 0
         self._last_tick: int | None = None  # TELEMETRY clock, for telemetry()
         self._t_ms = 0
 
+    @contextlib.contextmanager
+    def _writing(self) -> Iterator[None]:
+        """A disk that fills up during a run is the recording's error, said in one line."""
+        try:
+            yield
+        except OSError as exc:
+            raise RecordingError(f"{self.path}: could not write the recording ({exc.strerror or exc})") from None
+
     def _write_sidecar(self) -> None:
-        sidecar_path(self.path).write_text(json.dumps(self.meta, indent=1, default=str) + "\n")
+        with self._writing():
+            sidecar_path(self.path).write_text(json.dumps(self.meta, indent=1, default=str) + "\n")
 
     def row(self, t: float, cmd: tuple[float, float], enc: tuple[int, int], ir_on: list[int] | tuple[int, ...],
             ir_amb: list[int] | tuple[int, ...], vbat: float,
@@ -106,8 +118,9 @@ class RecordingWriter:
         else:
             cells += [str(int(firmware[0]))] + [repr(float(v)) for v in firmware[1:]]
         cells += [repr(float(v)) for v in pose] if pose is not None else ["", "", ""]
-        self._file.write(",".join(cells) + "\n")
-        self._file.flush()
+        with self._writing():
+            self._file.write(",".join(cells) + "\n")
+            self._file.flush()
         self.rows += 1
 
     def telemetry(self, f: dict[str, object], *, t: float | None = None,
@@ -143,7 +156,8 @@ class RecordingWriter:
     def close(self) -> None:
         if self._file.closed:
             return
-        self._file.close()
+        with self._writing():
+            self._file.close()
         self.meta["rows"] = self.rows
         self.meta["complete"] = True
         self._write_sidecar()

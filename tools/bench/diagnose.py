@@ -193,9 +193,12 @@ def run_suite(seeds: list[int], out_dir: Path, duration: float, jobs: int, quiet
 
 def keep_diagnosis(out_dir: Path, seed: int, result: dict[str, Any]) -> None:
     """DIR/diagnoses/case_NNNN.json: what --rescore reads, written as each case is done."""
+    from tools.arguments import writing
+
     folder = out_dir / "diagnoses"
-    folder.mkdir(exist_ok=True)
-    (folder / f"case_{seed:04d}.json").write_text(json.dumps(result, indent=1, default=_plain) + "\n")
+    with writing("--out", out_dir):
+        folder.mkdir(exist_ok=True)
+        (folder / f"case_{seed:04d}.json").write_text(json.dumps(result, indent=1, default=_plain) + "\n")
 
 
 def _plain(x: Any) -> Any:
@@ -535,5 +538,8 @@ def run(args: argparse.Namespace) -> int:
     report["elapsed_s"] = time.monotonic() - t_start
     print_report(report)
     if args.json:
-        Path(args.json).write_text(json.dumps(report, indent=1, default=str) + "\n")
+        from tools.arguments import writing
+
+        with writing("--json", args.json):
+            Path(args.json).write_text(json.dumps(report, indent=1, default=str) + "\n")
     return 0

@@ -213,10 +213,13 @@ def run(args: argparse.Namespace) -> int:
     _print_targets(mp, heap, heap32, speedup)
     print(f"\nelapsed: {time.monotonic() - t_start:.1f} s")
     if args.json:
-        Path(args.json).write_text(json.dumps({
-            "command": command, "micropython": mp, "heap": heap, "heap_32bit": heap32, "cpython_cycle_us": cp_cycle,
-            "fuzzy": {k: v for k, v in fuzzy.items() if k != "table"},
-        }, indent=2, default=str))
+        from tools.arguments import writing
+
+        with writing("--json", args.json):
+            Path(args.json).write_text(json.dumps({
+                "command": command, "micropython": mp, "heap": heap, "heap_32bit": heap32,
+                "cpython_cycle_us": cp_cycle, "fuzzy": {k: v for k, v in fuzzy.items() if k != "table"},
+            }, indent=2, default=str))
     return 0
 
 

@@ -12,7 +12,7 @@ import platform
 from pathlib import Path
 from typing import Any
 
-from tools.arguments import float_range, image_file, int_range, output_file
+from tools.arguments import float_range, image_file, int_range, output_file, writing
 from tools.bench.report import machine_line, print_targets
 
 DESCRIPTION = """\
@@ -106,9 +106,11 @@ def run(args: argparse.Namespace) -> int:
     print_targets([{"met": not worse, "text": "ghost error below the raw late pose's at every delay > 0"
                                               + (f" (not at {', '.join(map(str, worse))} ms)" if worse else "")}])
     if args.plot is not None:
-        plot(rows, Path(args.plot))
+        with writing("--plot", args.plot):
+            plot(rows, Path(args.plot))
         print(f"plot: {args.plot}")
     if args.json is not None:
-        Path(args.json).write_text(json.dumps(rows, indent=1))
+        with writing("--json", args.json):
+            Path(args.json).write_text(json.dumps(rows, indent=1))
     return 0 if not worse else 1
 

@@ -213,5 +213,8 @@ def run(args: argparse.Namespace) -> int:
     report["elapsed_s"] = time.monotonic() - t_start
     print_report(report)
     if args.json:
-        Path(args.json).write_text(json.dumps(report, indent=1) + "\n")
+        from tools.arguments import writing
+
+        with writing("--json", args.json):
+            Path(args.json).write_text(json.dumps(report, indent=1) + "\n")
     return 0

@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from tools.arguments import CliError, output_file
+from tools.arguments import CliError, output_file, writing
 
 HEADER = "header"  # the page's own block, rewritten on every write: what the page is, one command per section
 _MARKER = re.compile(r"^<!-- bench:([a-z][a-z0-9_-]*) (begin|end) -->$", re.MULTILINE)
@@ -50,6 +50,8 @@ def markdown_file(text: str) -> str:
     """A page to write a section into: a writable file whose bench markers, if it exists, pair up."""
     output_file(text)
     path = Path(text)
+    if path.exists() and not path.is_file():  # the page is replaced whole: never a device or a pipe
+        raise argparse.ArgumentTypeError(f"{text}: not a regular file")
     if path.exists():
         try:
             split_sections(path.read_text(encoding="utf-8"))
@@ -229,8 +231,9 @@ def write_section(path: Path, name: str, section: str, order: list[str]) -> None
     except (OSError, UnicodeDecodeError, ValueError) as exc:
         raise CliError(f"{path}: section {name} not written: {exc}") from None
     partial = path.with_name(f".{path.name}.partial")
-    partial.write_text(new, encoding="utf-8")
-    os.replace(partial, path)
+    with writing("--markdown", path):
+        partial.write_text(new, encoding="utf-8")
+        os.replace(partial, path)
 
 
 def _shown(path: Path) -> str:

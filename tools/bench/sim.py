@@ -588,7 +588,10 @@ def run(args: argparse.Namespace) -> int:
     report["elapsed_s"] = time.monotonic() - t_start
     print_report(report)
     if args.json:
-        Path(args.json).write_text(json.dumps(report, indent=2, default=str))
+        from tools.arguments import writing
+
+        with writing("--json", args.json):
+            Path(args.json).write_text(json.dumps(report, indent=2, default=str))
     return 0
 
 

@@ -12,7 +12,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from tools.arguments import int_range, output_folder, positive_float, sim_seconds
+from tools.arguments import int_range, output_folder, positive_float, sim_seconds, writing
 from tools.arguments import CliError
 from tools.cli.sim import plural
 
@@ -61,7 +61,8 @@ def run(args: argparse.Namespace) -> int:
     except WorldError as exc:
         raise CliError(str(exc)) from None
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    with writing("--out", out):
+        out.mkdir(parents=True, exist_ok=True)
 
     print(f"1. exploration of {world.name}, up to {args.duration:.0f} s per rule set or until the robot finds "
           "the exit; firmware in the loop (SIL), fixed step")
@@ -80,10 +81,11 @@ def run(args: argparse.Namespace) -> int:
             line += f"; the first rule set with the firmware's stall guard: {controller.robot.stall.escapes} escapes"
         print("   " + line)
     runs.pop("guarded")  # the pictures show the paper's two
-    pic = save_runs(out / "exploration.png", world, list(runs.values()),
-                    [_title("first", runs["first"]), _title("refined", runs["refined"])],
-                    DEFAULT.body_radius, f"{world.name}: the paper's exploration task")
-    cov = save_coverage(out / "coverage.png", list(runs.values()), ["first rule set", "refined rule set"])
+    with writing("--out", out):
+        pic = save_runs(out / "exploration.png", world, list(runs.values()),
+                        [_title("first", runs["first"]), _title("refined", runs["refined"])],
+                        DEFAULT.body_radius, f"{world.name}: the paper's exploration task")
+        cov = save_coverage(out / "coverage.png", list(runs.values()), ["first rule set", "refined rule set"])
     print(f"   pictures: {pic}, {cov}")
 
     fixed_ok = _repeatability(args, out)
@@ -121,12 +123,13 @@ def _repeatability(args: argparse.Namespace, out: Path) -> bool:
           f"{'every pair identical, bit for bit' if fixed_ok else 'pairs DIFFER (a bug)'}")
     world = builtin_world(sc.world, DEFAULT.body_radius)
     a, b = rt.example  # type: ignore[misc]
-    pic = save_pairs(out / "repeatability.png", world, [rt.example, fx.example],  # type: ignore[list-item]
-                     [f"step from the clock ({args.repeat_speed:g}x): routes up to {route_gap(a, b):.2f} m apart",
-                      "fixed step: the two routes are identical"],
-                     DEFAULT.body_radius,
-                     f"Same start, same firmware, same noise seed: {rt.splits(thr)}/{args.pairs} real-time pairs "
-                     f"split, {fx.splits(thr)}/{args.pairs} fixed-step pairs")
+    with writing("--out", out):
+        pic = save_pairs(out / "repeatability.png", world, [rt.example, fx.example],  # type: ignore[list-item]
+                         [f"step from the clock ({args.repeat_speed:g}x): routes up to {route_gap(a, b):.2f} m apart",
+                          "fixed step: the two routes are identical"],
+                         DEFAULT.body_radius,
+                         f"Same start, same firmware, same noise seed: {rt.splits(thr)}/{args.pairs} real-time "
+                         f"pairs split, {fx.splits(thr)}/{args.pairs} fixed-step pairs")
     print(f"   picture: {pic}")
     return fixed_ok
 

@@ -7,7 +7,7 @@ import os
 import sys
 from pathlib import Path
 
-from tools.arguments import input_file, int_range, output_file
+from tools.arguments import input_file, int_range, output_file, writing
 from tools.arguments import CliError
 
 DESCRIPTION = """\
@@ -104,16 +104,20 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(f"{args.recording}: {exc}") from None
     print(result.summary())
     if args.json:
-        Path(args.json).write_text(json.dumps(result.to_json(), indent=1) + "\n")
+        with writing("--json", args.json):
+            Path(args.json).write_text(json.dumps(result.to_json(), indent=1) + "\n")
         print(f"wrote {args.json}")
     if args.html:
         from host_sim.diagnosis.html import render
 
-        Path(args.html).write_text(render(rec, result), encoding="utf-8")
+        page = render(rec, result)
+        with writing("--html", args.html):
+            Path(args.html).write_text(page, encoding="utf-8")
         print(f"wrote {args.html}")
     if args.write_params:
         fitted = result.model.params if result.model is not None else params
-        Path(args.write_params).write_text(json.dumps(fitted.to_json(), indent=1) + "\n")
+        with writing("--write-params", args.write_params):
+            Path(args.write_params).write_text(json.dumps(fitted.to_json(), indent=1) + "\n")
         print(f"wrote {args.write_params}: the twin with {len(result.effects)} fitted effect(s); "
               f"use it with twinbot sim --params {args.write_params}")
     return 0

@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from tools.arguments import float_range, input_file, int_range, non_negative_int, output_file
+from tools.arguments import float_range, input_file, int_range, non_negative_int, output_file, output_folder
 from tools.arguments import CliError
 
 MAX_SPEED = 64.0  # x real time: beyond, a frame's catch-up is whole seconds of two firmwares
@@ -38,7 +38,7 @@ def window_size(text: str) -> tuple[int, int]:
 def existing_folder(text: str) -> str:
     if not Path(text).is_dir():
         raise argparse.ArgumentTypeError(f"{text}: no such folder")
-    return text
+    return output_folder(text)
 
 
 DESCRIPTION = """\

@@ -7,6 +7,7 @@ new subcommand is one module and one line here.
 from __future__ import annotations
 
 import argparse
+import errno
 import sys
 
 from tools.arguments import CliError
@@ -52,6 +53,11 @@ EXPECTED_ERRORS = frozenset({
 })
 
 
+# A write the work ends with fails with these whatever wrote it: a full disk or a read-only one.
+# Each command's own writes say which option failed; these catch any other write in one line too.
+FULL_OR_READ_ONLY = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS})
+
+
 def _expected(exc: BaseException) -> bool:
     return any(f"{c.__module__}.{c.__qualname__}" in EXPECTED_ERRORS for c in type(exc).__mro__)
 
@@ -94,6 +100,12 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except CliError as exc:
         print(f"twinbot {args.subcommand}: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        if exc.errno not in FULL_OR_READ_ONLY:
+            raise
+        where = f" {exc.filename}" if exc.filename else ""
+        print(f"twinbot {args.subcommand}: error: could not write{where}: {exc.strerror}", file=sys.stderr)
         return 2
     except Exception as exc:
         if not _expected(exc):

@@ -13,7 +13,7 @@ from typing import Any
 
 from host_sim.figures import sensor_model
 from host_sim.figures.sensor_model import DEFAULT_OUT
-from tools.arguments import help_and_error, image_file, input_file, output_folder
+from tools.arguments import help_and_error, image_file, input_file, output_folder, writing
 
 
 def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None:  # type: ignore[type-arg]
@@ -50,13 +50,18 @@ def register_worlds(subparsers: Any, name: str, summary: str) -> None:
 
 
 def run_sensor(args: argparse.Namespace) -> int:
-    for path in sensor_model.plot_sensor_figures(args.out, _params(args.params)):
+    params = _params(args.params)
+    with writing("--out", args.out):
+        paths = sensor_model.plot_sensor_figures(args.out, params)
+    for path in paths:
         print(path)
     return 0
 
 
 def run_worlds(args: argparse.Namespace) -> int:
-    print(sensor_model.plot_worlds(args.out))
+    with writing("--out", args.out):
+        path = sensor_model.plot_worlds(args.out)
+    print(path)
     return 0
 
 
@@ -97,5 +102,7 @@ def run_recording(args: argparse.Namespace) -> int:
     except argparse.ArgumentTypeError as exc:
         raise CliError(f"--png {exc}") from None
     rec, params, world = load_inputs(args, need_world=False)
-    print(save_recording(png, rec, params, world))
+    with writing("--png", png):
+        path = save_recording(png, rec, params, world)
+    print(path)
     return 0

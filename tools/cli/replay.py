@@ -13,7 +13,7 @@ import argparse
 import math
 from typing import Any
 
-from tools.arguments import image_file, input_file, int_range, non_negative_int
+from tools.arguments import image_file, input_file, int_range, non_negative_int, writing
 from tools.arguments import CliError
 
 EXAMPLES = """\
@@ -100,7 +100,9 @@ def run(args: argparse.Namespace) -> int:
     if args.png:
         from host_sim.figures.runs import save_recording
 
-        print(f"  picture: {save_recording(args.png, rec, params, world, replayed=result)}")
+        with writing("--png", args.png):
+            picture = save_recording(args.png, rec, params, world, replayed=result)
+        print(f"  picture: {picture}")
     return 0
 
 

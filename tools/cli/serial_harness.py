@@ -67,6 +67,9 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
     p.add_argument("--duration", type=positive_float, help="stop after this many seconds (default: until Ctrl-C)")
     p.add_argument("--count", type=positive_int, help="stop after receiving this many good frames")
     p.add_argument("--quiet", action="store_true", help="no per-frame lines, only the counts")
+    p.add_argument("--restart", action="store_true",
+                   help="if the board is at its MicroPython REPL (the firmware stopped), send Ctrl-B, Ctrl-D: a soft "
+                        "reset that runs main.py, and wait for the firmware's HELLO")
     p.set_defaults(func=run)
 
 
@@ -272,8 +275,11 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from None
 
     predictor = Predictor() if args.predict else None
+    repl: ReplWatch | None = None
 
     def on_frame(frame: Frame) -> None:
+        if repl is not None:
+            repl.frame(frame)
         if log:
             log.frame(frame)
         if predictor is not None:
@@ -289,8 +295,9 @@ def run(args: argparse.Namespace) -> int:
             log.close()
         raise CliError(str(exc)) from None
     display.link = link
+    repl = ReplWatch(link, args.port, args.restart)
     try:
-        return session(link, args, command, param_sets, param_gets)
+        return session(link, args, command, param_sets, param_gets, repl)
     except KeyboardInterrupt:
         return 0
     finally:
@@ -324,7 +331,7 @@ class TelemetryRecorder:
 
 
 def session(link: SerialLink, args: argparse.Namespace, command: dict[str, object] | ManoeuvreDriver | None,
-            param_sets: list[tuple[int, int]], param_gets: list[int]) -> int:
+            param_sets: list[tuple[int, int]], param_gets: list[int], repl: ReplWatch) -> int:
     if args.hello:
         link.send(M.HELLO, host_hello())
     for pid, value in param_sets:
@@ -336,7 +343,9 @@ def session(link: SerialLink, args: argparse.Namespace, command: dict[str, objec
     silence = SilenceHint(args.port)
     while True:
         now = time.monotonic()
-        silence.check(link.decoder.frames, now)
+        repl.check(link.decoder.frames, now)
+        if not repl.told:  # the REPL's own line says more than the silence's hint
+            silence.check(link.decoder.frames, now)
         if command is not None and now >= next_command:
             link.send(M.COMMAND, command() if callable(command) else command)
             if args.rate > 0:
@@ -383,5 +392,72 @@ class SilenceHint:
         elif not self.told and now - self.since >= self.silent_s:
             self.told = True
             print(f"twinbot serial: no frames for {self.silent_s:g} s on {self.port}: is the firmware running? "
-                  f"After mpremote it stays at the REPL: run `mpremote connect {self.port} reset` or press reset",
+                  f"After mpremote it stays at the REPL: add --restart, run `mpremote connect {self.port} reset` "
+                  "or press reset",
                   file=sys.stderr, flush=True)
+
+
+# How a MicroPython REPL ends what it prints: the friendly prompt, the raw REPL's banner, and the raw
+# REPL's prompt after a command.  A running firmware's bytes always end with a frame's 0x00.
+REPL_PROMPTS = ((b"raw REPL; CTRL-B to exit\r\n>", "raw REPL"), (b"\x04>", "raw REPL"), (b">>> ", "prompt >>>"))
+REPL_QUIET_S = 0.2  # a prompt is the REPL's when nothing follows it for this long (frames come every 40 ms)
+PROBE_AFTER_S = 1.5  # with --restart, a port silent this long gets one Ctrl-B (before the hint at SILENT_S)
+REPL_PROBE = b"\x02"  # Ctrl-B: a REPL answers with its banner and >>>, the firmware decodes one byte of junk
+SOFT_RESET = b"\x02\x04"  # Ctrl-B leaves the raw REPL, Ctrl-D in the friendly one soft-resets and runs main.py
+RESTART_WAIT_S = 10.0  # from the soft reset to the firmware's HELLO
+
+
+class ReplWatch:
+    """A board stopped at its MicroPython REPL: recognised by its prompt, said in one line, and with
+    --restart brought back by a soft reset (tests/test_virtual_board.py::test_serial_restarts_a_board_at_its_repl)."""
+
+    def __init__(self, link: SerialLink, port: str, restart: bool) -> None:
+        self.link, self.port, self.restart = link, port, restart
+        self.tail = b""
+        self.last_byte = time.monotonic()
+        self.frames = 0
+        self.probed = self.told = False
+        self.restarting: float | None = None  # when the soft reset was sent, until HELLO comes
+        link.on_bytes = self.received
+
+    def received(self, data: bytes) -> None:
+        self.tail = (self.tail + data)[-64:]
+        self.last_byte = time.monotonic()
+
+    def frame(self, frame: Frame) -> None:
+        if frame.direction == "rx" and frame.msg_type == M.HELLO and self.restarting is not None:
+            self.restarting = None
+            f = frame.fields
+            _say(f"the firmware restarted on {self.port}: HELLO, firmware {f['fw_major']}.{f['fw_minor']}."
+                 f"{f['fw_patch']}")
+
+    def prompt(self) -> str | None:
+        return next((kind for text, kind in REPL_PROMPTS if self.tail.endswith(text)), None)
+
+    def check(self, frames: int, now: float) -> None:
+        if frames != self.frames:  # the firmware talks: a later stop is news again
+            self.frames, self.probed, self.told = frames, False, False
+        if self.restarting is not None:
+            if now - self.restarting > RESTART_WAIT_S:
+                raise CliError(f"no HELLO within {RESTART_WAIT_S:g} s of the soft reset on {self.port}: is the "
+                               f"firmware's main.py on the board? (twinbot flash --port {self.port} puts it there)")
+            return
+        quiet = now - self.last_byte
+        kind = self.prompt() if quiet >= REPL_QUIET_S and not self.told else None
+        if kind is not None:
+            self.told, self.tail = True, b""
+            if not self.restart:
+                _say(f"the board on {self.port} is at its MicroPython REPL ({kind}), not running the firmware: "
+                     "--restart sends Ctrl-B, Ctrl-D (a soft reset that runs main.py) and waits for its HELLO")
+                return
+            _say(f"the board on {self.port} is at its MicroPython REPL ({kind}): restarting it with Ctrl-B, "
+                 "Ctrl-D (a soft reset that runs main.py)")
+            self.link.send_raw(SOFT_RESET)
+            self.restarting = now
+        elif self.restart and quiet >= PROBE_AFTER_S and not self.probed:
+            self.probed = True
+            self.link.send_raw(REPL_PROBE)
+
+
+def _say(text: str) -> None:
+    print(f"twinbot serial: {text}", file=sys.stderr, flush=True)

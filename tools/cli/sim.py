@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 from tools.arguments import (image_file, int_range, non_negative_int, recording_file, sim_seconds, speed_factor,
-                             warn)
+                             warn, writing)
 from tools.arguments import CliError
 
 EXAMPLES = """\
@@ -207,8 +207,9 @@ def run(args: argparse.Namespace) -> int:
     if args.png:
         from host_sim.figures.runs import save_runs
 
-        save_runs(args.png, world, [result], [f"{world.name}, {args.rules} rule set, {args.duration:.0f} s"],
-                  params.body_radius)
+        with writing("--png", args.png):
+            save_runs(args.png, world, [result], [f"{world.name}, {args.rules} rule set, {args.duration:.0f} s"],
+                      params.body_radius)
         print(f"picture: {args.png}")
     return 0
 

@@ -12,8 +12,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from tools.arguments import float_range, int_range, sim_seconds
-from tools.arguments import CliError
+from tools.arguments import CliError, float_range, int_range, output_folder, sim_seconds, writing
 
 EXAMPLES = """\
 examples:
@@ -45,6 +44,7 @@ def out_folder(text: str) -> Path:
         raise argparse.ArgumentTypeError(f"{text}: is a file, not a folder")
     if not path.exists() and not path.parent.is_dir():
         raise argparse.ArgumentTypeError(f"{text}: its parent folder {path.parent} does not exist")
+    output_folder(text)  # tried before the runs, which may take hours
     return path
 
 
@@ -127,18 +127,25 @@ def run(args: argparse.Namespace) -> int:
     varied = f"start within {radius:g} m, +-{heading:g} deg" + "".join(f", {n} +-{100 * r:g} %" for n, r in args.perturb)
     print(f"{len(todo)} runs of {args.duration:g} sim s on {where}; per seed: {varied}", file=sys.stderr)
     bar = tqdm(total=len(todo), desc="sweep", unit="run", file=sys.stderr, disable=not sys.stderr.isatty())
+    done = []
+
+    def finished(n: int) -> None:
+        done.append(n)
+        bar.update(n)
+
     try:
-        results = sweep.run_cases(todo, args.scheduler, args.workers, progress=bar.update)
+        results = sweep.run_cases(todo, args.scheduler, args.workers, progress=finished)
     except OSError as exc:  # scheduler unreachable (Dask raises OSError on connect timeout)
         raise CliError(f"--scheduler {args.scheduler}: {exc}") from None
+    except KeyboardInterrupt:  # one line, not the cluster's tracebacks (tests/test_sweep.py::test_ctrl_c_is_one_line)
+        bar.close()
+        print(f"twinbot sweep: interrupted: {sum(done)} of {len(todo)} runs done, nothing written to {args.out}",
+              file=sys.stderr)
+        return 130
     finally:
         bar.close()
-    rows = [r.row for r in results]
-    args.out.mkdir(exist_ok=True)
-    table = sweep.write_table(args.out / "runs.csv", rows, sweep.columns(args.perturb))
-    summary = sweep.summarise(rows)
-    sweep.write_table(args.out / "summary.csv", summary, sweep.SUMMARY_COLUMNS)
-    plot = sweep.save_coverage_plot(args.out / "coverage.png", results)
+    with writing("--out", args.out):
+        table, summary, plot = _write_outputs(args, results)
     for s in summary:
         print(f"{s['rules']:>8} {s['world']:<11} {s['runs']} runs: coverage {100 * float(s['coverage_mean']):.1f} % "
               f"(sd {100 * float(s['coverage_std']):.1f}), 90 % reached {100 * float(s['reached_90_rate']):.0f} %, "
@@ -146,3 +153,15 @@ def run(args: argparse.Namespace) -> int:
               f"collisions {s['collisions_mean']}/run")
     print(f"table: {table}\nsummary: {args.out / 'summary.csv'}\nplot: {plot}")
     return 0
+
+
+def _write_outputs(args: argparse.Namespace, results: list) -> tuple:  # type: ignore[type-arg]
+    """runs.csv, summary.csv and coverage.png in --out: (the table's path, the summary's rows, the plot's path)."""
+    from host_sim.loops import sweep
+
+    rows = [r.row for r in results]
+    args.out.mkdir(exist_ok=True)
+    table = sweep.write_table(args.out / "runs.csv", rows, sweep.columns(args.perturb))
+    summary = sweep.summarise(rows)
+    sweep.write_table(args.out / "summary.csv", summary, sweep.SUMMARY_COLUMNS)
+    return table, summary, sweep.save_coverage_plot(args.out / "coverage.png", results)
