@@ -92,7 +92,7 @@ def _judge_named(result: Any, block: Recording, before: Comparison, after: Compa
         label = entry["name"] + (f"({entry['wheel']})" if entry.get("wheel", "both") != "both" else "") + (
             f"({entry['sensor']})" if "sensor" in entry else "")
         if removes > 0 and (closest is None or removes > closest["removes_percent"]):
-            closest = {"name": label, "removes_percent": round(removes, 1)}
+            closest = {"name": label, "removes_percent": round(float(removes), 1)}
     failing = [j for j in judged.values() if not j.explains]
     result.unexplained += [{"channel": j.channel, "regime": "on the test block", "spans": _span(result),
                             "words": test_block_words(j, result.fit_test)} for j in failing]

@@ -94,24 +94,28 @@ def trend_t(resid: np.ndarray, times: np.ndarray) -> float:
     return float(slope / se) if se > 0 else (0.0 if slope == 0 else math.copysign(math.inf, slope))
 
 
+def judge_residual(name: str, resid: np.ndarray, noise: float, times: np.ndarray, tests: int = 1) -> Judgement:
+    """One channel's residual (W, T') in its windows, with its noise level and times (W, T'): near its
+    ceiling, white and without a trend, each test's alpha shared among `tests` channels (Bonferroni)."""
+    rms = float(np.sqrt(np.mean(resid ** 2))) / noise
+    white = whiteness_p(resid) if resid.shape[1] > 1 else math.nan
+    tt = trend_t(resid, times)
+    crit = float(stats.t.isf(TREND_ALPHA / tests / 2, max(resid.shape[0] - 2, 1)))
+    return Judgement(name, rms, white, tt, bool(rms <= NEAR_NOISE),
+                     bool(math.isnan(white) or rms <= EFFECT_MIN or white >= WHITE_ALPHA / tests), bool(abs(tt) < crit))
+
+
 def judge_channels(cmp: Comparison, t: np.ndarray, names: list[str], s: int = 0) -> dict[str, Judgement]:
-    """Each channel (or window total) of `names` on every window of cmp (the test block, all judged):
-    near its ceiling, white and without a trend, the tests' alphas shared among the channels (Bonferroni).
-    t: the recording's times (cmp's windows index it)."""
+    """judge_residual of each channel (or window total) of `names` on every window of cmp (the test block,
+    all judged); t: the recording's times (cmp's windows index it)."""
     out: dict[str, Judgement] = {}
-    tests = max(len(names), 1)
     for name in names:
         resid, noise, keep = channel_residual(cmp, name, s)
         if resid.shape[0] == 0:
             continue
         times = t[cmp.windows.index[keep, :-1]]
         times = times if resid.shape[1] > 1 else times.mean(axis=1, keepdims=True)
-        rms = float(np.sqrt(np.mean(resid ** 2))) / noise
-        white = whiteness_p(resid) if name not in TOTALS else math.nan
-        tt = trend_t(resid, times)
-        crit = float(stats.t.isf(TREND_ALPHA / tests / 2, max(resid.shape[0] - 2, 1)))
-        out[name] = Judgement(name, rms, white, tt, bool(rms <= NEAR_NOISE),
-                              bool(math.isnan(white) or rms <= EFFECT_MIN or white >= WHITE_ALPHA / tests), bool(abs(tt) < crit))
+        out[name] = judge_residual(name, resid, noise, times, max(len(names), 1))
     return out
 
 
