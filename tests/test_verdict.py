@@ -145,6 +145,18 @@ def test_an_effect_that_does_not_explain_the_test_block_is_closest_not_named(tmp
     assert "closest in the library: " in d.summary() and not d.model.effects
 
 
+def test_windows_that_touch_are_one_cluster():
+    """A window's lead-in replays the end of the window before: back-to-back windows are one cluster of the
+    intervals' sandwich, a window left out between them parts them."""
+    from host_sim.diagnosis.fit import touching_runs
+    from host_sim.diagnosis.windows import Windows
+
+    windows = Windows(np.arange(12, 12 + 25 * 9, 25), 25, np.arange(9) % 3 == 2)
+    train = np.flatnonzero(~windows.held_out)  # 0 1 3 4 6 7
+    assert touching_runs(windows, np.repeat(train, 3)).tolist() == [0] * 6 + [1] * 6 + [2] * 6
+    assert touching_runs(windows, np.array([8, 0, 1, 2])).tolist() == [1, 0, 0, 0]
+
+
 @pytest.mark.slow
 def test_the_intervals_hold_the_true_value_about_95_times_in_100(tmp_path):
     """Twin recordings of 20 s with a known dry friction on each wheel, 20 seeds: the window-clustered

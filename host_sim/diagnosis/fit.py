@@ -290,7 +290,7 @@ def fit_model(obj: Objective, base: RobotParams, effects: list[Candidate], start
     r_train, jac, r_test = evaluate(sol.x)
     model = Model(list(effects), unpack(sol.x), _apply_all(base, effects, unpack(sol.x)),
                   float(r_train @ r_train), float(r_test @ r_test), int(r_train.size), r_test=r_test)
-    model.ci95 = _intervals(sol.x, jac, r_train, sizes, lo, hi, obj.train_windows)
+    model.ci95 = _intervals(sol.x, jac, r_train, sizes, lo, hi, touching_runs(obj.windows, obj.train_windows))
     return model
 
 
@@ -320,13 +320,26 @@ def fit_start(effects: list[Candidate], start: list[list[float]], base: RobotPar
     return np.clip(np.concatenate(start), lo + inside, hi - inside)
 
 
+def touching_runs(windows: Windows, which: np.ndarray) -> np.ndarray:
+    """For each entry of `which` (indices of windows), the run of back-to-back windows it lies in: a window's
+    lead-in replays the rows that end the window before, so the two twins' errors are not independent (their
+    scores correlate about -0.5); a window not among `which` between them (a held-out one) parts them
+    (tests/test_verdict.py::test_windows_that_touch_are_one_cluster)."""
+    if which.size == 0:
+        return which
+    ids = np.unique(which)
+    starts = windows.start[ids]
+    run = np.concatenate([[0], np.cumsum(np.diff(starts) > windows.rows)])
+    return run[np.searchsorted(ids, which)]
+
+
 def _intervals(x: np.ndarray, jac: np.ndarray, r: np.ndarray, sizes: list[int], lo: np.ndarray,
                hi: np.ndarray, windows: np.ndarray) -> list[list[tuple[float, float]]]:
-    """95 % intervals from a cluster-robust sandwich, the window the cluster: (J'J)^-1 (sum over windows of
-    J_w' r_w r_w' J_w) (J'J)^-1 G / (G - 1), with a t quantile on G - 1 degrees of freedom (G windows).
-    The residuals within a window are correlated (a start state, a speed loop), and the twin's own error
-    is in them; between windows they are close to independent, so the windows carry the evidence
-    (tests/test_verdict.py::test_the_intervals_hold_the_true_value_about_95_times_in_100)."""
+    """95 % intervals from a cluster-robust sandwich, a run of touching windows the cluster (touching_runs):
+    (J'J)^-1 (sum over clusters of J_g' r_g r_g' J_g) (J'J)^-1 G / (G - 1), with a t quantile on G - 1
+    degrees of freedom (G clusters).  The residuals within a window are correlated (a start state, a speed
+    loop), and the twin's own error is in them; apart runs are close to independent, so they carry the
+    evidence (tests/test_verdict.py::test_the_intervals_hold_the_true_value_about_95_times_in_100)."""
     k = jac.shape[1]
     ids, group = np.unique(windows, return_inverse=True) if windows.size == r.size else (np.zeros(1), np.zeros(r.size, int))
     g = len(ids)
