@@ -81,6 +81,16 @@ def test_near_its_ceiling_is_noise_plus_at_most_one_noise_level():
     assert not far.near and V.NEAR_NOISE == pytest.approx(math.sqrt(2))
 
 
+def test_a_heavy_tailed_white_residual_is_near_its_noise():
+    """White noise with rare large values (5 % at ten times the rest): its noise as a second moment makes
+    its RMS one noise level; a slow residual's first differences still leave it out."""
+    rng = np.random.default_rng(3)
+    heavy = rng.normal(size=(40, 24)) * np.where(rng.random((40, 24)) < 0.05, 10.0, 1.0)
+    assert V.second_moment_noise(heavy) == pytest.approx(np.sqrt(np.mean(heavy ** 2)), rel=0.15)
+    slow = np.repeat(np.linspace(-3, 3, 40)[:, None], 24, axis=1) + 0.1 * rng.normal(size=(40, 24))
+    assert V.second_moment_noise(slow) < 0.2
+
+
 def test_whiteness_passes_differenced_noise_and_fails_a_slow_residual():
     """Increments of a rounded position (a lag-1 moving average) are white to the test; a slow residual
     above one noise level is not; below one noise level its structure is not asked about."""
