@@ -14,7 +14,7 @@ import pytest
 from host_sim.diagnosis import DiagnosisError, diagnose
 from host_sim.diagnosis import report as R
 from host_sim.diagnosis import verdict as V
-from host_sim.diagnosis.testblock import MIN_TEST_WINDOWS, split_test_block, window_count
+from host_sim.diagnosis.testblock import MIN_TEST_WINDOWS, TEST_FRACTION, split_test_block, window_count
 from host_sim.physics import effects as E
 from host_sim.physics.params import DEFAULT
 from tests.helpers import run_twinbot
@@ -40,7 +40,7 @@ def test_the_test_block_is_the_last_quarter_and_nothing_else_sees_it(twin_run, m
     seen = []
     compare_all = R.compare_all
     monkeypatch.setattr(R, "compare_all", lambda rec, *a, **k: seen.append(rec.t[-1]) or compare_all(rec, *a, **k))
-    d = diagnose(twin_run, DEFAULT, ROOM)
+    d = diagnose(twin_run, DEFAULT, ROOM, test_block=TEST_FRACTION)
     assert seen and all(t_end == fitted.t[-1] for t_end in seen)
     assert d.verdict == "match"
     doc = d.to_json()["fit"]["test"]
@@ -53,8 +53,8 @@ def test_too_short_for_a_test_block_is_refused_in_one_line(tmp_path):
     rec = record(tmp_path, duration=11.0)
     with pytest.raises(DiagnosisError, match=r"lasts 11\.0 s: too short to diagnose and keep a test block "
                                              r"\(at least 13 s"):
-        diagnose(rec, DEFAULT, ROOM)
-    out = run_twinbot("diagnose", str(rec.path), "--quiet")
+        diagnose(rec, DEFAULT, ROOM, test_block=TEST_FRACTION)
+    out = run_twinbot("diagnose", str(rec.path), "--test-fraction", "0.25", "--quiet")
     assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1 and "at least 13 s" in out.stderr
 
 
@@ -145,7 +145,7 @@ def test_an_effect_that_does_not_explain_the_test_block_is_closest_not_named(tmp
     late = rec.t[1:] > 8.0
     counts[late] = np.round(1.3 * counts[late])
     enc = np.column_stack([rec.enc[0, 0] + np.concatenate([[0], np.cumsum(counts)]), rec.enc[:, 1]])
-    d = diagnose(dataclasses.replace(rec, enc=enc.astype(rec.enc.dtype)), DEFAULT, ROOM)
+    d = diagnose(dataclasses.replace(rec, enc=enc.astype(rec.enc.dtype)), DEFAULT, ROOM, test_block=TEST_FRACTION)
     doc = json.loads(json.dumps(d.to_json()))
     assert d.verdict in ("unexplained", "partly explained") and d.located, d.summary()
     assert doc["closest"] is not None and set(doc["closest"]) == {"name", "removes_percent"}, d.summary()
@@ -183,7 +183,21 @@ def test_the_intervals_hold_the_true_value_about_95_times_in_100(tmp_path):
         fitted, _block = split_test_block(record(tmp_path, robot, 20.0, name=f"s{seed}.csv", seed=seed))
         first = compare_all(fitted, DEFAULT, ROOM)[0]
         stratify(first, fitted)
-        model = fit_model(R.fit_objective(fitted, ROOM, first), DEFAULT, [Candidate(n, s) for n, s, _v in true],
+        objective = R.fit_objective(fitted, ROOM, first, clustered=True)  # as a diagnosis with a test block
+        model = fit_model(objective, DEFAULT, [Candidate(n, s) for n, s, _v in true],
                           [E.absent_values(DEFAULT, n) for n, _s, _v in true])
         held += sum(lo <= v <= hi for (_n, _s, v), [(lo, hi)] in zip(true, model.ci95))
     assert 0.85 <= held / 40 <= 0.99
+
+
+def test_without_the_opt_in_there_is_no_test_block(twin_run, monkeypatch):
+    """diagnose without test_block compares and judges the whole recording on its held-out windows, as
+    before the test block: no test figures, no keys of the rules in the JSON."""
+    seen = []
+    compare_all = R.compare_all
+    monkeypatch.setattr(R, "compare_all", lambda rec, *a, **k: seen.append(rec.t[-1]) or compare_all(rec, *a, **k))
+    d = diagnose(twin_run, DEFAULT, ROOM)
+    assert seen and all(t_end == twin_run.t[-1] for t_end in seen)
+    doc = d.to_json()
+    assert d.verdict == "match" and not d.fit_test and set(doc["fit"]) == {"before", "after", "ceiling", "judged"}
+    assert not {"closest", "changes", "test_judgements"} & set(doc)

@@ -140,6 +140,7 @@ class Objective:
         self.worker_count = 1  # how many
         self.test_columns: dict[str, np.ndarray] = {}  # channel (or window total) -> its held-out residuals' columns
         self.train_windows = np.zeros(0, dtype=int)  # each training residual's window: the intervals' clusters
+        self.clustered_intervals = False  # window-clustered sandwich intervals (with a test block) or the Jacobian's
 
     def residuals(self, robots: list[RobotParams], part: str = "both") -> tuple[np.ndarray, np.ndarray]:
         """(train (N, n), test (N, m)) weighted residuals of N twins: with workers (select), the robots
@@ -290,7 +291,8 @@ def fit_model(obj: Objective, base: RobotParams, effects: list[Candidate], start
     r_train, jac, r_test = evaluate(sol.x)
     model = Model(list(effects), unpack(sol.x), _apply_all(base, effects, unpack(sol.x)),
                   float(r_train @ r_train), float(r_test @ r_test), int(r_train.size), r_test=r_test)
-    model.ci95 = _intervals(sol.x, jac, r_train, sizes, lo, hi, touching_runs(obj.windows, obj.train_windows))
+    model.ci95 = (_sandwich_intervals(sol.x, jac, r_train, sizes, lo, hi, touching_runs(obj.windows, obj.train_windows))
+                  if obj.clustered_intervals else _intervals(sol.x, jac, r_train, sizes, lo, hi))
     return model
 
 
@@ -334,7 +336,33 @@ def touching_runs(windows: Windows, which: np.ndarray) -> np.ndarray:
 
 
 def _intervals(x: np.ndarray, jac: np.ndarray, r: np.ndarray, sizes: list[int], lo: np.ndarray,
-               hi: np.ndarray, windows: np.ndarray) -> list[list[tuple[float, float]]]:
+               hi: np.ndarray) -> list[list[tuple[float, float]]]:
+    """95 % intervals from the Jacobian, widened for the residuals' correlation along each window (the
+    default; a diagnosis with a test block uses _sandwich_intervals)."""
+    n, k = jac.shape
+    s2 = float(r @ r) / max(n - k, 1)
+    rho = float(np.corrcoef(r[:-1], r[1:])[0, 1]) if n > 2 and r.std() > 0 else 0.0
+    inflate = (1 + max(rho, 0.0)) / (1 - min(max(rho, 0.0), 0.95))
+    try:
+        cov = np.linalg.pinv(jac.T @ jac) * s2 * inflate
+        half = 1.96 * np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    except np.linalg.LinAlgError:
+        half = np.full(k, np.inf)
+    return _around(x, half, sizes, lo, hi)
+
+
+def _around(x: np.ndarray, half: np.ndarray, sizes: list[int], lo: np.ndarray,
+            hi: np.ndarray) -> list[list[tuple[float, float]]]:
+    """x +- half, within the bounds, one list per effect."""
+    out, i = [], 0
+    for size in sizes:
+        out.append([(float(max(lo[j], x[j] - half[j])), float(min(hi[j], x[j] + half[j]))) for j in range(i, i + size)])
+        i += size
+    return out
+
+
+def _sandwich_intervals(x: np.ndarray, jac: np.ndarray, r: np.ndarray, sizes: list[int], lo: np.ndarray,
+                        hi: np.ndarray, windows: np.ndarray) -> list[list[tuple[float, float]]]:
     """95 % intervals from a cluster-robust sandwich, a run of touching windows the cluster (touching_runs):
     (J'J)^-1 (sum over clusters of J_g' r_g r_g' J_g) (J'J)^-1 G / (G - 1), with a t quantile on G - 1
     degrees of freedom (G clusters).  The residuals within a window are correlated (a start state, a speed
@@ -351,11 +379,7 @@ def _intervals(x: np.ndarray, jac: np.ndarray, r: np.ndarray, sizes: list[int], 
         half = float(stats.t.isf(0.025, max(g - 1, 1))) * np.sqrt(np.clip(np.diag(cov), 0.0, None))
     except np.linalg.LinAlgError:
         half = np.full(k, np.inf)
-    out, i = [], 0
-    for size in sizes:
-        out.append([(float(max(lo[j], x[j] - half[j])), float(min(hi[j], x[j] + half[j]))) for j in range(i, i + size)])
-        i += size
-    return out
+    return _around(x, half, sizes, lo, hi)
 
 
 def f_test(rss0: float, rss1: float, k: int, n: int, k_total: int) -> float:

@@ -1,7 +1,8 @@
 """The verdict and its evidence: a terminal summary and a stable JSON document.
 
 diagnose() runs the whole diagnosis: compare, locate, fit, then judge the fitted twin on the same held-out
-windows.  Verdicts, refusals and the JSON keys: docs/diagnosis.md, "Verdict" and "Output".
+windows (opt-in: on a test block, block_verdict).  Verdicts, refusals and the JSON keys: docs/diagnosis.md,
+"Verdict" and "Output".
 """
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ from host_sim.diagnosis.fit import Model, Objective, candidates_for, fit_totals,
 from host_sim.diagnosis.channels import ACCUMULATED, WHEELS, judged_windows
 from host_sim.diagnosis.locate import Finding, noise_level, regimes, total_noise
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
-from host_sim.diagnosis.testblock import TEST_FRACTION, TestBlockError, check_test_recording, split_test_block
+from host_sim.diagnosis.testblock import TestBlockError, check_test_recording, split_test_block
 from host_sim.diagnosis.block_verdict import judge_test_block
 from host_sim.diagnosis.phrasing import sentence
 from host_sim.physics.params import RobotParams
@@ -56,12 +57,14 @@ class Diagnosis:
     after_long: Comparison | None = None  # ... and on the longest ones (pictures)
 
     def to_json(self) -> dict[str, Any]:
-        return {"recording": self.recording, "verdict": self.verdict, "located": self.located,
-                "effects": self.effects, "fit": {"before": _finite(self.fit_before), "after": _finite(self.fit_after),
-                        "ceiling": _finite(self.fit_ceiling), "judged": self.fit_judged,
-                        "test": {k: (_finite(v) if isinstance(v, dict) else v) for k, v in self.fit_test.items()}},
-                "unexplained": self.unexplained, "closest": self.closest, "changes": self.changes,
-                "test_judgements": self.test_judgements, "notes": self.notes}
+        doc = {"recording": self.recording, "verdict": self.verdict, "located": self.located,
+               "effects": self.effects, "fit": {"before": _finite(self.fit_before), "after": _finite(self.fit_after),
+                                                "ceiling": _finite(self.fit_ceiling), "judged": self.fit_judged},
+               "unexplained": self.unexplained, "notes": self.notes}
+        if self.fit_test:  # judged on a test block (diagnose's test_block): its figures and rules' findings
+            doc["fit"]["test"] = {k: (_finite(v) if isinstance(v, dict) else v) for k, v in self.fit_test.items()}
+            doc |= {"closest": self.closest, "changes": self.changes, "test_judgements": self.test_judgements}
+        return doc
 
     def summary(self) -> str:
         lines = [f"{self.recording}: {self.verdict}"]
@@ -185,29 +188,34 @@ def check_judgeable(rec: Recording, first: Comparison) -> None:
 
 def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
              seconds: tuple[float, ...] = DEFAULT_SECONDS, progress: Callable[[str], None] | None = None,
-             workers: int = 1, test: Recording | None = None, test_fraction: float = TEST_FRACTION) -> Diagnosis:
-    """Compare, locate and fit on all but the test block, then judge on the test block (judge_test_block):
-    the last test_fraction of rec's 1 s windows, or `test`, a second recording of the same robot and world.
+             workers: int = 1, test_block: float | Recording | None = None) -> Diagnosis:
+    """Compare, locate and fit, the verdict judged on the held-out windows.  With test_block (opt-in), all
+    that runs on all but a test block, which the verdict is then judged on (judge_test_block): the last
+    test_block share of rec's 1 s windows (a float, e.g. testblock.TEST_FRACTION), or a second recording
+    of the same robot and world; the intervals are then the window-clustered sandwich.
     workers > 1: each step's screening and its shortlisted fits run in that many processes (the same
     figures, sooner: fit.select)."""
+    if test_block is None:
+        return _diagnose_fitted(rec, params, world, seconds, progress, workers)[0]
     try:
-        if test is None:
-            fitted, block = split_test_block(rec, test_fraction, seconds[0])
+        if isinstance(test_block, Recording):
+            check_test_recording(test_block, seconds[0])
+            fitted, block = rec, test_block
         else:
-            check_test_recording(test, seconds[0])
-            fitted, block = rec, test
+            fitted, block = split_test_block(rec, float(test_block), seconds[0])
     except TestBlockError as exc:
         raise DiagnosisError(str(exc)) from None
-    result, chain, objective = _diagnose_fitted(fitted, params, world, seconds, progress, workers)
+    result, chain, objective = _diagnose_fitted(fitted, params, world, seconds, progress, workers, clustered=True)
     result.recording = str(rec.path or "recording")
     judge_test_block(result, block, params, world, chain, objective, seconds[0], progress)
     return result
 
 
 def _diagnose_fitted(rec: Recording, params: RobotParams, world: World | None, seconds: tuple[float, ...],
-                     progress: Callable[[str], None] | None, workers: int
+                     progress: Callable[[str], None] | None, workers: int, clustered: bool = False
                      ) -> tuple[Diagnosis, list[Model], Objective | None]:
-    """The diagnosis on the part fitted (no test block): (its result, the chain of models, the objective)."""
+    """The diagnosis on rec (with a test block: the part fitted): (its result, the chain of models, the
+    objective); clustered: the intervals are the window-clustered sandwich (fit.Objective)."""
     notes = check_data(rec, world)
     say = progress or (lambda _text: None)
     say("comparing the twin with the recording")
@@ -238,10 +246,9 @@ def _diagnose_fitted(rec: Recording, params: RobotParams, world: World | None, s
         result.fit_after = dict(first.fit)
         return result, [], None
     judge = _judge(rec, world, seconds, first.windows.held_out)
-    objective = fit_objective(rec, world, first)
+    objective = fit_objective(rec, world, first, clustered)
     chain = _fit(objective, params, first, say, workers, still_located=_relocate(judge))
-    final = chain[-1]
-    result.model = final
+    final = result.model = chain[-1]
     say("judging the fitted twin")
     afters = judge(final.params)
     after = result.after = afters[0]
@@ -322,14 +329,16 @@ def _fit(objective: Objective, params: RobotParams, first: Comparison, say: Call
                   workers=workers, still_located=still_located)
 
 
-def fit_objective(rec: Recording, world: World | None, first: Comparison) -> Objective:
+def fit_objective(rec: Recording, world: World | None, first: Comparison, clustered: bool = False) -> Objective:
     """What a fit minimises: the located channels and their family, each on the windows it is judged on
-    (the drive's away from the walls)."""
+    (the drive's away from the walls); clustered: its fits' intervals are the window-clustered sandwich."""
     located = [f.channel for f in first.findings]
     names = objective_channels(located, [c.name for c in first.channels])
     totals = fit_totals(located)
-    return Objective(rec, first.windows, world, names, objective_sigma(first, names, totals), first.contact,
-                     first.unjudged, totals)
+    objective = Objective(rec, first.windows, world, names, objective_sigma(first, names, totals), first.contact,
+                          first.unjudged, totals)
+    objective.clustered_intervals = clustered
+    return objective
 
 
 def objective_sigma(cmp: Comparison, names: list[str], totals: tuple[str, ...]) -> dict[str, float]:

@@ -12,7 +12,6 @@ from typing import Any
 import numpy as np
 
 from host_sim.diagnosis.channels import fit_percent
-from host_sim.diagnosis.testblock import split_test_block
 from host_sim.diagnosis.compare import compare
 from host_sim.physics.params import RobotParams
 from host_sim.recordings.recording import Recording
@@ -62,7 +61,6 @@ def _choose_threshold(z: np.ndarray, u: np.ndarray, r: np.ndarray, train_rows: n
 def sindy_case(rec: Recording, params: RobotParams, world: World | None, seconds: float = 1.0) -> dict[str, Any]:
     """SINDy on the nominal twin's wheel residuals: held-out fit before/after, threshold, active terms."""
     t0 = time.perf_counter()
-    rec = split_test_block(rec, seconds=seconds)[0]  # the part the diagnosis fits: its held-out windows
     cmp = compare(rec, params, world, seconds, locate=False)
     chans = [cmp.channel("wheel_l"), cmp.channel("wheel_r")]
     dt = rec.sample_period
