@@ -1,8 +1,11 @@
 """Findings in words a robotics engineer reads at a glance (docs/diagnosis.md, "Output")."""
 from __future__ import annotations
 
+from typing import Any
+
 from host_sim.diagnosis.channels import SENSOR_NAMES
 from host_sim.diagnosis.locate import Finding
+from host_sim.diagnosis.verdict import Judgement
 
 
 def what(channel: str, mean: float) -> str:
@@ -57,3 +60,30 @@ def sentence(f: Finding) -> str:
     text = " ".join(parts)
     when = spans_text(f.spans)
     return f"{text}, {when}" if when else text
+
+
+CHANNEL_WORDS = {"wheel_l": "the left wheel", "wheel_r": "the right wheel", "count_l": "the left encoder's window totals",
+                 "count_r": "the right encoder's window totals", "forward": "the robot's advance", "lateral":
+                 "the robot's sideways drift", "heading_rate": "the robot's turn rate", "travel": "each window's travel",
+                 "turn": "each window's turn", "vbat": "the battery voltage"}
+
+
+def channel_words(channel: str) -> str:
+    """e.g. "the left wheel", "sensor S3 left's reflected light"."""
+    if channel.startswith(("ir_", "amb_")):
+        kind = "reflected" if channel.startswith("ir_") else "ambient"
+        return f"sensor {SENSOR_NAMES[int(channel.split('_')[1])]}'s {kind} light"
+    return CHANNEL_WORDS.get(channel, channel)
+
+
+def test_block_words(j: Judgement, block: dict[str, Any]) -> str:
+    """What a twin leaves in a channel on the test block, e.g. "on the test block (68-90 s) the left wheel is
+    left 2.3 times its noise (RMS), drifting in time (trend t = 5.1)"."""
+    what = []
+    if not j.near:
+        what.append(f"is left {j.rms_noise:.1f} times its noise (RMS)")
+    if not j.steady:
+        what.append(f"drifts in time (trend t = {j.trend_t:.1f})")
+    if not j.white:
+        what.append(f"is not white (Ljung-Box p = {j.white_p:.2g})")
+    return f"on the test block ({block['from_s']:.0f}-{block['to_s']:.0f} s) {channel_words(j.channel)} " + ", ".join(what)

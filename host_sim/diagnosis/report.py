@@ -1,7 +1,8 @@
 """The verdict and its evidence: a terminal summary and a stable JSON document.
 
 diagnose() runs the whole diagnosis: compare, locate, fit, then judge the fitted twin on the same held-out
-windows.  Verdicts, refusals and the JSON keys: docs/diagnosis.md, "Verdict" and "Output".
+windows (opt-in: on a test block, block_verdict).  Verdicts, refusals and the JSON keys: docs/diagnosis.md,
+"Verdict" and "Output".
 """
 from __future__ import annotations
 
@@ -18,6 +19,8 @@ from host_sim.diagnosis.fit import Model, Objective, candidates_for, fit_totals,
 from host_sim.diagnosis.channels import ACCUMULATED, WHEELS, judged_windows
 from host_sim.diagnosis.locate import Finding, noise_level, regimes, total_noise
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
+from host_sim.diagnosis.testblock import TestBlockError, check_test_recording, split_test_block
+from host_sim.diagnosis.block_verdict import judge_test_block
 from host_sim.diagnosis.phrasing import sentence
 from host_sim.physics.params import RobotParams
 from host_sim.recordings.recording import Recording
@@ -45,15 +48,23 @@ class Diagnosis:
     fit_judged: list[list[float]] = field(default_factory=list)  # [t0, t1] of the windows the wheels are judged on
     unexplained: list[dict[str, Any]] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    fit_test: dict[str, Any] = field(default_factory=dict)  # on the test block: before, after, ceiling, judged
+    closest: dict[str, Any] | None = None  # an effect that removes part of a mismatch it does not explain
+    changes: list[dict[str, Any]] = field(default_factory=list)  # effects whose halves differ: not named
+    test_judgements: list[dict[str, Any]] = field(default_factory=list)  # verdict.Judgement per channel judged
     model: Model | None = None  # the fitted twin, when effects were tried
     after: Comparison | None = None  # the fitted twin judged on the same windows
     after_long: Comparison | None = None  # ... and on the longest ones (pictures)
 
     def to_json(self) -> dict[str, Any]:
-        return {"recording": self.recording, "verdict": self.verdict, "located": self.located,
-                "effects": self.effects, "fit": {"before": _finite(self.fit_before), "after": _finite(self.fit_after),
-                        "ceiling": _finite(self.fit_ceiling), "judged": self.fit_judged},
-                "unexplained": self.unexplained, "notes": self.notes}
+        doc = {"recording": self.recording, "verdict": self.verdict, "located": self.located,
+               "effects": self.effects, "fit": {"before": _finite(self.fit_before), "after": _finite(self.fit_after),
+                                                "ceiling": _finite(self.fit_ceiling), "judged": self.fit_judged},
+               "unexplained": self.unexplained, "notes": self.notes}
+        if self.fit_test:  # judged on a test block (diagnose's test_block): its figures and rules' findings
+            doc["fit"]["test"] = {k: (_finite(v) if isinstance(v, dict) else v) for k, v in self.fit_test.items()}
+            doc |= {"closest": self.closest, "changes": self.changes, "test_judgements": self.test_judgements}
+        return doc
 
     def summary(self) -> str:
         lines = [f"{self.recording}: {self.verdict}"]
@@ -69,10 +80,19 @@ class Diagnosis:
             lines += [f"    {text}" for text in e["evidence"].get("told_apart_by", [])]
         for item in self.unexplained:
             lines.append(f"  unexplained: {item['words']}")
+        if self.closest is not None:
+            lines.append(f"  closest in the library: {self.closest['name']}, which removes "
+                         f"{self.closest['removes_percent']:.0f} % of it (on the test block; not named)")
         shown = [k for k in self.fit_before if not k.startswith("amb_")]
         lines.append("  held-out fit % per channel (1 s windows), before" + (" -> after" if self.effects else "") + ": "
                      + ", ".join(f"{k} {self.fit_before[k]:.0f}" + (f" -> {self.fit_after.get(k, float('nan')):.0f}"
                                                                     if self.effects else "") for k in shown))
+        test = self.fit_test
+        if test.get("before"):
+            lines.append(f"  test block ({test['from_s']:.0f}-{test['to_s']:.0f} s, seen by no fit nor rule), fit % "
+                         f"before -> after: " + ", ".join(
+                             f"{k} {v:.0f} -> {test['after'].get(k, float('nan')):.0f}"
+                             for k, v in test["before"].items() if not k.startswith("amb_")))
         wheels = [k for k in WHEELS if k in self.fit_ceiling]
         if wheels:
             lines.append("  the wheels' ceiling (a twin right but for the encoders' rounding): "
@@ -168,9 +188,34 @@ def check_judgeable(rec: Recording, first: Comparison) -> None:
 
 def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
              seconds: tuple[float, ...] = DEFAULT_SECONDS, progress: Callable[[str], None] | None = None,
-             workers: int = 1) -> Diagnosis:
-    """workers > 1: each step's screening and its shortlisted fits run in that many processes (the same
+             workers: int = 1, test_block: float | Recording | None = None) -> Diagnosis:
+    """Compare, locate and fit, the verdict judged on the held-out windows.  With test_block (opt-in), all
+    that runs on all but a test block, which the verdict is then judged on (judge_test_block): the last
+    test_block share of rec's 1 s windows (a float, e.g. testblock.TEST_FRACTION), or a second recording
+    of the same robot and world; the intervals are then the window-clustered sandwich.
+    workers > 1: each step's screening and its shortlisted fits run in that many processes (the same
     figures, sooner: fit.select)."""
+    if test_block is None:
+        return _diagnose_fitted(rec, params, world, seconds, progress, workers)[0]
+    try:
+        if isinstance(test_block, Recording):
+            check_test_recording(test_block, seconds[0])
+            fitted, block = rec, test_block
+        else:
+            fitted, block = split_test_block(rec, float(test_block), seconds[0])
+    except TestBlockError as exc:
+        raise DiagnosisError(str(exc)) from None
+    result, chain, objective = _diagnose_fitted(fitted, params, world, seconds, progress, workers, clustered=True)
+    result.recording = str(rec.path or "recording")
+    judge_test_block(result, block, params, world, chain, objective, seconds[0], progress)
+    return result
+
+
+def _diagnose_fitted(rec: Recording, params: RobotParams, world: World | None, seconds: tuple[float, ...],
+                     progress: Callable[[str], None] | None, workers: int, clustered: bool = False
+                     ) -> tuple[Diagnosis, list[Model], Objective | None]:
+    """The diagnosis on rec (with a test block: the part fitted): (its result, the chain of models, the
+    objective); clustered: the intervals are the window-clustered sandwich (fit.Objective)."""
     notes = check_data(rec, world)
     say = progress or (lambda _text: None)
     say("comparing the twin with the recording")
@@ -199,11 +244,11 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     result.notes += excitation_notes(rec, first, params, world)
     if not result.located:
         result.fit_after = dict(first.fit)
-        return result
+        return result, [], None
     judge = _judge(rec, world, seconds, first.windows.held_out)
-    chain = _fit(rec, params, world, first, say, workers, still_located=_relocate(judge))
-    final = chain[-1]
-    result.model = final
+    objective = fit_objective(rec, world, first, clustered)
+    chain = _fit(objective, params, first, say, workers, still_located=_relocate(judge))
+    final = result.model = chain[-1]
     say("judging the fitted twin")
     afters = judge(final.params)
     after = result.after = afters[0]
@@ -225,7 +270,7 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
         result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")} for item in result.located]
     else:
         result.verdict = "explained" if not remaining else "partly explained"
-    return result
+    return result, chain, objective
 
 
 def _judge(rec: Recording, world: World | None, seconds: tuple[float, ...], held_out: np.ndarray
@@ -277,22 +322,23 @@ def _located(cmp: Comparison, f: Finding) -> dict[str, Any]:
     return item
 
 
-def _fit(rec: Recording, params: RobotParams, world: World | None, first: Comparison,
-         say: Callable[[str], None], workers: int = 1,
+def _fit(objective: Objective, params: RobotParams, first: Comparison, say: Callable[[str], None], workers: int = 1,
          still_located: Callable[[Model, Objective], list[str]] | None = None) -> list[Model]:
     located = [f.channel for f in first.findings]
-    return select(fit_objective(rec, world, first), params, candidates_for(located), progress=say, located=located,
+    return select(objective, params, candidates_for(located), progress=say, located=located,
                   workers=workers, still_located=still_located)
 
 
-def fit_objective(rec: Recording, world: World | None, first: Comparison) -> Objective:
+def fit_objective(rec: Recording, world: World | None, first: Comparison, clustered: bool = False) -> Objective:
     """What a fit minimises: the located channels and their family, each on the windows it is judged on
-    (the drive's away from the walls)."""
+    (the drive's away from the walls); clustered: its fits' intervals are the window-clustered sandwich."""
     located = [f.channel for f in first.findings]
     names = objective_channels(located, [c.name for c in first.channels])
     totals = fit_totals(located)
-    return Objective(rec, first.windows, world, names, objective_sigma(first, names, totals), first.contact,
-                     first.unjudged, totals)
+    objective = Objective(rec, first.windows, world, names, objective_sigma(first, names, totals), first.contact,
+                          first.unjudged, totals)
+    objective.clustered_intervals = clustered
+    return objective
 
 
 def objective_sigma(cmp: Comparison, names: list[str], totals: tuple[str, ...]) -> dict[str, float]:

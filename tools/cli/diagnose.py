@@ -7,7 +7,7 @@ import os
 import sys
 from pathlib import Path
 
-from tools.arguments import input_file, int_range, output_file, writing
+from tools.arguments import float_range, input_file, int_range, output_file, writing
 from tools.arguments import CliError
 
 DESCRIPTION = """\
@@ -18,13 +18,18 @@ it, each IR sensor's reflected and ambient light, the battery) is judged on
 held-out windows; where the residuals are not noise, the mismatch is located
 by regime (speed, acceleration, turning, direction, command, heading, battery,
 distance to the walls) and by time, and said in words.  Effects from the
-library are then fitted and kept only if they improve the held-out windows.
+library are then fitted and kept only if they improve the held-out windows,
+and the verdict is judged on those held-out windows.  Opt-in: --test-fraction F
+(the last F of the windows) or --test REC2.csv (a second recording) is a test
+block that no fit nor rule sees, and the verdict is judged there instead: an
+effect is named only if the twin fitted with it leaves noise there (near its
+noise, white, with no trend in time), and a match needs the nominal twin to.
 
 Verdicts: match (the twin reproduces the recording to its noise), explained,
 partly explained, unexplained (located, but nothing in the library of effects
 names it).  The JSON document is described in docs/diagnosis.md.
 
-What it needs: 6 s at least (60-90 s is better), with the wheels turning
+What it needs: 6 s at least, 13 s with a test block (60-90 s is better), with the wheels turning
 (or driven, away from the walls) in a fifth of the periods, and 6 windows
 of 1 s away from the walls; a tracker's pose for the body's motion and the
 IR sensors.  Less is refused with a one-line reason and exit status 2.  The
@@ -52,6 +57,14 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
                    help="processes that screen and fit the effects side by side: the same verdict and figures, "
                         f"sooner (default on Linux: one per core, {os.cpu_count()} here, up to the effects fitted "
                         "at a time; elsewhere 1, which runs it all in this process)")
+    block = p.add_mutually_exclusive_group()  # opt-in: without either, no test block (judged as before)
+    block.add_argument("--test", metavar="REC2.csv", type=input_file,
+                       help="a second recording of the same robot and world: the test block the verdict is judged "
+                            "on, with its rules (default: no test block; the held-out windows are judged)")
+    block.add_argument("--test-fraction", metavar="F", type=float_range(0.0, 0.9, lo_open=True),
+                       help="keep the last F of the 1 s windows (0.25: a quarter; at least 6 windows) as a test "
+                            "block that no fit nor rule sees, the verdict judged there with its rules "
+                            "(default: no test block)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=run)
 
@@ -71,6 +84,7 @@ def load(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 
     try:
         rec = load_recording(args.recording)
+        test = load_recording(args.test) if getattr(args, "test", None) else None
         if args.params:
             params = load_params(args.params)
         elif isinstance(rec.meta.get("robot"), dict) and rec.meta["robot"]:
@@ -85,21 +99,21 @@ def load(args: argparse.Namespace):  # type: ignore[no-untyped-def]
             world = None
     except (RecordingError, ParamsError, WorldError) as exc:
         raise CliError(str(exc)) from None
-    return rec, params, world
+    return rec, params, world, test
 
 
 def run(args: argparse.Namespace) -> int:
     from host_sim.diagnosis import DiagnosisError, diagnose
 
-    rec, params, world = load(args)
+    rec, params, world, test = load(args)
 
     def progress(stage: str) -> None:
         if not args.quiet:
             print(f"  ... {stage}", file=sys.stderr, flush=True)
 
     try:
-        result = diagnose(rec, params, world, progress=progress,
-                           workers=args.workers or default_workers())
+        result = diagnose(rec, params, world, progress=progress, workers=args.workers or default_workers(),
+                          test_block=test if test is not None else args.test_fraction)
     except DiagnosisError as exc:
         raise CliError(f"{args.recording}: {exc}") from None
     print(result.summary())

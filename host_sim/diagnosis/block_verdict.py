@@ -1,0 +1,151 @@
+"""The verdict on the test block: a twin is a match, or an effect is named, only if what it leaves there is
+noise (verdict.judge_channels); an effect that removes part of a mismatch is "closest", one whose two
+halves differ "changes during the recording".  docs/diagnosis.md, "Verdict".
+"""
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import numpy as np
+
+from host_sim.diagnosis.channels import ACCUMULATED, IR, AMBIENT, drive_channel, sensor_channel
+from host_sim.diagnosis.compare import Comparison, compare
+from host_sim.diagnosis.fit import MIN_LOCATED_GAIN, Model, Objective, fit_apart
+from host_sim.diagnosis.phrasing import test_block_words
+from host_sim.diagnosis.testblock import window_count
+from host_sim.diagnosis.verdict import changed, judge_channels, removed_percent, step_window
+from host_sim.physics import effects as E
+from host_sim.physics.params import RobotParams
+from host_sim.physics.world import World
+from host_sim.recordings.recording import Recording
+
+
+def judge_test_block(result: Any, block: Recording, params: RobotParams, world: World | None, chain: list[Model],
+                     objective: Objective | None, seconds: float, progress: Callable[[str], None] | None) -> None:
+    """Set result's test-block figures and judge its verdict there (result: a report.Diagnosis)."""
+    say = progress or (lambda _text: None)
+    say("judging on the test block")
+    every = np.ones(window_count(block, seconds), dtype=bool)  # the test block: every window judged
+    before = compare(block, params, world, seconds, locate=False, held_out=every)
+    model = result.model
+    after = (compare(block, model.params, world, seconds, locate=False, held_out=every)
+             if model is not None and model.effects else before)
+    t = block.t
+    result.fit_test = {"from_s": float(t[before.windows.start[0]]),
+                       "to_s": float(t[before.windows.start[-1] + before.windows.rows - 1]),
+                       "windows": len(every), "before": dict(before.fit), "after": dict(after.fit),
+                       "ceiling": dict(after.ceiling)}
+    if result.verdict == "match":
+        _judge_match(result, block, before)
+    elif result.effects:
+        _judge_named(result, block, before, after, chain, objective, params, say)
+
+
+def judged_names(cmp: Comparison) -> list[str]:
+    """Every channel the locator judges, and the window totals of those that have them."""
+    names = [c.name for c in cmp.channels if c.locate]
+    return names + [ACCUMULATED[n] for n in names if n in ACCUMULATED]
+
+
+def _span(result: Any) -> list[list[float]]:
+    return [[result.fit_test["from_s"], result.fit_test["to_s"]]]
+
+
+def _judge_match(result: Any, block: Recording, before: Comparison) -> None:
+    """A match needs the nominal twin near its ceiling on the test block and no trend in time there, on every
+    channel (whiteness is not asked of it: nothing is named)."""
+    judged = judge_channels(before, block.t, judged_names(before))
+    result.test_judgements = [j.to_json() for j in judged.values()]
+    failing = [j for j in judged.values() if not (j.near and j.steady)]
+    if failing:
+        result.verdict = "unexplained"
+        result.unexplained = [{"channel": j.channel, "regime": "on the test block", "spans": _span(result),
+                               "words": test_block_words(j, result.fit_test)} for j in failing]
+
+
+def family(effect: str, site: Any, located: list[str]) -> list[str]:
+    """The located channels an effect answers for: the drive's for a drive or robot effect, sensor k's for
+    its own, every sensor's for the ring's."""
+    kind = E.LIBRARY[effect].kind
+    if kind == "sensor":
+        return [c for c in located if c in (IR[int(site)], AMBIENT[int(site)])]
+    if kind == "ring":
+        return [c for c in located if sensor_channel(c)]
+    return [c for c in located if drive_channel(c)]
+
+
+def _judge_named(result: Any, block: Recording, before: Comparison, after: Comparison, chain: list[Model],
+                 objective: Objective | None, params: RobotParams, say: Callable[[str], None]) -> None:
+    """Each named effect stays named only if every located channel it answers for is left noise on the test
+    block (near, white, steady); else it is at most "closest".  Those left are fitted on the recording's
+    two halves apart (_changes)."""
+    located = list(dict.fromkeys(item["channel"] for item in result.located))
+    judged = judge_channels(after, block.t, located)
+    result.test_judgements = [j.to_json() for j in judged.values()]
+    kept, closest = [], None
+    for entry in result.effects:
+        own = family(entry["name"], entry.get("wheel", entry.get("sensor", "both")), located)
+        if own and all(c in judged and judged[c].explains for c in own):
+            kept.append(entry)
+            continue
+        removes = removed_percent(before, after, own) if own else 0.0
+        label = entry["name"] + (f"({entry['wheel']})" if entry.get("wheel", "both") != "both" else "") + (
+            f"({entry['sensor']})" if "sensor" in entry else "")
+        if removes > 0 and (closest is None or removes > closest["removes_percent"]):
+            closest = {"name": label, "removes_percent": round(float(removes), 1)}
+    failing = [j for j in judged.values() if not j.explains]
+    result.unexplained += [{"channel": j.channel, "regime": "on the test block", "spans": _span(result),
+                            "words": test_block_words(j, result.fit_test)} for j in failing]
+    result.effects, result.closest = kept, closest
+    if kept and objective is not None and result.model is not None:
+        say("fitting the named effects on each half of the recording")
+        _changes(result, objective, params, located)
+    _settle(result, chain)
+
+
+def _changes(result: Any, objective: Objective, params: RobotParams, located: list[str]) -> None:
+    """Fit the model on the first and the second half of the part fitted apart; an effect whose parameter
+    differs beyond the two intervals (verdict.changed) is not named as a constant: it "changes during the
+    recording", near the window where a step fits the located channels best (verdict.step_window)."""
+    model: Model = result.model
+    start = objective.windows.start
+    first_half = start < np.median(start)
+    halves = [fit_apart(objective, params, model, keep) for keep in (first_half, ~first_half)]
+    cmp = result.after  # the fitted twin on the part fitted: where a step fits its residuals best
+    at = step_window(cmp, located) if cmp is not None else 0
+    t_at = float(objective.rec.t[cmp.windows.start[at]]) if cmp is not None else float("nan")
+    kept = []
+    for entry in result.effects:
+        i = next(k for k, c in enumerate(model.effects) if _same(c, entry))
+        a, b = halves[0], halves[1]
+        if not changed(a.values[i], b.values[i], a.ci95[i], b.ci95[i]):
+            kept.append(entry)
+            continue
+        change = {"name": entry["name"], "first_half": a.values[i], "second_half": b.values[i], "at_s": t_at}
+        result.changes.append(change)
+        result.unexplained.append({"channel": entry["name"], "regime": "during the recording", "spans": [[t_at, t_at]],
+                                   "words": f"{entry['name']} changes during the recording: "
+                                            f"{_values(a.values[i])} in the first half, {_values(b.values[i])} in "
+                                            f"the second, a step fits best at {t_at:.0f} s"})
+    result.effects = kept
+
+
+def _values(values: list[float]) -> str:
+    return ", ".join(f"{v:.4g}" for v in values)
+
+
+def _same(cand: Any, entry: dict[str, Any]) -> bool:
+    site = entry.get("wheel", entry.get("sensor", "both"))
+    return cand.name == entry["name"] and cand.site == site
+
+
+def _settle(result: Any, chain: list[Model]) -> None:
+    """The verdict from what is named and what is left: explained, partly explained (something named, or a
+    closest effect that removes MIN_LOCATED_GAIN of the mismatch), unexplained."""
+    if result.effects:
+        result.verdict = "partly explained" if result.unexplained else "explained"
+        return
+    removes = result.closest["removes_percent"] if result.closest else 0.0
+    result.verdict = "partly explained" if removes >= 100 * MIN_LOCATED_GAIN else "unexplained"
+    if chain:
+        result.model = chain[0]  # nothing named: the parameters written are the nominal twin's
