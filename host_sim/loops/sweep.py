@@ -201,9 +201,11 @@ def _client(scheduler: str | None, workers: int | None):  # type: ignore[no-unty
         return Client(scheduler, timeout="10s"), None
     # The workers are spawned with SIGINT ignored and inherit it: a terminal's Ctrl-C reaches the whole
     # process group, and the parent alone answers it, shutting them down (tests/test_sweep.py::test_ctrl_c_is_one_line).
+    # Their logs stop short of CRITICAL: a worker whose scheduler went away in that shutdown logs its lost
+    # heartbeat as an ERROR, while a run that fails reaches the client as its exception all the same.
     with _sigint_ignored():
         cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs=logging.ERROR)
+                               dashboard_address=None, silence_logs=logging.CRITICAL)
         return Client(cluster), cluster
 
 
