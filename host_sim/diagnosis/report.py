@@ -21,7 +21,7 @@ from host_sim.diagnosis.locate import Finding, noise_level, regimes, total_noise
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
 from host_sim.diagnosis.testblock import TestBlockError, check_test_recording, split_test_block
 from host_sim.diagnosis.block_verdict import judge_test_block
-from host_sim.diagnosis.phrasing import sentence
+from host_sim.diagnosis.phrasing import checked, sentence
 from host_sim.physics.params import RobotParams
 from host_sim.recordings.recording import Recording
 from host_sim.physics.world import World
@@ -48,6 +48,7 @@ class Diagnosis:
     fit_judged: list[list[float]] = field(default_factory=list)  # [t0, t1] of the windows the wheels are judged on
     unexplained: list[dict[str, Any]] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    recording_checks: list[dict[str, Any]] = field(default_factory=list)  # checks.Note's: mended, never fitted
     fit_test: dict[str, Any] = field(default_factory=dict)  # on the test block: before, after, ceiling, judged
     closest: dict[str, Any] | None = None  # an effect that removes part of a mismatch it does not explain
     changes: list[dict[str, Any]] = field(default_factory=list)  # effects whose halves differ: not named
@@ -60,7 +61,7 @@ class Diagnosis:
         doc = {"recording": self.recording, "verdict": self.verdict, "located": self.located,
                "effects": self.effects, "fit": {"before": _finite(self.fit_before), "after": _finite(self.fit_after),
                                                 "ceiling": _finite(self.fit_ceiling), "judged": self.fit_judged},
-               "unexplained": self.unexplained, "notes": self.notes}
+               "unexplained": self.unexplained, "notes": self.notes, "recording_checks": self.recording_checks}
         if self.fit_test:  # judged on a test block (diagnose's test_block): its figures and rules' findings
             doc["fit"]["test"] = {k: (_finite(v) if isinstance(v, dict) else v) for k, v in self.fit_test.items()}
             doc |= {"closest": self.closest, "changes": self.changes, "test_judgements": self.test_judgements}
@@ -68,6 +69,7 @@ class Diagnosis:
 
     def summary(self) -> str:
         lines = [f"{self.recording}: {self.verdict}"]
+        lines += [f"  {checked(item)}" for item in self.recording_checks]
         lines += [f"  note: {n}" for n in self.notes]
         for item in self.located:
             lines.append(f"  - {item['words']} (fit {item['fit_before']:.0f} %)")
@@ -207,6 +209,8 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
         raise DiagnosisError(str(exc)) from None
     result, chain, objective = _diagnose_fitted(fitted, params, world, seconds, progress, workers, clustered=True)
     result.recording = str(rec.path or "recording")
+    if isinstance(test_block, Recording):  # a second recording: its own checks' notes
+        result.recording_checks += [n.to_json() | {"test": True} for n in block.notes]
     judge_test_block(result, block, params, world, chain, objective, seconds[0], progress)
     return result
 
@@ -224,7 +228,7 @@ def _diagnose_fitted(rec: Recording, params: RobotParams, world: World | None, s
     stratify(first, rec)  # before any figure is taken: the held-out windows hold a share of what was located
     result = Diagnosis(str(rec.path or "recording"), "match", comparisons, [_located(first, f) for f in first.findings],
                        fit_before=dict(first.fit), fit_ceiling=dict(first.ceiling), fit_judged=judged_spans(rec, first),
-                       notes=notes)
+                       notes=notes, recording_checks=[n.to_json() for n in rec.notes])
     little_data = False
     try:
         check_judgeable(rec, first)

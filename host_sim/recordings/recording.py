@@ -17,7 +17,7 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -184,6 +184,7 @@ class Recording:
     path: Path | None = None
     emitter: np.ndarray | None = None  # (n,) % pulse width of each row's on-reading, None if not recorded
     firmware: np.ndarray | None = None  # (n, 6) mode, sp_l, sp_r, odo_x, odo_y, odo_phi; None if not recorded
+    notes: list[Any] = field(default_factory=list)  # checks.Note: what loading's checks found and mended
 
     def __len__(self) -> int:
         return len(self.t)
@@ -197,14 +198,16 @@ class Recording:
         return str(self.meta.get("source", "robot"))
 
 
-def load_recording(path: str | os.PathLike[str], *, require_sidecar: bool = True) -> Recording:
+def load_recording(path: str | os.PathLike[str], *, require_sidecar: bool = True,
+                   ordered_times: bool = True) -> Recording:
+    """ordered_times=False lets times repeat or go back, for checks.check_recording to name or mend."""
     path = Path(path)
     meta = _load_sidecar(path, require_sidecar)
     lines = _read_lines(path)
     columns = _check_header(path, lines[0].split(","))
     robot = meta.get("robot") if isinstance(meta.get("robot"), dict) else {}
     adc_max = (1 << int(robot["adc_bits"])) - 1 if "adc_bits" in robot else None  # type: ignore[index,operator,call-overload]
-    data, present = _parse_rows(path, lines[1:], columns, adc_max)
+    data, present = _parse_rows(path, lines[1:], columns, adc_max, ordered_times)
     n = len(data)
     if meta.get("rows") is not None and meta.get("rows") != n:
         raise RecordingError(f"{path}: the sidecar says {meta['rows']} rows, the file holds {n}")
@@ -256,7 +259,7 @@ def _check_header(path: Path, header: list[str]) -> list[str]:
 
 
 def _parse_rows(path: Path, lines: list[str], columns: list[str],
-                adc_max: int | None) -> tuple[np.ndarray, dict[tuple[str, ...], bool]]:
+                adc_max: int | None, ordered_times: bool = True) -> tuple[np.ndarray, dict[tuple[str, ...], bool]]:
     """Every cell checked; optional groups (emitter, firmware view, pose) all-or-nothing and alike in every row."""
     data = np.zeros((len(lines), len(columns)))
     groups = [(g, [columns.index(c) for c in g]) for g in _OPTIONAL_GROUPS if g[0] in columns]
@@ -278,7 +281,7 @@ def _parse_rows(path: Path, lines: list[str], columns: list[str],
                 empty_cols.update(idx)
         for k, (name, cell) in enumerate(zip(columns, cells)):
             data[row_index, k] = math.nan if k in empty_cols else _cell(path, lineno, name, cell, adc_max)
-        if row_index and data[row_index, 0] <= data[row_index - 1, 0]:
+        if ordered_times and row_index and data[row_index, 0] <= data[row_index - 1, 0]:
             raise RecordingError(f"{path}:{lineno}: column 't': {cells[0]} does not increase "
                                  f"(previous row: {data[row_index - 1, 0]!r})")
     for names, _idx in groups:

@@ -58,9 +58,9 @@ def replay_inputs(rec: Recording, start: int = 0, stop: int | None = None,
                   nominal_timing: bool | None = None) -> ReplayInputs:
     """The one reading of a recording's timing, emitter power and start, for every replay.
 
-    Timing: one nominal sample period per row for fixed-step simulator
-    recordings (nominal_timing None), else the recorded times (the last
-    row lasts one sample period).  Emitter power: the recording's own
+    Timing: whole nominal sample periods per row for fixed-step simulator
+    recordings (nominal_timing None; two where a row was lost), else the
+    recorded times (the last row lasts one sample period).  Emitter power: the recording's own
     emitter_pct column; for version-1 recordings without it, the sidecar's
     emitter_pct (default 60 %), 0 for a simulator run's first row (its
     emitters are not on until the first actuation).
@@ -72,9 +72,12 @@ def replay_inputs(rec: Recording, start: int = 0, stop: int | None = None,
         nominal_timing = rec.source == "simulator" and rec.meta.get("mode") == "fixed"
     n = stop - start
     period = np.full(n, rec.sample_period)
+    inner = np.arange(start, stop) + 1 < len(rec)
+    recorded = np.diff(rec.t[start:min(stop + 1, len(rec))])[: int(inner.sum())]
     if not nominal_timing:
-        inner = np.arange(start, stop) + 1 < len(rec)
-        period[inner] = np.diff(rec.t[start:min(stop + 1, len(rec))])[: int(inner.sum())]
+        period[inner] = recorded
+    else:  # the exact period, not the times' rounding; a row the checks found missing leaves a step of two
+        period[inner] = np.maximum(np.round(recorded / rec.sample_period), 1.0) * rec.sample_period
     if rec.emitter is not None:
         emitter = rec.emitter[start:stop].astype(float)
     else:

@@ -94,7 +94,7 @@ def run_recording(args: argparse.Namespace) -> int:
 
     from host_sim.figures.runs import save_recording
     from tools.arguments import CliError
-    from tools.cli.replay import load_inputs
+    from tools.cli.replay import load_inputs, print_notes
 
     png = args.png or str(Path(args.recording).with_suffix(".png"))
     try:
@@ -105,4 +105,5 @@ def run_recording(args: argparse.Namespace) -> int:
     with writing("--png", png):
         path = save_recording(png, rec, params, world)
     print(path)
+    print_notes(rec)
     return 0

@@ -46,17 +46,19 @@ def add_source_arguments(p: argparse.ArgumentParser) -> None:
 def load_inputs(args: argparse.Namespace, need_world: bool) -> tuple[Any, Any, Any]:
     """(recording, robot parameters, world or None): each from its option, else from the sidecar."""
     from host_sim.physics.params import DEFAULT, ParamsError, load_params, params_from_dict
+    from host_sim.recordings.checks import check_recording
     from host_sim.recordings.recording import RecordingError, load_recording, sidecar_path
     from host_sim.physics.world import WorldError, world_by_name_or_path, world_from_dict
 
     try:
-        rec = load_recording(args.recording)
+        rec = load_recording(args.recording, ordered_times=False)
         side = str(sidecar_path(args.recording))
         robot = rec.meta.get("robot")
         if args.params:
             params = load_params(args.params)
         else:
             params = params_from_dict(robot, f"{side}: robot") if robot else DEFAULT
+        rec = check_recording(rec, params)
         world = None
         if args.world:
             world = world_by_name_or_path(args.world, params.body_radius)
@@ -89,6 +91,7 @@ def run(args: argparse.Namespace) -> int:
     duration = float(rec.t[-1] - rec.t[args.start])
     print(f"replayed {args.recording}: rows {args.start}..{len(rec) - 1} ({duration:.2f} s), open loop through "
           f"the twin in {world.name}")
+    print_notes(rec)
     print(f"  encoders at the end: twin {result.enc[-1, 0]}/{result.enc[-1, 1]}, recorded "
           f"{rec.enc[-1, 0]}/{rec.enc[-1, 1]} ticks (left/right): {_ticks(enc_gap[-1])} apart; "
           f"largest gap on the way {int(np.abs(enc_gap).max())} ticks")
@@ -104,6 +107,12 @@ def run(args: argparse.Namespace) -> int:
             picture = save_recording(args.png, rec, params, world, replayed=result)
         print(f"  picture: {picture}")
     return 0
+
+
+def print_notes(rec: Any) -> None:
+    """What loading's checks found and mended in the recording (host_sim/recordings/checks.py)."""
+    for note in rec.notes:
+        print(f"  note: {note.text}")
 
 
 def _ticks(gap: Any) -> str:
