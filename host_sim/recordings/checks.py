@@ -181,27 +181,38 @@ def check_encoders(rec: Recording, rows: np.ndarray, p: RobotParams, where: str)
     dt = np.diff(rec.t)
     for w, side in enumerate(("left", "right")):
         ticks = SPEED_MARGIN * top_speed(p) * dt * motors.ticks_per_rev(p, w) / (2 * math.pi) + ROUNDING_TICKS
-        step = np.diff(enc[:, w])
-        wrapped = np.zeros(len(step), dtype=bool)
-        for bits in ENCODER_BITS:
-            span = 1 << bits
-            short = (step + span // 2) % span - span // 2
-            fix = (np.abs(step) > ticks) & (np.abs(short) <= ticks) & ~wrapped
-            step = np.where(fix, short, step)
-            wrapped |= fix
-            if fix.any():
-                at = np.flatnonzero(fix) + 1
-                notes.append(_note("encoder_wrap", f"the {side} encoder (enc_{side[0]}) wraps at {bits} bits at "
-                                   "{where}: unwrapped", rows[at], rec.t[at]))
+        step, wraps = _unwrap_counter(np.diff(enc[:, w]), ticks)
+        for bits, at in wraps:
+            notes.append(_note("encoder_wrap", f"the {side} encoder (enc_{side[0]}) wraps at {bits} bits at "
+                               "{where}: unwrapped", rows[at + 1], rec.t[at + 1]))
         jumps = np.flatnonzero(np.abs(step) > ticks)
         if len(jumps):
             k = int(jumps[0])
             raise RecordingCheckError(
-                f"{where}: row {rows[k + 1]} (t {rec.t[k + 1]:.3f} s): the {side} encoder jumps {int(step[k])} ticks in "
-                f"{1000 * dt[k]:.0f} ms, more than its wheel turns at {SPEED_MARGIN:g} times its top speed "
+                f"{where}: row {rows[k + 1]} (t {rec.t[k + 1]:.3f} s): the {side} encoder jumps {int(step[k])} ticks "
+                f"in {1000 * dt[k]:.0f} ms, more than its wheel turns at {SPEED_MARGIN:g} times its top speed "
                 f"({ticks[k]:.0f} ticks): a counter reset or a glitch; cut the recording there and use each part")
+        if wraps:  # the first count in the widest wrapping counter's signed range: -500, not 65036
+            span = 1 << wraps[0][0]
+            enc[0, w] = (enc[0, w] + span // 2) % span - span // 2
         enc[1:, w] = enc[0, w] + np.cumsum(step)
     return enc, notes
+
+
+def _unwrap_counter(step: np.ndarray, ticks: np.ndarray) -> tuple[np.ndarray, list[tuple[int, np.ndarray]]]:
+    """(steps with each wrap undone, [(bits, the steps that wrapped at that many bits)], widest first): a
+    step no wheel turns (over `ticks`) that is one it does turn modulo 2^bits."""
+    wrapped = np.zeros(len(step), dtype=bool)
+    wraps = []
+    for bits in ENCODER_BITS:
+        span = 1 << bits
+        short = (step + span // 2) % span - span // 2
+        fix = (np.abs(step) > ticks) & (np.abs(short) <= ticks) & ~wrapped
+        if fix.any():
+            step = np.where(fix, short, step)
+            wrapped |= fix
+            wraps.append((bits, np.flatnonzero(fix)))
+    return step, wraps
 
 
 def check_units(rec: Recording, p: RobotParams, where: str) -> None:
