@@ -91,7 +91,8 @@ def _rows(rec: Recording, keep: np.ndarray, t: np.ndarray) -> Recording:
     if keep.all() and np.array_equal(t, rec.t):
         return rec
     arrays = {f.name: getattr(rec, f.name)[keep] for f in dataclasses.fields(rec)
-              if isinstance(getattr(rec, f.name), np.ndarray) and f.name != "t"}
+              if isinstance(getattr(rec, f.name), np.ndarray) and len(getattr(rec, f.name)) == len(keep)
+              and f.name != "t"}
     return dataclasses.replace(rec, t=t, **arrays)
 
 
@@ -131,7 +132,8 @@ def _unwrap_clock(t: np.ndarray, rows: np.ndarray, memory: float, where: str) ->
     wraps = []
     for k in np.flatnonzero(np.diff(t) < 0) + 1:
         step = float(t[k] - t[k - 1])
-        wrap = next((w for w in CLOCK_WRAPS_S if 0 < step + w <= memory), None)
+        # read as a wrap only if the step it leaves is one the dynamics allow and under half the wrap
+        wrap = next((w for w in CLOCK_WRAPS_S if 0 < step + w <= min(memory, w / 2)), None)
         if wrap is None:
             raise RecordingCheckError(
                 f"{where}: row {rows[k]}: the clock goes back from {t[k - 1]:.3f} s to {t[k]:.3f} s, a reset (the "
@@ -257,13 +259,17 @@ def _wheel_speeds(rec: Recording, p: RobotParams) -> np.ndarray:
 
 
 def _check_pose(rec: Recording, p: RobotParams, where: str) -> None:
-    """A tracker far faster than the robot can drive, or far outside its world: in mm (or cm)."""
+    """A tracker far faster than the robot can drive, or far outside its world: in mm (or cm).  Rows the
+    tracker lost (empty) are left out."""
+    assert rec.pose is not None
     fastest = top_speed(p) * p.wheel_radius
-    speed = np.hypot(*(np.diff(rec.pose[:, :2], axis=0) / np.diff(rec.t)[:, None]).T) if len(rec) > 1 else []
+    speed = np.hypot(*(np.diff(rec.pose[:, :2], axis=0) / np.diff(rec.t)[:, None]).T)
+    speed = speed[np.isfinite(speed)]
     typical = float(np.percentile(speed, 95)) if len(speed) else 0.0
     world = rec.meta.get("world")
     size = max(world["size"]) if isinstance(world, dict) and isinstance(world.get("size"), list) else None
-    extent = float(np.abs(rec.pose[:, :2]).max())
+    seen = np.abs(rec.pose[:, :2])
+    extent = float(seen[np.isfinite(seen)].max(initial=0.0))
     if typical > UNIT_FACTOR * fastest:
         seen = f"the tracker moves at {typical:.3g} m/s, {typical / fastest:.0f} times the robot's top speed " \
                f"{fastest:.2f} m/s"
