@@ -162,3 +162,10 @@ def test_an_encoder_counting_backwards_is_refused(clean, tmp_path):
 def test_an_encoder_that_jumps_farther_than_its_wheel_turns_is_refused(clean, tmp_path):
     path = corrupt(clean, tmp_path, lambda h, rows: column(h, rows, "enc_l", lambda e: str(int(e) + 5000), first=300))
     assert "a counter reset or a glitch" in refused(path, "the left encoder jumps")
+
+
+def test_the_boards_late_rows_are_noted_and_its_diagnosis_stays_a_match():
+    r = run_twinbot("diagnose", str(DATA / "vboard_6busy_46s.csv"), "--quiet", "--workers", "1", timeout=300)
+    assert r.returncode == 0, r.stderr
+    lines = r.stdout.splitlines()
+    assert lines[0].endswith(": match") and lines[1].startswith("  recording (late_rows): 12 row(s) late"), r.stdout
