@@ -261,7 +261,7 @@ def make_inputs(folder: Path) -> None:
         "lamp.json": world([2, 2], lamps=[{"x": 1, "y": 1, "level": 1e308}]),
         "far.json": world([2, 2], walls=[{"segment": [0, 0, 1e300, 1]}]),
         "adc64.json": {"adc_bits": 64},
-        "ticks.json": {"ticks_per_rev": 1.5},
+        "ticks.json": {"ticks_per_rev": 0.5},
         "gains.json": {"ir_gain_scale": [1, 1, 1, 1, 1, 1, 1, 1e300]},
     }
     for name, data in files.items():

@@ -54,7 +54,8 @@ class RobotParams:
                                          "wheel carries half the weight, (m_c + 2 m_w) g / 2")
     wall_friction: float = _p(0.3, "-", "Coulomb friction coefficient between the body's rim and a wall")
     # --- encoders ------------------------------------------------------------------
-    ticks_per_rev: float = _p(1200, "ticks", "encoder ticks per wheel turn (12 CPR x2 decoding x 50:1)")
+    ticks_per_rev: float = _p(1200, "ticks", "encoder ticks per wheel turn (12 CPR x2 decoding x 50:1); need "
+                                                "not be whole")
     # --- IR sensors (paper 3.3; host_sim/sensors/ir_sensor.py, docs/ir-sensor.md) ----------
     # reflected = ir_gain * min(L/100, ir_saturation) * A(angle) * F(x), in ADC
     # counts.  Calibrated on a white matte wall straight ahead at L = 60 %:
@@ -188,8 +189,11 @@ class ParamsError(ValueError):
 # where the hardware counts, and ranges outside which the models overflow or
 # stop meaning anything (readings travel as 16-bit fields on the wire).  The
 # fields an effect of the library sets are checked as it declares (effects.Admits).
-INTEGER_PARAMS = {"adc_bits": (8, 16), "ticks_per_rev": (1, 1_000_000)}
+INTEGER_PARAMS = {"adc_bits": (8, 16)}
 PARAM_RANGES = {
+    # counts per wheel turn need not be whole (a 29.86:1 gearbox behind a 12-count encoder);
+    # tests/test_cli_commands.py::test_parameter_files_out_of_range_are_refused
+    "ticks_per_rev": (1.0, 1e6),
     "ir_saturation": (0.0, 1.0), "ir_on_delay": (0.0, 0.04), "ir_noise": (0.0, 1e4),
     "viscous_friction": (0.0, 1e3), "coulomb_friction": (0.0, 1e3),
     "ir_blend": (1.0, 1e3), "ir_gain": (0.0, 1e6), "ir_ambient": (0.0, 1e6), "ir_near_peak": (0.0, 1.0),
