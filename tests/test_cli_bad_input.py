@@ -158,7 +158,6 @@ CASES: list[tuple[str, list[str], str]] = [
     ("replay-start-negative", ["replay", "{in}/run.csv", "--start", "-1"], "'-1'"),
     ("replay-png-folder", ["replay", "{in}/run.csv", "--png", "{case}/adir"], "adir"),
     ("replay-params-bad", ["replay", "{in}/run.csv", "--params", "{in}/ticks.json"], "ticks_per_rev"),
-    ("replay-robot-no-world", ["replay", "{in}/robot.csv"], "give --world"),
     ("replay-robot-no-pose", ["replay", "{in}/robot.csv", "--world", "arena"], "tracker pose"),
     ("replay-substeps-zero", ["replay", "{in}/run.csv", "--substeps", "0"], "'0'"),
     # diagnose

@@ -168,3 +168,42 @@ def test_counts_per_turn_need_not_be_whole():
     p = params_from_dict({"ticks_per_rev": 29.86 * 12})
     assert motors.encoder_ticks(2 * math.pi * 10, p) == math.floor(10 * 358.32)
     assert np.isclose(motors.encoder_angle(358, p), 358.5 * 2 * math.pi / 358.32)
+
+
+def _robot_recording(tmp_path, capsys):
+    """A simulator run, then its tracker pose and world taken away: a robot's recording of its encoders."""
+    assert main(["sim", "--world", "arena", "--duration", "3", "--record", str(tmp_path / "run.csv")]) == 0
+    capsys.readouterr()
+    lines = (tmp_path / "run.csv").read_text().splitlines()
+    (tmp_path / "robot.csv").write_text("\n".join([lines[0]] + [r.rsplit(",", 3)[0] + ",,," for r in lines[1:]]) + "\n")
+    meta = json.loads((tmp_path / "run.csv.json").read_text())
+    meta.update(source="robot", world=None)
+    (tmp_path / "robot.csv.json").write_text(json.dumps(meta))
+    return tmp_path / "robot.csv"
+
+
+def test_replay_and_plot_take_the_encoders_alone_without_a_world(tmp_path, capsys):
+    path = _robot_recording(tmp_path, capsys)
+    assert main(["replay", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "in an empty world (no world known: the drive alone)" in out and "encoders at the end" in out
+    assert "pose at the end" not in out
+    assert main(["plot", "recording", str(path), "--png", str(tmp_path / "r.png")]) == 0
+    assert (tmp_path / "r.png").stat().st_size > 10_000
+
+
+def test_the_diagnosis_says_what_it_cannot_judge():
+    from host_sim.diagnosis.report import check_data, without_gapped_pose
+    from host_sim.physics.world import builtin_world
+    from host_sim.recordings.recording import Recording
+
+    n = 400
+    rec = Recording(t=np.arange(n) * 0.04, cmd=np.zeros((n, 2)), enc=np.zeros((n, 2), np.int64),
+                    ir_on=np.zeros((n, 6), np.int64), ir_amb=np.zeros((n, 6), np.int64), vbat=np.full(n, np.nan),
+                    pose=np.zeros((n, 3)), meta={"sample_period": 0.04})
+    notes = check_data(rec, builtin_world("arena"))
+    assert any("6 IR sensors are not the twin's ring of 8" in s for s in notes)
+    assert any("no battery voltage recorded" in s for s in notes)
+    rec.pose[7] = np.nan
+    judged, gap = without_gapped_pose(rec)
+    assert judged.pose is None and gap == ["the tracker pose is missing in 1 of 400 rows: judged without the tracker"]

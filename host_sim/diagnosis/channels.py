@@ -12,6 +12,7 @@ import numpy as np
 
 from host_sim.diagnosis.windows import WindowRun, Windows, sensors_on_track
 from host_sim.physics.params import RobotParams
+from host_sim.sensors import ir_sensor
 from host_sim.recordings.recording import Recording
 from host_sim.physics.world import World
 
@@ -87,13 +88,20 @@ def build_channels(rec: Recording, windows: Windows, run: WindowRun, robots: lis
         chans.append(Channel(name, "ticks/period", enc_rec[..., w], enc_twin[..., w], float(np.sqrt(1 / 6))))
     if rec.pose is not None:
         chans += _motion_channels(rec, idx, run, p)
-        if world is not None and world.n_walls:
+        if world is not None and world.n_walls and ring_comparable(rec):
             chans += sensor_channels(rec, idx[:, 1:], robots, world, unjudged)
+    if not rec.battery_recorded:
+        return chans
     vb = rec.vbat[idx[:, 1:]]
     vb_twin = (run.vbat[..., 1:] if run.vbat is not None
                else np.repeat(np.full_like(vb, p.battery_voltage)[:, None], run.enc.shape[1], 1))
     chans.append(Channel("vbat", "V", vb, vb_twin, 0.005, relative=False))
     return chans
+
+
+def ring_comparable(rec: Recording) -> bool:
+    """The recording's IR readings are the twin's ring's: as many sensors, emitters on and ambient."""
+    return rec.n_ir == ir_sensor.N_SENSORS and rec.ambient_recorded
 
 
 def _motion_channels(rec: Recording, idx: np.ndarray, run: WindowRun, p: RobotParams) -> list[Channel]:

@@ -6,6 +6,7 @@ windows (opt-in: on a test block, block_verdict).  Verdicts, refusals and the JS
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Any, Callable
@@ -16,7 +17,7 @@ from host_sim.physics import effects as E
 from host_sim.diagnosis.tell_apart import tell_apart
 from host_sim.diagnosis.compare import Comparison, compare_all, stratify
 from host_sim.diagnosis.fit import Model, Objective, candidates_for, fit_totals, objective_channels, select
-from host_sim.diagnosis.channels import ACCUMULATED, WHEELS, judged_windows
+from host_sim.diagnosis.channels import ACCUMULATED, WHEELS, judged_windows, ring_comparable
 from host_sim.diagnosis.locate import Finding, noise_level, regimes, total_noise
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
 from host_sim.diagnosis.testblock import TestBlockError, check_test_recording, split_test_block
@@ -25,6 +26,7 @@ from host_sim.diagnosis.phrasing import sentence
 from host_sim.physics.params import RobotParams
 from host_sim.recordings.recording import Recording
 from host_sim.physics.world import World
+from host_sim.sensors import ir_sensor
 
 MIN_WINDOWS = 6  # 1 s windows: fewer and the held-out judgement rests on one or two windows
 MIN_FREE_WINDOWS = MIN_WINDOWS  # of them away from the walls: the contact windows are judged apart
@@ -140,7 +142,22 @@ def check_data(rec: Recording, world: World | None) -> list[str]:
                      "(track width vs wheel radius, slip) and on the IR sensors cannot be told apart without it")
     elif world is None or world.n_walls == 0:
         notes.append("no walls known: the IR sensors are not judged")
+    elif not ring_comparable(rec):
+        notes.append(f"the recording's {rec.n_ir} IR sensors{'' if rec.ambient_recorded else ' (no ambient readings)'}"
+                     f" are not the twin's ring of {ir_sensor.N_SENSORS} pairs: the IR sensors are not judged")
+    if not rec.battery_recorded:
+        notes.append("no battery voltage recorded: the battery is not judged")
     return notes
+
+
+def without_gapped_pose(rec: Recording) -> tuple[Recording, list[str]]:
+    """A recording whose tracker lost the robot in some rows, judged without the tracker (its windows
+    start from recorded states, which a row without a pose does not give), and the note that says so."""
+    if rec.pose is None or rec.pose_rows.all():
+        return rec, []
+    missing = int((~rec.pose_rows).sum())
+    return dataclasses.replace(rec, pose=None), [
+        f"the tracker pose is missing in {missing} of {len(rec)} rows: judged without the tracker"]
 
 
 class TooLittleData(DiagnosisError):
@@ -195,8 +212,13 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     of the same robot and world; the intervals are then the window-clustered sandwich.
     workers > 1: each step's screening and its shortlisted fits run in that many processes (the same
     figures, sooner: fit.select)."""
+    rec, gap_notes = without_gapped_pose(rec)
+    if isinstance(test_block, Recording):
+        test_block = without_gapped_pose(test_block)[0]
     if test_block is None:
-        return _diagnose_fitted(rec, params, world, seconds, progress, workers)[0]
+        result = _diagnose_fitted(rec, params, world, seconds, progress, workers)[0]
+        result.notes[:0] = gap_notes
+        return result
     try:
         if isinstance(test_block, Recording):
             check_test_recording(test_block, seconds[0])
@@ -206,6 +228,7 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     except TestBlockError as exc:
         raise DiagnosisError(str(exc)) from None
     result, chain, objective = _diagnose_fitted(fitted, params, world, seconds, progress, workers, clustered=True)
+    result.notes[:0] = gap_notes
     result.recording = str(rec.path or "recording")
     judge_test_block(result, block, params, world, chain, objective, seconds[0], progress)
     return result

@@ -11,13 +11,11 @@ from typing import Any
 
 import numpy as np
 
-from host_sim.physics import dynamics, motors
 from host_sim.sensors import ir_sensor
 from host_sim.robot.batch import SUBSTEPS, BatchSim, robot_params, step_parts
 from host_sim.physics.params import RobotParams
 from host_sim.recordings.recording import Recording
-from host_sim.recordings.replay import (SEED_ROWS, ReplayError, replay_inputs, sliding_rows, starts_at_rest, state_at,
-                             wheel_speeds_at)
+from host_sim.recordings.replay import SEED_ROWS, ReplayError, replay_inputs, sliding_rows, state_or_origin
 from host_sim.physics.world import World
 
 DEFAULT_SECONDS = (1.0, 5.0)
@@ -159,17 +157,11 @@ class WindowRun:
 
 
 def initial_states(rec: Recording, rows: np.ndarray, p: RobotParams) -> tuple[np.ndarray, np.ndarray]:
-    """(q (W, 5), v (W, 2)) at the given rows: as replay.state_at, the origin standing in for a missing tracker."""
+    """(q (W, 5), v (W, 2)) at the given rows: replay.state_or_origin, the origin standing in for a missing tracker."""
     q = np.empty((len(rows), 5))
     v = np.empty((len(rows), 2))
     for i, k in enumerate(rows):
-        if rec.pose is not None:
-            qk, vk = state_at(rec, int(k), p)
-        else:
-            theta = [motors.encoder_angle(int(rec.enc[k, w]), p, w) for w in range(2)]
-            qk = dynamics.q_from_axle_pose(0.0, 0.0, 0.0, p, theta[0], theta[1])
-            vk = (0.0, 0.0) if starts_at_rest(rec, int(k)) else wheel_speeds_at(rec, int(k), p)
-        q[i], v[i] = qk, vk
+        q[i], v[i] = state_or_origin(rec, int(k), p)
     return q, v
 
 

@@ -7,6 +7,15 @@ from __future__ import annotations
 # The drive's canonical unit of a command: the unit cmd_l and cmd_r hold.
 UNITS = {"current": "A", "voltage": "V", "duty": "fraction", "wheel_speed": "rad/s"}
 DEFAULT = {"kind": "current", "unit": "A"}
+# The drive's parameters a robot file may hold (the contract's names), with their choices (None: a number >= 0).
+DRIVE_KEYS: dict[str, tuple[str, ...] | None] = {
+    "drive": tuple(UNITS), "pwm_decay": ("coast", "brake"), "driver_deadband": None, "dead_time": None,
+    "pwm_frequency": None, "motor_inductance": None, "speed_kp": None, "speed_ki": None, "speed_loop_period": None}
+
+
+def without_drive(robot: dict[str, object]) -> dict[str, object]:
+    """A robot block without its drive's parameters: what a reader that runs no drive (a plot) needs."""
+    return {k: v for k, v in robot.items() if k not in DRIVE_KEYS}
 
 
 def drive_of(meta: dict[str, object]) -> dict[str, object]:

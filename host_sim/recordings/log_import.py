@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from host_sim.physics.params import ParamsError, RobotParams, params_from_dict
-from host_sim.recordings.drive_block import UNITS as DRIVE_UNITS
+from host_sim.recordings.drive_block import DRIVE_KEYS, UNITS as DRIVE_UNITS
 from host_sim.recordings.recording import MAX_IR, UNITS, RecordingWriter
 
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6}
@@ -28,10 +28,6 @@ VOLT_UNITS = {"V": 1.0, "mV": 1e-3}
 COMMAND_UNITS = {"current": {"A": 1.0, "mA": 1e-3}, "voltage": VOLT_UNITS,
                  "wheel_speed": {"rad/s": 1.0, "rpm": 2 * math.pi / 60, "m/s": None}}
 WHEEL_SPEED_UNITS = COMMAND_UNITS["wheel_speed"]
-# The contract's drive parameters: a robot file may hold them before this twin's RobotParams knows them.
-DRIVE_KEYS = {"drive": tuple(DRIVE_UNITS), "pwm_decay": ("coast", "brake"), "driver_deadband": None,
-              "dead_time": None, "pwm_frequency": None, "motor_inductance": None, "speed_kp": None,
-              "speed_ki": None, "speed_loop_period": None}
 MAP_KEYS = ("time", "command", "encoder", "wheel_speed", "battery", "pose", "ir", "emitter", "firmware")
 
 
@@ -134,8 +130,8 @@ def read_json(path: str | os.PathLike[str], what: str) -> dict[str, object]:
 
 
 def load_robot(path: str | os.PathLike[str]) -> tuple[RobotParams, dict[str, object]]:
-    """(the twin's parameters, the robot block for the sidecar).  The contract's drive parameters
-    (DRIVE_KEYS) pass through, checked here, where this twin's parameters do not know them yet."""
+    """(the twin's parameters, the robot block for the sidecar).  The drive's parameters (DRIVE_KEYS)
+    pass through, checked here, where RobotParams does not hold them."""
     data = read_json(path, "robot parameter file")
     try:
         return params_from_dict(data, str(path)), dict(data)
@@ -260,7 +256,7 @@ def _robot_drive(m: MapReader, g: dict[str, object], kind: str, robot: dict[str,
     if "decay" in g:
         if kind not in ("voltage", "duty"):
             raise LogImportError(f"{m.where('command', 'decay')}: a {kind} drive has no PWM decay")
-        decay = m.choice(g, "command", "decay", DRIVE_KEYS["pwm_decay"])  # type: ignore[arg-type]
+        decay = m.choice(g, "command", "decay", DRIVE_KEYS["pwm_decay"] or ())
         if robot.get("pwm_decay", decay) != decay:
             raise LogImportError(f"{m.where('command', 'decay')}: {decay!r}, but the robot file says pwm_decay "
                                  f"{robot['pwm_decay']!r}")
