@@ -191,8 +191,8 @@ class ParamsError(ValueError):
 # fields an effect of the library sets are checked as it declares (effects.Admits).
 INTEGER_PARAMS = {"adc_bits": (8, 16)}
 PARAM_RANGES = {
-    # counts per wheel turn need not be whole (a 29.86:1 gearbox behind a 12-count encoder);
-    # tests/test_cli_commands.py::test_parameter_files_out_of_range_are_refused
+    # counts per wheel turn need not be whole, as behind a 29.86:1 gearbox
+    # (tests/test_import.py::test_counts_per_turn_need_not_be_whole)
     "ticks_per_rev": (1.0, 1e6),
     "ir_saturation": (0.0, 1.0), "ir_on_delay": (0.0, 0.04), "ir_noise": (0.0, 1e4),
     "viscous_friction": (0.0, 1e3), "coulomb_friction": (0.0, 1e3),
