@@ -207,3 +207,51 @@ def test_the_diagnosis_says_what_it_cannot_judge():
     rec.pose[7] = np.nan
     judged, gap = without_gapped_pose(rec)
     assert judged.pose is None and gap == ["the tracker pose is missing in 1 of 400 rows: judged without the tracker"]
+
+
+SIX = [0.0, 1.0, 2.0, math.pi, -2.0, -1.0]  # rad: a ring of six pairs, not the firmware's eight
+
+
+def test_a_robot_file_gives_its_ring_and_its_pairs_lists_follow():
+    from host_sim.physics.params import ParamsError, params_from_dict
+
+    p = params_from_dict({"ir_bearings": SIX})
+    assert p.ir_bearings == tuple(SIX) and p.ir_gain_scale == (1.0,) * 6 and p.ambient_leakage == (0.0,) * 6
+    assert params_from_dict(p.to_json()) == p
+    with pytest.raises(ParamsError, match="'ir_offset' must be a list of 6 numbers, one per IR pair"):
+        params_from_dict({"ir_bearings": SIX, "ir_offset": [0.0] * 8})
+    with pytest.raises(ParamsError, match="'ir_bearings' must be a list of 1..64"):
+        params_from_dict({"ir_bearings": []})
+
+
+def test_a_ring_of_six_replays_exactly_and_cannot_run_the_firmware(tmp_path, capsys):
+    from host_sim.physics.params import params_from_dict
+    from host_sim.physics.world import world_from_dict
+    from host_sim.recordings.recording import RecordingWriter
+    from host_sim.recordings.replay import replay
+
+    assert main(["sim", "--world", "arena", "--duration", "2", "--record", str(tmp_path / "run.csv")]) == 0
+    run = load_recording(tmp_path / "run.csv")
+    p = params_from_dict({"ir_bearings": SIX})
+    world = world_from_dict(run.meta["world"])
+    twin = replay(run, p, world, seed=5, exact_sensors=True, nominal_timing=True)
+    assert twin.ir_on.shape == (len(run), 6)
+    with RecordingWriter(tmp_path / "six.csv", source="simulator", sample_period=0.04, robot=p.to_json(),
+                         world=run.meta["world"], extra={"mode": "fixed"}, n_ir=6) as writer:
+        for k in range(len(run)):
+            writer.row(twin.t[k], tuple(run.cmd[k]), tuple(twin.enc[k]), twin.ir_on[k].tolist(),
+                       twin.ir_amb[k].tolist(), 7.4, tuple(twin.pose[k]), emitter_pct=float(run.emitter[k]))
+    six = load_recording(tmp_path / "six.csv")
+    again = replay(six, p, world, seed=5, exact_sensors=True)
+    np.testing.assert_array_equal(again.ir_on, six.ir_on)
+    np.testing.assert_array_equal(again.enc, six.enc)
+    capsys.readouterr()
+    (tmp_path / "six.json").write_text(json.dumps({"ir_bearings": SIX}))
+    assert main(["sim", "--params", str(tmp_path / "six.json"), "--duration", "1"]) == 2
+    assert "the firmware reads 8 IR pairs, and this robot has 6" in capsys.readouterr().err
+
+
+def test_a_map_whose_ir_count_is_not_the_robots_ring_is_refused(tmp_path, capsys):
+    assert main(_files(tmp_path, ROBOT_MAP, {"ir_bearings": SIX[:5]}, _robot_log)) == 2
+    assert "map.json: ir.on: 6 sensors, but the robot file's ir_bearings places 5 pairs" in capsys.readouterr().err
+    assert main(_files(tmp_path, ROBOT_MAP, {"ir_bearings": SIX}, _robot_log)) == 0

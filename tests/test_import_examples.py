@@ -53,7 +53,7 @@ def test_the_speed_set_point_robots_example(tmp_path):
                  "--robot", str(EXAMPLES / "speed_setpoint_robot.json"), "--out", str(tmp_path / "rec.csv")]) == 0
     rec = load_recording(tmp_path / "rec.csv")
     assert rec.meta["drive"]["unit"] == "rad/s" and rec.cmd[0, 0] == pytest.approx(0.05 / 0.0215)
-    assert rec.n_ir == 6 and not rec.ambient_recorded and rec.vbat[0] == 4.1
+    assert rec.n_ir == 6 == len(rec.meta["robot"]["ir_bearings"]) and not rec.ambient_recorded and rec.vbat[0] == 4.1
     assert rec.pose_rows.sum() == 98 and rec.pose[0].tolist() == pytest.approx([0.5, 0.3, math.pi / 2])
 
 

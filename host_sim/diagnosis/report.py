@@ -23,10 +23,9 @@ from host_sim.diagnosis.windows import DEFAULT_SECONDS
 from host_sim.diagnosis.testblock import TestBlockError, check_test_recording, split_test_block
 from host_sim.diagnosis.block_verdict import judge_test_block
 from host_sim.diagnosis.phrasing import sentence
-from host_sim.physics.params import RobotParams
+from host_sim.physics.params import DEFAULT, RobotParams
 from host_sim.recordings.recording import Recording
 from host_sim.physics.world import World
-from host_sim.sensors import ir_sensor
 
 MIN_WINDOWS = 6  # 1 s windows: fewer and the held-out judgement rests on one or two windows
 MIN_FREE_WINDOWS = MIN_WINDOWS  # of them away from the walls: the contact windows are judged apart
@@ -130,7 +129,7 @@ def excitation_notes(rec: Recording, first: Comparison, params: RobotParams, wor
             f"{'; '.join(effects)} (the identification manoeuvre has all of these: twinbot serial PORT --excite)"]
 
 
-def check_data(rec: Recording, world: World | None) -> list[str]:
+def check_data(rec: Recording, world: World | None, params: RobotParams | None = None) -> list[str]:
     """Refuse what is too short to diagnose; return notes on what this recording cannot show."""
     period = rec.sample_period
     if len(rec) * period < MIN_WINDOWS * DEFAULT_SECONDS[0]:
@@ -142,9 +141,10 @@ def check_data(rec: Recording, world: World | None) -> list[str]:
                      "(track width vs wheel radius, slip) and on the IR sensors cannot be told apart without it")
     elif world is None or world.n_walls == 0:
         notes.append("no walls known: the IR sensors are not judged")
-    elif not ring_comparable(rec):
+    elif not ring_comparable(rec, params or DEFAULT):
+        ring = len((params or DEFAULT).ir_bearings)
         notes.append(f"the recording's {rec.n_ir} IR sensors{'' if rec.ambient_recorded else ' (no ambient readings)'}"
-                     f" are not the twin's ring of {ir_sensor.N_SENSORS} pairs: the IR sensors are not judged")
+                     f" are not the twin's ring of {ring} pairs (ir_bearings): the IR sensors are not judged")
     if not rec.battery_recorded:
         notes.append("no battery voltage recorded: the battery is not judged")
     return notes
@@ -239,7 +239,7 @@ def _diagnose_fitted(rec: Recording, params: RobotParams, world: World | None, s
                      ) -> tuple[Diagnosis, list[Model], Objective | None]:
     """The diagnosis on rec (with a test block: the part fitted): (its result, the chain of models, the
     objective); clustered: the intervals are the window-clustered sandwich (fit.Objective)."""
-    notes = check_data(rec, world)
+    notes = check_data(rec, world, params)
     say = progress or (lambda _text: None)
     say("comparing the twin with the recording")
     comparisons = compare_all(rec, params, world, seconds)

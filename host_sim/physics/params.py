@@ -98,6 +98,10 @@ class RobotParams:
         default=(0.25, 0.45),
         metadata={"unit": "rad", "doc": "below the first |angle| the small dome alone, above the second the "
                                         "big dome alone, smoothstep in between"})
+    ir_bearings: tuple[float, ...] = field(
+        default=tuple(i * math.pi / 4 for i in range(8)),
+        metadata={"unit": "rad", "doc": "each IR pair's place on the rim, counter-clockwise from the heading: as "
+                                        "many pairs as bearings (the firmware's ring: eight, S1 front, every 45 deg)"})
 
     # --- effects (host_sim/physics/effects.py, docs/effects.md): physics the nominal twin leaves out.
     # Each holds the value meaning "absent" by default; diagnosis fits them, a parameter file sets them.
@@ -206,7 +210,7 @@ def params_from_dict(data: object, where: str = "parameters") -> RobotParams:
     if not isinstance(data, dict):
         raise ParamsError(f"{where}: expected a JSON object of name: value")
     known = {f.name: f for f in dataclasses.fields(RobotParams)}
-    changes: dict[str, object] = {}
+    changes: dict[str, object] = _ring_of(data, where)
     for name, value in data.items():
         if name not in known:
             import difflib
@@ -214,11 +218,14 @@ def params_from_dict(data: object, where: str = "parameters") -> RobotParams:
             close = difflib.get_close_matches(str(name), list(known), n=1, cutoff=0.8)
             hint = f" (did you mean {', '.join(close)}?)" if close else ""
             raise ParamsError(f"{where}: unknown parameter '{name}'{hint}")
-        default = known[name].default
+        default = changes.get(name, known[name].default)
+        if name == "ir_bearings":
+            continue  # _ring_of read it
         if isinstance(default, tuple):
             if not isinstance(value, list) or len(value) != len(default) or not all(
                     isinstance(v, (int, float)) for v in value):
-                raise ParamsError(f"{where}: '{name}' must be a list of {len(default)} numbers")
+                raise ParamsError(f"{where}: '{name}' must be a list of {len(default)} numbers"
+                                  + (", one per IR pair" if name in PER_PAIR else ""))
             changes[name] = tuple(float(v) for v in value)
         else:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
@@ -240,6 +247,23 @@ def params_from_dict(data: object, where: str = "parameters") -> RobotParams:
     if why is not None:
         raise ParamsError(f"{where}: {why}")
     return params
+
+
+# Lists with one entry per IR pair: as many as ir_bearings has, each pair neutral by default.
+PER_PAIR = {"ir_gain_scale": 1.0, "ir_misalignment": 0.0, "ir_offset": 0.0, "ambient_leakage": 0.0}
+MAX_IR_PAIRS = 64
+
+
+def _ring_of(data: dict[Any, Any], where: str) -> dict[str, object]:
+    """The ring a parameter file gives (ir_bearings), with its pairs' lists sized to it (neutral values)."""
+    if "ir_bearings" not in data:
+        return {}
+    value = data["ir_bearings"]
+    if not isinstance(value, list) or not 1 <= len(value) <= MAX_IR_PAIRS or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value):
+        raise ParamsError(f"{where}: 'ir_bearings' must be a list of 1..{MAX_IR_PAIRS} finite numbers (rad)")
+    n = len(value)
+    return {"ir_bearings": tuple(float(v) for v in value), **{k: (v,) * n for k, v in PER_PAIR.items()}}
 
 
 def _check_ranges(changes: dict[str, object], where: str) -> None:

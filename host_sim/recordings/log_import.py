@@ -202,6 +202,9 @@ def convert(log: Log, m: MapReader, params: RobotParams, robot: dict[str, object
     cmd, drive, robot = _command(log, m, params, robot)
     enc = _wheels(log, m, params, t)
     ir_on, ir_amb = _ir(log, m, params)
+    if "ir_bearings" in robot and ir_on.shape[1] != len(params.ir_bearings):
+        raise LogImportError(f"{m.where('ir', 'on')}: {ir_on.shape[1]} sensors, but the robot file's ir_bearings "
+                             f"places {len(params.ir_bearings)} pairs")
     pose = _pose(log, m)
     return Imported(t, cmd, enc, ir_on, ir_amb, _battery(log, m), pose, _emitter(log, m), _firmware(log, m),
                     robot, drive)

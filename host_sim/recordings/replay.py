@@ -33,8 +33,8 @@ class ReplayResult:
     t: np.ndarray  # (n,) s
     enc: np.ndarray  # (n, 2) simulated encoder ticks
     pose: np.ndarray  # (n, 3) simulated pose of C
-    ir_on: np.ndarray  # (n, 8); (n, 0) for the drive alone (replay_drive)
-    ir_amb: np.ndarray  # (n, 8); (n, 0) for the drive alone
+    ir_on: np.ndarray  # (n, S) for the S pairs of p.ir_bearings; (n, 0) for the drive alone (replay_drive)
+    ir_amb: np.ndarray  # (n, S); (n, 0) for the drive alone
     start: int  # the recording row it started from
 
 
@@ -240,8 +240,8 @@ def replay(rec: Recording, p: RobotParams, world: World, start: int = 0, stop: i
     n = len(inputs.cmd)
     enc = np.zeros((n, 2), dtype=np.int64)
     pose = np.zeros((n, 3))
-    ir_on = np.zeros((n, 8), dtype=np.int64)
-    ir_amb = np.zeros((n, 8), dtype=np.int64)
+    ir_on = np.zeros((n, len(p.ir_bearings)), dtype=np.int64)
+    ir_amb = np.zeros((n, len(p.ir_bearings)), dtype=np.int64)
     t = np.zeros(n)
     for j in range(n):
         t[j] = robot.t
