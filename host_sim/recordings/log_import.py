@@ -10,7 +10,7 @@ import csv
 import json
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -85,7 +85,6 @@ class Imported:
     firmware: np.ndarray | None
     robot: dict[str, object]
     drive: dict[str, object]
-    notes: list[str] = field(default_factory=list)
 
 
 def read_log(path: str | os.PathLike[str]) -> Log:
