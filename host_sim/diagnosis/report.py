@@ -6,6 +6,7 @@ windows (opt-in: on a test block, block_verdict).  Verdicts, refusals and the JS
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Any, Callable
@@ -16,13 +17,13 @@ from host_sim.physics import effects as E
 from host_sim.diagnosis.tell_apart import tell_apart
 from host_sim.diagnosis.compare import Comparison, compare_all, stratify
 from host_sim.diagnosis.fit import Model, Objective, candidates_for, fit_totals, objective_channels, select
-from host_sim.diagnosis.channels import ACCUMULATED, WHEELS, judged_windows
+from host_sim.diagnosis.channels import ACCUMULATED, WHEELS, judged_windows, ring_comparable
 from host_sim.diagnosis.locate import Finding, noise_level, regimes, total_noise
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
 from host_sim.diagnosis.testblock import TestBlockError, check_test_recording, split_test_block
 from host_sim.diagnosis.block_verdict import judge_test_block
 from host_sim.diagnosis.phrasing import checked, sentence
-from host_sim.physics.params import RobotParams
+from host_sim.physics.params import DEFAULT, RobotParams
 from host_sim.recordings.recording import Recording
 from host_sim.physics.world import World
 
@@ -130,7 +131,7 @@ def excitation_notes(rec: Recording, first: Comparison, params: RobotParams, wor
             f"{'; '.join(effects)} (the identification manoeuvre has all of these: twinbot serial PORT --excite)"]
 
 
-def check_data(rec: Recording, world: World | None) -> list[str]:
+def check_data(rec: Recording, world: World | None, params: RobotParams | None = None) -> list[str]:
     """Refuse what is too short to diagnose; return notes on what this recording cannot show."""
     period = rec.sample_period
     if len(rec) * period < MIN_WINDOWS * DEFAULT_SECONDS[0]:
@@ -142,7 +143,23 @@ def check_data(rec: Recording, world: World | None) -> list[str]:
                      "(track width vs wheel radius, slip) and on the IR sensors cannot be told apart without it")
     elif world is None or world.n_walls == 0:
         notes.append("no walls known: the IR sensors are not judged")
+    elif not ring_comparable(rec, params or DEFAULT):
+        ring = len((params or DEFAULT).ir_bearings)
+        notes.append(f"the recording's {rec.n_ir} IR sensors{'' if rec.ambient_recorded else ' (no ambient readings)'}"
+                     f" are not the twin's ring of {ring} pairs (ir_bearings): the IR sensors are not judged")
+    if not rec.battery_recorded:
+        notes.append("no battery voltage recorded: the battery is not judged")
     return notes
+
+
+def without_gapped_pose(rec: Recording) -> tuple[Recording, list[str]]:
+    """A recording whose tracker lost the robot in some rows, judged without the tracker (its windows
+    start from recorded states, which a row without a pose does not give), and the note that says so."""
+    if rec.pose is None or rec.pose_rows.all():
+        return rec, []
+    missing = int((~rec.pose_rows).sum())
+    return dataclasses.replace(rec, pose=None), [
+        f"the tracker pose is missing in {missing} of {len(rec)} rows: judged without the tracker"]
 
 
 class TooLittleData(DiagnosisError):
@@ -197,8 +214,13 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     of the same robot and world; the intervals are then the window-clustered sandwich.
     workers > 1: each step's screening and its shortlisted fits run in that many processes (the same
     figures, sooner: fit.select)."""
+    rec, gap_notes = without_gapped_pose(rec)
+    if isinstance(test_block, Recording):
+        test_block = without_gapped_pose(test_block)[0]
     if test_block is None:
-        return _diagnose_fitted(rec, params, world, seconds, progress, workers)[0]
+        result = _diagnose_fitted(rec, params, world, seconds, progress, workers)[0]
+        result.notes[:0] = gap_notes
+        return result
     try:
         if isinstance(test_block, Recording):
             check_test_recording(test_block, seconds[0])
@@ -208,6 +230,7 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     except TestBlockError as exc:
         raise DiagnosisError(str(exc)) from None
     result, chain, objective = _diagnose_fitted(fitted, params, world, seconds, progress, workers, clustered=True)
+    result.notes[:0] = gap_notes
     result.recording = str(rec.path or "recording")
     if isinstance(test_block, Recording):  # a second recording: its own checks' notes
         result.recording_checks += [n.to_json() | {"test": True} for n in block.notes]
@@ -220,7 +243,7 @@ def _diagnose_fitted(rec: Recording, params: RobotParams, world: World | None, s
                      ) -> tuple[Diagnosis, list[Model], Objective | None]:
     """The diagnosis on rec (with a test block: the part fitted): (its result, the chain of models, the
     objective); clustered: the intervals are the window-clustered sandwich (fit.Objective)."""
-    notes = check_data(rec, world)
+    notes = check_data(rec, world, params)
     say = progress or (lambda _text: None)
     say("comparing the twin with the recording")
     comparisons = compare_all(rec, params, world, seconds)

@@ -54,7 +54,8 @@ class RobotParams:
                                          "wheel carries half the weight, (m_c + 2 m_w) g / 2")
     wall_friction: float = _p(0.3, "-", "Coulomb friction coefficient between the body's rim and a wall")
     # --- encoders ------------------------------------------------------------------
-    ticks_per_rev: float = _p(1200, "ticks", "encoder ticks per wheel turn (12 CPR x2 decoding x 50:1)")
+    ticks_per_rev: float = _p(1200, "ticks", "encoder ticks per wheel turn (12 CPR x2 decoding x 50:1); need "
+                                                "not be whole")
     # --- IR sensors (paper 3.3; host_sim/sensors/ir_sensor.py, docs/ir-sensor.md) ----------
     # reflected = ir_gain * min(L/100, ir_saturation) * A(angle) * F(x), in ADC
     # counts.  Calibrated on a white matte wall straight ahead at L = 60 %:
@@ -97,6 +98,10 @@ class RobotParams:
         default=(0.25, 0.45),
         metadata={"unit": "rad", "doc": "below the first |angle| the small dome alone, above the second the "
                                         "big dome alone, smoothstep in between"})
+    ir_bearings: tuple[float, ...] = field(
+        default=tuple(i * math.pi / 4 for i in range(8)),
+        metadata={"unit": "rad", "doc": "each IR pair's place on the rim, counter-clockwise from the heading: as "
+                                        "many pairs as bearings (the firmware's ring: eight, S1 front, every 45 deg)"})
 
     # --- effects (host_sim/physics/effects.py, docs/effects.md): physics the nominal twin leaves out.
     # Each holds the value meaning "absent" by default; diagnosis fits them, a parameter file sets them.
@@ -188,8 +193,11 @@ class ParamsError(ValueError):
 # where the hardware counts, and ranges outside which the models overflow or
 # stop meaning anything (readings travel as 16-bit fields on the wire).  The
 # fields an effect of the library sets are checked as it declares (effects.Admits).
-INTEGER_PARAMS = {"adc_bits": (8, 16), "ticks_per_rev": (1, 1_000_000)}
+INTEGER_PARAMS = {"adc_bits": (8, 16)}
 PARAM_RANGES = {
+    # counts per wheel turn need not be whole, as behind a 29.86:1 gearbox
+    # (tests/test_import.py::test_counts_per_turn_need_not_be_whole)
+    "ticks_per_rev": (1.0, 1e6),
     "ir_saturation": (0.0, 1.0), "ir_on_delay": (0.0, 0.04), "ir_noise": (0.0, 1e4),
     "viscous_friction": (0.0, 1e3), "coulomb_friction": (0.0, 1e3),
     "ir_blend": (1.0, 1e3), "ir_gain": (0.0, 1e6), "ir_ambient": (0.0, 1e6), "ir_near_peak": (0.0, 1.0),
@@ -202,7 +210,7 @@ def params_from_dict(data: object, where: str = "parameters") -> RobotParams:
     if not isinstance(data, dict):
         raise ParamsError(f"{where}: expected a JSON object of name: value")
     known = {f.name: f for f in dataclasses.fields(RobotParams)}
-    changes: dict[str, object] = {}
+    changes: dict[str, object] = _ring_of(data, where)
     for name, value in data.items():
         if name not in known:
             import difflib
@@ -210,11 +218,14 @@ def params_from_dict(data: object, where: str = "parameters") -> RobotParams:
             close = difflib.get_close_matches(str(name), list(known), n=1, cutoff=0.8)
             hint = f" (did you mean {', '.join(close)}?)" if close else ""
             raise ParamsError(f"{where}: unknown parameter '{name}'{hint}")
-        default = known[name].default
+        default = changes.get(name, known[name].default)
+        if name == "ir_bearings":
+            continue  # _ring_of read it
         if isinstance(default, tuple):
             if not isinstance(value, list) or len(value) != len(default) or not all(
                     isinstance(v, (int, float)) for v in value):
-                raise ParamsError(f"{where}: '{name}' must be a list of {len(default)} numbers")
+                raise ParamsError(f"{where}: '{name}' must be a list of {len(default)} numbers"
+                                  + (", one per IR pair" if name in PER_PAIR else ""))
             changes[name] = tuple(float(v) for v in value)
         else:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
@@ -236,6 +247,23 @@ def params_from_dict(data: object, where: str = "parameters") -> RobotParams:
     if why is not None:
         raise ParamsError(f"{where}: {why}")
     return params
+
+
+# Lists with one entry per IR pair: as many as ir_bearings has, each pair neutral by default.
+PER_PAIR = {"ir_gain_scale": 1.0, "ir_misalignment": 0.0, "ir_offset": 0.0, "ambient_leakage": 0.0}
+MAX_IR_PAIRS = 64
+
+
+def _ring_of(data: dict[Any, Any], where: str) -> dict[str, object]:
+    """The ring a parameter file gives (ir_bearings), with its pairs' lists sized to it (neutral values)."""
+    if "ir_bearings" not in data:
+        return {}
+    value = data["ir_bearings"]
+    if not isinstance(value, list) or not 1 <= len(value) <= MAX_IR_PAIRS or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value):
+        raise ParamsError(f"{where}: 'ir_bearings' must be a list of 1..{MAX_IR_PAIRS} finite numbers (rad)")
+    n = len(value)
+    return {"ir_bearings": tuple(float(v) for v in value), **{k: (v,) * n for k, v in PER_PAIR.items()}}
 
 
 def _check_ranges(changes: dict[str, object], where: str) -> None:

@@ -33,8 +33,8 @@ class ReplayResult:
     t: np.ndarray  # (n,) s
     enc: np.ndarray  # (n, 2) simulated encoder ticks
     pose: np.ndarray  # (n, 3) simulated pose of C
-    ir_on: np.ndarray  # (n, 8)
-    ir_amb: np.ndarray  # (n, 8)
+    ir_on: np.ndarray  # (n, S) for the S pairs of p.ir_bearings; (n, 0) for the drive alone (replay_drive)
+    ir_amb: np.ndarray  # (n, S); (n, 0) for the drive alone
     start: int  # the recording row it started from
 
 
@@ -103,6 +103,17 @@ def state_at(rec: Recording, k: int, p: RobotParams) -> tuple[tuple[float, ...],
         theta = [motors.encoder_angle(int(rec.enc[k, i]), p, i) for i in range(2)]
     v = (0.0, 0.0) if starts_at_rest(rec, k) else wheel_speeds_at(rec, k, p)
     q = dynamics.q_from_axle_pose(x, y, phi, p, theta[0], theta[1])
+    return q, (float(v[0]), float(v[1]))
+
+
+def state_or_origin(rec: Recording, k: int, p: RobotParams) -> tuple[tuple[float, ...], tuple[float, float]]:
+    """state_at, or where the tracker has no pose at row k, the wheels' state at the origin (of an empty
+    world: the encoders alone say nothing of where the robot is)."""
+    if rec.pose is not None and bool(rec.pose_rows[k]):
+        return state_at(rec, k, p)
+    theta = [motors.encoder_angle(int(rec.enc[k, w]), p, w) for w in range(2)]
+    q = dynamics.q_from_axle_pose(0.0, 0.0, 0.0, p, theta[0], theta[1])
+    v = (0.0, 0.0) if starts_at_rest(rec, k) else wheel_speeds_at(rec, k, p)
     return q, (float(v[0]), float(v[1]))
 
 
@@ -232,8 +243,8 @@ def replay(rec: Recording, p: RobotParams, world: World, start: int = 0, stop: i
     n = len(inputs.cmd)
     enc = np.zeros((n, 2), dtype=np.int64)
     pose = np.zeros((n, 3))
-    ir_on = np.zeros((n, 8), dtype=np.int64)
-    ir_amb = np.zeros((n, 8), dtype=np.int64)
+    ir_on = np.zeros((n, len(p.ir_bearings)), dtype=np.int64)
+    ir_amb = np.zeros((n, len(p.ir_bearings)), dtype=np.int64)
     t = np.zeros(n)
     for j in range(n):
         t[j] = robot.t
@@ -266,15 +277,17 @@ def replay_batch(rec: Recording, params_list: Any, start: int = 0, *, stop: int 
     Every robot starts in the state the recording has at row `start` (state_at
     with that robot's parameters) and is fed the recorded current references.
     params_list: a RobotParams, a sequence of N, or a ParamBatch (with `base`).
-    world: default the recording's own (its sidecar), no walls when it has none.
+    world: default the recording's own (its sidecar), no walls when it has none or no tracker placed the
+    robot at `start` (state_or_origin: the robot then starts at the origin).
     """
     from host_sim.physics.world import world_from_dict
 
     inputs = replay_inputs(rec, start, stop, nominal_timing)
-    if world is None and isinstance(rec.meta.get("world"), dict):
+    tracked = rec.pose is not None and bool(rec.pose_rows[start])
+    if world is None and tracked and isinstance(rec.meta.get("world"), dict):
         world = world_from_dict(rec.meta["world"], f"{rec.path or 'recording'} (sidecar world)")
     params, robots = robot_params(params_list, base)
-    states = [state_at(rec, start, p) for p in robots]
+    states = [state_or_origin(rec, start, p) for p in robots]
     q = np.array([s[0] for s in states], dtype=float).reshape(-1, 5)
     v = np.array([s[1] for s in states], dtype=float).reshape(-1, 2)
     sim = BatchSim(world, params, q=q, v=v, t=inputs.t0, base=base, cycle_s=rec.sample_period, substeps=substeps)
@@ -288,3 +301,13 @@ def replay_batch(rec: Recording, params_list: Any, start: int = 0, *, stop: int 
                             emitter=inputs.emitter)
     result.start = start
     return result
+
+
+def replay_drive(rec: Recording, p: RobotParams, start: int = 0, substeps: int = 8) -> ReplayResult:
+    """The drive alone, open loop in an empty world from the state at `start` (state_or_origin): what a
+    recording without a world (or without a tracker) can be compared on, the encoders (and the pose)."""
+    res = replay_batch(rec, p, start, world=None, substeps=substeps, sensors=False)
+    n = res.enc.shape[0]
+    t = res.t if res.t.ndim == 1 else res.t[:, 0]
+    empty = np.zeros((n, 0), dtype=np.int64)
+    return ReplayResult(t, res.enc[:, 0], res.pose[:, 0], empty, empty.copy(), start)

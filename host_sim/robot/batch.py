@@ -26,7 +26,6 @@ from host_sim.physics.world import World
 
 SUBSTEPS = 8
 VECTOR_CONTACTS_FROM = 64  # robots in one contact step from which the vectorised solve is the faster
-N_SENSORS = ir_sensor.N_SENSORS
 # RobotParams fields the IR model reads: robots that agree on all of them
 # share one ir_sensor.read_sensors call.
 IR_FIELDS = tuple(f.name for f in dataclasses.fields(RobotParams)
@@ -303,6 +302,11 @@ class BatchSim:
         the backlash's gap)."""
         return self.q[:, 3:5] if self.gear_gap is None else self.q[:, 3:5] + self.gear_gap
 
+    @property
+    def n_ir(self) -> int:
+        """The IR pairs of every robot's ring (ir_bearings; one ring for the whole batch)."""
+        return len(self._ir_groups[0][1].ir_bearings)
+
     def read_sensors(self, rng: np.random.Generator | None = None,
                      pose: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(adc_on, adc_off), each (N, 8): the IR ring now, at the emitter power in force.
@@ -317,8 +321,8 @@ class BatchSim:
             if self._ir_history is None:
                 self._ir_history = ir_sensor.PoseHistory(latency)
             self._ir_history.add(self.t, pose)
-        on = np.empty((self.n, N_SENSORS), dtype=np.int64)
-        off = np.empty((self.n, N_SENSORS), dtype=np.int64)
+        on = np.empty((self.n, self.n_ir), dtype=np.int64)
+        off = np.empty((self.n, self.n_ir), dtype=np.int64)
         for idx, p in self._ir_groups:
             at, t = pose, self.t
             if p.ir_latency > 0:
@@ -561,8 +565,8 @@ class BatchSim:
         theta = np.empty((n_rows, n, 2))
         pose = np.empty((n_rows, n, 3))
         vbat = np.empty((n_rows, n))
-        ir_on = np.empty((n_rows, n, N_SENSORS), dtype=np.int64) if sensors else None
-        ir_amb = np.empty((n_rows, n, N_SENSORS), dtype=np.int64) if sensors else None
+        ir_on = np.empty((n_rows, n, self.n_ir), dtype=np.int64) if sensors else None
+        ir_amb = np.empty((n_rows, n, self.n_ir), dtype=np.int64) if sensors else None
         collisions0 = self.collisions.copy()
         for j in range(n_rows):
             t_out[j] = self.t
