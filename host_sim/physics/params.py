@@ -229,7 +229,7 @@ class ParamsError(ValueError):
 # fields an effect of the library sets are checked as it declares (effects.Admits).
 INTEGER_PARAMS = {"adc_bits": (8, 16)}
 PARAM_RANGES = {
-    "ticks_per_rev": (1.0, 1e6), "driver_deadband": (0.0, 0.95), "dead_time": (0.0, 1e-3),
+    "ticks_per_rev": (1.0, 1e6), "dead_time": (0.0, 1e-3),
     "pwm_frequency": (1.0, 1e7), "motor_inductance": (0.0, 10.0), "speed_kp": (0.0, 1e4), "speed_ki": (0.0, 1e6),
     "speed_loop_period": (1e-4, 1.0),
     "ir_saturation": (0.0, 1.0), "ir_on_delay": (0.0, 0.04), "ir_noise": (0.0, 1e4),
