@@ -148,3 +148,131 @@ def test_coast_at_light_load_turns_faster_than_the_linear_model():
     coast.run_inputs(cmd, sensors=False)
     brake.run_inputs(cmd, sensors=False)
     assert coast.v[0, 0] > 1.5 * brake.v[0, 0] > 0.0
+
+
+def test_the_wheel_speed_drive_follows_its_set_points_through_its_own_loop():
+    p = RobotParams(drive="wheel_speed")
+    sim = BatchSim(None, p)
+    res = sim.run_inputs(np.repeat([[10.0, -5.0], [20.0, 12.0]], 75, axis=0), sensors=False)
+    speed = np.diff(res.theta[:, 0], axis=0) / sim.cycle_s
+    assert np.allclose(speed[60:74], [10.0, -5.0], rtol=0.03)
+    assert np.allclose(speed[-15:], [20.0, 12.0], rtol=0.03)
+    # without its integral the loop leaves a steady error (friction needs a voltage kp e must supply)
+    lazy = BatchSim(None, p.replace(speed_ki=0.0))
+    lazy_res = lazy.run_inputs(np.tile([10.0, 10.0], (75, 1)), sensors=False)
+    assert np.diff(lazy_res.theta[-15:, 0, 0]).mean() / sim.cycle_s < 0.9 * 10.0
+
+
+def test_the_speed_loop_runs_at_its_own_period():
+    """A loop ten times slower answers a set-point step later: its first volts are held a whole period."""
+    fast = BatchSim(None, RobotParams(drive="wheel_speed"))
+    slow = BatchSim(None, RobotParams(drive="wheel_speed", speed_loop_period=0.1))
+    cmd = np.tile([15.0, 15.0], (10, 1))
+    a, b = fast.run_inputs(cmd, sensors=False), slow.run_inputs(cmd, sensors=False)
+    assert not np.allclose(a.theta, b.theta, atol=1e-3)
+
+
+@pytest.mark.parametrize("kind,cmd", [("voltage", (2.5, -1.0)), ("duty", (0.5, 0.3)), ("wheel_speed", (12.0, 4.0))])
+def test_a_recording_of_each_drive_replays_exactly(tmp_path, kind, cmd):
+    """A twin's own recording of a drive, with the drive block, replays from row 0 on the batch path and
+    through SimRobot alike, tick for tick."""
+    from host_sim.physics.params import DRIVE_UNITS
+    from host_sim.recordings.recording import RecordingWriter, load_recording
+    from host_sim.recordings.replay import replay, replay_batch
+
+    p = RobotParams(drive=kind, battery_resistance=0.5)
+    rows = np.concatenate([np.tile(cmd, (40, 1)), np.tile(cmd[::-1], (40, 1))])
+    sim = BatchSim(EMPTY, p, poses=[[1.0, 1.0, 0.0]])
+    res = sim.run_inputs(rows, sensors=False)
+    path = tmp_path / "run.csv"
+    block = {"kind": kind, "unit": DRIVE_UNITS[kind], "source_unit": DRIVE_UNITS[kind], "full_scale": None}
+    with RecordingWriter(path, source="simulator", sample_period=sim.cycle_s, robot=p.to_json(),
+                         extra={"drive": block, "mode": "fixed"}) as w:
+        for j, row in enumerate(rows):
+            w.row(j * sim.cycle_s, tuple(row), tuple(res.enc[j, 0]), [0] * 8, [0] * 8, float(res.vbat[j, 0]),
+                  tuple(res.pose[j, 0]))
+    rec = load_recording(path)
+    assert rec.drive == kind
+    # given the current drive's parameters, the replay still feeds the commands to the recording's drive
+    again = replay_batch(rec, RobotParams(battery_resistance=0.5), sensors=False)
+    assert np.array_equal(again.enc[:, 0], res.enc[:, 0])
+    one = replay(rec, RobotParams(battery_resistance=0.5), EMPTY)
+    assert np.abs(one.enc - res.enc[:, 0]).max() <= 1
+
+
+def test_the_library_offers_an_effect_for_its_drives_only_and_none_of_the_floors_on_a_bench():
+    from host_sim.diagnosis.fit import candidates_for
+    from host_sim.physics import effects
+
+    def names(drive, bench=False):
+        return {c.name for c in candidates_for(["wheel_l"], drive, bench)}
+
+    assert set(effects.ALL_DRIVES) == set(params_module().DRIVES)
+    assert "current_limit" in names("current") and "current_limit" not in names("duty")
+    assert {"motor_resistance", "driver_deadband"} <= names("voltage") and not {"motor_resistance",
+                                                                                 "driver_deadband"} & names("current")
+    assert {"speed_loop_kp", "speed_loop_ki"} <= names("wheel_speed") and "speed_loop_kp" not in names("duty")
+    floor = {"traction_limit", "caster_drag", "turning_resistance", "com_offset", "mass", "track_width",
+             "wheel_radius"}
+    assert floor <= names("duty") and not floor & names("duty", bench=True)
+    assert "dry_friction" in names("duty", bench=True)
+
+
+def params_module():
+    from host_sim.physics import params
+
+    return params
+
+
+@pytest.mark.parametrize("fields", [{"armature_resistance_delta_l": 5.0}, {"driver_deadband": 0.15},
+                                    {"speed_kp": 0.3, "drive": "wheel_speed"}])
+def test_the_drive_effects_change_the_twin_and_sim_robot_agrees(fields):
+    base = RobotParams(drive=fields.get("drive", "duty"))
+    p = base.replace(**{k: v for k, v in fields.items() if k != "drive"})
+    cmd = (8.0, 6.0) if base.drive_kind == "wheel_speed" else (0.35, 0.25)
+    sim = BatchSim(EMPTY, [p, base], poses=[[1.0, 1.0, 0.0]] * 2)
+    res = sim.run_inputs(np.tile(cmd, (50, 1)), sensors=False)
+    assert np.abs(res.pose[:, 0] - res.pose[:, 1]).max() > 1e-4
+    robot = SimRobot(EMPTY, p, pose=(1.0, 1.0, 0.0), noise=False)
+    robot.i_ref = cmd
+    for _ in range(50 * 8):
+        robot.advance(sim.cycle_s / 8)
+    assert np.allclose(robot.pose, sim.pose[0], atol=1e-9)
+
+
+def test_twinbot_sim_refuses_a_drive_the_firmware_cannot_command(tmp_path):
+    import argparse
+
+    from tools.arguments import CliError
+    from tools.cli.sim import load_inputs
+
+    path = tmp_path / "robot.json"
+    path.write_text('{"drive": "duty"}')
+    with pytest.raises(CliError, match="commands motor currents"):
+        load_inputs(argparse.Namespace(params=str(path), world="paper_room"))
+
+
+@pytest.mark.slow
+def test_diagnose_names_a_motors_resistance_on_a_bench_and_nothing_of_the_floor(tmp_path):
+    """A duty robot on a bench whose left motor has 6 ohm more than its datasheet: the diagnosis, on the
+    encoders alone, holds the body, fits motor_resistance at the left wheel and says nothing of the motion."""
+    from host_sim.diagnosis import diagnose
+    from host_sim.recordings.recording import RecordingWriter, load_recording
+
+    base = RobotParams(drive="duty")
+    truth = base.replace(armature_resistance_delta_l=6.0)
+    period, n = 0.04, 1500
+    levels = np.repeat(np.random.default_rng(1).uniform(-1, 1, (n // 25 + 1, 2)), 25, axis=0)[:n]
+    res = BatchSim(None, truth, bench=True, cycle_s=period).run_inputs(levels, sensors=False)
+    path = tmp_path / "bench.csv"
+    block = {"kind": "duty", "unit": "fraction", "source_unit": "fraction", "full_scale": None}
+    with RecordingWriter(path, source="robot", sample_period=period, robot=base.to_json(),
+                         extra={"drive": block, "bench": True}) as w:
+        for j in range(n):
+            w.row(j * period, tuple(levels[j]), tuple(res.enc[j, 0]), [0] * 8, [0] * 8, float(res.vbat[j, 0]))
+    found = diagnose(load_recording(path), base, None).to_json()
+    assert found["verdict"] == "explained"
+    (effect,) = found["effects"]
+    assert effect["name"] == "motor_resistance" and effect["wheel"] == "left"
+    assert effect["params"]["resistance"]["value"] == pytest.approx(6.0, rel=0.02)
+    assert not {c["channel"] for c in found["located"]} & {"forward", "lateral", "heading_rate", "travel", "turn"}
