@@ -170,21 +170,25 @@ def _drive_currents(cmd: np.ndarray, w: np.ndarray, volts: np.ndarray, d: Drive)
 
 def _bridge_supply(cmd: np.ndarray, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray]:
     """supply() where some drive is not current: the battery delivers i_e + sum((R i + e) i) / V (the
-    bridges pass the motors' power, their ripple aside), solved for V by fixed-point iteration."""
+    bridges pass the motors' power, their ripple aside); Newton on V from V_bat, the slope by a difference."""
     cmd = np.broadcast_to(cmd, w.shape)
     volts = d.v_bat.copy()
     i = _drive_currents(cmd, w, volts, d)
     if not np.any(d.r_int):
         return volts, i
     emf = d.kt * d.gear * w
-    for _ in range(4 * SUPPLY_NEWTON):
-        power = ((d.res_w * i + emf) * i).sum(1)
-        new = np.clip(d.v_bat - d.r_int * (d.i_e + power / volts), 0.05 * d.v_bat, d.v_bat)
-        done = not np.any(np.abs(new - volts) > 1e-12 * d.v_bat)
-        volts = 0.5 * (volts + new)  # damped: the current grows with V
-        i = _drive_currents(cmd, w, volts, d)
-        if done:
+
+    def residual(v: np.ndarray, cur: np.ndarray) -> np.ndarray:
+        return v - d.v_bat + d.r_int * (d.i_e + ((d.res_w * cur + emf) * cur).sum(1) / v)
+
+    for _ in range(2 * SUPPLY_NEWTON):
+        gv = residual(volts, i)
+        if not np.any(np.abs(gv) > 1e-12 * d.v_bat):
             break
+        step = 1e-6 * d.v_bat
+        slope = (residual(volts + step, _drive_currents(cmd, w, volts + step, d)) - gv) / step
+        volts = np.clip(volts - gv / np.maximum(slope, 0.5), 0.05 * d.v_bat, d.v_bat)
+        i = _drive_currents(cmd, w, volts, d)
     return volts, i
 
 
