@@ -2,8 +2,9 @@
 
 While every drive effect is absent BatchSim takes the nominal drive (drivetrain.py), unchanged; with any
 present it takes this one, whose equations are the nominal ones generalised per wheel and with the supply,
-the caster and the tyres' scrub (docs/effects.md, "Where the effects are computed").  SimRobot runs its
-robot through a BatchSim of one here, so both twins are the same code.
+the caster and the tyres' scrub (docs/effects.md, "Where the effects are computed").  The H-bridge drives
+(docs/motors.md "Drives") and the bench (bench_step) take it too.  SimRobot runs its robot through a
+BatchSim of one here, so both twins are the same code.
 """
 from __future__ import annotations
 
@@ -410,7 +411,7 @@ def bench_step(q: np.ndarray, v: np.ndarray, i_ref: ArrayLike, dt: PerRobot, d: 
     """One step on a stand (a bench recording: wheels off the floor, the body held): each wheel spins alone with
     its own inertia, its motor and its axle's friction, the pose stays.  (q_next, v_next, currents, supply V):
     drive_step's midpoint with the half step's dry friction, each wheel's response dt / I_w."""
-    hdt = 0.5 * dt if np.ndim(dt) == 0 else 0.5 * np.asarray(dt)
+    hdt = np.broadcast_to(0.5 * np.asarray(dt, dtype=float), d.iw.shape)  # (N,): a float or each robot's own
     inv = 1.0 / d.iw
     zero = np.zeros(len(d.iw))
     tau, _i, _v = wheel_torque(i_ref, v, d)
@@ -419,10 +420,10 @@ def bench_step(q: np.ndarray, v: np.ndarray, i_ref: ArrayLike, dt: PerRobot, d: 
     fl, fr, sl, sr = friction.solve_batch(free[:, 0], free[:, 1], h, zero, zero, h, d.t_c[:, 0], d.t_c[:, 1], v)
     v_mid = np.stack(friction.end_speeds_batch(free[:, 0], free[:, 1], h, zero, zero, h, fl, fr, sl, sr), 1)
     tau, cur, volts = wheel_torque(i_ref, v_mid, d)
-    k = dt * inv
+    k = 2.0 * hdt * inv
     free = v + k[:, None] * tau
     fl, fr, sl, sr = friction.solve_batch(free[:, 0], free[:, 1], k, zero, zero, k, d.t_c[:, 0], d.t_c[:, 1], v)
     v1 = np.stack(friction.end_speeds_batch(free[:, 0], free[:, 1], k, zero, zero, k, fl, fr, sl, sr), 1)
     q1 = q.copy()
-    q1[:, 3:5] = q[:, 3:5] + (hdt if np.ndim(dt) == 0 else hdt[:, None]) * (v + v1)
+    q1[:, 3:5] = q[:, 3:5] + hdt[:, None] * (v + v1)
     return q1, v1, cur, volts

@@ -1,9 +1,9 @@
-"""Current-regulated DC gear motors and wheel encoders (paper section 3.2).
+"""DC gear motors (current-regulated, paper section 3.2, or on an H-bridge) and wheel encoders.
 
 The driver delivers i_ref clipped to its limit and to what the battery can push against the back-EMF;
 the wheel torque is eta N k_t i - c_v w (the axle's dry friction is solved in the step: friction.py).
 Encoders count floor(theta / 2 pi * ticks_per_rev).  Scalar functions take Python floats; *_batch ones
-arrays (N,) or (N, 2) with a RobotParams or a ParamBatch.  Equations: docs/motors.md.
+arrays (N,) or (N, 2) with a RobotParams or a ParamBatch; bridge_* the H-bridge drives'.  Equations: docs/motors.md.
 """
 from __future__ import annotations
 
