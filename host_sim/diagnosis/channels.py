@@ -87,7 +87,8 @@ def build_channels(rec: Recording, windows: Windows, run: WindowRun, robots: lis
         # The recorded counts are floors, the twin's are not: an increment is off by up to a tick (1/6 tick^2).
         chans.append(Channel(name, "ticks/period", enc_rec[..., w], enc_twin[..., w], float(np.sqrt(1 / 6))))
     if rec.pose is not None:
-        chans += _motion_channels(rec, idx, run, p)
+        if not rec.bench:  # on a bench the body is held: its motion says nothing of the drive
+            chans += _motion_channels(rec, idx, run, p)
         if world is not None and world.n_walls and ring_comparable(rec, p):
             chans += sensor_channels(rec, idx[:, 1:], robots, world, unjudged)
     if not rec.battery_recorded:

@@ -25,6 +25,7 @@ from host_sim.diagnosis.block_verdict import judge_test_block
 from host_sim.diagnosis.phrasing import checked, sentence
 from host_sim.physics.params import DEFAULT, RobotParams
 from host_sim.recordings.recording import Recording
+from host_sim.recordings.replay import with_drive
 from host_sim.physics.world import World
 
 MIN_WINDOWS = 6  # 1 s windows: fewer and the held-out judgement rests on one or two windows
@@ -138,7 +139,10 @@ def check_data(rec: Recording, world: World | None, params: RobotParams | None =
         raise DiagnosisError(f"the recording lasts {len(rec) * period:.1f} s: too short to diagnose "
                              f"(at least {MIN_WINDOWS * DEFAULT_SECONDS[0]:.0f} s; 60-90 s is better)")
     notes = []
-    if rec.pose is None:
+    if rec.bench:
+        notes.append("recorded on a bench (wheels off the floor, the body held): the twin holds its body; traction, "
+                     "the caster, contact and the body's motion are not judged")
+    elif rec.pose is None:
         notes.append("no tracker pose: judged on the encoders and the battery only; effects on the body's motion "
                      "(track width vs wheel radius, slip) and on the IR sensors cannot be told apart without it")
     elif world is None or world.n_walls == 0:
@@ -214,6 +218,7 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     of the same robot and world; the intervals are then the window-clustered sandwich.
     workers > 1: each step's screening and its shortlisted fits run in that many processes (the same
     figures, sooner: fit.select)."""
+    params = with_drive(rec, params)  # the recording's commands are for its own drive (docs/recordings.md)
     rec, gap_notes = without_gapped_pose(rec)
     if isinstance(test_block, Recording):
         test_block = without_gapped_pose(test_block)[0]
@@ -352,8 +357,9 @@ def _located(cmp: Comparison, f: Finding) -> dict[str, Any]:
 def _fit(objective: Objective, params: RobotParams, first: Comparison, say: Callable[[str], None], workers: int = 1,
          still_located: Callable[[Model, Objective], list[str]] | None = None) -> list[Model]:
     located = [f.channel for f in first.findings]
-    return select(objective, params, candidates_for(located), progress=say, located=located,
-                  workers=workers, still_located=still_located)
+    offered = candidates_for(located, params.drive_kind, objective.rec.bench)
+    return select(objective, params, offered, progress=say, located=located, workers=workers,
+                  still_located=still_located)
 
 
 def fit_objective(rec: Recording, world: World | None, first: Comparison, clustered: bool = False) -> Objective:

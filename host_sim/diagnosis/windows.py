@@ -211,7 +211,7 @@ def _run_windows(rec: Recording, windows: Windows, params: Any, world: World | N
             on_track[:, s] = q_k[:, :3]
     per_robot = robots[0] if n_sets == 1 else [p for _w in range(n_win) for p in robots]
     sim = BatchSim(world if rec.pose is not None else None, per_robot, q=q.reshape(-1, 5), v=v.reshape(-1, 2),
-                   base=base, substeps=substeps)
+                   base=base, substeps=substeps, bench=rec.bench)
     # Each window's twin lives its own rows' recorded durations, a late row (the board's loop overran) or a
     # missed cycle as long as it lasted (tests/test_diagnosis.py::test_a_board_whose_loop_overran_matches).
     period = np.repeat(inputs.period[idx].T, n_sets, axis=1)  # (T, W * N)

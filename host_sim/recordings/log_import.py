@@ -15,8 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from host_sim.physics.params import ParamsError, RobotParams, params_from_dict
-from host_sim.recordings.drive_block import DRIVE_KEYS, UNITS as DRIVE_UNITS
+from host_sim.physics.params import DRIVE_UNITS, PWM_DECAYS, ParamsError, RobotParams, params_from_dict
 from host_sim.recordings.recording import MAX_IR, UNITS, RecordingWriter
 
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6}
@@ -129,31 +128,12 @@ def read_json(path: str | os.PathLike[str], what: str) -> dict[str, object]:
 
 
 def load_robot(path: str | os.PathLike[str]) -> tuple[RobotParams, dict[str, object]]:
-    """(the twin's parameters, the robot block for the sidecar).  The drive's parameters (DRIVE_KEYS)
-    pass through, checked here, where RobotParams does not hold them."""
+    """(the twin's parameters, the robot block for the sidecar)."""
     data = read_json(path, "robot parameter file")
     try:
         return params_from_dict(data, str(path)), dict(data)
     except ParamsError as exc:
-        if not any(k in data for k in DRIVE_KEYS):
-            raise LogImportError(str(exc)) from None
-    for name in DRIVE_KEYS:
-        if name in data:
-            _check_drive_key(path, name, data[name])
-    try:
-        params = params_from_dict({k: v for k, v in data.items() if k not in DRIVE_KEYS}, str(path))
-    except ParamsError as exc:
         raise LogImportError(str(exc)) from None
-    return params, dict(data)
-
-
-def _check_drive_key(path: object, name: str, value: object) -> None:
-    choices = DRIVE_KEYS[name]
-    if choices is not None:
-        if value not in choices:
-            raise LogImportError(f"{path}: '{name}' must be one of {', '.join(choices)}, got {value!r}")
-    elif isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-        raise LogImportError(f"{path}: '{name}' must be a finite number >= 0, got {value!r}")
 
 
 class MapReader:
@@ -258,7 +238,7 @@ def _robot_drive(m: MapReader, g: dict[str, object], kind: str, robot: dict[str,
     if "decay" in g:
         if kind not in ("voltage", "duty"):
             raise LogImportError(f"{m.where('command', 'decay')}: a {kind} drive has no PWM decay")
-        decay = m.choice(g, "command", "decay", DRIVE_KEYS["pwm_decay"] or ())
+        decay = m.choice(g, "command", "decay", PWM_DECAYS)
         if robot.get("pwm_decay", decay) != decay:
             raise LogImportError(f"{m.where('command', 'decay')}: {decay!r}, but the robot file says pwm_decay "
                                  f"{robot['pwm_decay']!r}")

@@ -23,7 +23,7 @@ import numpy as np
 
 from firmware.hal import TICK_MASK
 from firmware.odometry import HEADING_TURN
-from host_sim.recordings.drive_block import drive_problem
+from host_sim.physics.params import DRIVE_UNITS, DRIVES
 
 FORMAT = "twinbot-recording"
 VERSION = 2
@@ -226,6 +226,17 @@ class Recording:
         return int(self.ir_on.shape[1])
 
     @property
+    def drive(self) -> str:
+        """What cmd_l, cmd_r hold: the sidecar's drive block's kind (params.DRIVES; current without one)."""
+        block = self.meta.get("drive")
+        return str(block["kind"]) if isinstance(block, dict) else "current"
+
+    @property
+    def bench(self) -> bool:
+        """Recorded on a bench: the wheels off the floor, the body held (docs/recordings.md)."""
+        return self.meta.get("bench") is True
+
+    @property
     def battery_recorded(self) -> bool:
         return bool(len(self.vbat)) and bool(np.isfinite(self.vbat).all())
 
@@ -388,7 +399,24 @@ def _load_sidecar(path: Path, required: bool) -> dict[str, object]:
     period = meta.get("sample_period")
     if not isinstance(period, (int, float)) or period <= 0:
         raise RecordingError(f"{side}: 'sample_period' must be a positive number of seconds, got {period!r}")
-    why = drive_problem(meta)
-    if why is not None:
+    why = drive_refusal(meta)
+    if why:
         raise RecordingError(f"{side}: {why}")
     return meta
+
+
+def drive_refusal(meta: dict[str, object]) -> str | None:
+    """Why the sidecar's "drive" block and "bench" flag are refused, or None (docs/recordings.md)."""
+    if "bench" in meta and not isinstance(meta["bench"], bool):
+        return f"'bench' must be true or false, got {meta['bench']!r}"
+    block = meta.get("drive", {"kind": "current"})  # none: every recording before drives had a name
+    if not isinstance(block, dict) or block.get("kind") not in DRIVES:
+        return f"the drive block must be an object whose 'kind' is one of {', '.join(DRIVES)}, got {block!r}"
+    kind = block["kind"]
+    if block.get("unit", DRIVE_UNITS[kind]) != DRIVE_UNITS[kind]:
+        return f"the drive block's unit must be {DRIVE_UNITS[kind]!r} for a {kind} drive, got {block['unit']!r}"
+    robot = meta.get("robot")
+    said = robot.get("drive", "current") if isinstance(robot, dict) else kind
+    if said != kind:
+        return f"the robot's parameters say drive {said!r}, the drive block says {kind!r}"
+    return None

@@ -19,7 +19,8 @@ from host_sim.sensors import ir_sensor
 from host_sim.robot.batch import BatchResult, BatchSim, robot_params
 from host_sim.controller.hardware_io import Actuate
 from host_sim.robot.sim_robot import SimRobot
-from host_sim.physics.params import RobotParams
+from host_sim.physics.dynamics import ParamBatch
+from host_sim.physics.params import DRIVES, RobotParams
 from host_sim.recordings.recording import Recording
 from host_sim.physics.world import World
 
@@ -42,7 +43,7 @@ class ReplayResult:
 class ReplayInputs:
     """What rows start..stop-1 of a recording gave the robot, and how time passed between them."""
 
-    cmd: np.ndarray  # (T, 2) current references, A, held from row j to row j + 1
+    cmd: np.ndarray  # (T, 2) commands in the recording's drive's unit (A for current), held from row j to row j + 1
     period: np.ndarray  # (T,) s from row j to row j + 1
     emitter: np.ndarray  # (T,) % emitter pulse width in force for row j's on-reading
     t0: float  # time of row start
@@ -88,8 +89,25 @@ def replay_inputs(rec: Recording, start: int = 0, stop: int | None = None,
                         starts_at_rest(rec, start))
 
 
+def with_drive(rec: Recording, params: Any) -> Any:
+    """params (a RobotParams, a sequence of them or a ParamBatch) with the drive the recording's commands are for
+    (its sidecar's drive block: docs/recordings.md), whatever they said."""
+    code = float(DRIVES.index(rec.drive))
+    if isinstance(params, RobotParams):
+        return params if params.drive == code else params.replace(drive=code)
+    if isinstance(params, ParamBatch):
+        if np.all(params.drive == code):
+            return params
+        return ParamBatch({k: (np.full(params.n, code) if k == "drive" else getattr(params, k)) for k in params.names})
+    return [with_drive(rec, p) for p in params]
+
+
 def state_at(rec: Recording, k: int, p: RobotParams) -> tuple[tuple[float, ...], tuple[float, float]]:
-    """(q, v) of the model at row k, from the recording alone."""
+    """(q, v) of the model at row k, from the recording alone (on a bench without a tracker: at the origin)."""
+    if rec.pose is None and rec.bench:
+        theta = [motors.encoder_angle(int(rec.enc[k, i]), p, i) for i in range(2)]
+        v = (0.0, 0.0) if starts_at_rest(rec, k) else wheel_speeds_at(rec, k, p)
+        return dynamics.q_from_axle_pose(0.0, 0.0, 0.0, p, theta[0], theta[1]), (float(v[0]), float(v[1]))
     if rec.pose is None:
         raise ReplayError("replay from a recorded state needs the tracker pose (x, y, phi columns), "
                           "and this recording has none")
@@ -173,9 +191,9 @@ def sliding_rows(rec: Recording, p: RobotParams) -> tuple[np.ndarray, np.ndarray
 
     A replay started at rest or rolling where the robot slid (braking on ice: the wheels stopped, the body
     still going; or pressed into a wall, the wheels turning, the body still) starts a way off the truth.
-    Without a tracker nothing slides."""
+    Without a tracker, or on a bench, nothing slides."""
     n = len(rec)
-    if rec.pose is None or n < 2 * SLOPE_ROWS + 1:
+    if rec.pose is None or n < 2 * SLOPE_ROWS + 1 or rec.bench:
         return np.zeros(n, dtype=bool), np.zeros((n, 3))
     body = tracked_velocity(rec)
     rolling = rolling_velocity(rec, p)
@@ -234,7 +252,8 @@ def replay(rec: Recording, p: RobotParams, world: World, start: int = 0, stop: i
     the same order: a simulator recording then replays bit for bit.
     """
     inputs = replay_inputs(rec, start, stop, nominal_timing)
-    robot = SimRobot(world, p, seed=seed, noise=seed is not None)
+    p = with_drive(rec, p)
+    robot = SimRobot(world, p, seed=seed, noise=seed is not None, bench=rec.bench)
     robot.q, robot.v = state_at(rec, start, p)
     slides, body = sliding_rows(rec, p)
     if slides[start] and not inputs.at_rest:
@@ -257,6 +276,8 @@ def replay(rec: Recording, p: RobotParams, world: World, start: int = 0, stop: i
         enc[j] = robot.encoder_ticks()
         left, right = inputs.cmd[j]
         robot.actuate(Actuate(round(left * 1000), round(right * 1000), robot.emitter_pct))
+        if p.drive:  # not a current in mA: the command as it stands, in its drive's unit
+            robot.i_ref = (float(left), float(right))
         h = float(inputs.period[j]) / substeps
         for _ in range(substeps):
             robot.advance(h)
@@ -286,11 +307,12 @@ def replay_batch(rec: Recording, params_list: Any, start: int = 0, *, stop: int 
     tracked = rec.pose is not None and bool(rec.pose_rows[start])
     if world is None and tracked and isinstance(rec.meta.get("world"), dict):
         world = world_from_dict(rec.meta["world"], f"{rec.path or 'recording'} (sidecar world)")
-    params, robots = robot_params(params_list, base)
+    params, robots = robot_params(with_drive(rec, params_list), base)
     states = [state_or_origin(rec, start, p) for p in robots]
     q = np.array([s[0] for s in states], dtype=float).reshape(-1, 5)
     v = np.array([s[1] for s in states], dtype=float).reshape(-1, 2)
-    sim = BatchSim(world, params, q=q, v=v, t=inputs.t0, base=base, cycle_s=rec.sample_period, substeps=substeps)
+    sim = BatchSim(world, params, q=q, v=v, t=inputs.t0, base=base, cycle_s=rec.sample_period, substeps=substeps,
+                   bench=rec.bench)
     slides, body = sliding_rows(rec, robots[0])
     if slides[start] and not inputs.at_rest:
         sim.start_sliding(np.ones(sim.n, dtype=bool), np.tile(body[start], (sim.n, 1)))

@@ -135,6 +135,7 @@ def run(args: argparse.Namespace) -> int:
         fitted = result.model.params if result.model is not None else params
         with writing("--write-params", args.write_params):
             Path(args.write_params).write_text(json.dumps(fitted.to_json(), indent=1) + "\n")
+        use = "sim" if fitted.drive_kind == "current" else "replay"  # the firmware in sim commands currents
         print(f"wrote {args.write_params}: the twin with {len(result.effects)} fitted effect(s); "
-              f"use it with twinbot sim --params {args.write_params}")
+              f"use it with twinbot {use} --params {args.write_params}")
     return 0

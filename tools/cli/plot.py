@@ -101,7 +101,7 @@ def run_recording(args: argparse.Namespace) -> int:
         image_file(png)
     except argparse.ArgumentTypeError as exc:
         raise CliError(f"--png {exc}") from None
-    rec, params, world = load_inputs(args, drive=False)
+    rec, params, world = load_inputs(args)
     with writing("--png", png):
         path = save_recording(png, rec, params, world)
     print(path)

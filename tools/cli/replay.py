@@ -44,12 +44,10 @@ def add_source_arguments(p: argparse.ArgumentParser) -> None:
                    help="robot parameters JSON (default: the recording's)")
 
 
-def load_inputs(args: argparse.Namespace, drive: bool = True) -> tuple[Any, Any, Any]:
-    """(recording, robot parameters, world or None): each from its option, else from the sidecar.
-    drive False: the robot's drive parameters are left out (a plot, which drives nothing)."""
+def load_inputs(args: argparse.Namespace) -> tuple[Any, Any, Any]:
+    """(recording, robot parameters, world or None): each from its option, else from the sidecar."""
     from host_sim.physics.params import DEFAULT, ParamsError, load_params, params_from_dict
     from host_sim.recordings.checks import check_recording
-    from host_sim.recordings.drive_block import without_drive
     from host_sim.recordings.recording import RecordingError, load_recording, sidecar_path
     from host_sim.physics.world import WorldError, world_by_name_or_path, world_from_dict
 
@@ -57,8 +55,6 @@ def load_inputs(args: argparse.Namespace, drive: bool = True) -> tuple[Any, Any,
         rec = load_recording(args.recording, ordered_times=False)
         side = str(sidecar_path(args.recording))
         robot = rec.meta.get("robot")
-        if not drive and isinstance(robot, dict):
-            robot = without_drive(robot)
         if args.params:
             params = load_params(args.params)
         else:
