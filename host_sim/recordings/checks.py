@@ -67,11 +67,9 @@ def speed_memory(p: RobotParams) -> float:
 
 
 def drive_kind(rec: Recording, p: RobotParams) -> str:
-    """The drive the commands are for: the sidecar's drive block, else the parameters', else current."""
-    block = rec.meta.get("drive")
-    if isinstance(block, dict) and block.get("kind"):
-        return str(block["kind"])
-    return str(getattr(p, "drive", "current"))
+    """The drive the commands are for: the recording's own (its sidecar's drive block; current without
+    one), which replay and the diagnosis take over any parameters' (replay.with_drive)."""
+    return rec.drive
 
 
 def check_recording(rec: Recording, p: RobotParams) -> Recording:
