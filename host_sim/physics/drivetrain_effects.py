@@ -2,8 +2,8 @@
 
 While every drive effect is absent BatchSim takes the nominal drive (drivetrain.py), unchanged; with any
 present it takes this one, whose equations are the nominal ones generalised per wheel and with the supply,
-the caster and the tyres' scrub (docs/effects.md, "Where the effects are computed").  SimRobot runs its
-robot through a BatchSim of one here, so both twins are the same code.
+the caster and the tyres' scrub (docs/effects.md, "Where the effects are computed").  SimRobot, a view of
+a BatchSim of one, comes here too, so both twins are the same code.
 """
 from __future__ import annotations
 
