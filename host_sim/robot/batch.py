@@ -323,6 +323,12 @@ class BatchSim:
             self._write_back()
         self._current = current
 
+    def floats_of_one(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """(q, v) of the first robot as Python floats, without writing a float step's state back."""
+        if self._one_state is not None:
+            return tuple(self._one_state[0]), tuple(self._one_state[1])
+        return tuple(self._q.tolist()[0]), tuple(self._v.tolist()[0])
+
     def _write_back(self) -> None:
         """The floats of _substep_one into q, v and current (the arrays are the state again)."""
         q, v, current = self._one_state  # type: ignore[misc]

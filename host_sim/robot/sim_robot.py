@@ -41,7 +41,7 @@ class SimRobot:
     @property
     def q(self) -> tuple[float, ...]:
         """(x_G, y_G, phi, theta_l, theta_r) as in host_sim/physics/dynamics.py."""
-        return tuple(self.batch.q[0].tolist())
+        return self.batch.floats_of_one()[0]
 
     @q.setter
     def q(self, q: tuple[float, ...]) -> None:
@@ -50,7 +50,7 @@ class SimRobot:
     @property
     def v(self) -> tuple[float, float]:
         """(wheel speed left, right), rad/s."""
-        return tuple(self.batch.v[0].tolist())  # type: ignore[return-value]
+        return self.batch.floats_of_one()[1]  # type: ignore[return-value]
 
     @v.setter
     def v(self, v: tuple[float, float]) -> None:
@@ -103,7 +103,11 @@ class SimRobot:
 
     # ------------------------------------------------------------------ what the firmware sees
     def encoder_ticks(self) -> tuple[int, int]:
-        th_l, th_r = self.batch.encoder_angles()[0].tolist()  # the encoders are on the motors (backlash)
+        if self.batch.gear_gap is None:
+            q = self.q
+            th_l, th_r = q[3], q[4]
+        else:  # the encoders are on the motors, a gear's play from the wheels
+            th_l, th_r = self.batch.encoder_angles()[0].tolist()
         return motors.encoder_ticks(th_l, self.p, 0), motors.encoder_ticks(th_r, self.p, 1)
 
     def sense(self) -> Sense:
