@@ -101,6 +101,26 @@ def test_one_robot_with_a_seed_has_simrobots_sensor_noise():
     assert np.ptp(res.ir_amb[:, 0]) > 0  # there was noise to match
 
 
+@pytest.mark.parametrize("grip", [1.0, 0.05])
+def test_one_robot_steps_in_floats_as_in_a_batch(grip):
+    """BatchSim.substep is every robot's step: a BatchSim of one takes it in Python floats, SimRobot (its
+    view) the same bit for bit; the same robot in a batch of two takes the vectorised step, equal to rounding."""
+    rng = np.random.default_rng(7)
+    p = DEFAULT.replace(wheel_friction=grip)
+    poses = np.array([[0.35, 0.35, 0.5], [1.5, 0.5, 2.0]])
+    cmd = commands(rng, 400, n=2)
+    alone = BatchSim(ROOM, p, poses[:1])
+    assert alone._floats and not BatchSim(ROOM, p, poses)._floats
+    res = alone.run_inputs(cmd[:, 0], sensors=False)
+    ref = simrobot_run(ROOM, p, poses[0], cmd[:, 0])
+    assert np.array_equal(res.theta[:, 0], ref["theta"]) and np.array_equal(res.enc[:, 0], ref["enc"])
+    assert res.collisions[0] == ref["collisions"] > 0  # the contact step was exercised
+    both = BatchSim(ROOM, p, poses).run_inputs(cmd, sensors=False)
+    np.testing.assert_allclose(both.pose[:, 0], res.pose[:, 0], rtol=0, atol=1e-9)
+    assert_ticks_match(both.enc[:, 0], res.enc[:, 0], res.theta[:, 0])
+    assert both.collisions[0] == res.collisions[0]
+
+
 def test_a_heavier_robot_accelerates_less():
     masses = [0.30, 0.46, 0.70, 1.00]
     params = [DEFAULT.replace(body_mass=m) for m in masses]

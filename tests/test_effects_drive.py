@@ -48,7 +48,7 @@ def balance_speed(i: float, extra_torque: float = 0.0, c_v: float = P.viscous_fr
 def test_absent_effects_take_the_nominal_path():
     assert not drivetrain_effects.active(P)
     assert BatchSim(None, P)._fx is None and BatchSim(None, P)._delay is None
-    assert SimRobot(World(name="e", size=(1.0, 1.0), walls=[]), P)._effects is None
+    assert SimRobot(World(name="e", size=(1.0, 1.0), walls=[]), P).batch._floats  # one robot, Python floats
 
 
 @pytest.mark.parametrize("wheel", ["l", "r"])

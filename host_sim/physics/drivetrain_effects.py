@@ -3,8 +3,8 @@
 While every drive effect is absent BatchSim takes the nominal drive (drivetrain.py), unchanged; with any
 present it takes this one, whose equations are the nominal ones generalised per wheel and with the supply,
 the caster and the tyres' scrub (docs/effects.md, "Where the effects are computed").  The H-bridge drives
-(docs/motors.md "Drives") and the bench (bench_step) take it too.  SimRobot runs its robot through a
-BatchSim of one here, so both twins are the same code.
+(docs/motors.md "Drives") and the bench (bench_step) take it too.  SimRobot, a view of a BatchSim of one,
+comes here too, so both twins are the same code.
 """
 from __future__ import annotations
 

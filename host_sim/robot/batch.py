@@ -1,14 +1,15 @@
 """Batch mode: N robots stepped together, vectorised numpy (N parameter sets, or N robots).
 
 The core of identification: N candidate robots in the same recorded state, fed the same current
-references, their encoders, IR ring and pose compared with the recording.  `BatchSim` takes one
-RobotParams, a sequence of them or a ParamBatch; `run_inputs` applies one row of references per
-control period and returns a `BatchResult`.  The same physics as SimRobot, to rounding error.
+references, their encoders, IR ring and pose compared with the recording.  `BatchSim.substep` is every
+robot's step, N = 1 (SimRobot is a view of a BatchSim of one) or many; `run_inputs` applies one row of
+references per control period and returns a `BatchResult`.
 Equations: docs/dynamics.md ("One robot and the batch"), docs/contact.md; the effects: docs/effects.md.
 """
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any, TypeGuard, Union, cast
@@ -143,7 +144,7 @@ class BatchSim:
         self._gap = np.full(n, -1.0)
         self.slipping = np.zeros(n, dtype=bool)  # a wheel slips: the body velocity is extra state
         self.body = np.zeros((n, 3))  # (u, l, omega) of the robots that slip
-        # the last contact step's forces, where the next one starts (SimRobot._forces)
+        # the last contact step's forces, where the next one starts
         self._warm = np.zeros(n, dtype=bool)
         # Fewer robots than this in a contact step: contact.slip_step one by one, else slip_step_batch.
         self.vector_contacts_from = VECTOR_CONTACTS_FROM
@@ -160,10 +161,11 @@ class BatchSim:
         self._hist_i: list[np.ndarray] = []
 
     def set_world(self, world: World) -> None:
-        """The robots, where they stand, in an edited world (SimRobot.set_world for each)."""
+        """The robots, where they stand, in an edited world (walls drawn or moved around them)."""
         self.world = world
         self._gap[:] = -1.0  # the broad phase's gaps were measured against the old walls
         self._warm[:] = False  # contact forces are kept by wall index, which the edit may have changed
+        self._one_gap, self._one_forces = -1.0, None  # the same for _substep_one
         self._wall_force = np.zeros((2, self.n, max(world.n_walls, 1)))
         self._walls = world.n_walls > 0
 
@@ -173,6 +175,7 @@ class BatchSim:
         self.q[:, :3] = np.asarray(poses, dtype=float)
         self._gap[:] = -1.0  # the broad phase measured its gaps where the robots were
         self._warm[:] = False
+        self._one_gap, self._one_forces = -1.0, None  # the same for _substep_one
 
     def start_sliding(self, slides: ArrayLike, body: ArrayLike) -> None:
         """Robots `slides` ((N,) bool) start sliding over the floor with body velocity (u, l, omega) of C
@@ -247,6 +250,7 @@ class BatchSim:
         self._half_axle = shared.half_axle if shared is not None else batch.half_axle
         self._shared = shared is not None
         self._set_drive(batch)
+        self._floats = n == 1 and self._fx is None and self._delay is None and self._speed is None  # _substep_one
         self._gear_engaged = np.ones((self.n, 2), dtype=bool)  # at the end of the rolling substep under way
         self._per_wheel_ticks = bool(np.any(batch.ticks_per_rev_delta_l != 0) or np.any(batch.ticks_per_rev_delta_r != 0))
         # IR groups: (indices or None for all, RobotParams).
@@ -282,6 +286,64 @@ class BatchSim:
             if on.any() else None
 
     # ------------------------------------------------------------------ state
+    # A BatchSim of one in floats keeps q, v and current as Python floats between its steps (numpy's cost to
+    # write them back each step is half the step's); reading or setting any of them writes them back first.
+    _one_state: tuple[Any, Any, Any] | None = None
+    # and its own broad phase and contact forces (_chk, _gap and _warm with the forces, for one robot)
+    _one_checked_at, _one_gap = (0.0, 0.0, 0.0), -1.0
+    _one_forces: tuple[list[list[float]], dict[int, list[float]]] | None = None
+
+    @property
+    def q(self) -> np.ndarray:
+        """(N, 5): x_G, y_G, phi, theta_l, theta_r as in host_sim/physics/dynamics.py."""
+        if self._one_state is not None:
+            self._write_back()
+        return self._q
+
+    @q.setter
+    def q(self, q: np.ndarray) -> None:
+        if self._one_state is not None:
+            self._write_back()
+        self._q = q
+
+    @property
+    def v(self) -> np.ndarray:
+        """(N, 2) rad/s, the wheels' speeds."""
+        if self._one_state is not None:
+            self._write_back()
+        return self._v
+
+    @v.setter
+    def v(self, v: np.ndarray) -> None:
+        if self._one_state is not None:
+            self._write_back()
+        self._v = v
+
+    @property
+    def current(self) -> np.ndarray:
+        """(N, 2) A, the motor currents of the last substep (mid-step)."""
+        if self._one_state is not None:
+            self._write_back()
+        return self._current
+
+    @current.setter
+    def current(self, current: np.ndarray) -> None:
+        if self._one_state is not None:
+            self._write_back()
+        self._current = current
+
+    def floats_of_one(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """(q, v) of the first robot as Python floats, without writing a float step's state back."""
+        if self._one_state is not None:
+            return tuple(self._one_state[0]), tuple(self._one_state[1])
+        return tuple(self._q.tolist()[0]), tuple(self._v.tolist()[0])
+
+    def _write_back(self) -> None:
+        """The floats of _substep_one into q, v and current (the arrays are the state again)."""
+        q, v, current = self._one_state  # type: ignore[misc]
+        self._one_state = None
+        self._q[0], self._v[0], self._current[0] = q, v, current
+
     @property
     def pose(self) -> np.ndarray:
         """(N, 3): x, y, phi of C, the centre of the wheel axle."""
@@ -323,7 +385,7 @@ class BatchSim:
 
         pose: the robots' pose now (default self.pose).  Robots with an
         ir_latency read the pose of that long ago, linear between the poses
-        of the earlier calls (ir_sensor.PoseHistory, as SimRobot.sense).
+        of the earlier calls (ir_sensor.PoseHistory, as SimRobot.sense does).
         """
         pose = self.pose if pose is None else pose
         latency = max(p.ir_latency for _idx, p in self._ir_groups)
@@ -349,8 +411,11 @@ class BatchSim:
     # ------------------------------------------------------------------ physics
     def substep(self, i_ref: ArrayLike, dt: PerRobot) -> None:
         """All N robots by dt seconds (a float, or (N,) each robot's own) with current references i_ref, (2,)
-        or (N, 2) A: SimRobot.advance for each (rolling where the wheels hold and no wall is hit, else the
-        contact step)."""
+        or (N, 2) A: rolling where the wheels hold and no wall is hit, else the contact step.  Every robot's
+        step, N = 1 or many: one robot with the nominal physics takes it in Python floats (_substep_one)."""
+        if self._floats:
+            self._substep_one(i_ref, dt)
+            return
         if self._delay is not None:
             i_ref = self._delayed(i_ref, dt)
         if self._speed is not None:  # set-points to the loop, its volts to the bridge
@@ -372,7 +437,8 @@ class BatchSim:
             ok = drivetrain_effects.traction_ok(v0, v1, tau, dt, self._fx) & ~self.slipping
         idx, gaps, normals, order = self._walls_in_reach(q0, q1, ok, dt)
         if idx.size:
-            # the rolling step is kept unless it takes the rim into a wall (SimRobot.advance)
+            # the rolling step is kept unless it takes the rim into a wall (linearised gap: the distance
+            # to a segment is convex in C, so this never misses a contact)
             d = _sub(self._d, idx)
             dx = q1[idx, 0] - q0[idx, 0] - d * (np.cos(q1[idx, 2]) - np.cos(q0[idx, 2]))
             dy = q1[idx, 1] - q0[idx, 1] - d * (np.sin(q1[idx, 2]) - np.sin(q0[idx, 2]))
@@ -392,6 +458,84 @@ class BatchSim:
             self.gear_gap, self.rotor_speed = gap1, wm1
         self.q, self.v = q1, v1
         self.t = self.t + dt  # a new value: the actuator delay's history keeps the old one
+
+    def _substep_one(self, i_ref: ArrayLike, dt: PerRobot) -> None:
+        """substep for one robot with the nominal physics, in Python floats: for one robot numpy's cost per
+        call outweighs the arithmetic; the figures are the vectorised step's to rounding
+        (tests/test_batch.py::test_one_robot_steps_in_floats_as_in_a_batch).  drivetrain.drive_step, kept
+        unless the wheels slip (contact.traction_ok) or the rim would enter a wall, else _contact_one."""
+        p: RobotParams = self._p  # type: ignore[assignment]
+        h = dt if type(dt) is float else float(np.reshape(dt, -1)[0])
+        i_lr = i_ref if type(i_ref) is tuple else tuple(np.reshape(np.asarray(i_ref, dtype=float), 2).tolist())
+        if self._one_state is None:
+            q0, v0 = self._q.tolist()[0], self._v.tolist()[0]
+        else:
+            q0, v0, _current = self._one_state
+        slip = tuple(self.body[0].tolist()) if self.slipping[0] else None
+        rolled = False
+        if slip is None:
+            q1, v1, tau, current = drivetrain.drive_step(q0, v0, i_lr, h, p)
+            rolled = contact.traction_ok(v0, v1, tau, h, p)
+        walls = self._walls_near_one(q0, q1 if rolled else None, v0, slip, h)
+        if rolled and walls:
+            # the rolling step is kept unless it takes the rim into a wall (linearised gap, as substep's)
+            d = p.com_offset
+            dx = q1[0] - q0[0] - d * (math.cos(q1[2]) - math.cos(q0[2]))
+            dy = q1[1] - q0[1] - d * (math.sin(q1[2]) - math.sin(q0[2]))
+            rolled = all(gap + nx * dx + ny * dy >= 0.0 for gap, nx, ny, _i in walls)
+        if rolled:
+            self._one_state = (q1, v1, current)
+            self._one_forces = None  # a rolling step ends the contact forces' history
+        else:
+            self._contact_one(q0, v0, slip, i_lr, h, walls)
+        self.t = self.t + dt
+
+    def _contact_one(self, q0: Sequence[float], v0: Sequence[float], slip: tuple[float, ...] | None,
+                     i_lr: tuple[float, ...], h: float, walls: list[tuple[float, float, float, int]]) -> None:
+        """_substep_one's contact step (contact.slip_step), started from the last one's contact forces."""
+        p: RobotParams = self._p  # type: ignore[assignment]
+        tl, il, sl = motors.wheel_torque_slope(i_lr[0], v0[0], p)
+        tr, ir, sr = motors.wheel_torque_slope(i_lr[1], v0[1], p)
+        warm = None
+        if self._one_forces is not None:
+            wheel_f, wall_f = self._one_forces
+            warm = (wheel_f, [wall_f.get(w[3], [0.0, 0.0]) for w in walls])
+        q1, v1, body, pushed, (wheel_f, wall_list) = contact.slip_step(
+            q0, v0, slip, (tl, tr), (sl, sr), h, p, walls, warm)  # type: ignore[arg-type]
+        self._one_state = (q1, v1, (il, ir))
+        self._one_forces = (wheel_f, {w[3]: f for w, f in zip(walls, wall_list)})
+        self.slipping[0] = body is not None
+        if body is not None:
+            self.body[0] = body
+        if pushed and not self.in_contact[0]:
+            self.collisions[0] += 1
+            self.in_contact[0] = True
+
+    def _walls_near_one(self, q0: Sequence[float], q1: Sequence[float] | None, v0: Sequence[float],
+                        slip: tuple[float, ...] | None, h: float) -> list[tuple[float, float, float, int]]:
+        """The walls the step from q0 (to q1 when rolling) may touch, (gap, nx, ny, index) each.
+
+        Broad phase: no test while the smallest gap at the last test exceeds how far C may have
+        moved since (C = G - d e moves at most |dG| + d |dphi|) plus how far this step takes it."""
+        d: float = self._d  # type: ignore[assignment]
+        chk, gap_at_check = self._one_checked_at, self._one_gap
+        moved = math.hypot(q0[0] - chk[0], q0[1] - chk[1]) + d * abs(q0[2] - chk[2])
+        if q1 is not None:
+            travel = math.hypot(q1[0] - q0[0], q1[1] - q0[1]) + d * abs(q1[2] - q0[2])
+        else:
+            u, l, _om = slip if slip is not None else contact.body_velocity(v0, self._p)
+            travel = h * (abs(u) + abs(l))
+        within = travel + contact.REACH_MARGIN
+        if moved + within < gap_at_check:
+            if gap_at_check - moved > contact.CONTACT_HYSTERESIS and self.in_contact[0]:
+                self.in_contact[0] = False
+            return []
+        cx, cy = q0[0] - d * math.cos(q0[2]), q0[1] - d * math.sin(q0[2])
+        walls, gmin = contact.walls_in_reach(self.world, cx, cy, self._r, within)  # type: ignore[arg-type]
+        self._one_checked_at, self._one_gap = (q0[0], q0[1], q0[2]), gmin
+        if gmin > contact.CONTACT_HYSTERESIS:  # a little hysteresis: grazing is one contact, not many
+            self.in_contact[0] = False
+        return walls
 
     def _gear_step(self, q0: np.ndarray, v0: np.ndarray, i_ref: ArrayLike, dt: PerRobot
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
@@ -428,7 +572,7 @@ class BatchSim:
             g[found] = gaps[pos[found]]
             nrm[found] = normals[pos[found]]
             walls[found] = order[pos[found]]
-        # warm start from the last step's contact forces, where there was one (SimRobot.advance)
+        # warm start from the last step's contact forces, where there was one
         warm = self._warm[s]
         wheel_f = np.where(warm[None, None], self._wheel_force[:, :, s], 0.0)
         wall_f = self._wall_force[:, s[:, None], walls].transpose(0, 2, 1)  # (2, W, K)
@@ -522,9 +666,8 @@ class BatchSim:
 
     def _walls_in_reach(self, q0: np.ndarray, q1: np.ndarray, ok: np.ndarray, dt: PerRobot
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(robots tested, their gaps (K, W), normals (K, W, 2), wall indices (K, W)):
-        SimRobot._walls_in_reach for every robot
-        that may reach a wall in this step (C moves at most |dG| + d |dphi|)."""
+        """(robots tested, their gaps (K, W), normals (K, W, 2), wall indices (K, W)) of the robots that may
+        reach a wall in this step (C moves at most |dG| + d |dphi|): _walls_near_one for each."""
         none = np.empty(0, dtype=np.int64)
         if not self._walls:
             return none, np.empty((0, 0)), np.empty((0, 0, 2)), np.empty((0, 0), dtype=np.int64)

@@ -134,7 +134,7 @@ COMPONENTS = {
     "(a) replay": [
         ("IR sensors + encoders (SimRobot.sense)", "host_sim/robot/sim_robot.py", "sense"),
         ("8 physics steps (SimRobot.advance)", "host_sim/robot/sim_robot.py", "advance"),
-        ("  of which the wall test (_walls_in_reach)", "host_sim/robot/sim_robot.py", "_walls_in_reach"),
+        ("  of which the wall test (BatchSim._walls_near_one)", "host_sim/robot/batch.py", "_walls_near_one"),
         ("  of which motors + dynamics (drivetrain.drive_step)", "host_sim/physics/drivetrain.py", "drive_step"),
         ("  of which the grip test (contact.traction_ok)", "host_sim/physics/contact.py", "traction_ok"),
         ("  of which contact steps (contact.slip_step)", "host_sim/physics/contact.py", "slip_step"),
