@@ -170,12 +170,15 @@ def test_ctrl_c_is_one_line(tmp_path: Path) -> None:
 
     out = tmp_path / "o"
     sweep_cmd = [sys.executable, "-m", "tools.cli.main", "sweep", "--rules", "first", "--world", "maze", "--seeds",
-                 "4", "--duration", "3600", "--workers", "2", "--out", str(out)]
+                 "8", "--duration", "36000", "--workers", "2", "--out", str(out)]
     proc = subprocess.Popen(sweep_cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)
     try:
-        time.sleep(4)  # into the runs (a Ctrl-C while the workers start is ignored, so repeat it until it lands)
-        deadline = time.monotonic() + 120
+        # into the runs (a Ctrl-C while the workers start is ignored, so repeat it until it lands); the runs last
+        # far longer than the ceiling (8 x 10 sim h: minutes idle), so a slow start on a loaded machine cannot
+        # let them finish before a Ctrl-C lands
+        time.sleep(4)
+        deadline = time.monotonic() + 300
         while proc.poll() is None and time.monotonic() < deadline:
             os.killpg(proc.pid, signal.SIGINT)
             try:
