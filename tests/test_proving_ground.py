@@ -298,7 +298,7 @@ def test_ir_latency_shows_the_pose_of_earlier():
 
 
 def test_floor_tilt_turns_the_robot_downhill():
-    tilted = effects.apply(EXACT, "floor_tilt", 0.015).replace(floor_tilt_direction=-math.pi / 2)  # downhill: -y
+    tilted = effects.apply(EXACT, "floor_slope", 0.015).replace(floor_tilt_direction=-math.pi / 2)  # downhill: -y
     run, nominal = drive(tilted, [(0.02, 0.02)] * 40), drive(EXACT, [(0.02, 0.02)] * 40)
     assert run.pose[-1, 2] < nominal.pose[-1, 2] - 0.02  # G ahead of the axle swings the nose downhill
     assert run.pose[-1, 1] < nominal.pose[-1, 1] - 0.002

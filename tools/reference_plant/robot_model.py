@@ -145,9 +145,9 @@ def nominal_spec() -> PlantSpec:
     own): a real driver's current loop, Stribeck friction, gear ripple, compliant tyres, a rolling caster,
     uneven encoder edges, a quantised battery reading and a jittering period with lost rows."""
     return datasheet_spec().replace(
-        inductance=(1.0e-3, 1.0e-3), current_loop_hz=300.0, stiction_ratio=(1.3, 1.3), stribeck_speed=1.0,
+        inductance=(1.0e-3, 1.0e-3), current_loop_hz=300.0, stiction_ratio=(1.2, 1.2), stribeck_speed=1.0,
         ripple=(0.02, 0.02), ripple_teeth=(40.0, 40.0), slip_stiffness=25.0, lateral_stiffness=2500.0,
-        caster_rolling=0.004, vbat_lsb=0.0024, period_jitter=0.002, late_share=0.01, drop_share=0.005)
+        caster_rolling=0.0025, vbat_lsb=0.0024, period_jitter=0.002, late_share=0.01, drop_share=0.005)
 
 
 def _f(*v: float) -> str:
@@ -178,7 +178,8 @@ def _tyre_xml(spec: PlantSpec, side: str, k: int, own: float) -> str:
 def _wheel_xml(spec: PlantSpec, side: str, k: int) -> str:
     """One wheel (and its separate rotor when the gear has play), as children of the chassis."""
     y = spec.half_axle if side == "l" else -spec.half_axle
-    own = spec.wheel_inertia - spec.rotor_inertia  # the wheel's own spin inertia
+    # the wheel's own spin inertia, at most twice its diametral one (a rigid body's triangle inequality)
+    own = min(spec.wheel_inertia - spec.rotor_inertia, 1.9999 * spec.wheel_inertia_diam)
     # Axle friction: MuJoCo's dry friction (a stiff constraint: no creep below
     # breakaway) and viscous damping, on the joint the motor drives.  Its level is the
     # breakaway torque; Plant lowers it to the Stribeck curve in motion.
