@@ -233,9 +233,11 @@ class Plant:
             if drop > 0:
                 d.qfrc_applied[v] += drop * (1.0 - math.exp(-(w / s.stribeck_speed) ** 2)) * math.copysign(1.0, w)
             if self._tread_v:
-                # slip = F / C: the tread lags the hub by d_w = F r / c, so c = r C / |w| (implicit damping)
-                c = s.wheel_radius[k] * s.slip_stiffness / max(abs(w), SLIP_MIN_SPEED)
-                m.dof_damping[self._tread_v[k]] = c
+                # slip = F / C of the ground's speed (the tread's, which rolls): the tread turns against the
+                # hub at F r / c, so c = r C / |w_tread| (MuJoCo integrates the damping implicitly)
+                rolling = w + float(d.qvel[self._tread_v[k]])
+                m.dof_damping[self._tread_v[k]] = s.wheel_radius[k] * s.slip_stiffness / max(abs(rolling),
+                                                                                             SLIP_MIN_SPEED)
         if s.caster_rolling > 0:
             self._caster_drag()
         if s.cable_drag > 0:
