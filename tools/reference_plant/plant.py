@@ -21,6 +21,7 @@ N_SENSORS = 8
 RAY_HEIGHT = 0.03  # m above the floor: the IR surfaces' mid-height
 SETTLE_S = 0.3  # s the robot rests on the floor before t = 0
 LOOP_STEPS = 5  # the drivers' current loop runs at 5 kHz: 5 steps per MuJoCo step
+ROLLING_SMOOTH = 0.2  # per step: the tread speed the slip damper is set from follows over ~5 ms
 CASTER_SLIDE = 0.005  # m/s over which the caster's rolling drag builds up (no chatter at rest)
 CABLE_HEIGHT = 0.03  # m above the floor where the tether pulls on the body's rear
 
@@ -54,10 +55,12 @@ class Plant:
         self._drive_q = [m.joint(drive_joint(spec, k)).qposadr[0] for k in range(2)]
         self._drive_v = [m.joint(drive_joint(spec, k)).dofadr[0] for k in range(2)]
         self._wheel_q = [m.joint(f"wheel_{s}").qposadr[0] for s in "lr"]
+        self._wheel_v = [m.joint(f"wheel_{s}").dofadr[0] for s in "lr"]
         self._tread_v = [m.joint(f"tread_{s}").dofadr[0] for s in "lr"] if spec.slip_stiffness > 0 else []
         self._caster = m.geom("caster").id
         self._loop = [0.0, 0.0]  # the current loops' integrators (V)
         self._coil = [0.0, 0.0]  # the current in each winding now (A)
+        self._rolling = [0.0, 0.0]  # each tread's rolling speed (rad/s), smoothed over a few steps
         self._velocity = np.zeros(6)
         self._chassis = m.body("chassis").id
         self._ray_mask = ir_group_mask()
@@ -235,8 +238,9 @@ class Plant:
             if self._tread_v:
                 # slip = F / C of the ground's speed (the tread's, which rolls): the tread turns against the
                 # hub at F r / c, so c = r C / |w_tread| (MuJoCo integrates the damping implicitly)
-                rolling = w + float(d.qvel[self._tread_v[k]])
-                m.dof_damping[self._tread_v[k]] = s.wheel_radius[k] * s.slip_stiffness / max(abs(rolling),
+                rolling = float(d.qvel[self._wheel_v[k]] + d.qvel[self._tread_v[k]])  # the hub's, not a rotor's
+                self._rolling[k] += ROLLING_SMOOTH * (rolling - self._rolling[k])  # no step-to-step chatter
+                m.dof_damping[self._tread_v[k]] = s.wheel_radius[k] * s.slip_stiffness / max(abs(self._rolling[k]),
                                                                                              SLIP_MIN_SPEED)
         if s.caster_rolling > 0:
             self._caster_drag()
