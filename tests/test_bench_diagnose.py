@@ -253,7 +253,7 @@ def test_a_limit_shown_only_against_a_wall_is_not_excited(suite: dict[str, Any])
     rec.pose[:, :2] = (start["x"], start["y"])  # parked clear of the walls
     rec.cmd[:] = 0.01
     n = len(rec)
-    burst = slice(n // 2, n // 2 + n // 10)  # 10 % of the periods ask more than the limit
+    burst = slice(n // 2, n // 2 + round(n / 10))  # 10 % of the periods (a drawn number of rows) ask more
     rec.cmd[burst] = 0.2
     limit = concealed("current_limit", "current_limit", 0.1, 0.5)
     assert scoring.not_excited(limit, PLANT, rec) is None
@@ -332,7 +332,7 @@ def test_scoreboard_structure(suite: dict[str, Any], capsys: pytest.CaptureFixtu
         if "fit_before" in r:  # SINDy and diagnosis judge the same windows: the same nominal fit
             assert min(s["fit_before"].values()) == pytest.approx(r["fit_before"], abs=0.01)
     names = [t["name"] for t in report["targets"]]
-    assert names == ["named", "params", "wheel_fit", "false_alarms", "out_of_library", "seconds"]
+    assert names == ["named", "params", "wheel_fit", "false_alarms", "out_of_library", "coverage", "seconds"]
     bench_diagnose.print_report(report)
     out = capsys.readouterr().out
     assert "command:     twinbot bench diagnose --cases 3 --seed 18 --duration 30 --jobs 2 --workers 2" in out
@@ -392,15 +392,17 @@ def test_a_kept_suite_is_scored_again_without_diagnosing(suite: dict[str, Any], 
 
 
 def test_the_perfect_twin_is_the_plants_own_encoders_on_the_judged_windows(suite: dict[str, Any]) -> None:
-    """The answer keys keep the plant's unrounded encoders (their floor is the recording's counts), and the
-    scorer judges them as a twin's prediction on the windows the diagnosis judged: no twin does better."""
+    """The answer keys keep the plant's unrounded encoders (within a count of the recording's counts: the
+    plant's encoder places its edges unevenly), and the scorer judges them as a twin's prediction on the
+    windows the diagnosis judged: no twin does better."""
     for r in suite["report"]["cases"]:
         if "fit_before" not in r:
             continue
         answer = scoring.load_key(suite["out"] / "answer_keys" / f"{r['case']}.answer.json")
         rec = load_recording(suite["out"] / "recordings" / f"{r['case']}.csv")
         exact = answer["encoders"]
-        assert exact.shape == rec.enc.shape and (np.floor(exact) == rec.enc).all()
+        assert exact.shape == rec.enc.shape and (np.abs(np.floor(exact) - rec.enc) <= 1).all()
+        assert (np.floor(exact) == rec.enc).mean() > 0.5
         assert not (exact == rec.enc).all()  # not the counts themselves
         judged = json.loads((suite["out"] / "diagnoses" / f"{r['case']}.json").read_text())["diagnosis"]["fit"]["judged"]
         assert judged and all(t1 > t0 for t0, t1 in judged)

@@ -532,7 +532,8 @@ def run(args: argparse.Namespace) -> int:
         except (OSError, ValueError) as exc:  # a missing or broken key or recording: the loaders' one-line errors
             print(f"twinbot bench diagnose: error: {exc}", file=sys.stderr)
             return 2
-        args.duration = round(statistics.median(r["duration"] for r in results.values()), 3)
+        # to 0.1 s: a recording's span jitters with the firmware's period (docs/proving-ground.md, "Timing")
+        args.duration = round(statistics.median(r["duration"] for r in results.values()), 1)
         command = f"twinbot bench diagnose --rescore {args.rescore} (the timings are the kept run's)"
     else:
         from tools.reference_plant.cases import first_seed
