@@ -335,7 +335,8 @@ def test_scoreboard_structure(suite: dict[str, Any], capsys: pytest.CaptureFixtu
     assert names == ["named", "params", "wheel_fit", "false_alarms", "out_of_library", "coverage", "seconds"]
     bench_diagnose.print_report(report)
     out = capsys.readouterr().out
-    assert "command:     twinbot bench diagnose --cases 3 --seed 18 --duration 30 --jobs 2 --workers 2" in out
+    assert (f"command:     twinbot bench diagnose --cases 3 --seed {SEED} --split tuning --duration 30 --jobs 2 "
+            "--workers 2") in out
     assert report["workers"] == 2 and "2 worker processes, 2 per diagnosis" in out
     header = next(ln for ln in out.splitlines() if ln.startswith("case "))
     assert [c.strip() for c in header.split("|")] == list(bench_diagnose.HEADER)
