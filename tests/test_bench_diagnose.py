@@ -7,6 +7,7 @@ structure, not its figures (docs/proving-ground.md, "The blind suite").
 from __future__ import annotations
 
 import json
+import math
 import shutil
 from pathlib import Path
 from typing import Any
@@ -393,17 +394,22 @@ def test_a_kept_suite_is_scored_again_without_diagnosing(suite: dict[str, Any], 
 
 
 def test_the_perfect_twin_is_the_plants_own_encoders_on_the_judged_windows(suite: dict[str, Any]) -> None:
-    """The answer keys keep the plant's unrounded encoders (within a count of the recording's counts: the
-    plant's encoder places its edges unevenly), and the scorer judges them as a twin's prediction on the
-    windows the diagnosis judged: no twin does better."""
+    """The answer keys keep the plant's unrounded encoders (the recording's counts are the edges passed at
+    them, each edge where the plant's uneven encoder places it), and the scorer judges them as a twin's
+    prediction on the windows the diagnosis judged: no twin does better."""
+    from tools.reference_plant.plant import edges_passed
+
     for r in suite["report"]["cases"]:
         if "fit_before" not in r:
             continue
         answer = scoring.load_key(suite["out"] / "answer_keys" / f"{r['case']}.answer.json")
         rec = load_recording(suite["out"] / "recordings" / f"{r['case']}.csv")
         exact = answer["encoders"]
-        assert exact.shape == rec.enc.shape and (np.abs(np.floor(exact) - rec.enc) <= 1).all()
-        assert (np.floor(exact) == rec.enc).mean() > 0.5
+        edges, drift = answer["plant"]["encoder_edges"], answer["plant"]["encoder_drift"]
+        counts = [[edges_passed(x, tuple(edges[k])) + math.floor(drift[k] * t) for k, x in enumerate(row)]
+                  for row, t in zip(exact, rec.t)]
+        assert exact.shape == rec.enc.shape and (np.array(counts) == rec.enc).all()
+        assert (np.floor(exact) == rec.enc).mean() > 0.5  # the edges sit near their even places
         assert not (exact == rec.enc).all()  # not the counts themselves
         judged = json.loads((suite["out"] / "diagnoses" / f"{r['case']}.json").read_text())["diagnosis"]["fit"]["judged"]
         assert judged and all(t1 > t0 for t0, t1 in judged)

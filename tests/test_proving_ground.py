@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,7 +21,7 @@ from host_sim.physics.params import DEFAULT
 from host_sim.recordings.recording import load_recording
 from host_sim.controller.sil import SilController
 from host_sim.physics.world import builtin_world
-from tools.reference_plant import effects, excitation, ir_law
+from tools.reference_plant import effects, excitation, ir_law, ir_paper
 from tools.reference_plant.agreement import compare
 from tools.reference_plant.cases import make_case
 from tools.reference_plant.plant import Plant
@@ -340,6 +341,33 @@ def test_make_case_writes_a_recording_and_a_separate_answer_key(tmp_path):
     assert rec.meta["robot"] == DEFAULT.to_json() and "effects" not in rec.meta
     assert make_case(7, tmp_path / "again", duration=3.0)[0].read_text() == rec_path.read_text()
 
+
+
+def test_a_case_on_the_datasheet_robot_is_the_same_case_without_the_draw(tmp_path):
+    """robot="datasheet" (for pipeline tests) records the seed's effect, world, start and drive on the datasheet
+    robot: none of the physics the twin lacks, and the paper's IR law with the datasheet's constants (the
+    twin's response, written apart); the default is the case's own drawn robot, with the plant's own curve."""
+    from host_sim.sensors.ir_sensor import response
+
+    drawn = json.loads(make_case(8, tmp_path / "drawn", duration=0.2, n_effects=2)[1].read_text())
+    sheet = json.loads(make_case(8, tmp_path / "sheet", duration=0.2, n_effects=2, robot="datasheet")[1].read_text())
+    assert (drawn["robot"], sheet["robot"]) == ("drawn", "datasheet")
+    assert all(drawn[k] == sheet[k] for k in ("world", "start", "excitation", "split"))
+    assert [e["name"] for e in sheet["effects"]] == [e["name"] for e in drawn["effects"]]
+    for e in sheet["effects"]:  # about the datasheet's own value: the robot's value without it is the datasheet's
+        (param,) = [v for v in e["params"].values() if "drawn" in v]
+        assert param["drawn"] == pytest.approx(param["absent"])
+    base = dataclasses.asdict(datasheet_spec(paper_ir=True))
+    touched = {effects.EFFECTS[e["name"]].param for e in sheet["effects"]}
+    changed = {k for k, v in base.items() if json.loads(json.dumps(v)) != sheet["plant"][k]}
+    assert changed <= touched | {"body_inertia"}  # the effects alone (a mass carries its inertia)
+    assert drawn["plant"]["inductance"] != [0.0, 0.0] and sheet["plant"]["inductance"] == [0.0, 0.0]
+    assert sheet["plant"]["ir"]["law"] == "paper" and "law" not in drawn["plant"]["ir"]
+    paper = datasheet_spec(paper_ir=True).ir
+    for x, angle, pct in ((0.05, 0.0, 60), (0.15, 0.3, 60), (0.012, 0.6, 100), (0.3, 0.2, 40)):
+        assert ir_paper.reflected(x, angle, pct, paper["gain"], paper) == pytest.approx(float(response(x, angle, pct)))
+    with pytest.raises(ValueError, match="not one of drawn, datasheet"):
+        make_case(8, tmp_path / "bad", duration=0.2, robot="nominal")
 
 
 def test_a_case_may_conceal_two_or_three_effects(tmp_path):

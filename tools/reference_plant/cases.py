@@ -20,7 +20,7 @@ from host_sim.physics.world import BUILTIN_NAMES, World, builtin_world
 from tools.reference_plant import effects
 from tools.reference_plant.recorder import record
 from tools.reference_plant.robot_draw import draw_robot
-from tools.reference_plant.robot_model import PlantSpec, nominal_spec
+from tools.reference_plant.robot_model import PlantSpec, datasheet_spec, nominal_spec
 
 CONTROL_SHARE = 0.15  # fraction of cases with no effect at all
 START_MARGIN = 0.15  # m from C to any wall at the start
@@ -29,6 +29,10 @@ TUNING_SEEDS = range(0, 10_000)
 FINAL_FIRST_SEED = 100_000
 HELD_BACK = ("cable_drag", "encoder_drift", "weakening_motor")  # kinds drawn on the final split only
 SPLITS = ("tuning", "final")
+# "drawn": the case's own robot (robot_draw.py), what `bench diagnose` scores.  "datasheet": the datasheet robot
+# with none of the physics the twin lacks and the paper's IR law, for tests of the diagnosis's pipeline rather
+# than of its score (tests/test_diagnosis.py::test_a_blind_pair_is_named_in_full_on_the_reference_plant).
+ROBOTS = ("drawn", "datasheet")
 
 
 def split_of(seed: int) -> str:
@@ -161,12 +165,19 @@ def _set_in_run(spec: PlantSpec, concealed: list[dict[str, object]], start: tupl
     return spec
 
 
+def case_robot(seed: int, robot: str = "drawn") -> PlantSpec:
+    """The robot case `seed` is recorded on: its own drawn one, or the datasheet's (ROBOTS)."""
+    if robot not in ROBOTS:
+        raise ValueError(f"robot {robot!r} is not one of {', '.join(ROBOTS)}")
+    return draw_robot(seed) if robot == "drawn" else datasheet_spec(paper_ir=True)
+
+
 def make_case(seed: int, out_dir: str | Path, duration: float = 90.0,
-              key_dir: str | Path | None = None, n_effects: int = 1) -> tuple[Path, Path]:
-    """Record one blind case (an in-library one concealing `n_effects` effects); returns (recording path,
-    answer key path)."""
+              key_dir: str | Path | None = None, n_effects: int = 1, robot: str = "drawn") -> tuple[Path, Path]:
+    """Record one blind case (an in-library one concealing `n_effects` effects) on `robot` (ROBOTS); returns
+    (recording path, answer key path).  The effect, world, start and drive do not depend on `robot`."""
     rng = case_rng(seed)
-    spec, concealed = draw_more(*draw_effect(rng, draw_robot(seed), split_of(seed)), seed, n_effects)
+    spec, concealed = draw_more(*draw_effect(rng, case_robot(seed, robot), split_of(seed)), seed, n_effects)
     world = builtin_world(BUILTIN_NAMES[int(rng.integers(len(BUILTIN_NAMES)))])
     start = _start(world, rng)
     controller, how = _pick_drive(rng)
@@ -179,9 +190,9 @@ def make_case(seed: int, out_dir: str | Path, duration: float = 90.0,
     rec_path = out_dir / f"{name}.csv"
     truth = record(rec_path, spec, world, controller, duration, seed=seed, pose=start)
     np.savez_compressed(truth_file(key_dir, name), encoders=np.array(truth.encoders))
-    key = {"case": name, "seed": seed, "split": split_of(seed), "recording": rec_path.name, "world": world.name,
-           "start": start, "excitation": how, "duration": duration, "verdict_expected": _expected(concealed),
-           "effects": concealed, "plant": _jsonable(dataclasses.asdict(spec))}
+    key = {"case": name, "seed": seed, "split": split_of(seed), "robot": robot, "recording": rec_path.name,
+           "world": world.name, "start": start, "excitation": how, "duration": duration,
+           "verdict_expected": _expected(concealed), "effects": concealed, "plant": _jsonable(dataclasses.asdict(spec))}
     key_path = key_dir / f"{name}.answer.json"
     key_path.write_text(json.dumps(key, indent=1) + "\n")
     return rec_path, key_path

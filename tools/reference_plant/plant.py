@@ -14,7 +14,7 @@ import numpy as np
 
 from host_sim.controller.hardware_io import TICK_MASK, Actuate, Sense
 from host_sim.physics.world import World
-from tools.reference_plant import ir_law
+from tools.reference_plant import ir_law, ir_paper
 from tools.reference_plant.robot_model import SLIP_MIN_SPEED, PlantSpec, build_model, drive_joint, ir_group_mask
 
 N_SENSORS = 8
@@ -26,7 +26,7 @@ CASTER_SLIDE = 0.005  # m/s over which the caster's rolling drag builds up (no c
 CABLE_HEIGHT = 0.03  # m above the floor where the tether pulls on the body's rear
 
 
-def _count(x: float, edges: tuple[float, ...]) -> int:
+def edges_passed(x: float, edges: tuple[float, ...]) -> int:
     """Edges passed at position x (ticks): edge j sits at j + edges[j mod len(edges)] (all at j if none)."""
     j = math.floor(x)
     if not edges:
@@ -63,6 +63,8 @@ class Plant:
         self._rolling = [0.0, 0.0]  # each tread's rolling speed (rad/s), smoothed over a few steps
         self._velocity = np.zeros(6)
         self._chassis = m.body("chassis").id
+        # the IR ring's law: the plant's own curve, or the paper's for the datasheet robot (ir_paper.py)
+        self._optics = ir_paper if spec.ir.get("law") == "paper" else ir_law
         self._ray_mask = ir_group_mask()
         self._geomid = np.zeros(1, dtype=np.int32)
         self._normal = np.zeros(3)
@@ -130,7 +132,7 @@ class Plant:
     def encoder_ticks(self) -> tuple[int, int]:
         """The counts: edges passed (each edge where the plant's own encoder has it), plus any drift."""
         s = self.spec
-        return tuple(_count(x, s.encoder_edges[k]) + math.floor(s.encoder_drift[k] * self.t)
+        return tuple(edges_passed(x, s.encoder_edges[k]) + math.floor(s.encoder_drift[k] * self.t)
                      for k, x in enumerate(self.encoder_position()))  # type: ignore[return-value]
 
     # ------------------------------------------------------------------ I/O
@@ -319,7 +321,7 @@ class Plant:
             dist, cos = self._ray(behind, direction)
             gap = max(0.0, dist - r)  # from the mount, along the turned axis
             angle = math.acos(min(1.0, cos))
-            light = ir_law.reflected(gap, angle, self.emitter_pct, float(c["gain"]) * s.ir_gain_scale[i], c)
+            light = self._optics.reflected(gap, angle, self.emitter_pct, float(c["gain"]) * s.ir_gain_scale[i], c)
             if self.emitter_pct > 0:
                 light += s.ir_offset[i]  # the emitter pulse couples into the receiver
             v_off = amb_off[i] + noise[i]
@@ -350,5 +352,5 @@ class Plant:
                 b = mount + self.spec.ir_misalignment[i]
                 axis = (math.cos(b), math.sin(b))
                 at = (x + r * math.cos(mount), y + r * math.sin(mount))
-                levels[i] += ir_law.lamp_light(level, at, axis, (lamp.x, lamp.y))
+                levels[i] += self._optics.lamp_light(level, at, axis, (lamp.x, lamp.y))
         return levels

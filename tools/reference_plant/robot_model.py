@@ -16,7 +16,7 @@ import numpy as np
 
 from host_sim.physics.params import DEFAULT
 from host_sim.physics.world import World
-from tools.reference_plant import ir_law
+from tools.reference_plant import ir_law, ir_paper
 
 WALL_RADIUS = 0.01  # m, contact capsule around each wall line
 WALL_HEIGHT = 0.025  # m above the floor: the contact capsules' axis and the IR rays
@@ -115,9 +115,11 @@ class PlantSpec:
         return dataclasses.replace(self, **changes)  # type: ignore[arg-type]
 
 
-def datasheet_spec() -> PlantSpec:
+def datasheet_spec(paper_ir: bool = False) -> PlantSpec:
     """The robot the twin describes (host_sim.physics.params.DEFAULT, as numbers), in the plant's terms, with
-    none of the physics the twin lacks: the ideal driver, Coulomb friction, rigid tyres, even encoder edges."""
+    none of the physics the twin lacks: the ideal driver, Coulomb friction, rigid tyres, even encoder edges.
+    Its IR ring reads the plant's own curve, or with paper_ir the paper's law and the datasheet's constants
+    (ir_paper.py): then nothing but a concealed effect departs from the datasheet."""
     p = DEFAULT
     two = lambda v: (float(v), float(v))  # noqa: E731 - per-wheel pair
     # A rigid wheel's spin inertia is at most twice its diametral one (the
@@ -135,7 +137,8 @@ def datasheet_spec() -> PlantSpec:
         battery_resistance=0.0, quiescent_current=0.08, vbat_noise=0.005, floor_friction=1.0,
         torsional_friction=0.0, caster_friction=0.0, wall_friction=0.3, floor_tilt=0.0, floor_tilt_direction=0.0,
         ticks_per_rev=two(p.ticks_per_rev),
-        ir={**ir_law.NOMINAL, "ambient": p.ir_ambient, "noise": p.ir_noise, "on_delay": p.ir_on_delay,
+        ir=ir_paper.datasheet_ir() if paper_ir else {
+            **ir_law.NOMINAL, "ambient": p.ir_ambient, "noise": p.ir_noise, "on_delay": p.ir_on_delay,
             "adc_max": float((1 << int(p.adc_bits)) - 1)},
     )
 
