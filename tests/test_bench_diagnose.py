@@ -516,3 +516,13 @@ def test_the_margins_bench_says_which_recordings_it_could_not_read_or_label(suit
     assert rows["case_9999"]["unlabelled"] and "margins" in rows["case_9999"]
     summary = json.loads(out.read_text())["summary"]
     assert sum(s["controls"] for s in summary) == 5 * sum(1 for r in rows.values() if r["control"] and "margins" in r)
+
+
+def test_the_board_controls_target_needs_every_recording_a_match() -> None:
+    """Idle and oversubscribed both count: one board recording that is not a match misses the target."""
+    from tools.bench.diagnose import board_target
+
+    rows = [{"busy": 0, "verdict": "match", "late_share": 0.1}, {"busy": 6, "verdict": "match", "late_share": 0.7}]
+    assert board_target(rows)["met"] is True and "2/2" in board_target(rows)["text"]
+    rows[1]["verdict"] = "unexplained"
+    assert board_target(rows)["met"] is False and "6 busy: unexplained, 70% rows late" in board_target(rows)["text"]

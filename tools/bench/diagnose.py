@@ -93,6 +93,9 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
                    help="score the diagnoses a run with --out DIR kept, again (nothing generated or diagnosed)")
     p.add_argument("--json", metavar="FILE", type=output_file, help="write every figure here")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--board-controls", action="store_true",
+                   help="also record the firmware on the virtual board over the serial link, idle and with three "
+                        "busy processes per core, and diagnose each: both must be a match (tools/bench/board_control.py)")
     p.set_defaults(func=run)
 
 
@@ -417,6 +420,24 @@ def targets(t: dict[str, Any]) -> list[dict[str, Any]]:
     ]
 
 
+def board_controls(out: Path | None, duration: float) -> list[dict[str, Any]]:
+    """The virtual board recorded idle and oversubscribed, each diagnosed (tools/bench/board_control.py)."""
+    from tools.bench.board_control import format_rows, run_board_controls
+
+    with tempfile.TemporaryDirectory(prefix="twinbot-board-control-") as tmp:
+        rows = run_board_controls((out or Path(tmp)) / "board_controls", duration)
+    print("\n".join(format_rows(rows)))
+    return rows
+
+
+def board_target(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    ok = sum(r["verdict"] == "match" for r in rows)
+    return {"name": "board_controls", "met": ok == len(rows),
+            "text": f"the virtual board over the serial link, idle and with the cores oversubscribed, a match: "
+                    f"{ok}/{len(rows)} (" + ", ".join(f"{r['busy']} busy: {r['verdict']}, {r['late_share']:.0%} "
+                                                       f"rows late" for r in rows) + ")"}
+
+
 def _pct(x: float | None) -> str:
     return "-" if x is None else f"{100 * x:.0f} %"
 
@@ -555,6 +576,11 @@ def run(args: argparse.Namespace) -> int:
         "machine": {**_machine(blas), "pysindy": pysindy.__version__}, "cases": rows}
     report["totals"] = totals(rows)
     report["targets"] = targets(report["totals"])
+    if args.board_controls:
+        report["board_controls"] = board_controls(Path(args.out) if args.out else None, args.duration)
+        report["targets"].append(board_target(report["board_controls"]))
+        command += " --board-controls"
+        report["command"] = command
     report["elapsed_s"] = time.monotonic() - t_start
     print_report(report)
     if args.json:
