@@ -25,6 +25,8 @@ const BKPT = 0xbe00; // Thumb BKPT #imm8
 // host can send nothing before: by then MicroPython's main.py has run its first lines (a 0x03 byte that
 // arrived earlier would be a KeyboardInterrupt under it).
 const HOST_PORT_DELAY_NS = 500e6;
+const INBOUND_PAUSE = 1 << 16;
+const INBOUND_RESUME = 1 << 14;
 const FLASH_CALLS = { RE: 0xe0, RP: 0xe1 }; // the bootrom's flash_range_erase, flash_range_program
 
 export function parseArgs(argv) {
@@ -147,6 +149,8 @@ function main() {
     const old = board;
     old.sim.stop();
     flash = old.mcu.flash.slice();
+    inbound.length = 0;
+    inboundBytes = 0;
     start(reason);
   }
 
@@ -154,10 +158,29 @@ function main() {
     if (opts.flash && board) fs.writeFileSync(opts.flash, board.mcu.flash);
   }
 
-  // Bytes sent while the board's port is not up are lost, as they are to a host whose port has gone.
+  // The host's bytes wait here while the CDC's 512-byte FIFO is full (rp2040js drops what overflows it);
+  // stdin pauses while many wait.  Bytes sent while the board's port is not up are lost, as they are to a
+  // host whose port has gone.
+  const inbound = [];
+  let inboundBytes = 0;
+  function pump() {
+    while (inbound.length && board && !board.cdc.txFIFO.full) {
+      const chunk = inbound[0];
+      let used = 0;
+      while (used < chunk.length && !board.cdc.txFIFO.full) board.cdc.sendSerialByte(chunk[used++]);
+      inboundBytes -= used;
+      if (used === chunk.length) inbound.shift();
+      else inbound[0] = chunk.subarray(used);
+    }
+    if (inboundBytes < INBOUND_RESUME) process.stdin.resume();
+  }
+  setInterval(pump, 2);
   process.stdin.on("data", (chunk) => {
     if (!board || board.sim.clock.nanos < board.portAt) return;
-    for (const byte of chunk) board.cdc.sendSerialByte(byte);
+    inbound.push(chunk);
+    inboundBytes += chunk.length;
+    if (inboundBytes > INBOUND_PAUSE) process.stdin.pause();
+    pump();
   });
   process.stdin.on("end", () => {
     board.sim.stop();
