@@ -127,7 +127,7 @@ def test_flash_vectors_cycles_and_watchdog_on_the_rp2_build(tmp_path: Path) -> N
     from tools.bench.firmware_rp2040 import measure
 
     f = measure(*image_files(), tmp_path, 50)
-    assert f["flash"]["hello"] is not None, f["flash"]
+    assert f["flash"]["hello"], f["flash"]
     assert f["vectors"]["free"].startswith("ok") and f["vectors"]["locked"].startswith("ok"), f["vectors"]
     assert f["cycle"]["alloc_bytes_per_cycle"] == 0 and f["cycle"]["heap_locked_cycles_ok"]
     assert f["cycle"]["heap_free"] >= 100 * 1024 and f["cycle"]["max_us"] < 40_000

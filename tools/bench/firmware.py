@@ -41,6 +41,14 @@ libraries (tools/bench/fuzzy.py), and the cycle time for information.
 The unix port is 64-bit: its objects and GC blocks are twice the size of
 an RP2040's, so its heap figures are upper bounds for the robot; the
 32-bit port's are the ones the <= 32 KB target is held to.
+
+With --rp2040 (docs/rp2040.md), on MicroPython's rp2 build (--image, a .uf2
+the user provides) in an emulated RP2040 instead: `twinbot flash` on a
+blank board and its HELLO; the first 25 golden vectors of each kind, free
+and under heap_lock; --cycles control cycles on the test HAL timed by the
+board's own ticks_us (emulated time at 125 MHz), allocation and heap_lock
+over up to 500 of them, the heap free; a hung firmware reset by
+machine.WDT and its HELLO after.
 """
 
 MP_SCRIPT = REPO_ROOT / "tools" / "bench" / "mp" / "mp_firmware.py"
