@@ -25,6 +25,8 @@ const BKPT = 0xbe00; // Thumb BKPT #imm8
 // host can send nothing before: by then MicroPython's main.py has run its first lines (a 0x03 byte that
 // arrived earlier would be a KeyboardInterrupt under it).
 const HOST_PORT_DELAY_NS = 500e6;
+const CYCLE_NS = 1e9 / 125e6; // the emulator's clock: 125 MHz, as rp2040js's own run loop counts
+const BATCH = 100_000; // instructions between looks at the host's bytes: a REPL round trip waits for one
 const INBOUND_PAUSE = 1 << 16;
 const INBOUND_RESUME = 1 << 14;
 const FLASH_CALLS = { RE: 0xe0, RP: 0xe1 }; // the bootrom's flash_range_erase, flash_range_program
@@ -125,10 +127,10 @@ function main() {
     if (flash) mcu.flash.set(flash.subarray(0, mcu.flash.length));
     for (const [offset, bytes] of image) mcu.flash.set(bytes, offset);
     mcu.onBreak = (imm8) => {
-      if (!serveFlashCall(mcu, imm8)) sim.stop();
+      if (!serveFlashCall(mcu, imm8)) current.stopped = true;
     };
     const cdc = new USBCDC(mcu.usbCtrl);
-    const current = { sim, mcu, cdc, portAt: Infinity };
+    const current = { sim, mcu, cdc, portAt: Infinity, stopped: false };
     cdc.onDeviceConnected = () => {
       current.portAt = sim.clock.nanos + HOST_PORT_DELAY_NS;
       const announce = sim.clock.createAlarm(() => process.stderr.write(`rp2040: USB serial port up (boot ${boots})\n`));
@@ -142,12 +144,28 @@ function main() {
     boots += 1;
     process.stderr.write(`rp2040: boot ${boots} (${reason})\n`);
     mcu.core.PC = FLASH_BASE; // boot stage 2 at the start of flash, as the bootrom would enter it
-    sim.execute();
+    run(current);
+  }
+
+  // rp2040js's Simulator.execute() with a smaller batch and setImmediate: the host's bytes get in sooner.
+  function run(current) {
+    const { mcu } = current;
+    const clock = current.sim.clock;
+    for (let i = 0; i < BATCH && !current.stopped; i++) {
+      if (mcu.core.waiting) {
+        const nanos = clock.nanosToNextAlarm;
+        clock.tick(nanos);
+        i += nanos / CYCLE_NS;
+      } else {
+        clock.tick(mcu.core.executeInstruction() * CYCLE_NS);
+      }
+    }
+    if (!current.stopped) setImmediate(() => run(current));
   }
 
   function restart(reason) {
     const old = board;
-    old.sim.stop();
+    old.stopped = true;
     flash = old.mcu.flash.slice();
     inbound.length = 0;
     inboundBytes = 0;
@@ -183,12 +201,12 @@ function main() {
     pump();
   });
   process.stdin.on("end", () => {
-    board.sim.stop();
+    board.stopped = true;
     save();
     process.exit(0);
   });
   process.on("SIGTERM", () => {
-    board.sim.stop();
+    board.stopped = true;
     save();
     process.exit(0);
   });
