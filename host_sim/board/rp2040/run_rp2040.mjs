@@ -119,7 +119,8 @@ function main() {
   let board = null;
   let boots = 0;
 
-  function start(reason) {
+  // carried: the old chip's watchdog REASON and scratch registers, which a watchdog reset keeps.
+  function start(reason, carried = null) {
     const sim = new Simulator();
     const mcu = sim.rp2040;
     mcu.logger = new ConsoleLogger(LogLevel.Error);
@@ -137,9 +138,22 @@ function main() {
       announce.schedule(HOST_PORT_DELAY_NS);
     };
     cdc.onSerialData = (bytes) => process.stdout.write(Buffer.from(bytes));
-    // REASON bit 1 (FORCE) is a software reset (machine.reset()); bit 0 (TIMER) a watchdog expiry.
+    // REASON bit 1 (FORCE) is a software reset (machine.reset()); bit 0 (TIMER) a watchdog expiry.  The
+    // watchdog is stopped at once: rp2040js's expired timer fires again at every tick until it is.
     const watchdog = mcu.peripherals[WATCHDOG_BASE >>> 12]; // rp2040js names it only by address
-    watchdog.onWatchdogTrigger = () => setImmediate(() => restart(watchdog.reason & 2 ? "reset" : "watchdog"));
+    if (carried) {
+      watchdog.reason = carried.reason;
+      watchdog.scratchData.set(carried.scratch);
+    }
+    watchdog.onWatchdogTrigger = () => {
+      if (current.stopped) return;
+      current.stopped = true;
+      watchdog.alarm.enable = false;
+      watchdog.timer.enable = false;
+      const reason = watchdog.reason & 2 ? "reset" : "watchdog";
+      const kept = { reason: watchdog.reason, scratch: watchdog.scratchData.slice() };
+      setImmediate(() => restart(reason, kept));
+    };
     board = current;
     boots += 1;
     process.stderr.write(`rp2040: boot ${boots} (${reason})\n`);
@@ -163,13 +177,13 @@ function main() {
     if (!current.stopped) setImmediate(() => run(current));
   }
 
-  function restart(reason) {
+  function restart(reason, carried) {
     const old = board;
     old.stopped = true;
     flash = old.mcu.flash.slice();
     inbound.length = 0;
     inboundBytes = 0;
-    start(reason);
+    start(reason, carried);
   }
 
   function save() {
