@@ -44,7 +44,7 @@ an RP2040's, so its heap figures are upper bounds for the robot; the
 
 With --rp2040 (docs/rp2040.md), on MicroPython's rp2 build (--image, a .uf2
 the user provides) in an emulated RP2040 instead: `twinbot flash` on a
-blank board and its HELLO; the first 25 golden vectors of each kind, free
+blank board and its HELLO; the first 10 golden vectors of each kind, free
 and under heap_lock; --cycles control cycles on the test HAL timed by the
 board's own ticks_us (emulated time at 125 MHz), allocation and heap_lock
 over up to 500 of them, the heap free; a hung firmware reset by
