@@ -151,8 +151,11 @@ def test_two_effects_at_once_are_both_named(tmp_path, first, second):
 
 @pytest.mark.slow
 def test_a_blind_pair_is_named_in_full_on_the_reference_plant(tmp_path, monkeypatch):
-    """The reference plant's two-effect case of seed 43 (make_case(43, n_effects=2)): the tyres' scrub beside
-    wheels 4.4 % large, under the firmware's exploration.  Once the scrub is fitted, the radius must be judged
+    """A pipeline test, not a score: a two-effect case of the reference plant recorded on the datasheet robot
+    (make_case(..., robot="datasheet"): not drawn, none of the physics the twin lacks), so that the pair and
+    the plant's own IR curve are all that depart from the twin; the score on drawn robots is `twinbot bench
+    diagnose`'s (docs/proving-ground.md, "Pipeline tests").  The tyres' scrub beside wheels 4.4 % large, under
+    the firmware's exploration.  Once the scrub is fitted, the radius must be judged
     on what the scrub's twin leaves located (the travel and the turn), not on the six channels the nominal
     twin located, and each residual weighed by the noise that twin leaves, not by the nominal twin's, which
     the scrub's mismatch spread (the turn's by 27 times); either rule alone names this case.  Two processes
@@ -161,7 +164,7 @@ def test_a_blind_pair_is_named_in_full_on_the_reference_plant(tmp_path, monkeypa
     from tools.bench import diagnose_scoring as scoring
     from tools.reference_plant.cases import make_case
 
-    rec_path, key_path = make_case(43, tmp_path, n_effects=2)
+    rec_path, key_path = make_case(43, tmp_path, n_effects=2, robot="datasheet")
     key = scoring.load_key(key_path)
     assert [e["name"] for e in key["effects"]] == ["wheel_radius", "turning_resistance"]
     rec = load_recording(rec_path)

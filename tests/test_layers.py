@@ -109,6 +109,20 @@ def test_the_reference_plant_imports_no_diagnosis() -> None:
         assert not used, f"{_rel(path)} imports {sorted(used)}"
 
 
+# The twin's physics and sensor code: the plant reads the datasheet (host_sim.physics.params) but must compute
+# every force and reading its own way, or it proves the twin against itself (docs/proving-ground.md).
+TWIN_PHYSICS = ("host_sim.physics.dynamics", "host_sim.physics.motors", "host_sim.physics.friction",
+                "host_sim.physics.contact", "host_sim.physics.drivetrain", "host_sim.physics.backlash",
+                "host_sim.sensors")
+
+
+def test_the_reference_plant_imports_no_twin_physics() -> None:
+    """drivetrain covers drivetrain_effects too (a prefix); host_sim.sensors covers the IR model."""
+    for path in sorted((REPO / "tools" / "reference_plant").rglob("*.py")):
+        used = {m for m in imported_modules(path) if m.startswith(TWIN_PHYSICS)}
+        assert not used, f"{_rel(path)} imports {sorted(used)}"
+
+
 def _graph() -> dict[str, set[str]]:
     modules = product_modules()
     return {name: {t for t in imported_modules(path) if t in modules and t != name}

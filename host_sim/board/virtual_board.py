@@ -51,17 +51,20 @@ class VirtualBoard:
         tty.setraw(self.slave)
         self.path = os.ttyname(self.slave)
         os.set_blocking(self.master, False)
-        env = dict(os.environ, TWINBOT_HW=f"127.0.0.1:{hw_port}", MICROPYPATH="")
         self._stderr = open(stderr_path, "ab") if stderr_path else subprocess.DEVNULL
-        self.proc = subprocess.Popen(
-            [micropython_exe(), str(SUPERVISOR), flash], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-            stderr=self._stderr, env=env, bufsize=0,
-        )
+        command, env = self.board_command()
+        self.proc = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     stderr=self._stderr, env=env, bufsize=0)
         self.dropped = 0  # bytes the board sent while nobody read the port
         self._tail = b""  # the board's last output: a traceback when it dies (the unix port prints it on stdout)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._relay, name="pty relay", daemon=True)
         self._thread.start()
+
+    def board_command(self) -> tuple[list[str], dict[str, str]]:
+        """The board's process: its command line and environment (the emulated RP2040 has its own)."""
+        env = dict(os.environ, TWINBOT_HW=f"127.0.0.1:{self.hw_port}", MICROPYPATH="")
+        return [micropython_exe(), str(SUPERVISOR), self.flash], env
 
     def _relay(self) -> None:
         assert self.proc.stdin is not None and self.proc.stdout is not None

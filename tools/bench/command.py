@@ -62,6 +62,7 @@ def register(subparsers: Any, name: str, summary: str) -> None:
     )
     sub = parser.add_subparsers(dest="benchmark", metavar="BENCHMARK")
     order = [b[0] for b in BENCHMARKS]
+    order.insert(order.index("firmware") + 1, "firmware-rp2040")  # `bench firmware --rp2040`'s own section
     for bench_name, module_name, bench_summary in BENCHMARKS:
         importlib.import_module(module_name).register(sub, bench_name, bench_summary)
         add_markdown_option(sub.choices[bench_name], bench_name, bench_summary, order)

@@ -113,27 +113,38 @@ def caster_load(plant: dict[str, Any]) -> float:
     return float(plant["body_mass"]) * G * max(float(plant["com_offset"]), 0.0) / CASTER_X
 
 
-def true_value(effect: dict[str, Any], plant: dict[str, Any], nominal: RobotParams) -> tuple[float, float]:
-    """(true value, absent value) of the key's effect, in the library's terms."""
-    name = effect["name"]
+def _in_library_terms(name: str, v: float, plant: dict[str, Any], nominal: RobotParams) -> float:
+    """A plant value of effect `name` as the library's parameter (PARAMS' conversion)."""
     row = PARAMS[name]
-    v = float(effect["params"][row.plant_param]["value"])
-    absent = float(library.absent_values(nominal, name)[0])
     if row.conversion == "minus nominal":
-        v -= _nominal_field(nominal, name)
-    elif row.conversion == "caster load":
-        v *= caster_load(plant)
-    elif row.conversion in ("scrub load", "wheel load"):
+        return v - _nominal_field(nominal, name)
+    if row.conversion == "caster load":  # the ball's rolling drag is a drag force of the caster too
+        return (v + float(plant.get("caster_rolling", 0.0))) * caster_load(plant)
+    if row.conversion in ("scrub load", "wheel load"):
         weight = (float(plant["body_mass"]) + 2 * float(plant["wheel_mass"])) * G
-        v *= (weight - caster_load(plant)) / (weight if row.conversion == "wheel load" else 1.0)
-    return v, absent
+        return v * (weight - caster_load(plant)) / (weight if row.conversion == "wheel load" else 1.0)
+    return v
+
+
+def true_value(effect: dict[str, Any], plant: dict[str, Any], nominal: RobotParams) -> tuple[float, float]:
+    """(true value, this robot's value without the effect) in the library's terms: the drawn robot's own
+    value (the key's `drawn`), or the datasheet's where the key has none."""
+    name = effect["name"]
+    entry = effect["params"][PARAMS[name].plant_param]
+    true = _in_library_terms(name, float(entry["value"]), plant, nominal)
+    if "drawn" in entry:
+        return true, _in_library_terms(name, float(entry["drawn"]), plant, nominal)
+    return true, float(library.absent_values(nominal, name)[0])
 
 
 def parameter_error(effect: dict[str, Any], plant: dict[str, Any], nominal: RobotParams,
-                    fitted: float) -> dict[str, float]:
+                    fitted: float, ci95: list[float] | None = None) -> dict[str, Any]:
+    """|fitted - true| over the effect's size on this robot (|true - its own value without it|), or over
+    |true| for the limits; `covered`: the 95 % interval holds the true value (None without one)."""
     true, absent = true_value(effect, plant, nominal)
     denom = abs(true - absent) if PARAMS[effect["name"]].relative_to == "change" else abs(true)
-    return {"true": true, "fitted": fitted, "absent": absent,
+    covered = None if not ci95 or len(ci95) != 2 else bool(float(ci95[0]) <= true <= float(ci95[1]))
+    return {"true": true, "fitted": fitted, "absent": absent, "covered": covered,
             "error": abs(fitted - true) / denom if denom > 0 else math.inf}
 
 
@@ -221,7 +232,7 @@ def traction_demand(plant: dict[str, Any], rec: Recording) -> np.ndarray:
     radius = np.asarray(plant["wheel_radius"], dtype=float)
     kt = np.asarray(plant["torque_constant"], dtype=float)
     n_gear, volts = float(plant["gear_ratio"]), float(plant["battery_voltage"])
-    ohm = float(plant["armature_resistance"])
+    ohm = np.asarray(plant["armature_resistance"], dtype=float)
     dt = rec.sample_period
     omega = np.gradient(rec.enc.astype(float) * 2 * np.pi / ticks, dt, axis=0)
     alpha = np.gradient(omega, dt, axis=0)
@@ -250,7 +261,7 @@ def score_case(key: dict[str, Any], diagnosis: dict[str, Any] | None, rec: Recor
         row["outcome"] = "right" if diagnosis and diagnosis["verdict"] == "match" else "false alarm"
         return row
     if row["kind"] == "out of library":
-        row.update(_score_unlisted(diagnosis))
+        row.update(_score_unlisted(diagnosis, concealed))
     else:
         row.update(_score_listed(concealed, key["plant"], diagnosis, nominal, rec))
     if diagnosis is None and str(error).startswith("refused"):
@@ -296,8 +307,9 @@ def _score_listed(concealed: list[dict[str, Any]], plant: dict[str, Any], diagno
         match = next((f for f in leading if f["name"] == effect["name"] and _site(f) == _site(effect)), None)
         if match is not None:
             score["named"] = True
-            fitted = float(match["params"][PARAMS[effect["name"]].library_param]["value"])
-            score["param"] = parameter_error(effect, plant, nominal, fitted)
+            fitted_param = match["params"][PARAMS[effect["name"]].library_param]
+            score["param"] = parameter_error(effect, plant, nominal, float(fitted_param["value"]),
+                                             fitted_param.get("ci95"))
     judged = [i for i, sc in enumerate(scores) if "not_excited" not in sc] or list(range(len(scores)))
     missing = [concealed[i] for i in judged if not scores[i]["named"]]
     if not missing:
@@ -313,15 +325,32 @@ def _score_listed(concealed: list[dict[str, Any]], plant: dict[str, Any], diagno
     return out
 
 
-def _score_unlisted(diagnosis: dict[str, Any] | None) -> dict[str, Any]:
+def _score_unlisted(diagnosis: dict[str, Any] | None, concealed: list[dict[str, Any]]) -> dict[str, Any]:
+    """Right: unexplained or partly explained, located where the kind shows (the IR ring for a clipping ADC,
+    the drive otherwise), and no library effect named (one given only as `closest` is no name)."""
     if diagnosis is None:
         return {"outcome": "error"}
     verdict = diagnosis["verdict"]
     where = [u["channel"] for u in diagnosis["unexplained"]] + [u["channel"] for u in diagnosis["located"]]
-    right_place = any(c in DRIVE_CHANNELS for c in where)
-    if verdict in ("unexplained", "partly explained"):
-        return {"outcome": "right" if right_place else "wrong place", "located_on": sorted(set(where))}
-    return {"outcome": "missed" if verdict == "match" else "wrong name", "located_on": sorted(set(where))}
+    shows_on = [c for c in where if _shows_on(c, concealed)]
+    out: dict[str, Any] = {"located_on": sorted(set(where))}
+    if diagnosis.get("closest"):
+        out["closest"] = diagnosis["closest"]
+    named = [e for e in diagnosis["effects"] if not e.get("closest")]
+    if verdict in ("unexplained", "partly explained") and not named:
+        out["outcome"] = "right" if shows_on else "wrong place"
+    else:
+        out["outcome"] = "missed" if verdict == "match" else "wrong name"
+    return out
+
+
+def _shows_on(channel: str, concealed: list[dict[str, Any]]) -> bool:
+    """The channel is where an out-of-library kind shows: the IR ring for adc_clipping, the drive (and the
+    encoders' counts) for the others."""
+    names = {e["name"] for e in concealed if not e["in_library"]}
+    ring = channel.startswith("ir_") and "adc_clipping" in names
+    drive = channel in DRIVE_CHANNELS + ("count_l", "count_r") and bool(names - {"adc_clipping"})
+    return ring or drive
 
 
 def describe_truth(key: dict[str, Any]) -> str:

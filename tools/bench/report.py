@@ -25,7 +25,7 @@ HEADER = "header"  # the page's own block, rewritten on every write: what the pa
 _MARKER = re.compile(r"^<!-- bench:([a-z][a-z0-9_-]*) (begin|end) -->$", re.MULTILINE)
 _COMMAND = re.compile(r"^Command: `(.+)`$", re.MULTILINE)
 # Options that say where results go or how progress shows, not what is measured: left out of the command.
-NOT_MEASURED = ("json", "markdown", "plot", "out", "quiet")
+NOT_MEASURED = ("json", "markdown", "plot", "out", "quiet", "image", "bootrom")  # files: named in the printout
 ENVIRONMENT = ("OPENBLAS_NUM_THREADS",)  # read by the benches that use numpy; named in the command when set
 
 
@@ -78,9 +78,11 @@ def add_markdown_option(parser: argparse.ArgumentParser, name: str, summary: str
         with contextlib.redirect_stdout(tee):
             status = int(run(args) or 0)
         if status != 2:
+            # A benchmark whose options measure another target names that run's section itself.
+            marker = getattr(args, "markdown_section", lambda a: name)(args)
             section = format_section(name, summary, command, tee.kept.getvalue(), started,
-                                     time.monotonic() - t0, parser.description or "")
-            write_section(Path(args.markdown), name, section, order)
+                                     time.monotonic() - t0, parser.description or "", marker)
+            write_section(Path(args.markdown), marker, section, order)
         return status
 
     parser.set_defaults(func=run_and_record)
@@ -122,14 +124,14 @@ class _Tee(io.TextIOBase):
 
 # --------------------------------------------------------------------------- the page
 def format_section(name: str, summary: str, command: str, printed: str, started: datetime.datetime,
-                   wall_s: float, method: str = "") -> str:
+                   wall_s: float, method: str = "", marker: str = "") -> str:
     """One benchmark's section, markers included: what it measures (and how: its --help text), the
     command, when, where, and its printout."""
     how = ([f"<details><summary>How it measures (<code>twinbot bench {name} --help</code>)</summary>", "",
             *_block(method), "", "</details>", ""] if method.strip() else [])
     return "\n".join([
-        f"<!-- bench:{name} begin -->",
-        f"## `twinbot bench {name}`",
+        f"<!-- bench:{marker or name} begin -->",
+        f"## `twinbot bench {name}`" + (" (" + marker + ")" if marker and marker != name else ""),
         "",
         summary[0].upper() + summary[1:] + ".",
         "",
@@ -140,7 +142,7 @@ def format_section(name: str, summary: str, command: str, printed: str, started:
         f"- machine: {machine_line()} (at the end of the run)",
         "",
         *_block(printed),
-        f"<!-- bench:{name} end -->",
+        f"<!-- bench:{marker or name} end -->",
     ])
 
 

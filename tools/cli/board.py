@@ -5,7 +5,8 @@ this relays its stdin/stdout to a pty that `twinbot serial`, mpremote or a termi
 a Pico's /dev/ttyACM0.  Its hardware is the robot's twin in --world, in real time; drive it as
 the real robot (`twinbot serial /dev/pts/N --command autonomous 0 0`).  --standin serves fixed
 readings instead.  --late MS [--jitter MS] delays what the board sends, to try the late-signal
-twin against a real host (docs/firmware.md, docs/late-signal-twin.md).
+twin against a real host (docs/firmware.md, docs/late-signal-twin.md).  --rp2040 runs an
+rp2 MicroPython image (--image FIRMWARE.uf2 --bootrom ROM) on an emulated Pico instead (docs/rp2040.md).
 """
 from __future__ import annotations
 
@@ -25,7 +26,8 @@ from host_sim.board.virtual_board import VirtualBoard, factory_image
 from host_sim.controller.hardware_io import TICK_MASK
 from protocol import messages as M
 from protocol.framing import FrameDecoder, FrameEncoder
-from tools.arguments import float_range, int_range, output_file, output_folder, tcp_port
+from host_sim.board.rp2040_board import UF2_MAGIC
+from tools.arguments import float_range, input_file, int_range, output_file, output_folder, tcp_port
 from tools.arguments import CliError
 from tools.cli.sim import plural
 
@@ -114,6 +116,7 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
         epilog="examples:\n"
                "  twinbot board                      a board flashed with this checkout's firmware\n"
                "  twinbot board --flash-kb 256 --image board.img   a blank 256 KB board to flash\n"
+               "  twinbot board --rp2040 --image RPI_PICO.uf2 --bootrom rp2040.rom   an emulated Pico\n"
                "then, in another terminal:\n"
                "  twinbot serial /dev/pts/N          live telemetry\n"
                "  twinbot flash --port /dev/pts/N    flash it\n"
@@ -123,7 +126,12 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
                    help="the board's flash as a folder, kept between runs (default: a temporary folder "
                         "holding this checkout's firmware, removed when the board stops)")
     p.add_argument("--image", metavar="FILE", type=image_path,
-                   help="the board's flash as a littlefs image file (blank if new)")
+                   help="the board's flash as a littlefs image file (blank if new); with --rp2040, the "
+                        "MicroPython rp2 .uf2 to run (default: $TWINBOT_RP2040_IMAGE)")
+    p.add_argument("--rp2040", action="store_true",
+                   help="an emulated Raspberry Pi Pico (rp2040js) running --image, its pins at rest")
+    p.add_argument("--bootrom", metavar="FILE", type=input_file,
+                   help="with --rp2040: the RP2040's 16 KB bootrom (default: $TWINBOT_RP2040_BOOTROM)")
     p.add_argument("--flash-kb", type=int_range(64, 65536, unit="KB"), default=1024,
                    help="size of a new --image, KB, 64..65536 (default 1024)")
     p.add_argument("--blank", action="store_true", help="start with empty flash (nothing to run until flashed)")
@@ -145,13 +153,14 @@ LFS_BLOCK = 4096  # firmware/unix_board.py FileBlockDevice.BLOCK
 
 
 def image_path(text: str) -> str:
-    """--image: a new file, or an existing littlefs image (never some other file, which the board would refuse)."""
+    """--image: a new file, an existing littlefs image or a UF2 image for --rp2040 (never some other
+    file, which the board would refuse)."""
     output_file(text)
     path = Path(text)
     if path.exists() and path.stat().st_size:
         with open(path, "rb") as f:
             head = f.read(2 * LFS_BLOCK)
-        if LFS_MAGIC not in head:
+        if LFS_MAGIC not in head and not head.startswith(UF2_MAGIC):
             raise argparse.ArgumentTypeError(f"{text}: not a littlefs image (no littlefs superblock in its first "
                                              f"two blocks); name a new file for a blank board")
     return text
@@ -159,6 +168,8 @@ def image_path(text: str) -> str:
 
 def prepare_flash(args: argparse.Namespace, scratch: Path) -> tuple[str, str]:
     """The flash argument for the supervisor, and how to describe it."""
+    if args.image and Path(args.image).is_file() and Path(args.image).read_bytes()[:4] == UF2_MAGIC:
+        raise CliError(f"--image {args.image} is a UF2 firmware image: it runs on the emulated Pico, add --rp2040")
     if args.image:
         if args.flash_dir:
             raise CliError("give --image or --flash-dir, not both")
@@ -202,6 +213,8 @@ def board_trouble(board: VirtualBoard, stderr_path: Path, offset: int) -> str:
 def run(args: argparse.Namespace) -> int:
     # SIGTERM (kill, a test's terminate()) unwinds like Ctrl-C does, so the scratch folder goes too.
     signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))
+    if args.rp2040:
+        return run_rp2040(args)
     with tempfile.TemporaryDirectory(prefix="twinbot-board-") as scratch:
         return run_in(args, Path(scratch))
 
@@ -248,6 +261,51 @@ def run_in(args: argparse.Namespace, scratch: Path) -> int:
             print(f"twinbot board: the twin ended at x={x:.3f} m, y={y:.3f} m, heading {phi:.2f} rad, "
                   f"{plural(twin.sim.robot.collisions, 'collision')}")
             twin.stop()
+
+
+RP2040_STARTUP_S = 120.0  # the emulated boot runs at a fraction of real time on a loaded host
+NOT_ON_RP2040 = ("flash_dir", "blank", "standin", "hw_port", "late", "jitter")
+
+
+def run_rp2040(args: argparse.Namespace) -> int:
+    """`twinbot board --rp2040`: the emulated Pico behind a pty, with the virtual board's face."""
+    from host_sim.board.micropython_runner import RigError
+    from host_sim.board.rp2040_board import Rp2040Board, image_files
+
+    clash = [name for name in NOT_ON_RP2040 if getattr(args, name)]
+    if clash or args.world != "paper_room":
+        option = "--" + (clash[0] if clash else "world").replace("_", "-")
+        raise CliError(f"{option} is not for --rp2040: the emulated Pico's pins are at rest, its flash its own")
+    try:
+        image, bootrom = image_files(args.image, args.bootrom)
+        with tempfile.TemporaryDirectory(prefix="twinbot-board-") as scratch:
+            stderr_path = Path(args.log) if args.log else Path(scratch) / "board-stderr.txt"
+            offset = stderr_path.stat().st_size if stderr_path.exists() else 0
+            board = Rp2040Board(image, bootrom, stderr_path)
+            return serve_rp2040(board, stderr_path, offset, image)
+    except RigError as exc:
+        raise CliError(str(exc)) from None
+
+
+def serve_rp2040(board, stderr_path: Path, offset: int, image: Path) -> int:  # type: ignore[no-untyped-def]
+    try:
+        if not board.wait_port_up(timeout=RP2040_STARTUP_S):
+            trouble = board_trouble(board, stderr_path, offset) if not board.alive() else \
+                f"its USB serial port did not come up within {RP2040_STARTUP_S:g} s"
+            raise CliError(f"{trouble}; image: {image}")
+        print(f"twinbot board: {board.path}", flush=True)
+        print(f"  image: {image} on an emulated RP2040 (rp2040js, 125 MHz), its REPL on USB CDC")
+        print("  hardware: the chip's own pins, at rest (no twin drives them)")
+        print(f"  talk to it: twinbot serial {board.path}   |   flash it: twinbot flash --port {board.path}")
+        print("  Ctrl-C stops the board.", flush=True)
+        while board.alive():
+            time.sleep(0.2)
+        print(f"twinbot board: {board_trouble(board, stderr_path, offset)}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 0
+    finally:
+        board.close()
 
 
 def load_world(args: argparse.Namespace):  # type: ignore[no-untyped-def]

@@ -133,6 +133,22 @@ def blocks_needed(files: list[Path], block_size: int) -> int:
     return data + 2 * 3 + 2
 
 
+LISTEN_S = 5.0  # how long the host keeps quiet after a reset unless the firmware is heard sooner
+
+
+def listen_first(link: SerialLink, until: float) -> dict[str, object] | bool:
+    """Listen before speaking: the firmware's own HELLO (its fields), True once any frame shows it running,
+    False if nothing came.  A HELLO frame holds 0x03 bytes, Ctrl-C to a REPL: sent while the old firmware
+    still waits out `mpremote reset`'s sleep, or before main.py disables Ctrl-C, it stops the reset or the
+    firmware (a slow board, such as the emulated RP2040, makes that window wide: docs/rp2040.md)."""
+    while time.monotonic() < until:
+        for frame in link.poll(0.1):
+            if frame.msg_type == M.HELLO:
+                return frame.fields
+            return True
+    return False
+
+
 def wait_for_hello(port: str, timeout: float) -> dict[str, object]:
     deadline = time.monotonic() + timeout
     last_error = ""
@@ -144,6 +160,9 @@ def wait_for_hello(port: str, timeout: float) -> dict[str, object]:
             time.sleep(0.3)
             continue
         try:
+            heard = listen_first(link, min(deadline, time.monotonic() + LISTEN_S))
+            if isinstance(heard, dict):
+                return heard
             while time.monotonic() < deadline:
                 link.send(M.HELLO, host_hello())
                 frame = link.wait_for(M.HELLO, 0.5)

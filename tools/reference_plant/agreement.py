@@ -1,4 +1,4 @@
-"""How closely the twin replays a recording of the nominal plant: the evidence that the plant is the twin's robot.
+"""How closely the twin replays a recording of the plant: the datasheet plant (the twin's robot), or a drawn one.
 
 `python -m tools.reference_plant.agreement`: records the plant, replays it through the twin in windows from
 the recorded state (host_sim.recordings.replay) away from the walls, and prints the tick, position and heading
@@ -85,7 +85,8 @@ def main(argv: list[str] | None = None) -> int:
     from host_sim.physics.world import WorldError, world_by_name_or_path
     from tools.reference_plant import excitation
     from tools.reference_plant.recorder import ProgramController, record
-    from tools.reference_plant.robot_model import nominal_spec
+    from tools.reference_plant.robot_draw import draw_robot
+    from tools.reference_plant.robot_model import datasheet_spec
 
     ap = argparse.ArgumentParser(prog="python -m tools.reference_plant.agreement", description=main.__doc__)
     ap.add_argument("--world", default="paper_room")
@@ -94,6 +95,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--window", type=float, default=1.0, help="window length (s)")
     ap.add_argument("--seed", type=int, default=3)
     ap.add_argument("--exact-tracker", action="store_true", help="no tracker noise (the model's own agreement)")
+    ap.add_argument("--drawn", type=int, metavar="SEED",
+                    help="record case SEED's drawn robot (robot_draw.py: parameters a few per cent off, the physics "
+                         "the twin lacks) instead of the datasheet plant")
     ap.add_argument("--twin-floor", action="store_true",
                     help="record the twin itself instead of the plant (exact tracker): what the replay method "
                          "costs by itself (encoder quantisation, speeds estimated from ticks)")
@@ -103,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     except WorldError as exc:
         print(f"--world: {exc}")
         return 2
-    spec = nominal_spec()
+    spec = datasheet_spec() if args.drawn is None else draw_robot(args.drawn)
     if args.exact_tracker:
         spec = spec.replace(tracker_noise_xy=0.0, tracker_noise_phi=0.0)
     controller: object = (SilController(1) if args.controller == "firmware" else
@@ -116,7 +120,8 @@ def main(argv: list[str] | None = None) -> int:
         else:
             record(path, spec, world, controller, args.duration, seed=args.seed)
         result = compare(load_recording(path), world, args.window)
-    what = "the twin itself" if args.twin_floor else "the nominal plant"
+    what = ("the twin itself" if args.twin_floor else "the datasheet plant" if args.drawn is None
+            else f"the robot drawn for case {args.drawn}")
     tracker = "exact" if args.exact_tracker or args.twin_floor else "noisy"
     print(f"{args.controller} on {what}, {world.name}, {args.duration:g} s, {tracker} tracker; "
           f"twin replay in {args.window:g} s windows:")

@@ -1,9 +1,9 @@
-"""Blind cases: a random effect, magnitude, world, start and drive, recorded on the plant.
+"""Blind cases: a drawn robot, a random effect, magnitude, world, start and drive, recorded on the plant.
 
     rec_path, key_path = make_case(seed, out_dir)
 
-Everything is drawn from the seed; the recording's sidecar holds the nominal robot, and the answer key
-(with the plant's unrounded encoder positions beside it) is written apart.  docs/proving-ground.md, "Blind cases".
+Everything is drawn from the seed, and the seed's split (tuning or final) says which kinds may be drawn; the
+sidecar holds the datasheet robot, the answer key (the drawn truth) is written apart.  docs/proving-ground.md.
 """
 from __future__ import annotations
 
@@ -19,10 +19,39 @@ from host_sim.controller.sil import SilController
 from host_sim.physics.world import BUILTIN_NAMES, World, builtin_world
 from tools.reference_plant import effects
 from tools.reference_plant.recorder import record
-from tools.reference_plant.robot_model import PlantSpec, nominal_spec
+from tools.reference_plant.robot_draw import draw_robot
+from tools.reference_plant.robot_model import PlantSpec, datasheet_spec, nominal_spec
 
 CONTROL_SHARE = 0.15  # fraction of cases with no effect at all
 START_MARGIN = 0.15  # m from C to any wall at the start
+# Decision rules are set on the tuning split only; the final split's seeds and its held-back kinds score them.
+TUNING_SEEDS = range(0, 10_000)
+FINAL_FIRST_SEED = 100_000
+HELD_BACK = ("cable_drag", "encoder_drift", "weakening_motor")  # kinds drawn on the final split only
+SPLITS = ("tuning", "final")
+# "drawn": the case's own robot (robot_draw.py), what `bench diagnose` scores.  "datasheet": the datasheet robot
+# with none of the physics the twin lacks and the paper's IR law, for tests of the diagnosis's pipeline rather
+# than of its score (tests/test_diagnosis.py::test_a_blind_pair_is_named_in_full_on_the_reference_plant).
+ROBOTS = ("drawn", "datasheet")
+
+
+def split_of(seed: int) -> str:
+    """The split a case seed belongs to: tuning (0..9999) or final (100000 and up); ValueError between."""
+    if seed in TUNING_SEEDS:
+        return "tuning"
+    if seed >= FINAL_FIRST_SEED:
+        return "final"
+    raise ValueError(f"case seed {seed} is in neither split (tuning: 0..9999, final: {FINAL_FIRST_SEED} and up)")
+
+
+def first_seed(split: str, offset: int = 0) -> int:
+    """The `offset`-th seed of a split."""
+    return offset if split == "tuning" else FINAL_FIRST_SEED + offset
+
+
+def kinds(split: str) -> list[str]:
+    """The effect kinds a split draws from: the final split holds every kind, tuning all but HELD_BACK."""
+    return [name for name in effects.EFFECTS if split == "final" or name not in HELD_BACK]
 
 
 def truth_file(key_dir: str | Path, name: str) -> Path:
@@ -40,13 +69,15 @@ def _start(world: World, rng: np.random.Generator) -> tuple[float, float, float]
     return float(xs[ix[k]]), float(ys[iy[k]]), float(rng.uniform(-math.pi, math.pi))
 
 
-def draw_effect(rng: np.random.Generator) -> tuple[PlantSpec, list[dict[str, object]]]:
-    """A plant spec with at most one concealed effect, and its description for the answer key."""
-    spec = nominal_spec()
+def draw_effect(rng: np.random.Generator, spec: PlantSpec | None = None,
+                split: str = "tuning") -> tuple[PlantSpec, list[dict[str, object]]]:
+    """A plant spec (the drawn robot `spec`) with at most one concealed effect of the split's kinds, and its
+    description for the answer key."""
+    spec = spec if spec is not None else nominal_spec()
     if rng.random() < CONTROL_SHARE:
         return spec, []
-    effect = list(effects.EFFECTS.values())[int(rng.integers(len(effects.EFFECTS)))]
-    return _conceal(spec, effect, rng)
+    pool = kinds(split)
+    return _conceal(spec, effects.EFFECTS[pool[int(rng.integers(len(pool)))]], rng)
 
 
 def draw_more(spec: PlantSpec, concealed: list[dict[str, object]], seed: int,
@@ -68,23 +99,35 @@ def draw_more(spec: PlantSpec, concealed: list[dict[str, object]], seed: int,
 
 def _conceal(spec: PlantSpec, effect: effects.Effect,
              rng: np.random.Generator) -> tuple[PlantSpec, list[dict[str, object]]]:
-    """spec with `effect` at a drawn site and value, and its entry for the answer key."""
+    """spec with `effect` at a drawn site and value (about the robot's own drawn value), and its key entry:
+    the true value, the robot's drawn value without the effect, and the datasheet's (absent)."""
     sites = effect.sites()
     where = sites[int(rng.integers(len(sites)))]
     value = effect.draw(rng)
-    spec = effects.apply(spec, effect.name, value, where)
+    spec, true, drawn = effects.apply_to_robot(spec, effect.name, value, where)
     entry: dict[str, object] = {"name": effect.name, "in_library": effect.in_library,
-                                "params": {effect.param: {"value": value, "unit": effect.unit,
-                                                          "absent": effect.absent}}}
-    if effect.applies_to == "wheel":
+                                "params": {effect.param: {"value": float(np.mean(true)), "unit": effect.unit,
+                                                          "absent": effect.absent, "drawn": float(np.mean(drawn)),
+                                                          "at_sites": true}}}
+    if effect.applies_to in ("wheel", "one wheel"):
         entry["wheel"] = where
     elif effect.applies_to == "sensor":
         entry["sensor"] = where
-    if effect.name == "floor_tilt":
-        direction = float(rng.uniform(-math.pi, math.pi))
-        spec = spec.replace(floor_tilt_direction=direction)
-        entry["params"]["floor_tilt_direction"] = {"value": direction, "unit": "rad"}  # type: ignore[index]
+    extra = _placed(effect.name, spec, rng)
+    if extra:
+        spec = spec.replace(**{k: v["value"] for k, v in extra.items()})
+        entry["params"].update(extra)  # type: ignore[attr-defined]
     return spec, [entry]
+
+
+def _placed(name: str, spec: PlantSpec, rng: np.random.Generator) -> dict[str, dict[str, object]]:
+    """What an out-of-library kind needs beside its size: the slope's direction, the motor's time (a share of
+    the run, scaled by make_case), the tether's anchor (set to the start by make_case)."""
+    if name == "floor_slope":
+        return {"floor_tilt_direction": {"value": float(rng.uniform(-math.pi, math.pi)), "unit": "rad"}}
+    if name == "weakening_motor":
+        return {"weak_time": {"value": float(rng.uniform(0.3, 0.7)), "unit": "share of the run"}}
+    return {}
 
 
 def case_rng(seed: int) -> np.random.Generator:
@@ -94,25 +137,51 @@ def case_rng(seed: int) -> np.random.Generator:
 
 def concealed_names(seed: int, n_effects: int = 1) -> list[str]:
     """The effects case `seed` will conceal, without recording it (for composing a suite)."""
-    return [str(e["name"]) for e in draw_more(*draw_effect(case_rng(seed)), seed, n_effects)[1]]
+    drawn = draw_effect(case_rng(seed), draw_robot(seed), split_of(seed))
+    return [str(e["name"]) for e in draw_more(*drawn, seed, n_effects)[1]]
+
+
+def _pick_drive(rng: np.random.Generator) -> tuple[object, dict[str, object]]:
+    if rng.random() < 0.5:
+        rules = int(rng.integers(2))
+        return SilController(rules), {"kind": "firmware", "rule_set": rules}
+    # the identification manoeuvre (twinbot sim --excite / serial --excite) through the firmware
+    rules = int(rng.integers(2))
+    return ExcitedController(SilController(rules)), {"kind": "manoeuvre", "rule_set": rules}
+
+
+def _set_in_run(spec: PlantSpec, concealed: list[dict[str, object]], start: tuple[float, float, float],
+                duration: float) -> PlantSpec:
+    """The parts of an out-of-library kind fixed by the run: the weakening's time, the tether's anchor."""
+    for e in concealed:
+        params = e["params"]
+        if e["name"] == "weakening_motor":
+            params["weak_time"]["value"] *= duration  # type: ignore[index]
+            params["weak_time"]["unit"] = "s"  # type: ignore[index]
+            spec = spec.replace(weak_time=params["weak_time"]["value"])  # type: ignore[index]
+        if e["name"] == "cable_drag":
+            params["cable_anchor"] = {"value": [start[0], start[1]], "unit": "m"}  # type: ignore[index]
+            spec = spec.replace(cable_anchor=(start[0], start[1]))
+    return spec
+
+
+def case_robot(seed: int, robot: str = "drawn") -> PlantSpec:
+    """The robot case `seed` is recorded on: its own drawn one, or the datasheet's (ROBOTS)."""
+    if robot not in ROBOTS:
+        raise ValueError(f"robot {robot!r} is not one of {', '.join(ROBOTS)}")
+    return draw_robot(seed) if robot == "drawn" else datasheet_spec(paper_ir=True)
 
 
 def make_case(seed: int, out_dir: str | Path, duration: float = 90.0,
-              key_dir: str | Path | None = None, n_effects: int = 1) -> tuple[Path, Path]:
-    """Record one blind case (an in-library one concealing `n_effects` effects); returns (recording path,
-    answer key path)."""
+              key_dir: str | Path | None = None, n_effects: int = 1, robot: str = "drawn") -> tuple[Path, Path]:
+    """Record one blind case (an in-library one concealing `n_effects` effects) on `robot` (ROBOTS); returns
+    (recording path, answer key path).  The effect, world, start and drive do not depend on `robot`."""
     rng = case_rng(seed)
-    spec, concealed = draw_more(*draw_effect(rng), seed, n_effects)
+    spec, concealed = draw_more(*draw_effect(rng, case_robot(seed, robot), split_of(seed)), seed, n_effects)
     world = builtin_world(BUILTIN_NAMES[int(rng.integers(len(BUILTIN_NAMES)))])
     start = _start(world, rng)
-    if rng.random() < 0.5:
-        rules = int(rng.integers(2))
-        controller: object = SilController(rules)
-        how = {"kind": "firmware", "rule_set": rules}
-    else:  # the identification manoeuvre (twinbot sim --excite / serial --excite) through the firmware
-        rules = int(rng.integers(2))
-        controller = ExcitedController(SilController(rules))
-        how = {"kind": "manoeuvre", "rule_set": rules}
+    controller, how = _pick_drive(rng)
+    spec = _set_in_run(spec, concealed, start, duration)
     out_dir = Path(out_dir)
     key_dir = Path(key_dir) if key_dir is not None else out_dir / "answer_keys"
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -121,9 +190,9 @@ def make_case(seed: int, out_dir: str | Path, duration: float = 90.0,
     rec_path = out_dir / f"{name}.csv"
     truth = record(rec_path, spec, world, controller, duration, seed=seed, pose=start)
     np.savez_compressed(truth_file(key_dir, name), encoders=np.array(truth.encoders))
-    key = {"case": name, "seed": seed, "recording": rec_path.name, "world": world.name, "start": start,
-           "excitation": how, "duration": duration, "verdict_expected": _expected(concealed),
-           "effects": concealed, "plant": _jsonable(dataclasses.asdict(spec))}
+    key = {"case": name, "seed": seed, "split": split_of(seed), "robot": robot, "recording": rec_path.name,
+           "world": world.name, "start": start, "excitation": how, "duration": duration,
+           "verdict_expected": _expected(concealed), "effects": concealed, "plant": _jsonable(dataclasses.asdict(spec))}
     key_path = key_dir / f"{name}.answer.json"
     key_path.write_text(json.dumps(key, indent=1) + "\n")
     return rec_path, key_path

@@ -24,7 +24,8 @@ Where = str | int  # "left" | "right" | "both", or a sensor index
 @dataclass(frozen=True)
 class Effect:
     name: str
-    applies_to: str  # "wheel" (left / right / both) | "robot" | "sensor" (0..7) | "ring" (all eight)
+    applies_to: str  # "wheel" (left / right / both) | "one wheel" (left / right) | "robot" | "sensor" (0..7) |
+    #                  "ring" (all eight)
     param: str  # the PlantSpec value it sets (its true physical value)
     unit: str
     absent: float  # the value meaning "no effect": the nominal plant's
@@ -45,6 +46,8 @@ class Effect:
         """Where the effect can sit: wheels, or sensors, or the whole robot."""
         if self.applies_to == "wheel":
             return ["left", "right", "both"]
+        if self.applies_to == "one wheel":
+            return ["left", "right"]
         if self.applies_to == "sensor":
             return list(range(8))
         return ["both"]
@@ -133,9 +136,23 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in (
            _sensor_field("ambient_leakage")),
     Effect("ir_latency", "ring", "ir_latency", "s", 0.0, ((0.02, 0.1),),
            "the IR readings describe the robot's pose this long ago", _robot_field("ir_latency")),
-    Effect("floor_tilt", "robot", "floor_tilt", "rad", 0.0, ((0.005, 0.02),),
+    # --- outside the library (a diagnosis must not name a library effect for them)
+    Effect("floor_slope", "robot", "floor_tilt", "rad", 0.0, ((0.005, 0.02),),
            "the floor slopes (gravity not normal to it); downhill direction drawn at random",
            lambda s, v, w: s.replace(floor_tilt=v)),
+    Effect("adc_clipping", "ring", "adc_clip", "counts", 4095.0, ((1200.0, 2500.0),),
+           "the IR readings clip at this level (the ADC's reference set too low)", _robot_field("adc_clip")),
+    Effect("eccentric_wheel", "wheel", "eccentricity", "m", 0.0, ((0.0002, 0.0008),),
+           "the tyre's centre sits this far off its axle: its rolling radius swings once per turn",
+           _wheel_field("eccentricity")),
+    Effect("cable_drag", "robot", "cable_drag", "N/m", 0.0, ((0.03, 0.1),),
+           "a tether dragged over the floor from the start point: it pulls back with this times the distance",
+           _robot_field("cable_drag")),
+    Effect("encoder_drift", "one wheel", "encoder_drift", "counts/s", 0.0, ((-3.0, -0.8), (0.8, 3.0)),
+           "spurious counts (a noisy channel) added to one encoder at a steady rate", _wheel_field("encoder_drift")),
+    Effect("weakening_motor", "one wheel", "weak_fraction", "-", 0.0, ((0.1, 0.3),),
+           "one motor loses this share of its torque constant at a drawn time (a hot winding, a cracked magnet)",
+           lambda s, v, w: s.replace(weak_fraction=v, weak_wheel=0 if w == "left" else 1)),
 )}
 
 
@@ -144,8 +161,36 @@ def apply(spec: PlantSpec, name: str, value: float, where: Where = "both") -> Pl
     if name not in EFFECTS:
         raise ValueError(f"unknown effect {name!r} (known: {', '.join(EFFECTS)})")
     effect = EFFECTS[name]
+    if effect.applies_to == "one wheel" and where not in ("left", "right"):
+        raise ValueError(f"{name} sits on one wheel ('left' or 'right'), not {where!r}")
     if effect.applies_to in ("robot", "ring") and where != "both":
         raise ValueError(f"{name} applies to the whole robot (where='both'), not {where!r}")
     if not math.isfinite(value):
         raise ValueError(f"{name}: value must be finite, got {value}")
     return effect.setter(spec, float(value), where)
+
+
+def _at(spec: PlantSpec, effect: Effect, where: Where) -> list[float]:
+    """The effect's parameter in spec at each of its sites (one value, or a wheel's, or both wheels')."""
+    value = getattr(spec, effect.param)
+    if not isinstance(value, tuple):
+        return [float(value)]
+    if effect.applies_to == "sensor":
+        return [float(value[int(where)])]  # type: ignore[arg-type]
+    return [float(value[k]) for k, side in enumerate(("left", "right")) if where in (side, "both")]
+
+
+def apply_to_robot(spec: PlantSpec, name: str, value: float, where: Where = "both"
+                   ) -> tuple[PlantSpec, list[float], list[float]]:
+    """A drawn robot with effect `name` at `where`: a value given about the datasheet's (`absent`) scales the
+    robot's own drawn value by value / absent (a worn tyre is worn from its own size), one about 0 is set.
+    Returns (spec, the true values at each site, the drawn values there before)."""
+    effect = EFFECTS[name]
+    drawn = _at(spec, effect, where)
+    if effect.absent == 0 or name == "adc_clipping":
+        return apply(spec, name, value, where), [value] * len(drawn), drawn
+    sides = [where] if where != "both" or effect.applies_to != "wheel" else ["left", "right"]
+    true = [d * value / effect.absent for d in drawn]
+    for side, v in zip(sides, true):
+        spec = apply(spec, name, v, side)
+    return spec, true, drawn

@@ -14,12 +14,29 @@ import numpy as np
 
 from host_sim.controller.hardware_io import TICK_MASK, Actuate, Sense
 from host_sim.physics.world import World
-from tools.reference_plant import ir_law
-from tools.reference_plant.robot_model import PlantSpec, build_model, drive_joint, ir_group_mask
+from tools.reference_plant import ir_law, ir_paper
+from tools.reference_plant.robot_model import SLIP_MIN_SPEED, PlantSpec, build_model, drive_joint, ir_group_mask
 
 N_SENSORS = 8
 RAY_HEIGHT = 0.03  # m above the floor: the IR surfaces' mid-height
 SETTLE_S = 0.3  # s the robot rests on the floor before t = 0
+LOOP_STEPS = 5  # the drivers' current loop runs at 5 kHz: 5 steps per MuJoCo step
+ROLLING_SMOOTH = 0.2  # per step: the tread speed the slip damper is set from follows over ~5 ms
+CASTER_SLIDE = 0.005  # m/s over which the caster's rolling drag builds up (no chatter at rest)
+CABLE_HEIGHT = 0.03  # m above the floor where the tether pulls on the body's rear
+
+
+def edges_passed(x: float, edges: tuple[float, ...]) -> int:
+    """Edges passed at position x (ticks): edge j sits at j + edges[j mod len(edges)] (all at j if none)."""
+    j = math.floor(x)
+    if not edges:
+        return j
+    n = len(edges)
+    if x < j + edges[j % n]:
+        return j - 1
+    if x >= j + 1 + edges[(j + 1) % n]:
+        return j + 1
+    return j
 
 
 class Plant:
@@ -38,7 +55,16 @@ class Plant:
         self._drive_q = [m.joint(drive_joint(spec, k)).qposadr[0] for k in range(2)]
         self._drive_v = [m.joint(drive_joint(spec, k)).dofadr[0] for k in range(2)]
         self._wheel_q = [m.joint(f"wheel_{s}").qposadr[0] for s in "lr"]
+        self._wheel_v = [m.joint(f"wheel_{s}").dofadr[0] for s in "lr"]
+        self._tread_v = [m.joint(f"tread_{s}").dofadr[0] for s in "lr"] if spec.slip_stiffness > 0 else []
+        self._caster = m.geom("caster").id
+        self._loop = [0.0, 0.0]  # the current loops' integrators (V)
+        self._coil = [0.0, 0.0]  # the current in each winding now (A)
+        self._rolling = [0.0, 0.0]  # each tread's rolling speed (rad/s), smoothed over a few steps
+        self._velocity = np.zeros(6)
         self._chassis = m.body("chassis").id
+        # the IR ring's law: the plant's own curve, or the paper's for the datasheet robot (ir_paper.py)
+        self._optics = ir_paper if spec.ir.get("law") == "paper" else ir_law
         self._ray_mask = ir_group_mask()
         self._geomid = np.zeros(1, dtype=np.int32)
         self._normal = np.zeros(3)
@@ -104,8 +130,10 @@ class Plant:
                      for k in range(2))  # type: ignore[return-value]
 
     def encoder_ticks(self) -> tuple[int, int]:
-        left, right = self.encoder_position()
-        return math.floor(left), math.floor(right)
+        """The counts: edges passed (each edge where the plant's own encoder has it), plus any drift."""
+        s = self.spec
+        return tuple(edges_passed(x, s.encoder_edges[k]) + math.floor(s.encoder_drift[k] * self.t)
+                     for k, x in enumerate(self.encoder_position()))  # type: ignore[return-value]
 
     # ------------------------------------------------------------------ I/O
     def actuate(self, a: Actuate) -> None:
@@ -117,6 +145,8 @@ class Plant:
         off, on = self.read_ir()
         enc_l, enc_r = self.encoder_ticks()
         vbat = self.v_term + self.spec.vbat_noise * float(self.rng.standard_normal())
+        if self.spec.vbat_lsb > 0:  # the battery ADC's counts
+            vbat = round(vbat / self.spec.vbat_lsb) * self.spec.vbat_lsb
         return Sense(int(round(self.t * 1000)) & TICK_MASK, off, on, enc_l, enc_r, int(round(vbat * 1000)))
 
     # ------------------------------------------------------------------ physics
@@ -127,6 +157,7 @@ class Plant:
             while self._pending and self._pending[0][0] <= d.time:
                 self.i_ref = self._pending.popleft()[1]
             self._drive()
+            self._loads()
             mujoco.mj_step(m, d)
             if self.spec.ir_latency > 0:
                 mujoco.mj_kinematics(m, d)
@@ -135,23 +166,121 @@ class Plant:
         # One instant for the pose, the tracker, the IR ring's rays and the encoders: the frames of now.
         mujoco.mj_kinematics(m, d)
 
+    def torque_constant(self, k: int) -> float:
+        """Wheel k's torque constant now (a weakening motor loses weak_fraction of it over 1 s from weak_time)."""
+        s = self.spec
+        if k != s.weak_wheel or self.t <= s.weak_time:
+            return s.torque_constant[k]
+        u = min(1.0, self.t - s.weak_time)
+        return s.torque_constant[k] * (1.0 - s.weak_fraction * u * u * (3.0 - 2.0 * u))
+
     def _drive(self) -> None:
-        """The drivers and the battery: currents for this step, motor torques into data.ctrl."""
+        """The drivers and the battery: currents for this step, motor torques (with the gear's ripple) into
+        data.ctrl."""
         s, d = self.spec, self.data
         v_bat = self.v_term
         power = 0.0
         currents = []
         for k in range(2):
             w = float(d.qvel[self._drive_v[k]])
-            emf = s.torque_constant[k] * s.gear_ratio * w
-            i = min(max(self.i_ref[k], -s.current_limit), s.current_limit)
-            i = min(max(i, (-v_bat - emf) / s.armature_resistance), (v_bat - emf) / s.armature_resistance)
-            d.ctrl[k] = s.gear_efficiency * s.gear_ratio * s.torque_constant[k] * i
-            power += (s.armature_resistance * i + emf) * i
+            kt = self.torque_constant(k)
+            emf = kt * s.gear_ratio * w
+            i_ref = min(max(self.i_ref[k], -s.current_limit), s.current_limit)
+            if s.inductance[k] > 0:
+                i, u = self._current_loop(k, i_ref, emf, v_bat)
+            else:  # the ideal driver: the reference, within what the voltage allows
+                ohm = s.armature_resistance[k]
+                i = min(max(i_ref, (-v_bat - emf) / ohm), (v_bat - emf) / ohm)
+                u = ohm * i + emf
+            torque = s.gear_efficiency * s.gear_ratio * kt * i
+            if s.ripple[k] > 0:
+                angle = float(d.qpos[self._drive_q[k]]) * s.ripple_teeth[k] + s.ripple_phase[k]
+                torque *= 1.0 + s.ripple[k] * math.sin(angle)
+            d.ctrl[k] = torque
+            power += u * i
             currents.append(i)
         self.current = (currents[0], currents[1])
         i_batt = s.quiescent_current + power / s.battery_voltage
         self.v_term = s.battery_voltage - s.battery_resistance * i_batt
+
+    def _current_loop(self, k: int, i_ref: float, emf: float, v_bat: float) -> tuple[float, float]:
+        """One step of a digital PI current loop (LOOP_STEPS per step) on the motor's R and L, its output
+        saturating at the battery voltage; returns the step's mean current and terminal voltage."""
+        s = self.spec
+        ohm, henry = s.armature_resistance[k], s.inductance[k]
+        h = self.dt / LOOP_STEPS
+        wc = 2 * math.pi * s.current_loop_hz
+        kp, ki = wc * henry, wc * ohm  # the PI's zero cancels the motor's pole: a first-order loop at wc
+        decay = math.exp(-ohm * h / henry)
+        i, integ = self._coil[k], self._loop[k]
+        i_sum = u_sum = 0.0
+        for _ in range(LOOP_STEPS):
+            err = i_ref - i
+            integ = min(max(integ + ki * err * h, -v_bat), v_bat)  # clamped: no wind-up at saturation
+            u = min(max(kp * err + integ, -v_bat), v_bat)
+            i_inf = (u - emf) / ohm  # the RL circuit held at u for h, exactly
+            i = i_inf + (i - i_inf) * decay
+            i_sum += i
+            u_sum += u
+        self._loop[k], self._coil[k] = integ, i
+        return i_sum / LOOP_STEPS, u_sum / LOOP_STEPS
+
+    def _loads(self) -> None:
+        """The loads MuJoCo's joints and contacts do not give: the Stribeck fall of the axles' friction in
+        motion, the tyres' slip damping, the caster's rolling drag and the tether (into qfrc_applied)."""
+        s, m, d = self.spec, self.model, self.data
+        d.qfrc_applied[:] = 0.0
+        for k in range(2):
+            v = self._drive_v[k]
+            w = float(d.qvel[v])
+            # frictionloss holds the breakaway torque; in motion it falls to Coulomb over stribeck_speed.
+            drop = s.coulomb_friction[k] * (s.stiction_ratio[k] - 1.0)
+            if drop > 0:
+                d.qfrc_applied[v] += drop * (1.0 - math.exp(-(w / s.stribeck_speed) ** 2)) * math.copysign(1.0, w)
+            if self._tread_v:
+                # slip = F / C of the ground's speed (the tread's, which rolls): the tread turns against the
+                # hub at F r / c, so c = r C / |w_tread| (MuJoCo integrates the damping implicitly)
+                rolling = float(d.qvel[self._wheel_v[k]] + d.qvel[self._tread_v[k]])  # the hub's, not a rotor's
+                self._rolling[k] += ROLLING_SMOOTH * (rolling - self._rolling[k])  # no step-to-step chatter
+                m.dof_damping[self._tread_v[k]] = s.wheel_radius[k] * s.slip_stiffness / max(abs(self._rolling[k]),
+                                                                                             SLIP_MIN_SPEED)
+        if s.caster_rolling > 0:
+            self._caster_drag()
+        if s.cable_drag > 0:
+            self._cable()
+
+    def _caster_drag(self) -> None:
+        """The ball caster's rolling drag: caster_rolling times its normal load, against its motion."""
+        m, d = self.model, self.data
+        load = 0.0
+        force = np.zeros(6)
+        for c in range(d.ncon):
+            if self._caster in (d.contact[c].geom1, d.contact[c].geom2):
+                mujoco.mj_contactForce(m, d, c, force)
+                load += abs(float(force[0]))
+        if load <= 0:
+            return
+        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_GEOM, self._caster, self._velocity, 0)
+        vx, vy = float(self._velocity[3]), float(self._velocity[4])
+        speed = math.hypot(vx, vy)
+        if speed <= 0:
+            return
+        f = self.spec.caster_rolling * load * math.tanh(speed / CASTER_SLIDE) / speed
+        mujoco.mj_applyFT(m, d, np.array([-f * vx, -f * vy, 0.0]), np.zeros(3), d.geom_xpos[self._caster].copy(),
+                          self._chassis, d.qfrc_applied)
+
+    def _cable(self) -> None:
+        """A tether from cable_anchor to the body's rear, pulling back with cable_drag times the distance."""
+        s, d = self.spec, self.data
+        x, y = float(d.xpos[self._chassis, 0]), float(d.xpos[self._chassis, 1])
+        dx, dy = s.cable_anchor[0] - x, s.cable_anchor[1] - y
+        dist = math.hypot(dx, dy)
+        if dist <= 1e-6:
+            return
+        mat = d.xmat[self._chassis]
+        rear = np.array([x - s.body_radius * float(mat[0]), y - s.body_radius * float(mat[3]), CABLE_HEIGHT])
+        mujoco.mj_applyFT(self.model, d, np.array([s.cable_drag * dx, s.cable_drag * dy, 0.0]), np.zeros(3), rear, self._chassis,
+                          d.qfrc_applied)
 
     def _remember_pose(self) -> None:
         h = self._history
@@ -181,7 +310,7 @@ class Plant:
         noise = self.rng.standard_normal(2 * N_SENSORS) * float(c["noise"])
         amb_off = self._ambient(x, y, phi, self.t)
         amb_on = self._ambient(x, y, phi, self.t + float(c["on_delay"]))
-        adc_max = float(c["adc_max"])
+        adc_max = float(c["adc_max"]) if s.adc_clip <= 0 else min(float(c["adc_max"]), s.adc_clip)
         off, on = [], []
         r = s.body_radius
         for i in range(N_SENSORS):
@@ -192,7 +321,7 @@ class Plant:
             dist, cos = self._ray(behind, direction)
             gap = max(0.0, dist - r)  # from the mount, along the turned axis
             angle = math.acos(min(1.0, cos))
-            light = ir_law.reflected(gap, angle, self.emitter_pct, float(c["gain"]) * s.ir_gain_scale[i], c)
+            light = self._optics.reflected(gap, angle, self.emitter_pct, float(c["gain"]) * s.ir_gain_scale[i], c)
             if self.emitter_pct > 0:
                 light += s.ir_offset[i]  # the emitter pulse couples into the receiver
             v_off = amb_off[i] + noise[i]
@@ -223,5 +352,5 @@ class Plant:
                 b = mount + self.spec.ir_misalignment[i]
                 axis = (math.cos(b), math.sin(b))
                 at = (x + r * math.cos(mount), y + r * math.sin(mount))
-                levels[i] += ir_law.lamp_light(level, at, axis, (lamp.x, lamp.y))
+                levels[i] += self._optics.lamp_light(level, at, axis, (lamp.x, lamp.y))
         return levels

@@ -13,6 +13,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from host_sim.controller.hardware_io import CYCLE_S, Actuate, Sense
 from host_sim.physics.params import DEFAULT
 from host_sim.recordings.recording import RecordingWriter
@@ -63,11 +65,29 @@ class ProgramController:
         pass
 
 
+LATE_MS = (5, 15)  # a late period overruns by this many ms (a busy link, a garbage collection)
+MIN_PERIOD_MS = 30  # the firmware's period never shortens below this
+
+
+def next_period(plant: Plant, rng: np.random.Generator, cycle_s: float) -> float:
+    """The firmware's next period, in whole plant steps: the nominal one, jittered (period_jitter), sometimes
+    late (late_share)."""
+    s = plant.spec
+    steps = cycle_s / plant.dt
+    if s.period_jitter > 0:
+        steps += s.period_jitter / plant.dt * float(rng.standard_normal())
+    if s.late_share > 0 and rng.random() < s.late_share:
+        steps += float(rng.integers(LATE_MS[0], LATE_MS[1] + 1)) * 0.001 / plant.dt
+    return max(round(steps), round(MIN_PERIOD_MS * 0.001 / plant.dt)) * plant.dt
+
+
 def run(plant: Plant, controller: object, duration: float, writer: RecordingWriter | None = None,
-        cycle_s: float = CYCLE_S) -> Truth:
-    """Drive the plant for `duration` s; returns the truth at each control instant."""
+        cycle_s: float = CYCLE_S, seed: int = 0) -> Truth:
+    """Drive the plant for `duration` s, a row per firmware period at its true time (jittered; rows the link
+    loses, drop_share, are not written); returns the truth at each written row."""
     truth = Truth()
-    for _ in range(int(round(duration / cycle_s))):
+    timing = np.random.default_rng([seed, 3])  # the firmware's and the link's timing: a stream of its own
+    while plant.t < duration - 1e-9:
         pose = plant.true_pose()
         seen = plant.tracker_pose()
         pct = plant.emitter_pct  # the power of this reading's emitter-on sample
@@ -75,12 +95,14 @@ def run(plant: Plant, controller: object, duration: float, writer: RecordingWrit
         s = plant.sense()
         a: Actuate = controller.cycle(s)  # type: ignore[attr-defined]
         plant.actuate(a)
-        if writer is not None:
+        lost = plant.spec.drop_share > 0 and timing.random() < plant.spec.drop_share
+        if writer is not None and not lost:
             writer.row(plant.t, (a.i_left_ma / 1000.0, a.i_right_ma / 1000.0), (s.enc_l, s.enc_r), s.adc_on,
                        s.adc_off, s.vbat_mv / 1000.0, seen, emitter_pct=pct)
-        truth.poses.append(pose)
-        truth.encoders.append(exact)
-        plant.advance(cycle_s)
+        if not lost:
+            truth.poses.append(pose)
+            truth.encoders.append(exact)
+        plant.advance(next_period(plant, timing, cycle_s))
     return truth
 
 
@@ -93,7 +115,7 @@ def record(path: str | Path, spec: PlantSpec, world: World, controller: object, 
             "emitter_pct": getattr(controller, "emitter_pct", 60), **(extra or {})}
     with RecordingWriter(path, source="robot", sample_period=CYCLE_S, robot=DEFAULT.to_json(),
                          world=world.to_dict(), extra=meta) as writer:
-        truth = run(plant, controller, duration, writer)
+        truth = run(plant, controller, duration, writer, seed=seed)
     return truth
 
 

@@ -1,8 +1,8 @@
 """The robot as MuJoCo sees it: PlantSpec (true physical values, SI, per wheel and per sensor) -> MJCF -> MjModel.
 
-`nominal_spec()` fills PlantSpec from host_sim.physics.params.DEFAULT (as numbers) plus what the twin does
-not describe (heights, the caster, the floor and wall contacts), so that the nominal plant rolls without
-slip on a level floor.  The bodies and contacts: docs/proving-ground.md, "The robot in MuJoCo".
+`datasheet_spec()` fills PlantSpec from host_sim.physics.params.DEFAULT (as numbers) plus what the twin does
+not describe (heights, the caster, the contacts); `nominal_spec()` adds the physics the twin lacks at its
+typical level.  The bodies and contacts: docs/proving-ground.md, "The robot in MuJoCo".
 """
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ import numpy as np
 
 from host_sim.physics.params import DEFAULT
 from host_sim.physics.world import World
+from tools.reference_plant import ir_law, ir_paper
 
 WALL_RADIUS = 0.01  # m, contact capsule around each wall line
 WALL_HEIGHT = 0.025  # m above the floor: the contact capsules' axis and the IR rays
@@ -26,6 +27,7 @@ CASTER_X = 0.045  # m ahead of C
 SKID_X = -0.045  # m, rear skid, behind C
 SKID_GAP = 0.001  # m between the rear skid and a level floor
 CONTACT_TIMECONST = 0.002  # s, stiffness of every contact (>= 2 timesteps)
+SLIP_MIN_SPEED = 0.5  # rad/s: below it a compliant tyre's slip damper keeps its low-speed (finite) value
 
 
 Pair = tuple[float, float]
@@ -51,10 +53,10 @@ class PlantSpec:
     wheel_inertia_diam: float  # kg m^2, each wheel about a diameter
     # drive train (per wheel)
     torque_constant: Pair  # N m/A (= back-EMF constant, V s/rad)
-    armature_resistance: float  # ohm
+    armature_resistance: Pair  # ohm
     gear_ratio: float  # -
     gear_efficiency: float  # -
-    coulomb_friction: Pair  # N m, dry friction at the axle
+    coulomb_friction: Pair  # N m, dry (Coulomb) friction at the axle in motion
     viscous_friction: Pair  # N m s/rad
     backlash: Pair  # rad of play at the wheel, 0 = rigid gear
     current_limit: float  # A, the driver's limit
@@ -74,7 +76,7 @@ class PlantSpec:
     # encoders
     ticks_per_rev: Pair  # counts per wheel turn
     # IR ring
-    ir: dict[str, Any] = field(default_factory=dict)  # the law's constants (ir_law.IrConstants fields)
+    ir: dict[str, Any] = field(default_factory=dict)  # the plant's IR constants (ir_law.NOMINAL's keys + noise...)
     ir_gain_scale: Eight = (1.0,) * 8  # -, per sensor
     ir_misalignment: Eight = (0.0,) * 8  # rad, per sensor, counter-clockwise
     ir_offset: Eight = (0.0,) * 8  # counts added to the emitter-on reading
@@ -83,13 +85,41 @@ class PlantSpec:
     # tracker
     tracker_noise_xy: float = 0.001  # m, sd
     tracker_noise_phi: float = math.radians(0.3)  # rad, sd
+    # --- physics the twin lacks (docs/proving-ground.md, "Physics the twin lacks"); 0 = off
+    inductance: Pair = (0.0, 0.0)  # H; 0 = an ideal driver (the current is its reference within the step)
+    current_loop_hz: float = 300.0  # the driver's PI current loop's bandwidth
+    stiction_ratio: Pair = (1.0, 1.0)  # breakaway / Coulomb torque (Stribeck curve)
+    stribeck_speed: float = 1.0  # rad/s at the wheel over which friction falls from breakaway to Coulomb
+    ripple: Pair = (0.0, 0.0)  # gear-mesh torque ripple, fraction of the transmitted torque
+    ripple_teeth: Pair = (40.0, 40.0)  # ripple cycles per wheel turn (the output stage's teeth)
+    ripple_phase: Pair = (0.0, 0.0)  # rad
+    slip_stiffness: float = 0.0  # N per unit of longitudinal slip, per tyre; 0 = no slip
+    lateral_stiffness: float = 0.0  # N/m, the tyre carcass sideways; 0 = rigid
+    caster_rolling: float = 0.0  # -, the ball caster's rolling drag / its load
+    vbat_lsb: float = 0.0  # V per count of the battery ADC; 0 = exact
+    encoder_edges: tuple[tuple[float, ...], tuple[float, ...]] = ((), ())  # each edge's offset (ticks), per motor turn
+    period_jitter: float = 0.0  # s, sd of the firmware's period (whole ms)
+    late_share: float = 0.0  # share of periods that run late by 5-15 ms
+    drop_share: float = 0.0  # share of rows the link loses
+    # --- mismatches outside the library (effects.py); 0 / -1 = off
+    weak_wheel: int = -1  # 0 left, 1 right: its motor weakens at weak_time
+    weak_fraction: float = 0.0  # of its torque constant lost
+    weak_time: float = 0.0  # s
+    eccentricity: Pair = (0.0, 0.0)  # m, the tyre's centre off its axle
+    encoder_drift: Pair = (0.0, 0.0)  # counts per second added to the encoder
+    adc_clip: float = 0.0  # counts at which the IR readings clip; 0 = the ADC's full scale
+    cable_drag: float = 0.0  # N per m of distance from the anchor
+    cable_anchor: Pair = (0.0, 0.0)  # m, where the tether is fixed
 
     def replace(self, **changes: object) -> PlantSpec:
         return dataclasses.replace(self, **changes)  # type: ignore[arg-type]
 
 
-def nominal_spec() -> PlantSpec:
-    """The robot the twin describes (host_sim.physics.params.DEFAULT, as numbers), in the plant's terms."""
+def datasheet_spec(paper_ir: bool = False) -> PlantSpec:
+    """The robot the twin describes (host_sim.physics.params.DEFAULT, as numbers), in the plant's terms, with
+    none of the physics the twin lacks: the ideal driver, Coulomb friction, rigid tyres, even encoder edges.
+    Its IR ring reads the plant's own curve, or with paper_ir the paper's law and the datasheet's constants
+    (ir_paper.py): then nothing but a concealed effect departs from the datasheet."""
     p = DEFAULT
     two = lambda v: (float(v), float(v))  # noqa: E731 - per-wheel pair
     # A rigid wheel's spin inertia is at most twice its diametral one (the
@@ -101,39 +131,72 @@ def nominal_spec() -> PlantSpec:
         body_radius=p.body_radius, body_mass=p.body_mass, body_inertia=p.body_inertia, wheel_mass=p.wheel_mass,
         wheel_inertia=p.wheel_inertia, rotor_inertia=p.wheel_inertia - wheel_own,
         wheel_inertia_diam=p.wheel_inertia_diam, torque_constant=two(p.torque_constant),
-        armature_resistance=p.armature_resistance, gear_ratio=p.gear_ratio, gear_efficiency=p.gear_efficiency,
+        armature_resistance=two(p.armature_resistance), gear_ratio=p.gear_ratio, gear_efficiency=p.gear_efficiency,
         coulomb_friction=two(p.coulomb_friction), viscous_friction=two(p.viscous_friction), backlash=(0.0, 0.0),
         current_limit=p.current_limit, actuator_delay=0.0, battery_voltage=p.battery_voltage,
         battery_resistance=0.0, quiescent_current=0.08, vbat_noise=0.005, floor_friction=1.0,
         torsional_friction=0.0, caster_friction=0.0, wall_friction=0.3, floor_tilt=0.0, floor_tilt_direction=0.0,
         ticks_per_rev=two(p.ticks_per_rev),
-        ir={"gain": p.ir_gain, "near_peak": p.ir_near_peak, "blend": p.ir_blend, "saturation": p.ir_saturation,
-            "range": p.sensor_range, "ambient": p.ir_ambient, "noise": p.ir_noise, "on_delay": p.ir_on_delay,
-            "adc_max": float((1 << int(p.adc_bits)) - 1), "big_dome": tuple(p.ir_big_dome),
-            "small_dome": tuple(p.ir_small_dome), "angle_blend": tuple(p.ir_angle_blend)},
+        ir=ir_paper.datasheet_ir() if paper_ir else {
+            **ir_law.NOMINAL, "ambient": p.ir_ambient, "noise": p.ir_noise, "on_delay": p.ir_on_delay,
+            "adc_max": float((1 << int(p.adc_bits)) - 1)},
     )
+
+
+def nominal_spec() -> PlantSpec:
+    """The datasheet robot with the physics the twin lacks at its typical level (robot_draw.py draws each case's
+    own): a real driver's current loop, Stribeck friction, gear ripple, compliant tyres, a rolling caster,
+    uneven encoder edges, a quantised battery reading and a jittering period with lost rows."""
+    return datasheet_spec().replace(
+        inductance=(1.0e-3, 1.0e-3), current_loop_hz=300.0, stiction_ratio=(1.2, 1.2), stribeck_speed=1.0,
+        ripple=(0.02, 0.02), ripple_teeth=(40.0, 40.0), slip_stiffness=25.0, lateral_stiffness=2500.0,
+        caster_rolling=0.0025, vbat_lsb=0.0024, period_jitter=0.002, late_share=0.01, drop_share=0.005)
 
 
 def _f(*v: float) -> str:
     return " ".join(f"{x:.9g}" for x in v)
 
 
+def _tyre_xml(spec: PlantSpec, side: str, k: int, own: float) -> str:
+    """The tyre on its hub: rigid, or (slip_stiffness > 0) a tread body turning and flexing sideways on the hub,
+    the turn damped by Plant each step so that the slip is force / slip stiffness (docs/proving-ground.md)."""
+    r = spec.wheel_radius[k]
+    geom = f'<geom name="tyre_{side}" class="tyre" type="sphere" size="{r:.9g}" pos="{spec.eccentricity[k]:.9g} 0 0"/>'
+    if spec.slip_stiffness <= 0:
+        return geom
+    tread_mass = 0.6 * spec.wheel_mass
+    # The carcass's sideways flex: a spring with 30 % of critical damping against the tread's mass.
+    damping = 0.6 * math.sqrt(max(spec.lateral_stiffness, 1.0) * tread_mass)
+    lateral = (f'<joint name="flex_{side}" type="slide" axis="0 1 0" stiffness="{spec.lateral_stiffness:.9g}" '
+               f'damping="{damping:.9g}"/>' if spec.lateral_stiffness > 0 else "")
+    return f"""<body name="tread_{side}" pos="0 0 0">
+          {lateral}
+          <joint name="tread_{side}" type="hinge" axis="0 1 0" damping="{r * spec.slip_stiffness / SLIP_MIN_SPEED:.9g}"/>
+          <inertial pos="0 0 0" mass="{tread_mass:.9g}"
+                    diaginertia="{_f(0.6 * spec.wheel_inertia_diam, 0.6 * own, 0.6 * spec.wheel_inertia_diam)}"/>
+          {geom}
+        </body>"""
+
+
 def _wheel_xml(spec: PlantSpec, side: str, k: int) -> str:
     """One wheel (and its separate rotor when the gear has play), as children of the chassis."""
     y = spec.half_axle if side == "l" else -spec.half_axle
-    r = spec.wheel_radius[k]
-    own = spec.wheel_inertia - spec.rotor_inertia  # the wheel's own spin inertia
+    # the wheel's own spin inertia, at most twice its diametral one (a rigid body's triangle inequality)
+    own = min(spec.wheel_inertia - spec.rotor_inertia, 1.9999 * spec.wheel_inertia_diam)
     # Axle friction: MuJoCo's dry friction (a stiff constraint: no creep below
-    # breakaway) and viscous damping, on the joint the motor drives.
-    friction = (f'frictionloss="{spec.coulomb_friction[k]:.9g}" solreffriction="{CONTACT_TIMECONST} 1" '
+    # breakaway) and viscous damping, on the joint the motor drives.  Its level is the
+    # breakaway torque; Plant lowers it to the Stribeck curve in motion.
+    breakaway = spec.coulomb_friction[k] * spec.stiction_ratio[k]
+    friction = (f'frictionloss="{breakaway:.9g}" solreffriction="{CONTACT_TIMECONST} 1" '
                 f'damping="{spec.viscous_friction[k]:.9g}" armature="{spec.rotor_inertia:.9g}"')
     rigid = spec.backlash[k] <= 0
+    hub = 0.4 if spec.slip_stiffness > 0 else 1.0  # the hub's share of the wheel's mass and inertia
     wheel = f"""
       <body name="wheel_{side}" pos="0 {y:.9g} 0">
         <joint name="wheel_{side}" type="hinge" axis="0 1 0" {friction if rigid else ''}/>
-        <inertial pos="0 0 0" mass="{spec.wheel_mass:.9g}"
-                  diaginertia="{_f(spec.wheel_inertia_diam, own, spec.wheel_inertia_diam)}"/>
-        <geom name="tyre_{side}" class="tyre" type="sphere" size="{r:.9g}"/>
+        <inertial pos="0 0 0" mass="{hub * spec.wheel_mass:.9g}"
+                  diaginertia="{_f(hub * spec.wheel_inertia_diam, hub * own, hub * spec.wheel_inertia_diam)}"/>
+        {_tyre_xml(spec, side, k, own)}
       </body>"""
     if rigid:
         return wheel
