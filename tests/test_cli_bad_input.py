@@ -151,6 +151,23 @@ CASES: list[tuple[str, list[str], str]] = [
     ("plot-recording-png-format", ["plot", "recording", "{in}/run.csv", "--png", "{case}/x.xyz"], ".xyz"),
     ("plot-recording-world-bad", ["plot", "recording", "{in}/run.csv", "--world", "{in}/latin1.json",
                                   "--png", "{case}/r.png"], "UTF-8"),
+    # import
+    ("import-log-missing", ["import", "{case}/none.csv", "--map", "{in}/map.json", "--robot", "{in}/robot.json",
+                            "--out", "{case}/r.csv"], "none.csv"),
+    ("import-map-not-json", ["import", "{in}/log.csv", "--map", "{in}/bad.json", "--robot", "{in}/robot.json",
+                             "--out", "{case}/r.csv"], "not valid JSON"),
+    ("import-map-kind", ["import", "{in}/log.csv", "--map", "{in}/map_kind.json", "--robot", "{in}/robot.json",
+                         "--out", "{case}/r.csv"], "command.kind"),
+    ("import-map-column", ["import", "{in}/log.csv", "--map", "{in}/map_column.json", "--robot", "{in}/robot.json",
+                           "--out", "{case}/r.csv"], "encoder.left"),
+    ("import-log-cell", ["import", "{in}/log_cell.csv", "--map", "{in}/map.json", "--robot", "{in}/robot.json",
+                         "--out", "{case}/r.csv"], "log_cell.csv:3"),
+    ("import-robot-ticks", ["import", "{in}/log.csv", "--map", "{in}/map.json", "--robot", "{in}/ticks.json",
+                            "--out", "{case}/r.csv"], "ticks_per_rev"),
+    ("import-out-folder", ["import", "{in}/log.csv", "--map", "{in}/map.json", "--robot", "{in}/robot.json",
+                           "--out", "{case}/adir"], "adir"),
+    ("import-out-in-a-file", ["import", "{in}/log.csv", "--map", "{in}/map.json", "--robot", "{in}/robot.json",
+                              "--out", "{case}/afile/r.csv"], "afile"),
     # replay
     ("replay-missing", ["replay", "{case}/none.csv"], "none.csv"),
     ("replay-bad", ["replay", "{in}/bad.csv"], "bad.csv"),
@@ -158,7 +175,6 @@ CASES: list[tuple[str, list[str], str]] = [
     ("replay-start-negative", ["replay", "{in}/run.csv", "--start", "-1"], "'-1'"),
     ("replay-png-folder", ["replay", "{in}/run.csv", "--png", "{case}/adir"], "adir"),
     ("replay-params-bad", ["replay", "{in}/run.csv", "--params", "{in}/ticks.json"], "ticks_per_rev"),
-    ("replay-robot-no-world", ["replay", "{in}/robot.csv"], "give --world"),
     ("replay-robot-no-pose", ["replay", "{in}/robot.csv", "--world", "arena"], "tracker pose"),
     ("replay-substeps-zero", ["replay", "{in}/run.csv", "--substeps", "0"], "'0'"),
     # diagnose
@@ -249,6 +265,11 @@ CASES: list[tuple[str, list[str], str]] = [
 ]
 
 
+IMPORT_MAP = {"time": {"column": "t", "unit": "ms"}, "command": {"kind": "current", "left": "il", "right": "ir",
+                                                                 "unit": "mA"},
+              "encoder": {"left": "el", "right": "er"}}
+
+
 def make_inputs(folder: Path) -> None:
     """The input files the table refers to as {in}/NAME."""
     def world(size: list[float], **more: object) -> dict[str, object]:
@@ -261,13 +282,20 @@ def make_inputs(folder: Path) -> None:
         "lamp.json": world([2, 2], lamps=[{"x": 1, "y": 1, "level": 1e308}]),
         "far.json": world([2, 2], walls=[{"segment": [0, 0, 1e300, 1]}]),
         "adc64.json": {"adc_bits": 64},
-        "ticks.json": {"ticks_per_rev": 1.5},
+        "ticks.json": {"ticks_per_rev": 0.5},
         "gains.json": {"ir_gain_scale": [1, 1, 1, 1, 1, 1, 1, 1e300]},
+        "robot.json": {},
+        "map.json": IMPORT_MAP,
+        "map_kind.json": {**IMPORT_MAP, "command": {**IMPORT_MAP["command"], "kind": "pwm"}},  # type: ignore[dict-item]
+        "map_column.json": {**IMPORT_MAP, "encoder": {"left": "nope", "right": "er"}},
     }
     for name, data in files.items():
         (folder / name).write_text(json.dumps(data))
     (folder / "latin1.json").write_bytes(json.dumps(world([2, 2], name="caf\u00e9"), ensure_ascii=False).encode("latin-1"))
     (folder / "bad.json").write_text('{"adc_bits": 12,')
+    log = "t,il,ir,el,er\n" + "".join(f"{40 * k},100,100,{k},{k}\n" for k in range(5))
+    (folder / "log.csv").write_text(log)
+    (folder / "log_cell.csv").write_text(log.replace("40,100,100,1,1", "40,100,1x0,1,1"))
     (folder / "garbage.img").write_bytes(bytes(range(256)) * 64)
     (folder / "bad.csv").write_text("t,cmd_l\n0,0\n")
     (folder / "bad.csv.json").write_text(json.dumps({"format": "twinbot-recording", "version": 1,

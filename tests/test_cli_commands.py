@@ -184,7 +184,7 @@ def test_worlds_too_big_for_their_grid_are_refused():
 
 
 @pytest.mark.parametrize("changes,name", [({"adc_bits": 64}, "adc_bits"), ({"adc_bits": 12.5}, "adc_bits"),
-                                          ({"ticks_per_rev": 1.5}, "ticks_per_rev"),
+                                          ({"ticks_per_rev": 0.5}, "ticks_per_rev"),
                                           ({"ir_saturation": 2}, "ir_saturation"),
                                           ({"body_mass": 1e300}, "body_mass"),
                                           ({"com_offset": -0.07}, "com_offset"), ({"com_offset": 0.06}, "com_offset")])

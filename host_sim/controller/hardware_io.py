@@ -44,6 +44,9 @@ class Actuate:
     emitter_pct: int  # IR emitter pulse width, the light power L
 
 
+FIRMWARE_IR_PAIRS = 8  # the firmware's HAL reads eight phototransistors a cycle (Sense.adc_on)
+
+
 def geometry_from_params(wheel_radius_m: float, half_axle_m: float, ticks_per_rev: int) -> tuple[int, int, int]:
     """The firmware's geometry parameters (wheel_diameter_um, wheel_base_um, ticks_per_rev) of a
     robot given as RobotParams does; protocol.messages.geometry_frames turns them into PARAM_SETs."""
@@ -64,6 +67,9 @@ def setup_frames(rule_set: int, mode: int = M.MODE_AUTONOMOUS, params: RobotPara
     """What the host says to the firmware before its first cycle: the robot's geometry (when the host
     knows the robot's parameters), the rule set, then the mode.  ValueError: a geometry the firmware
     cannot hold (outside its parameter ranges)."""
+    if params is not None and len(params.ir_bearings) != FIRMWARE_IR_PAIRS:
+        raise ValueError(f"the firmware reads {FIRMWARE_IR_PAIRS} IR pairs, and this robot has "
+                         f"{len(params.ir_bearings)} (ir_bearings): it replays and is diagnosed, it cannot run the firmware")
     enc = FrameEncoder()
     frames = M.geometry_frames(enc, *firmware_geometry(params)) if params is not None else []
     return frames + [

@@ -11,16 +11,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from host_sim.diagnosis.windows import WindowRun, Windows, sensors_on_track
-from host_sim.physics.params import RobotParams
+from host_sim.physics.params import MAX_IR_PAIRS, RobotParams
 from host_sim.recordings.recording import Recording
 from host_sim.physics.world import World
 
+# The firmware's ring by name; the pairs of a larger ring (ir_bearings) by number.
 SENSOR_NAMES = ("S1 front", "S2 front-left", "S3 left", "S4 back-left", "S5 back", "S6 back-right",
-                "S7 right", "S8 front-right")
+                "S7 right", "S8 front-right") + tuple(f"S{k + 1}" for k in range(8, MAX_IR_PAIRS))
 WHEELS = ("wheel_l", "wheel_r")
 MOTION = ("forward", "lateral", "heading_rate")
-IR = tuple(f"ir_{k}" for k in range(8))
-AMBIENT = tuple(f"amb_{k}" for k in range(8))
+IR = tuple(f"ir_{k}" for k in range(MAX_IR_PAIRS))
+AMBIENT = tuple(f"amb_{k}" for k in range(MAX_IR_PAIRS))
 # Each window's totals (locate.locate_scale), where an odometry-sized error shows: channel -> its total.
 ACCUMULATED = {"forward": "travel", "heading_rate": "turn", "wheel_l": "count_l", "wheel_r": "count_r"}
 
@@ -75,7 +76,7 @@ def build_channels(rec: Recording, windows: Windows, run: WindowRun, robots: lis
                    world: World | None, unjudged: np.ndarray | None = None) -> list[Channel]:
     """Every channel the recording supports: recorded vs the twin's run (and its sensors on the track).
 
-    unjudged: (W, T - 1, 8) IR readings that are not judged (windows.unjudged_readings): there the twin is
+    unjudged: (W, T - 1, S) IR readings that are not judged (windows.unjudged_readings): there the twin is
     given the recorded value, so they weigh nothing in a fit, a location or a fit %."""
     p = robots[0]
     idx = windows.index
@@ -86,14 +87,22 @@ def build_channels(rec: Recording, windows: Windows, run: WindowRun, robots: lis
         # The recorded counts are floors, the twin's are not: an increment is off by up to a tick (1/6 tick^2).
         chans.append(Channel(name, "ticks/period", enc_rec[..., w], enc_twin[..., w], float(np.sqrt(1 / 6))))
     if rec.pose is not None:
-        chans += _motion_channels(rec, idx, run, p)
-        if world is not None and world.n_walls:
+        if not rec.bench:  # on a bench the body is held: its motion says nothing of the drive
+            chans += _motion_channels(rec, idx, run, p)
+        if world is not None and world.n_walls and ring_comparable(rec, p):
             chans += sensor_channels(rec, idx[:, 1:], robots, world, unjudged)
+    if not rec.battery_recorded:
+        return chans
     vb = rec.vbat[idx[:, 1:]]
     vb_twin = (run.vbat[..., 1:] if run.vbat is not None
                else np.repeat(np.full_like(vb, p.battery_voltage)[:, None], run.enc.shape[1], 1))
     chans.append(Channel("vbat", "V", vb, vb_twin, 0.005, relative=False))
     return chans
+
+
+def ring_comparable(rec: Recording, p: RobotParams) -> bool:
+    """The recording's IR readings are the twin's ring's (ir_bearings): as many pairs, emitters on and ambient."""
+    return rec.n_ir == len(p.ir_bearings) and rec.ambient_recorded
 
 
 def _motion_channels(rec: Recording, idx: np.ndarray, run: WindowRun, p: RobotParams) -> list[Channel]:
@@ -115,7 +124,7 @@ def sensor_channels(rec: Recording, rows: np.ndarray, robots: list[RobotParams],
                     unjudged: np.ndarray | None) -> list[Channel]:
     """The IR and ambient channels at the rows (W, T - 1): the twin's sensors on the recorded track, so
     whatever the twin's motion (no run needed)."""
-    on, amb = sensors_on_track(rec, rows, robots, world)  # (N, W, T - 1, 8)
+    on, amb = sensors_on_track(rec, rows, robots, world)  # (N, W, T - 1, S)
     p = robots[0]
     refl_rec = (rec.ir_on - rec.ir_amb)[rows].astype(float)
     refl_twin = (on - amb).astype(float).transpose(1, 0, 2, 3)
@@ -123,7 +132,7 @@ def sensor_channels(rec: Recording, rows: np.ndarray, robots: list[RobotParams],
         refl_twin = np.where(unjudged[:, None], refl_rec[:, None], refl_twin)
     amb_twin = amb.astype(float).transpose(1, 0, 2, 3)
     chans = []
-    for k in range(8):
+    for k in range(rec.n_ir):
         chans.append(Channel(IR[k], "counts", refl_rec[..., k], refl_twin[..., k], float(np.sqrt(2) * p.ir_noise + 0.5)))
         chans.append(Channel(AMBIENT[k], "counts", rec.ir_amb[rows][..., k].astype(float), amb_twin[..., k],
                              float(p.ir_noise + 0.5), relative=False))

@@ -89,11 +89,14 @@ class Model:
     located_gain: float = 0.0  # what its newest effect removed of the located channels' held-out residuals
 
 
-def candidates_for(channels: list[str]) -> list[Candidate]:
+def candidates_for(channels: list[str], drive: str = "current", bench: bool = False) -> list[Candidate]:
+    """The library's effects that may explain these channels, those it offers for the robot's drive and,
+    on a bench, none of the floor's or the body's (effects.offered)."""
     out: list[Candidate] = []
     if any(drive_channel(c) for c in channels):
         for name in DRIVE_EFFECTS:
-            out += [Candidate(name, s) for s in E.LIBRARY[name].sites()]
+            if E.offered(name, drive, bench):
+                out += [Candidate(name, s) for s in E.LIBRARY[name].sites()]
     sensors = sorted({int(c.split("_")[1]) for c in channels if sensor_channel(c)})
     for k in sensors:
         out += [Candidate(name, k) for name in SENSOR_EFFECTS]

@@ -14,6 +14,7 @@ import numpy as np
 from host_sim.diagnosis.channels import ACCUMULATED, judged_windows
 from host_sim.diagnosis.compare import Comparison
 from host_sim.diagnosis.locate import lag_blocks
+from host_sim.diagnosis.phrasing import checked
 from host_sim.diagnosis.report import Diagnosis
 from host_sim.recordings.recording import Recording
 
@@ -132,6 +133,7 @@ def render(rec: Recording, d: Diagnosis) -> str:
     before = d.comparisons[0]
     parts = [f"<h1>twinbot diagnose: {html.escape(d.recording)}</h1>",
              f"<p><b>Verdict: {html.escape(d.verdict)}</b></p>"]
+    parts += [f"<p><i>{html.escape(checked(item))}</i></p>" for item in d.recording_checks]
     parts += [f"<p><i>{html.escape(n)}</i></p>" for n in d.notes]
     parts.append("<pre>" + html.escape(d.summary()) + "</pre>")
     traj = trajectory_figure(rec, d.comparisons[-1], d.after_long)

@@ -97,19 +97,18 @@ def regimes(rec: Recording, windows: Windows, p: RobotParams, world: World | Non
         heading = np.mod(rec.pose[rows][..., 2] + np.pi / 4, 2 * np.pi) // (np.pi / 2)
         out.add("heading", heading.astype(int), {0: "heading +x", 1: "heading +y", 2: "heading -x", 3: "heading -y"})
         if world is not None:
-            _wall_regimes(out, rec, rows, world)
+            _wall_regimes(out, rec, rows, world, p.ir_bearings)
     return out
 
 
-def _wall_regimes(out: Regimes, rec: Recording, rows: np.ndarray, world: World) -> None:
+def _wall_regimes(out: Regimes, rec: Recording, rows: np.ndarray, world: World, bearings: tuple[float, ...]) -> None:
     """Per sensor: how far the wall it looks at is (along its axis, from the body's rim), and whether it
     closes on that wall or draws away from it over the period (`timing_findings`)."""
     assert rec.pose is not None
-    bearings = [k * np.pi / 4 for k in range(8)]
     dist, _angle, hit = world.cast_robots(rec.pose[rows], bearings, 1.0)
     period = rec.t[rows + 1] - rec.t[rows]  # each period as long as it was recorded
     after, _angle, hit_after = world.cast_robots(rec.pose[rows + 1], bearings, 1.0)
-    for k in range(8):
+    for k in range(len(bearings)):
         d = np.where(hit[..., k], dist[..., k], np.inf)
         out.add(f"wall_{k}", np.digitize(d, [0.09, 0.18]),
                 {0: f"with a wall within 3 cm of {SENSOR_NAMES[k]}", 1: f"with a wall 3-12 cm from {SENSOR_NAMES[k]}",

@@ -87,3 +87,9 @@ def test_block_words(j: Judgement, block: dict[str, Any]) -> str:
     if not j.white:
         what.append(f"is not white (Ljung-Box p = {j.white_p:.2g})")
     return f"on the test block ({block['from_s']:.0f}-{block['to_s']:.0f} s) {channel_words(j.channel)} " + ", ".join(what)
+
+
+def checked(item: dict[str, Any]) -> str:
+    """A note of loading's checks (host_sim/recordings/checks.py, Note.to_json) as the report says it: the
+    recording's timing or counts as mended, which the diagnosis never fits as physics."""
+    return f"{'the test recording' if item.get('test') else 'recording'} ({item['name']}): {item['text']}"

@@ -6,6 +6,7 @@ windows (opt-in: on a test block, block_verdict).  Verdicts, refusals and the JS
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Any, Callable
@@ -16,14 +17,15 @@ from host_sim.physics import effects as E
 from host_sim.diagnosis.tell_apart import tell_apart
 from host_sim.diagnosis.compare import Comparison, compare_all, stratify
 from host_sim.diagnosis.fit import Model, Objective, candidates_for, fit_totals, objective_channels, select
-from host_sim.diagnosis.channels import ACCUMULATED, WHEELS, judged_windows
+from host_sim.diagnosis.channels import ACCUMULATED, WHEELS, judged_windows, ring_comparable
 from host_sim.diagnosis.locate import Finding, noise_level, regimes, total_noise
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
 from host_sim.diagnosis.testblock import TestBlockError, check_test_recording, split_test_block
 from host_sim.diagnosis.block_verdict import judge_test_block
-from host_sim.diagnosis.phrasing import sentence
-from host_sim.physics.params import RobotParams
+from host_sim.diagnosis.phrasing import checked, sentence
+from host_sim.physics.params import DEFAULT, RobotParams
 from host_sim.recordings.recording import Recording
+from host_sim.recordings.replay import with_drive
 from host_sim.physics.world import World
 
 MIN_WINDOWS = 6  # 1 s windows: fewer and the held-out judgement rests on one or two windows
@@ -48,6 +50,7 @@ class Diagnosis:
     fit_judged: list[list[float]] = field(default_factory=list)  # [t0, t1] of the windows the wheels are judged on
     unexplained: list[dict[str, Any]] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    recording_checks: list[dict[str, Any]] = field(default_factory=list)  # checks.Note's: mended, never fitted
     fit_test: dict[str, Any] = field(default_factory=dict)  # on the test block: before, after, ceiling, judged
     closest: dict[str, Any] | None = None  # an effect that removes part of a mismatch it does not explain
     changes: list[dict[str, Any]] = field(default_factory=list)  # effects whose halves differ: not named
@@ -60,7 +63,7 @@ class Diagnosis:
         doc = {"recording": self.recording, "verdict": self.verdict, "located": self.located,
                "effects": self.effects, "fit": {"before": _finite(self.fit_before), "after": _finite(self.fit_after),
                                                 "ceiling": _finite(self.fit_ceiling), "judged": self.fit_judged},
-               "unexplained": self.unexplained, "notes": self.notes}
+               "unexplained": self.unexplained, "notes": self.notes, "recording_checks": self.recording_checks}
         if self.fit_test:  # judged on a test block (diagnose's test_block): its figures and rules' findings
             doc["fit"]["test"] = {k: (_finite(v) if isinstance(v, dict) else v) for k, v in self.fit_test.items()}
             doc |= {"closest": self.closest, "changes": self.changes, "test_judgements": self.test_judgements}
@@ -68,6 +71,7 @@ class Diagnosis:
 
     def summary(self) -> str:
         lines = [f"{self.recording}: {self.verdict}"]
+        lines += [f"  {checked(item)}" for item in self.recording_checks]
         lines += [f"  note: {n}" for n in self.notes]
         for item in self.located:
             lines.append(f"  - {item['words']} (fit {item['fit_before']:.0f} %)")
@@ -128,19 +132,38 @@ def excitation_notes(rec: Recording, first: Comparison, params: RobotParams, wor
             f"{'; '.join(effects)} (the identification manoeuvre has all of these: twinbot serial PORT --excite)"]
 
 
-def check_data(rec: Recording, world: World | None) -> list[str]:
+def check_data(rec: Recording, world: World | None, params: RobotParams | None = None) -> list[str]:
     """Refuse what is too short to diagnose; return notes on what this recording cannot show."""
     period = rec.sample_period
     if len(rec) * period < MIN_WINDOWS * DEFAULT_SECONDS[0]:
         raise DiagnosisError(f"the recording lasts {len(rec) * period:.1f} s: too short to diagnose "
                              f"(at least {MIN_WINDOWS * DEFAULT_SECONDS[0]:.0f} s; 60-90 s is better)")
     notes = []
-    if rec.pose is None:
+    if rec.bench:
+        notes.append("recorded on a bench (wheels off the floor, the body held): the twin holds its body; traction, "
+                     "the caster, contact and the body's motion are not judged")
+    elif rec.pose is None:
         notes.append("no tracker pose: judged on the encoders and the battery only; effects on the body's motion "
                      "(track width vs wheel radius, slip) and on the IR sensors cannot be told apart without it")
     elif world is None or world.n_walls == 0:
         notes.append("no walls known: the IR sensors are not judged")
+    elif not ring_comparable(rec, params or DEFAULT):
+        ring = len((params or DEFAULT).ir_bearings)
+        notes.append(f"the recording's {rec.n_ir} IR sensors{'' if rec.ambient_recorded else ' (no ambient readings)'}"
+                     f" are not the twin's ring of {ring} pairs (ir_bearings): the IR sensors are not judged")
+    if not rec.battery_recorded:
+        notes.append("no battery voltage recorded: the battery is not judged")
     return notes
+
+
+def without_gapped_pose(rec: Recording) -> tuple[Recording, list[str]]:
+    """A recording whose tracker lost the robot in some rows, judged without the tracker (its windows
+    start from recorded states, which a row without a pose does not give), and the note that says so."""
+    if rec.pose is None or rec.pose_rows.all():
+        return rec, []
+    missing = int((~rec.pose_rows).sum())
+    return dataclasses.replace(rec, pose=None), [
+        f"the tracker pose is missing in {missing} of {len(rec)} rows: judged without the tracker"]
 
 
 class TooLittleData(DiagnosisError):
@@ -195,8 +218,14 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     of the same robot and world; the intervals are then the window-clustered sandwich.
     workers > 1: each step's screening and its shortlisted fits run in that many processes (the same
     figures, sooner: fit.select)."""
+    params = with_drive(rec, params)  # the recording's commands are for its own drive (docs/recordings.md)
+    rec, gap_notes = without_gapped_pose(rec)
+    if isinstance(test_block, Recording):
+        test_block = without_gapped_pose(test_block)[0]
     if test_block is None:
-        return _diagnose_fitted(rec, params, world, seconds, progress, workers)[0]
+        result = _diagnose_fitted(rec, params, world, seconds, progress, workers)[0]
+        result.notes[:0] = gap_notes
+        return result
     try:
         if isinstance(test_block, Recording):
             check_test_recording(test_block, seconds[0])
@@ -206,7 +235,10 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     except TestBlockError as exc:
         raise DiagnosisError(str(exc)) from None
     result, chain, objective = _diagnose_fitted(fitted, params, world, seconds, progress, workers, clustered=True)
+    result.notes[:0] = gap_notes
     result.recording = str(rec.path or "recording")
+    if isinstance(test_block, Recording):  # a second recording: its own checks' notes
+        result.recording_checks += [n.to_json() | {"test": True} for n in block.notes]
     judge_test_block(result, block, params, world, chain, objective, seconds[0], progress)
     return result
 
@@ -216,7 +248,7 @@ def _diagnose_fitted(rec: Recording, params: RobotParams, world: World | None, s
                      ) -> tuple[Diagnosis, list[Model], Objective | None]:
     """The diagnosis on rec (with a test block: the part fitted): (its result, the chain of models, the
     objective); clustered: the intervals are the window-clustered sandwich (fit.Objective)."""
-    notes = check_data(rec, world)
+    notes = check_data(rec, world, params)
     say = progress or (lambda _text: None)
     say("comparing the twin with the recording")
     comparisons = compare_all(rec, params, world, seconds)
@@ -224,7 +256,7 @@ def _diagnose_fitted(rec: Recording, params: RobotParams, world: World | None, s
     stratify(first, rec)  # before any figure is taken: the held-out windows hold a share of what was located
     result = Diagnosis(str(rec.path or "recording"), "match", comparisons, [_located(first, f) for f in first.findings],
                        fit_before=dict(first.fit), fit_ceiling=dict(first.ceiling), fit_judged=judged_spans(rec, first),
-                       notes=notes)
+                       notes=notes, recording_checks=[n.to_json() for n in rec.notes])
     little_data = False
     try:
         check_judgeable(rec, first)
@@ -325,8 +357,9 @@ def _located(cmp: Comparison, f: Finding) -> dict[str, Any]:
 def _fit(objective: Objective, params: RobotParams, first: Comparison, say: Callable[[str], None], workers: int = 1,
          still_located: Callable[[Model, Objective], list[str]] | None = None) -> list[Model]:
     located = [f.channel for f in first.findings]
-    return select(objective, params, candidates_for(located), progress=say, located=located,
-                  workers=workers, still_located=still_located)
+    offered = candidates_for(located, params.drive_kind, objective.rec.bench)
+    return select(objective, params, offered, progress=say, located=located, workers=workers,
+                  still_located=still_located)
 
 
 def fit_objective(rec: Recording, world: World | None, first: Comparison, clustered: bool = False) -> Objective:

@@ -24,6 +24,8 @@ YAW_NOISE = 0.1  # rad/s of yaw rate over one period (0.3 deg tracker noise)
 SEPARATION_MIN = 5.0  # z of a segment's difference that makes it decisive
 OPEN_FLOOR = World(name="open floor", size=(6.0, 6.0), walls=[], start=(3.0, 3.0, 0.0))
 COMMAND = "twinbot serial PORT --excite --record F.csv"
+OTHER_DRIVES = ("a recording whose commands step between several sizes in both directions, each held until the "
+                "wheels settle, would tell them apart")
 
 # Sensor effects that look alike in one kind of data, and the data that separates them.
 IR_APART = {
@@ -90,6 +92,8 @@ def tell_apart(chosen: tuple[str, RobotParams], rival: tuple[str, RobotParams]) 
         pair = frozenset(n.split("(")[0] for n in (name_a, name_b))
         data, why = IR_APART.get(pair, IR_DEFAULT)
         return f"{name_a} and {name_b} explain it equally well; {data} would tell them apart" + (f": {why}" if why else "")
+    if p_a.drive_kind != "current":  # the manoeuvre runs this project's firmware, which commands currents
+        return (f"{name_a} and {name_b} explain it equally well; {OTHER_DRIVES}")
     rows = separation(run_manoeuvre(p_a), run_manoeuvre(p_b))
     segment, level, words = rows[0]
     if level < SEPARATION_MIN:

@@ -11,13 +11,11 @@ from typing import Any
 
 import numpy as np
 
-from host_sim.physics import dynamics, motors
 from host_sim.sensors import ir_sensor
 from host_sim.robot.batch import SUBSTEPS, BatchSim, robot_params, step_parts
 from host_sim.physics.params import RobotParams
 from host_sim.recordings.recording import Recording
-from host_sim.recordings.replay import (SEED_ROWS, ReplayError, replay_inputs, sliding_rows, starts_at_rest, state_at,
-                             wheel_speeds_at)
+from host_sim.recordings.replay import SEED_ROWS, ReplayError, replay_inputs, sliding_rows, state_or_origin
 from host_sim.physics.world import World
 
 DEFAULT_SECONDS = (1.0, 5.0)
@@ -159,17 +157,11 @@ class WindowRun:
 
 
 def initial_states(rec: Recording, rows: np.ndarray, p: RobotParams) -> tuple[np.ndarray, np.ndarray]:
-    """(q (W, 5), v (W, 2)) at the given rows: as replay.state_at, the origin standing in for a missing tracker."""
+    """(q (W, 5), v (W, 2)) at the given rows: replay.state_or_origin, the origin standing in for a missing tracker."""
     q = np.empty((len(rows), 5))
     v = np.empty((len(rows), 2))
     for i, k in enumerate(rows):
-        if rec.pose is not None:
-            qk, vk = state_at(rec, int(k), p)
-        else:
-            theta = [motors.encoder_angle(int(rec.enc[k, w]), p, w) for w in range(2)]
-            qk = dynamics.q_from_axle_pose(0.0, 0.0, 0.0, p, theta[0], theta[1])
-            vk = (0.0, 0.0) if starts_at_rest(rec, int(k)) else wheel_speeds_at(rec, int(k), p)
-        q[i], v[i] = qk, vk
+        q[i], v[i] = state_or_origin(rec, int(k), p)
     return q, v
 
 
@@ -219,7 +211,7 @@ def _run_windows(rec: Recording, windows: Windows, params: Any, world: World | N
             on_track[:, s] = q_k[:, :3]
     per_robot = robots[0] if n_sets == 1 else [p for _w in range(n_win) for p in robots]
     sim = BatchSim(world if rec.pose is not None else None, per_robot, q=q.reshape(-1, 5), v=v.reshape(-1, 2),
-                   base=base, substeps=substeps)
+                   base=base, substeps=substeps, bench=rec.bench)
     # Each window's twin lives its own rows' recorded durations, a late row (the board's loop overran) or a
     # missed cycle as long as it lasted (tests/test_diagnosis.py::test_a_board_whose_loop_overran_matches).
     period = np.repeat(inputs.period[idx].T, n_sets, axis=1)  # (T, W * N)
@@ -320,7 +312,7 @@ def _ticks_per_rev(robots: list[RobotParams], n_win: int) -> np.ndarray:
 
 def sensors_on_track(rec: Recording, rows: np.ndarray, robots: list[RobotParams], world: World,
                      seed: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The twin's IR ring (on, ambient), each (N, *rows.shape, 8), read at the recorded poses of `rows`.
+    """The twin's IR ring (on, ambient), each (N, *rows.shape, S), read at the recorded poses of `rows`.
 
     The readings are not rounded to counts (as the encoder counts of
     run_windows): the residuals are then smooth in the parameters, so a fit
@@ -334,7 +326,8 @@ def sensors_on_track(rec: Recording, rows: np.ndarray, robots: list[RobotParams]
     inputs = replay_inputs(rec)
     rng = np.random.default_rng(seed) if seed is not None else None
     flat = rows.reshape(-1)
-    on = np.empty((len(robots), flat.size, ir_sensor.N_SENSORS))
+    n_ir = len(robots[0].ir_bearings)
+    on = np.empty((len(robots), flat.size, n_ir))
     amb = np.empty_like(on)
     for s, p in enumerate(robots):
         poses, t = rec.pose[flat], rec.t[flat]
@@ -342,12 +335,12 @@ def sensors_on_track(rec: Recording, rows: np.ndarray, robots: list[RobotParams]
             t = t - p.ir_latency
             poses = ir_sensor.pose_at(rec.t, rec.pose, t)
         amb[s], on[s] = ir_sensor.read_sensors(world, poses, inputs.emitter[flat], t, p, rng, quantise=False)
-    shape = (len(robots), *rows.shape, ir_sensor.N_SENSORS)
+    shape = (len(robots), *rows.shape, n_ir)
     return on.reshape(shape), amb.reshape(shape)
 
 
 def unjudged_readings(rec: Recording, rows: np.ndarray, p: RobotParams, world: World) -> np.ndarray:
-    """(*rows.shape, 8) bool: the twin's reflected light at the recorded pose is ill-conditioned there.
+    """(*rows.shape, S) bool: the twin's reflected light at the recorded pose is ill-conditioned there.
 
     A sensor's ray that grazes a wall's end (or a corner) hits or misses it as the pose moves by the
     tracker's noise: the twin would read 500 counts or nothing from the same recorded pose.  Such a reading
@@ -373,9 +366,9 @@ def unjudged_readings(rec: Recording, rows: np.ndarray, p: RobotParams, world: W
     spread = np.ptp(np.stack(refl), axis=0)
     doubt = spread > np.maximum(POSE_DOUBT_COUNTS, 0.5 * np.abs(refl[0]))
     dist, away = world.nearest_wall(rec.pose[flat, :2])  # away: the unit normal from the wall to C
-    bearing = rec.pose[flat, 2:3] + np.asarray(ir_sensor.BEARINGS)
+    bearing = rec.pose[flat, 2:3] + np.asarray(p.ir_bearings)
     facing = -(np.cos(bearing) * away[:, :1] + np.sin(bearing) * away[:, 1:]) > FACING_COS
     doubt |= (dist < p.body_radius + CONTACT_MARGIN)[:, None] & facing
     doubt |= ir_sensor.reflection(world, rec.pose[flat], p)[0] < p.ir_near_peak
-    return doubt.reshape(*rows.shape, ir_sensor.N_SENSORS)
+    return doubt.reshape(*rows.shape, len(p.ir_bearings))
 

@@ -112,30 +112,26 @@ def wheel_speeds(rec, params) -> np.ndarray:  # type: ignore[no-untyped-def]
     return np.diff(rec.enc, axis=0) * (2 * math.pi / params.ticks_per_rev) * params.wheel_radius / dt
 
 
+# How the commands of each drive are drawn (the sidecar's drive block; docs/recordings.md): label, scale.
+COMMAND_AXES = {"current": ("current reference (mA)", 1000.0), "voltage": ("voltage command (V)", 1.0),
+                "duty": ("duty (%)", 100.0), "wheel_speed": ("wheel-speed set-point (rad/s)", 1.0)}
+
+
 def save_recording(path: str | Path, rec, params, world=None, replayed=None) -> Path:  # type: ignore[no-untyped-def]
-    """A recording at a glance: trajectory (when tracked), wheel commands, encoder speeds, battery, IR on and ambient.
+    """A recording at a glance: trajectory (the tracker's, else the firmware's odometry), wheel commands,
+    encoder speeds, battery, IR on and ambient.
 
     replayed: a host_sim.recordings.replay.ReplayResult drawn beside the recorded trajectory.
     """
     plt = _pyplot()
     fig, axes = plt.subplots(3, 2, figsize=(12, 11))
     (traj, cmd), (speed, vbat), (ir_on, ir_amb) = axes
-    if world is not None:
-        draw_world(traj, world)
-    if rec.pose is not None:
-        traj.plot(rec.pose[:, 0], rec.pose[:, 1], color="tab:blue", lw=1.0, label="recorded")
-        traj.plot(*rec.pose[0, :2], "o", color="tab:green", label="start")
-        if replayed is not None:
-            traj.plot(replayed.pose[:, 0], replayed.pose[:, 1], color="tab:red", lw=1.0, ls="--", label="twin, replayed")
-        traj.legend(fontsize=8)
-        traj.set_aspect("equal")
-        traj.set_title("trajectory (tracker)")
-    else:
-        traj.text(0.5, 0.5, "no tracker pose in this recording", ha="center", va="center", transform=traj.transAxes)
-        traj.set_title("trajectory")
+    _draw_trajectory(traj, rec, world, replayed)
+    kind = str((rec.meta.get("drive") or {}).get("kind", "current"))
+    label, scale = COMMAND_AXES.get(kind, COMMAND_AXES["current"])
     for k, side in enumerate(("left", "right")):
-        cmd.plot(rec.t, 1000 * rec.cmd[:, k], lw=0.9, label=side)
-    cmd.set_ylabel("current reference (mA)")
+        cmd.plot(rec.t, scale * rec.cmd[:, k], lw=0.9, label=side)
+    cmd.set_ylabel(label)
     cmd.set_title("wheel commands")
     if len(rec) > 1:
         v = wheel_speeds(rec, params)
@@ -143,21 +139,61 @@ def save_recording(path: str | Path, rec, params, world=None, replayed=None) -> 
             speed.plot(rec.t[1:], 1000 * v[:, k], lw=0.9, label=side)
     speed.set_ylabel("wheel rim speed (mm/s)")
     speed.set_title("encoder speeds")
-    vbat.plot(rec.t, rec.vbat, color="tab:purple", lw=0.9)
+    if rec.battery_recorded:
+        vbat.plot(rec.t, rec.vbat, color="tab:purple", lw=0.9)
+    else:
+        _absent(vbat, "no battery voltage in this recording")
     vbat.set_ylabel("battery (V)")
     vbat.set_title("battery")
-    for ax, data, title in ((ir_on, rec.ir_on, "IR, emitters on"), (ir_amb, rec.ir_amb, "IR, ambient (emitters off)")):
-        for i in range(data.shape[1]):
-            ax.plot(rec.t, data[:, i], lw=0.7, label=f"S{i + 1}")
-        ax.set_ylabel("ADC counts")
-        ax.set_title(title)
+    _draw_ir(ir_on, ir_amb, rec)
     for ax in (cmd, speed, vbat, ir_on, ir_amb):
         ax.set_xlabel("time (s)")
         ax.grid(alpha=0.3)
     for ax in (cmd, speed):
         ax.legend(fontsize=8)
-    ir_on.legend(fontsize=7, ncol=4)
     name = rec.path.name if rec.path is not None else "recording"
     fig.suptitle(f"{name}: {len(rec)} rows, {rec.t[-1] - rec.t[0]:.1f} s, source {rec.meta.get('source', '?')}"
                  if len(rec) else f"{name}: empty")
     return _save(plt, fig, path)
+
+
+def _absent(ax, text: str) -> None:  # type: ignore[no-untyped-def]
+    ax.text(0.5, 0.5, text, ha="center", va="center", transform=ax.transAxes)
+
+
+def _draw_trajectory(traj, rec, world, replayed) -> None:  # type: ignore[no-untyped-def]
+    """The tracker's pose (its rows with one), else the firmware's own odometry, else a word why not."""
+    if world is not None:
+        draw_world(traj, world)
+    if rec.pose is not None:
+        xy, title = rec.pose[:, :2], "trajectory (tracker)"
+    elif rec.firmware is not None:
+        xy, title = rec.firmware[:, 3:5], "trajectory (the firmware's odometry; no tracker)"
+    else:
+        _absent(traj, "no tracker pose nor odometry in this recording")
+        traj.set_title("trajectory")
+        return
+    traj.plot(xy[:, 0], xy[:, 1], color="tab:blue", lw=1.0, label="recorded")
+    first = np.flatnonzero(np.isfinite(xy).all(axis=1))
+    if len(first):
+        traj.plot(*xy[first[0]], "o", color="tab:green", label="start")
+    if replayed is not None and rec.pose is not None:
+        traj.plot(replayed.pose[:, 0], replayed.pose[:, 1], color="tab:red", lw=1.0, ls="--", label="twin, replayed")
+    traj.legend(fontsize=8)
+    traj.set_aspect("equal")
+    traj.set_title(title)
+
+
+def _draw_ir(ir_on, ir_amb, rec) -> None:  # type: ignore[no-untyped-def]
+    """Each IR sensor's readings, emitters on and ambient; a word where the recording has none."""
+    for ax, data, title, here in ((ir_on, rec.ir_on, "IR, emitters on", rec.n_ir > 0),
+                                  (ir_amb, rec.ir_amb, "IR, ambient (emitters off)", rec.n_ir > 0 and rec.ambient_recorded)):
+        if here:
+            for i in range(data.shape[1]):
+                ax.plot(rec.t, data[:, i], lw=0.7, label=f"S{i + 1}")
+        else:
+            _absent(ax, "no IR sensors in this recording" if not rec.n_ir else "no ambient readings in this recording")
+        ax.set_ylabel("ADC counts")
+        ax.set_title(title)
+    if rec.n_ir:
+        ir_on.legend(fontsize=7, ncol=4)

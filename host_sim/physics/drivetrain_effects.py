@@ -2,8 +2,9 @@
 
 While every drive effect is absent BatchSim takes the nominal drive (drivetrain.py), unchanged; with any
 present it takes this one, whose equations are the nominal ones generalised per wheel and with the supply,
-the caster and the tyres' scrub (docs/effects.md, "Where the effects are computed").  SimRobot runs its
-robot through a BatchSim of one here, so both twins are the same code.
+the caster and the tyres' scrub (docs/effects.md, "Where the effects are computed").  The H-bridge drives
+(docs/motors.md "Drives") and the bench (bench_step) take it too.  SimRobot runs its robot through a
+BatchSim of one here, so both twins are the same code.
 """
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from host_sim.physics import effects, friction
+from host_sim.physics import effects, friction, motors
 
 if TYPE_CHECKING:  # annotations only
     from host_sim.physics.dynamics import ParamBatch, Params, PerRobot
@@ -28,11 +29,15 @@ MIN_ROTOR_SHARE = 0.05  # the motor side's inertia is at least this share of whe
 SUPPLY_NEWTON = 8  # Newton steps on the supply voltage (converged to 1e-12 V_bat once the limits in force are found)
 # RobotParams fields that switch this path on when any robot has them away from 0: the library's (effects.py).
 FIELDS = effects.fields_needing("drivetrain_effects")
+# and these, which only a drive other than current reads (that drive takes this path anyway)
+BRIDGE_FIELDS = ("drive", "armature_resistance_delta_l", "armature_resistance_delta_r")
+CURRENT, VOLTAGE, DUTY, WHEEL_SPEED = range(4)  # params.DRIVES, as RobotParams.drive holds them
+SLOPE_STEP = 1e-4  # rad/s: the bridge current's slope in the wheel speed by a central difference over this
 
 
 def active(p: Params) -> bool:
-    """True if any drive effect is present (p a RobotParams or a ParamBatch)."""
-    return any(np.any(np.asarray(getattr(p, f)) != 0.0) for f in FIELDS)
+    """True if any drive effect is present or any drive is not current (p a RobotParams or a ParamBatch)."""
+    return any(np.any(np.asarray(getattr(p, f)) != 0.0) for f in FIELDS + BRIDGE_FIELDS)
 
 
 def _pair(a: PerRobot, b: PerRobot) -> np.ndarray:
@@ -65,6 +70,13 @@ class Drive:
     play: np.ndarray  # (N, 2) rad, half the backlash: the gear's gap is in [-play, play]
     j_b: np.ndarray  # (N,) kg m^2, the body's yaw inertia about C without the wheels' spin (H's C = j_b + ...)
     i_r: np.ndarray  # (N, 1) kg m^2, the motor side (rotor through the gear) at the wheel: backlash.py
+    kind: np.ndarray  # (N, 1) the drive (CURRENT, VOLTAGE, DUTY, WHEEL_SPEED)
+    brake: np.ndarray  # (N, 1) bool: the bridge's off-phase brakes (slow decay), else coasts
+    deadband: np.ndarray  # (N, 1) fraction of full duty
+    dead_time: np.ndarray  # (N, 1) s
+    f_pwm: np.ndarray  # (N, 1) Hz
+    ind: np.ndarray  # (N, 1) H
+    res_w: np.ndarray  # (N, 2) ohm, each motor's armature (the bridge drives')
 
     @classmethod
     def of(cls, p: ParamBatch) -> Drive:
@@ -94,7 +106,11 @@ class Drive:
                    h=(np.asarray(h[0]), np.asarray(h[1]), np.asarray(h[2])),
                    cap=np.asarray(p.wheel_friction * m * 9.81 / 2, dtype=float),
                    play=0.5 * _pair(p.backlash_l, p.backlash_r), j_b=np.asarray(j_b, dtype=float),
-                   i_r=col(i_r))
+                   i_r=col(i_r), kind=col(p.drive).astype(np.int64), brake=col(p.pwm_decay) == 1.0,
+                   deadband=col(p.driver_deadband), dead_time=col(p.dead_time), f_pwm=col(p.pwm_frequency),
+                   ind=col(p.motor_inductance),
+                   res_w=_pair(p.armature_resistance + p.armature_resistance_delta_l,
+                               p.armature_resistance + p.armature_resistance_delta_r))
 
     def sub(self, s: np.ndarray) -> Drive:
         """Robots s only."""
@@ -119,6 +135,8 @@ def supply(i_ref: ArrayLike, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.nd
     terminal voltage) to the battery side, so the battery delivers i_e + sum(u i) / V, not
     i_e + |i_l| + |i_r| (the two agree only at full duty, u = V).  Newton on V from V_bat: the
     currents are piecewise linear in V, so it is exact once the limits in force are found."""
+    if np.any(d.kind):
+        return _bridge_supply(np.asarray(i_ref, dtype=float), w, d)
     c = np.minimum(np.maximum(np.asarray(i_ref, dtype=float), -d.lim), d.lim)
     emf = d.kt * d.gear * w
     volts = d.v_bat.copy()
@@ -138,6 +156,43 @@ def supply(i_ref: ArrayLike, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.nd
     return volts, i
 
 
+def _drive_currents(cmd: np.ndarray, w: np.ndarray, volts: np.ndarray, d: Drive) -> np.ndarray:
+    """(N, 2) motor currents for commands cmd in each robot's drive's unit, the supply at volts (N,): the current
+    drive's clipped reference, an H-bridge's cycle average for the others (motors.bridge_current)."""
+    emf = d.kt * d.gear * w
+    vb = volts[:, None]
+    duty = np.where(d.kind == DUTY, cmd, cmd / vb)  # voltage and the speed loop's output: volts across the motor
+    duty = motors.bridge_duty(duty, d.deadband, d.dead_time, d.f_pwm)
+    i = motors.bridge_current(duty, emf, vb, d.res_w, d.ind, d.f_pwm, d.brake)
+    if np.all(d.kind):
+        return i
+    return np.where(d.kind == CURRENT, _currents(np.clip(cmd, -d.lim, d.lim), emf, volts, d.res)[0], i)
+
+
+def _bridge_supply(cmd: np.ndarray, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray]:
+    """supply() where some drive is not current: the battery delivers i_e + sum((R i + e) i) / V (the
+    bridges pass the motors' power, their ripple aside); Newton on V from V_bat, the slope by a difference."""
+    cmd = np.broadcast_to(cmd, w.shape)
+    volts = d.v_bat.copy()
+    i = _drive_currents(cmd, w, volts, d)
+    if not np.any(d.r_int):
+        return volts, i
+    emf = d.kt * d.gear * w
+
+    def residual(v: np.ndarray, cur: np.ndarray) -> np.ndarray:
+        return v - d.v_bat + d.r_int * (d.i_e + ((d.res_w * cur + emf) * cur).sum(1) / v)
+
+    for _ in range(2 * SUPPLY_NEWTON):
+        gv = residual(volts, i)
+        if not np.any(np.abs(gv) > 1e-12 * d.v_bat):
+            break
+        step = 1e-6 * d.v_bat
+        slope = (residual(volts + step, _drive_currents(cmd, w, volts + step, d)) - gv) / step
+        volts = np.clip(volts - gv / np.maximum(slope, 0.5), 0.05 * d.v_bat, d.v_bat)
+        i = _drive_currents(cmd, w, volts, d)
+    return volts, i
+
+
 def wheel_torque(i_ref: ArrayLike, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(torque on each wheel (N, 2), current (N, 2), supply V (N,)): motors.wheel_torque per wheel (the motor
     less the viscous friction; the dry friction is the step's)."""
@@ -151,6 +206,11 @@ def wheel_torque_slope(i_ref: ArrayLike, w: np.ndarray, d: Drive
     """(torque, current, d torque / d w at fixed V) per wheel (N, 2), motors.wheel_torque_slope's, and
     the supply V (N,)."""
     volts, i = supply(i_ref, w, d)
+    if np.any(d.kind):  # the bridge's current: its slope by a central difference at this V
+        cmd = np.broadcast_to(np.asarray(i_ref, dtype=float), w.shape)
+        di = (_drive_currents(cmd, w + SLOPE_STEP, volts, d) - _drive_currents(cmd, w - SLOPE_STEP, volts, d))
+        n_kt = d.kt * d.gear
+        return (d.eta * n_kt * i - d.c_v * w, i, -d.c_v + d.eta * n_kt * di / (2.0 * SLOPE_STEP), volts)
     c = np.minimum(np.maximum(np.asarray(i_ref, dtype=float), -d.lim), d.lim)
     n_kt = d.kt * d.gear
     limited = c != i
@@ -344,3 +404,26 @@ def delayed_reference(hist_t: list[float], hist_i: list[np.ndarray], t: float, d
         w = np.clip(np.minimum(end, b) - np.maximum(tk, a), 0.0, None) / dt
         out += w[:, None] * ik
     return out
+
+
+def bench_step(q: np.ndarray, v: np.ndarray, i_ref: ArrayLike, dt: PerRobot, d: Drive
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One step on a stand (a bench recording: wheels off the floor, the body held): each wheel spins alone with
+    its own inertia, its motor and its axle's friction, the pose stays.  (q_next, v_next, currents, supply V):
+    drive_step's midpoint with the half step's dry friction, each wheel's response dt / I_w."""
+    hdt = np.broadcast_to(0.5 * np.asarray(dt, dtype=float), d.iw.shape)  # (N,): a float or each robot's own
+    inv = 1.0 / d.iw
+    zero = np.zeros(len(d.iw))
+    tau, _i, _v = wheel_torque(i_ref, v, d)
+    h = hdt * inv  # (N,): each wheel's response to its torque over the half step
+    free = v + h[:, None] * tau
+    fl, fr, sl, sr = friction.solve_batch(free[:, 0], free[:, 1], h, zero, zero, h, d.t_c[:, 0], d.t_c[:, 1], v)
+    v_mid = np.stack(friction.end_speeds_batch(free[:, 0], free[:, 1], h, zero, zero, h, fl, fr, sl, sr), 1)
+    tau, cur, volts = wheel_torque(i_ref, v_mid, d)
+    k = 2.0 * hdt * inv
+    free = v + k[:, None] * tau
+    fl, fr, sl, sr = friction.solve_batch(free[:, 0], free[:, 1], k, zero, zero, k, d.t_c[:, 0], d.t_c[:, 1], v)
+    v1 = np.stack(friction.end_speeds_batch(free[:, 0], free[:, 1], k, zero, zero, k, fl, fr, sl, sr), 1)
+    q1 = q.copy()
+    q1[:, 3:5] = q[:, 3:5] + hdt[:, None] * (v + v1)
+    return q1, v1, cur, volts

@@ -19,6 +19,9 @@ KINDS = ("drive", "robot", "sensor", "ring")
 # The optional parts of the robot's step an effect sets going while present (batch.step_parts): the drive
 # with effects (drivetrain_effects.py), the gear's play (backlash.py), the delayed current reference.
 STEP_PARTS = ("drivetrain_effects", "backlash", "delayed_reference")
+# The drives (params.DRIVES) an effect applies to; an effect that does not say applies to them all.
+ALL_DRIVES = ("current", "voltage", "duty", "wheel_speed")
+BRIDGE_DRIVES = ("voltage", "duty", "wheel_speed")  # an H-bridge drives the motor (docs/motors.md "Drives")
 STRICT_MARGIN = 1e-6  # of a parameter's declared range: how far inside an excluded end its fit bounds stay
 
 RobotLike = TypeVar("RobotLike")  # a RobotParams (this module sits below params.py, which checks through it)
@@ -94,6 +97,8 @@ class Effect:
     params: tuple[Param, ...]
     doc: str
     step_parts: tuple[str, ...] = ()  # of STEP_PARTS: what the step needs while the effect is present
+    drives: tuple[str, ...] = ALL_DRIVES  # the drives it belongs to: the library offers it for these only
+    on_floor: bool = False  # it acts through the floor or the body (traction, caster, contact): not on a bench
 
     def sites(self) -> tuple[str | int, ...]:
         if self.kind == "drive":
@@ -108,13 +113,16 @@ class Effect:
 
 
 def _drive(name: str, field: str, unit: str, lower: float, upper: float, doc: str, admits: Admits,
-           step_parts: tuple[str, ...] = ("drivetrain_effects",)) -> Effect:
-    return Effect(name, "drive", (Param(name, field + "_{w}", unit, lower, upper, 0.0, admits),), doc, step_parts)
+           step_parts: tuple[str, ...] = ("drivetrain_effects",), on_floor: bool = False) -> Effect:
+    return Effect(name, "drive", (Param(name, field + "_{w}", unit, lower, upper, 0.0, admits),), doc, step_parts,
+                  on_floor=on_floor)
 
 
 def _robot(name: str, pname: str, field: str, unit: str, lower: float, upper: float, doc: str,
-           admits: Admits, absent: float | None = 0.0, step_parts: tuple[str, ...] = ()) -> Effect:
-    return Effect(name, "robot", (Param(pname, field, unit, lower, upper, absent, admits),), doc, step_parts)
+           admits: Admits, absent: float | None = 0.0, step_parts: tuple[str, ...] = (),
+           drives: tuple[str, ...] = ALL_DRIVES, on_floor: bool = False) -> Effect:
+    return Effect(name, "robot", (Param(pname, field, unit, lower, upper, absent, admits),), doc, step_parts, drives,
+                  on_floor)
 
 
 def _sensor(name: str, field: str, unit: str, lower: float, upper: float, absent: float, doc: str) -> Effect:
@@ -129,36 +137,47 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
     _drive("viscous_friction", "viscous_friction_delta", "N m s/rad", -2e-4, 2e-3,
            "viscous friction at the wheel's axle beyond the nominal", total_at_least_zero("viscous_friction")),
     _drive("wheel_radius", "wheel_radius_delta", "m", -3e-3, 3e-3, "the wheel's radius minus the nominal",
-           total_above(0.0, "wheel_radius")),
+           total_above(0.0, "wheel_radius"), on_floor=True),
     _drive("torque_constant", "torque_constant_delta", "N m/A", -1.5e-3, 1.5e-3,
            "the motor's torque (= back-EMF) constant minus the nominal", total_above(0.0, "torque_constant")),
     _drive("encoder_scale", "ticks_per_rev_delta", "ticks", -150.0, 150.0,
            "encoder counts per wheel turn minus the nominal", total_above(0.5, "ticks_per_rev"), step_parts=()),
     _drive("backlash", "backlash", "rad", 0.0, 0.3, "play in the gear between the motor (and encoder) and the wheel",
            AT_LEAST_ZERO, step_parts=("drivetrain_effects", "backlash")),
+    Effect("motor_resistance", "drive", (Param("resistance", "armature_resistance_delta_{w}", "ohm", -5.0, 20.0,
+                                               0.0, total_above(0.0, "armature_resistance")),),
+           "the motor's armature resistance minus the nominal", (), BRIDGE_DRIVES),
     _robot("track_width", "half_axle", "half_axle", "m", 0.035, 0.065,
-           "half the distance between the wheels' contact points", POSITIVE, absent=None),
+           "half the distance between the wheels' contact points", POSITIVE, absent=None, on_floor=True),
     _robot("actuator_delay", "delay", "actuator_delay", "s", 0.0, 0.2,
-           "a new current reference reaches the drivers this late", AT_LEAST_ZERO,
+           "a new command reaches the drivers this late", AT_LEAST_ZERO,
            step_parts=("delayed_reference",)),
     _robot("current_limit", "limit", "current_limit", "A", 0.01, 3.0, "the drivers' current limit",
-           Admits(0.0, 1e3), absent=None),
+           Admits(0.0, 1e3), absent=None, drives=("current",)),
+    _robot("driver_deadband", "deadband", "driver_deadband", "-", 0.0, 0.5,
+           "the fraction of full duty below which the bridge gives nothing", Admits(0.0, 0.95),
+           drives=BRIDGE_DRIVES),
+    _robot("speed_loop_kp", "kp", "speed_kp", "V s/rad", 0.0, 2.0, "the robot's own wheel-speed loop's "
+           "proportional gain", AT_LEAST_ZERO, absent=None, drives=("wheel_speed",)),
+    _robot("speed_loop_ki", "ki", "speed_ki", "V/rad", 0.0, 50.0, "the robot's own wheel-speed loop's integral "
+           "gain", AT_LEAST_ZERO, absent=None, drives=("wheel_speed",)),
     _robot("battery_resistance", "resistance", "battery_resistance", "ohm", 0.0, 10.0,
            "the battery's internal resistance: its voltage sags with the current drawn", AT_LEAST_ZERO,
            step_parts=("drivetrain_effects",)),
     _robot("traction_limit", "mu", "wheel_friction", "-", 0.02, 2.0,
-           "tyre-floor friction coefficient: beyond it the wheels slip", AT_LEAST_ZERO, absent=None),
+           "tyre-floor friction coefficient: beyond it the wheels slip", AT_LEAST_ZERO, absent=None, on_floor=True),
     _robot("caster_drag", "force", "caster_drag", "N", 0.0, 0.5, "the caster's drag, against the motion",
-           AT_LEAST_ZERO, step_parts=("drivetrain_effects",)),
+           AT_LEAST_ZERO, step_parts=("drivetrain_effects",), on_floor=True),
     _robot("turning_resistance", "torque", "turning_resistance", "N m", 0.0, 0.01,
-           "the tyres' scrub torque, against turning", AT_LEAST_ZERO, step_parts=("drivetrain_effects",)),
+           "the tyres' scrub torque, against turning", AT_LEAST_ZERO, step_parts=("drivetrain_effects",),
+           on_floor=True),
     _robot("com_offset", "d", "com_offset", "m", -0.03, 0.05,
            "the centre of mass ahead of the axle centre (behind it: negative)",
            Admits(-1.0, 1.0, strict=True, per="body_radius",
                   says="lie inside the body, between -body_radius and body_radius (G ahead of C, or behind it "
-                       "if negative)"), absent=None),
+                       "if negative)"), absent=None, on_floor=True),
     Effect("mass", "robot", (Param("mass", "body_mass", "kg", 0.2, 1.2, None, POSITIVE, ("body_inertia",)),),
-           "the body's mass (its yaw inertia in proportion)"),
+           "the body's mass (its yaw inertia in proportion)", on_floor=True),
     _sensor("ir_offset", "ir_offset", "counts", -300.0, 300.0, 0.0, "added to the emitter-on reading"),
     _sensor("ir_gain", "ir_gain_scale", "-", 0.2, 3.0, 1.0, "the IR pair's optical efficiency, relative"),
     _sensor("ambient_leakage", "ambient_leakage", "-", -0.5, 0.5, 0.0,
@@ -173,6 +192,13 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
 def names_of_kind(*kinds: str) -> tuple[str, ...]:
     """The library's effects of these kinds, in its order."""
     return tuple(name for name, e in LIBRARY.items() if e.kind in kinds)
+
+
+def offered(name: str, drive: str = "current", bench: bool = False) -> bool:
+    """The library offers effect `name` to a robot with this drive (params.DRIVES), on a bench or not: one that
+    belongs to its drive and, on a bench (the body held, the wheels off the floor), not one of the floor's."""
+    effect = LIBRARY[name]
+    return drive in effect.drives and not (bench and effect.on_floor)
 
 
 @functools.cache

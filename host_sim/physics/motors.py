@@ -1,9 +1,9 @@
-"""Current-regulated DC gear motors and wheel encoders (paper section 3.2).
+"""DC gear motors (current-regulated, paper section 3.2, or on an H-bridge) and wheel encoders.
 
 The driver delivers i_ref clipped to its limit and to what the battery can push against the back-EMF;
 the wheel torque is eta N k_t i - c_v w (the axle's dry friction is solved in the step: friction.py).
 Encoders count floor(theta / 2 pi * ticks_per_rev).  Scalar functions take Python floats; *_batch ones
-arrays (N,) or (N, 2) with a RobotParams or a ParamBatch.  Equations: docs/motors.md.
+arrays (N,) or (N, 2) with a RobotParams or a ParamBatch; bridge_* the H-bridge drives'.  Equations: docs/motors.md.
 """
 from __future__ import annotations
 
@@ -152,3 +152,42 @@ def encoder_angle_batch(ticks: ArrayLike, p: Params) -> np.ndarray:
     """encoder_angle for an array of counts (N,) or (N, 2) -> float array of the same shape."""
     ticks = np.asarray(ticks, dtype=float)
     return (ticks + 0.5) * (TWO_PI / _axis0(p.ticks_per_rev, ticks.ndim))
+
+
+# --------------------------------------------------------------------------- #
+# H-bridge drives (voltage, duty, wheel_speed): docs/motors.md "Drives"
+# --------------------------------------------------------------------------- #
+MIN_CYCLE_TAU = 1e-12  # L f / R below this: the current follows the bridge at once (L = 0)
+
+
+def bridge_duty(duty: ArrayLike, deadband: Any, dead_time: Any, frequency: Any) -> np.ndarray:
+    """The duty the bridge delivers for a commanded signed duty: clipped to [-1, 1], the deadband taken off
+    and the rest stretched back over [0, 1], then each cycle's on-phase shortened by the dead time."""
+    duty = np.asarray(duty, dtype=float)
+    m = np.minimum(np.abs(duty), 1.0)
+    m = np.maximum(m - deadband, 0.0) / (1.0 - deadband)
+    m = np.maximum(m - dead_time * frequency, 0.0)
+    return np.where(duty < 0.0, -m, m)
+
+
+def bridge_current(duty: ArrayLike, emf: ArrayLike, volts: Any, res: Any, inductance: Any, frequency: Any,
+                   brake: Any) -> np.ndarray:
+    """The motor current (A) averaged over a PWM cycle in periodic steady state: sign-magnitude PWM at signed
+    duty d (the bridge's, bridge_duty) from a supply at `volts`, against the back-EMF `emf` (V), armature
+    R `res` and L `inductance`, at `frequency`.  brake (slow decay): the linear (d V - e) / R.  Coast (fast
+    decay): the off-phase drives the current back through the diodes against -V; where it reaches 0 within
+    the cycle (discontinuous conduction, light load) the terminal shows e until the next cycle.  Arrays
+    broadcast together; the closed form's derivation is in docs/motors.md."""
+    duty, emf = np.asarray(duty, dtype=float), np.asarray(emf, dtype=float)
+    sign = np.where(duty < 0.0, -1.0, 1.0)  # a negative duty is the mirror image of a positive one
+    d, e = np.abs(duty), sign * emf
+    linear = (d * volts - e) / res
+    continuous = ((2.0 * d - 1.0) * volts - e) / res
+    k = np.maximum(inductance * frequency / res, MIN_CYCLE_TAU)  # L / (R T)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        rise = (volts - e) * -np.expm1(-d / k)  # R i at the end of the on-phase, from 0
+        x = k * np.log1p(rise / (volts + e))  # the off-phase's share of the cycle until i = 0
+        broken = (d * volts - volts * x - e * (d + x)) / res
+    coast = np.where(e >= volts, (volts - e) / res,
+                     np.where((e > -volts) & (x < 1.0 - d), broken, continuous))
+    return sign * np.where(brake, linear, coast)

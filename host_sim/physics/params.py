@@ -18,6 +18,13 @@ from host_sim.physics import effects
 
 T = TypeVar("T")
 
+# The actuators a robot may have (docs/motors.md "Drives"); RobotParams holds the index, a parameter file the name.
+DRIVES = ("current", "voltage", "duty", "wheel_speed")
+DRIVE_UNITS = {"current": "A", "voltage": "V", "duty": "fraction", "wheel_speed": "rad/s"}
+PWM_DECAYS = ("coast", "brake")
+# Fields that hold an index into a list of names: a parameter file gives the name, to_json writes it back.
+NAMED_FIELDS = {"drive": DRIVES, "pwm_decay": PWM_DECAYS}
+
 
 def _p(default: float, unit: str, doc: str) -> Any:
     return field(default=default, metadata={"unit": unit, "doc": doc})
@@ -47,6 +54,19 @@ class RobotParams:
     viscous_friction: float = _p(2.0e-4, "N m s/rad", "viscous friction at each wheel axle")
     coulomb_friction: float = _p(1.5e-3, "N m", "dry friction torque at each wheel axle")
     battery_voltage: float = _p(7.4, "V", "battery voltage feeding the drivers")
+    # --- the drive (docs/motors.md "Drives"): what the commands are and what turns them into motor current ----
+    drive: float = _p(0.0, "-", "actuator the commands drive: current (0), voltage (1), duty (2) or wheel_speed "
+                              "(3, set-points to the robot's own speed loop); a parameter file gives the name")
+    pwm_decay: float = _p(0.0, "-", "H-bridge off-phase (voltage, duty, wheel_speed drives): coast (0, fast decay "
+                                  "through the diodes) or brake (1, slow decay, both low sides on)")
+    driver_deadband: float = _p(0.0, "-", "fraction of full duty below which the bridge gives nothing")
+    dead_time: float = _p(0.0, "s", "the bridge's dead time: each PWM cycle's on-phase starts this late")
+    pwm_frequency: float = _p(20000.0, "Hz", "the bridge's PWM frequency")
+    motor_inductance: float = _p(2.0e-4, "H", "motor armature inductance L")
+    speed_kp: float = _p(0.1, "V s/rad", "wheel_speed drive: the robot's speed loop's proportional gain "
+                                         "(volts across the motor per rad/s of wheel-speed error)")
+    speed_ki: float = _p(1.0, "V/rad", "wheel_speed drive: its integral gain (volts per rad of integrated error)")
+    speed_loop_period: float = _p(0.01, "s", "wheel_speed drive: its period (encoder speed measured over it)")
     electronics_current: float = _p(0.08, "A", "what the boards, sensors and emitters draw from the battery beside "
                                                "the motors (matters only with battery_resistance)")
     # --- contact (host_sim/physics/contact.py, docs/dynamics.md "Contact") ------------------
@@ -54,7 +74,8 @@ class RobotParams:
                                          "wheel carries half the weight, (m_c + 2 m_w) g / 2")
     wall_friction: float = _p(0.3, "-", "Coulomb friction coefficient between the body's rim and a wall")
     # --- encoders ------------------------------------------------------------------
-    ticks_per_rev: float = _p(1200, "ticks", "encoder ticks per wheel turn (12 CPR x2 decoding x 50:1)")
+    ticks_per_rev: float = _p(1200, "ticks", "encoder ticks per wheel turn (12 CPR x2 decoding x 50:1); "
+                                             "need not be whole (a 29.86:1 gear with 12 counts: 358.32)")
     # --- IR sensors (paper 3.3; host_sim/sensors/ir_sensor.py, docs/ir-sensor.md) ----------
     # reflected = ir_gain * min(L/100, ir_saturation) * A(angle) * F(x), in ADC
     # counts.  Calibrated on a white matte wall straight ahead at L = 60 %:
@@ -97,6 +118,10 @@ class RobotParams:
         default=(0.25, 0.45),
         metadata={"unit": "rad", "doc": "below the first |angle| the small dome alone, above the second the "
                                         "big dome alone, smoothstep in between"})
+    ir_bearings: tuple[float, ...] = field(
+        default=tuple(i * math.pi / 4 for i in range(8)),
+        metadata={"unit": "rad", "doc": "each IR pair's place on the rim, counter-clockwise from the heading: as "
+                                        "many pairs as bearings (the firmware's ring: eight, S1 front, every 45 deg)"})
 
     # --- effects (host_sim/physics/effects.py, docs/effects.md): physics the nominal twin leaves out.
     # Each holds the value meaning "absent" by default; diagnosis fits them, a parameter file sets them.
@@ -111,6 +136,10 @@ class RobotParams:
     torque_constant_delta_r: float = _p(0.0, "N m/A", "right motor's torque constant minus torque_constant")
     ticks_per_rev_delta_l: float = _p(0.0, "ticks", "left encoder's counts per wheel turn minus ticks_per_rev")
     ticks_per_rev_delta_r: float = _p(0.0, "ticks", "right encoder's counts per wheel turn minus ticks_per_rev")
+    armature_resistance_delta_l: float = _p(0.0, "ohm", "left motor's armature resistance minus armature_resistance "
+                                                        "(voltage, duty and wheel_speed drives)")
+    armature_resistance_delta_r: float = _p(0.0, "ohm", "right motor's armature resistance minus "
+                                                        "armature_resistance (voltage, duty and wheel_speed drives)")
     backlash_l: float = _p(0.0, "rad", "play in the left gear, at the wheel")
     backlash_r: float = _p(0.0, "rad", "play in the right gear, at the wheel")
     actuator_delay: float = _p(0.0, "s", "a new current reference reaches the drivers this late")
@@ -129,6 +158,17 @@ class RobotParams:
     ir_latency: float = _p(0.0, "s", "the IR readings describe the pose this long ago")
 
     # ------------------------------------------------------------------------------
+    def __post_init__(self) -> None:
+        for name, choices in NAMED_FIELDS.items():  # RobotParams(drive="duty") holds the index
+            value = getattr(self, name)
+            if isinstance(value, str):
+                object.__setattr__(self, name, float(choices.index(value)))
+
+    @property
+    def drive_kind(self) -> str:
+        """The drive's name (DRIVES)."""
+        return DRIVES[int(self.drive)]
+
     @property
     def adc_max(self) -> int:
         return (1 << int(self.adc_bits)) - 1
@@ -158,8 +198,11 @@ class RobotParams:
                 for f in dataclasses.fields(self)]
 
     def to_json(self) -> dict[str, object]:
-        return {f.name: (list(v) if isinstance(v := getattr(self, f.name), tuple) else v)
-                for f in dataclasses.fields(self)}
+        out: dict[str, object] = {f.name: (list(v) if isinstance(v := getattr(self, f.name), tuple) else v)
+                                  for f in dataclasses.fields(self)}
+        for name, choices in NAMED_FIELDS.items():
+            out[name] = choices[int(getattr(self, name))]
+        return out
 
 
 def cached_per_params(compute: Callable[[Any], T]) -> Callable[[Any], T]:
@@ -188,8 +231,14 @@ class ParamsError(ValueError):
 # where the hardware counts, and ranges outside which the models overflow or
 # stop meaning anything (readings travel as 16-bit fields on the wire).  The
 # fields an effect of the library sets are checked as it declares (effects.Admits).
-INTEGER_PARAMS = {"adc_bits": (8, 16), "ticks_per_rev": (1, 1_000_000)}
+INTEGER_PARAMS = {"adc_bits": (8, 16)}
 PARAM_RANGES = {
+    # counts per wheel turn need not be whole, as behind a 29.86:1 gearbox
+    # (tests/test_import.py::test_counts_per_turn_need_not_be_whole)
+    "ticks_per_rev": (1.0, 1e6),
+    "dead_time": (0.0, 1e-3),
+    "pwm_frequency": (1.0, 1e7), "motor_inductance": (0.0, 10.0), "speed_kp": (0.0, 1e4), "speed_ki": (0.0, 1e6),
+    "speed_loop_period": (1e-4, 1.0),
     "ir_saturation": (0.0, 1.0), "ir_on_delay": (0.0, 0.04), "ir_noise": (0.0, 1e4),
     "viscous_friction": (0.0, 1e3), "coulomb_friction": (0.0, 1e3),
     "ir_blend": (1.0, 1e3), "ir_gain": (0.0, 1e6), "ir_ambient": (0.0, 1e6), "ir_near_peak": (0.0, 1.0),
@@ -202,7 +251,7 @@ def params_from_dict(data: object, where: str = "parameters") -> RobotParams:
     if not isinstance(data, dict):
         raise ParamsError(f"{where}: expected a JSON object of name: value")
     known = {f.name: f for f in dataclasses.fields(RobotParams)}
-    changes: dict[str, object] = {}
+    changes: dict[str, object] = _ring_of(data, where)
     for name, value in data.items():
         if name not in known:
             import difflib
@@ -210,11 +259,18 @@ def params_from_dict(data: object, where: str = "parameters") -> RobotParams:
             close = difflib.get_close_matches(str(name), list(known), n=1, cutoff=0.8)
             hint = f" (did you mean {', '.join(close)}?)" if close else ""
             raise ParamsError(f"{where}: unknown parameter '{name}'{hint}")
-        default = known[name].default
-        if isinstance(default, tuple):
+        default = changes.get(name, known[name].default)
+        if name == "ir_bearings":
+            continue  # _ring_of read it
+        if name in NAMED_FIELDS:
+            if value not in NAMED_FIELDS[name]:
+                raise ParamsError(f"{where}: '{name}' must be one of {', '.join(NAMED_FIELDS[name])}, got {value!r}")
+            changes[name] = float(NAMED_FIELDS[name].index(value))
+        elif isinstance(default, tuple):
             if not isinstance(value, list) or len(value) != len(default) or not all(
                     isinstance(v, (int, float)) for v in value):
-                raise ParamsError(f"{where}: '{name}' must be a list of {len(default)} numbers")
+                raise ParamsError(f"{where}: '{name}' must be a list of {len(default)} numbers"
+                                  + (", one per IR pair" if name in PER_PAIR else ""))
             changes[name] = tuple(float(v) for v in value)
         else:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
@@ -236,6 +292,23 @@ def params_from_dict(data: object, where: str = "parameters") -> RobotParams:
     if why is not None:
         raise ParamsError(f"{where}: {why}")
     return params
+
+
+# Lists with one entry per IR pair: as many as ir_bearings has, each pair neutral by default.
+PER_PAIR = {"ir_gain_scale": 1.0, "ir_misalignment": 0.0, "ir_offset": 0.0, "ambient_leakage": 0.0}
+MAX_IR_PAIRS = 64
+
+
+def _ring_of(data: dict[Any, Any], where: str) -> dict[str, object]:
+    """The ring a parameter file gives (ir_bearings), with its pairs' lists sized to it (neutral values)."""
+    if "ir_bearings" not in data:
+        return {}
+    value = data["ir_bearings"]
+    if not isinstance(value, list) or not 1 <= len(value) <= MAX_IR_PAIRS or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value):
+        raise ParamsError(f"{where}: 'ir_bearings' must be a list of 1..{MAX_IR_PAIRS} finite numbers (rad)")
+    n = len(value)
+    return {"ir_bearings": tuple(float(v) for v in value), **{k: (v,) * n for k, v in PER_PAIR.items()}}
 
 
 def _check_ranges(changes: dict[str, object], where: str) -> None:

@@ -17,30 +17,47 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Iterator
 
 import numpy as np
 
 from firmware.hal import TICK_MASK
 from firmware.odometry import HEADING_TURN
+from host_sim.physics.params import DRIVE_UNITS, DRIVES
 
 FORMAT = "twinbot-recording"
 VERSION = 2
 READABLE_VERSIONS = (1, 2)
-IR_ON = tuple(f"ir_on_{i}" for i in range(8))
-IR_AMB = tuple(f"ir_amb_{i}" for i in range(8))
+FIRMWARE_IR = 8  # the firmware's ring; a recording of another robot holds 0..MAX_IR sensors
+MAX_IR = 64
+
+
+def ir_columns(n_ir: int = FIRMWARE_IR) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """The emitter-on and ambient column names of n_ir sensors."""
+    return tuple(f"ir_on_{i}" for i in range(n_ir)), tuple(f"ir_amb_{i}" for i in range(n_ir))
+
+
+def columns(n_ir: int = FIRMWARE_IR) -> list[str]:
+    """The header of a version-2 recording with n_ir IR sensors."""
+    on, amb = ir_columns(n_ir)
+    return ["t", "cmd_l", "cmd_r", "enc_l", "enc_r", *on, *amb, "vbat", "emitter_pct", *FIRMWARE_VIEW, *POSE]
+
+
+IR_ON, IR_AMB = ir_columns()
 FIRMWARE_VIEW = ("mode", "sp_l", "sp_r", "odo_x", "odo_y", "odo_phi")
 POSE = ("x", "y", "phi")
 COLUMNS_V1 = ["t", "cmd_l", "cmd_r", "enc_l", "enc_r", *IR_ON, *IR_AMB, "vbat", *POSE]
-COLUMNS = ["t", "cmd_l", "cmd_r", "enc_l", "enc_r", *IR_ON, *IR_AMB, "vbat", "emitter_pct", *FIRMWARE_VIEW, *POSE]
+COLUMNS = columns()
 UNITS = {"t": "s", "cmd_l": "A", "cmd_r": "A", "enc_l": "ticks", "enc_r": "ticks", "ir_on_i": "ADC counts",
          "ir_amb_i": "ADC counts", "vbat": "V", "emitter_pct": "%", "mode": "protocol MODE_*",
          "sp_l": "m/s", "sp_r": "m/s", "odo_x": "m", "odo_y": "m", "odo_phi": "rad",
          "x": "m", "y": "m", "phi": "rad"}
-_INT_COLUMNS = {"enc_l", "enc_r", "mode", *IR_ON, *IR_AMB}
-# Column groups that may be empty: all cells of a group present or all empty, in every row alike.
-_OPTIONAL_GROUPS = (("emitter_pct",), FIRMWARE_VIEW, POSE)
-_GROUP_LABELS = {("emitter_pct",): "the emitter power (emitter_pct)",
+_INT_COLUMNS = {"enc_l", "enc_r", "mode"}
+# Column groups that may be empty: all cells of a group present or all empty, in every row alike (the
+# ambient readings are a group too, see _optional_groups).  The tracker pose may also be empty in some rows
+# only, where the sidecar says "tracker_gaps": true (a tracker that lost the robot for a while).
+_OPTIONAL_GROUPS = (("emitter_pct",), ("vbat",), FIRMWARE_VIEW, POSE)
+_GROUP_LABELS = {("emitter_pct",): "the emitter power (emitter_pct)", ("vbat",): "the battery voltage (vbat)",
                  FIRMWARE_VIEW: "the firmware's view (" + ", ".join(FIRMWARE_VIEW) + ")",
                  POSE: "the tracker pose (x, y, phi)"}
 _UNWRAP_LIMIT = 1 << 29  # ms: a larger forward jump of the robot's clock is a reset, not time passing
@@ -74,20 +91,21 @@ class RecordingWriter:
 
     def __init__(self, path: str | os.PathLike[str], *, source: str, sample_period: float,
                  robot: dict[str, object] | None = None, world: object = None,
-                 extra: dict[str, object] | None = None) -> None:
+                 extra: dict[str, object] | None = None, n_ir: int = FIRMWARE_IR) -> None:
         self.path = Path(path)
+        self.n_ir = n_ir
         if not self.path.parent.exists():
             raise RecordingError(f"{self.path}: folder {self.path.parent} does not exist")
         self.meta: dict[str, object] = {
             "format": FORMAT, "version": VERSION, "source": source, "software": _software_version(),
             "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-            "sample_period": sample_period, "columns": COLUMNS, "units": UNITS,
+            "sample_period": sample_period, "columns": columns(n_ir), "units": UNITS,
             "robot": robot or {}, "world": world, "rows": None, "complete": False, **(extra or {}),
         }
         self._write_sidecar()
         with self._writing():
             self._file = open(self.path, "w", newline="", encoding="ascii")
-            self._file.write(",".join(COLUMNS) + "\n")
+            self._file.write(",".join(columns(n_ir)) + "\n")
             self._file.flush()
         self.rows = 0
         self._last_tick: int | None = None  # TELEMETRY clock, for telemetry()
@@ -106,12 +124,17 @@ class RecordingWriter:
             sidecar_path(self.path).write_text(json.dumps(self.meta, indent=1, default=str) + "\n")
 
     def row(self, t: float, cmd: tuple[float, float], enc: tuple[int, int], ir_on: list[int] | tuple[int, ...],
-            ir_amb: list[int] | tuple[int, ...], vbat: float,
+            ir_amb: list[int] | tuple[int, ...] | None, vbat: float | None,
             pose: tuple[float, float, float] | None = None, *, emitter_pct: float | None = None,
             firmware: tuple[int, float, float, float, float, float] | None = None) -> None:
-        """One control cycle.  firmware: (mode, sp_l, sp_r, odo_x, odo_y, odo_phi) in SI units, if known."""
+        """One control cycle.  firmware: (mode, sp_l, sp_r, odo_x, odo_y, odo_phi) in SI units, if known;
+        ir_amb and vbat None: not recorded (empty cells)."""
+        if len(ir_on) != self.n_ir or (ir_amb is not None and len(ir_amb) != self.n_ir):
+            raise RecordingError(f"{self.path}: a row of {len(ir_on)} IR readings for a recording of {self.n_ir}")
         cells = [repr(float(t)), repr(float(cmd[0])), repr(float(cmd[1])), str(int(enc[0])), str(int(enc[1]))]
-        cells += [str(int(v)) for v in ir_on] + [str(int(v)) for v in ir_amb] + [repr(float(vbat))]
+        cells += [str(int(v)) for v in ir_on]
+        cells += [""] * self.n_ir if ir_amb is None else [str(int(v)) for v in ir_amb]
+        cells.append("" if vbat is None else repr(float(vbat)))
         cells.append("" if emitter_pct is None else repr(float(emitter_pct)))
         if firmware is None:
             cells += [""] * len(FIRMWARE_VIEW)
@@ -174,16 +197,18 @@ class Recording:
     """A loaded recording: arrays by column group, and the sidecar."""
 
     t: np.ndarray  # (n,) s
-    cmd: np.ndarray  # (n, 2) A
+    cmd: np.ndarray  # (n, 2) in the drive's unit (sidecar "drive"; A for a current drive)
     enc: np.ndarray  # (n, 2) ticks, int64
-    ir_on: np.ndarray  # (n, 8) counts, int64
-    ir_amb: np.ndarray  # (n, 8) counts, int64
-    vbat: np.ndarray  # (n,) V
-    pose: np.ndarray | None  # (n, 3) x, y, phi, or None without a tracker
+    ir_on: np.ndarray  # (n, S) counts, int64; S = 0..MAX_IR sensors (the firmware's ring: 8)
+    ir_amb: np.ndarray  # (n, S) counts, int64; zeros where not recorded (ambient_recorded False)
+    vbat: np.ndarray  # (n,) V; NaN where not recorded (battery_recorded False)
+    pose: np.ndarray | None  # (n, 3) x, y, phi, or None without a tracker; NaN rows where it lost the robot
     meta: dict[str, object] = field(default_factory=dict)
     path: Path | None = None
     emitter: np.ndarray | None = None  # (n,) % pulse width of each row's on-reading, None if not recorded
     firmware: np.ndarray | None = None  # (n, 6) mode, sp_l, sp_r, odo_x, odo_y, odo_phi; None if not recorded
+    notes: list[Any] = field(default_factory=list)  # checks.Note: what loading's checks found and mended
+    ambient_recorded: bool = True
 
     def __len__(self) -> int:
         return len(self.t)
@@ -196,29 +221,62 @@ class Recording:
     def source(self) -> str:
         return str(self.meta.get("source", "robot"))
 
+    @property
+    def n_ir(self) -> int:
+        return int(self.ir_on.shape[1])
 
-def load_recording(path: str | os.PathLike[str], *, require_sidecar: bool = True) -> Recording:
+    @property
+    def drive(self) -> str:
+        """What cmd_l, cmd_r hold: the sidecar's drive block's kind (params.DRIVES; current without one)."""
+        block = self.meta.get("drive")
+        return str(block["kind"]) if isinstance(block, dict) else "current"
+
+    @property
+    def bench(self) -> bool:
+        """Recorded on a bench: the wheels off the floor, the body held (docs/recordings.md)."""
+        return self.meta.get("bench") is True
+
+    @property
+    def battery_recorded(self) -> bool:
+        return bool(len(self.vbat)) and bool(np.isfinite(self.vbat).all())
+
+    @property
+    def pose_rows(self) -> np.ndarray:
+        """(n,) bool: the rows with a tracker pose."""
+        if self.pose is None:
+            return np.zeros(len(self.t), dtype=bool)
+        return np.isfinite(self.pose).all(axis=1)
+
+
+def load_recording(path: str | os.PathLike[str], *, require_sidecar: bool = True,
+                   ordered_times: bool = True) -> Recording:
+    """ordered_times=False lets times repeat or go back, for checks.check_recording to name or mend."""
     path = Path(path)
     meta = _load_sidecar(path, require_sidecar)
     lines = _read_lines(path)
     columns = _check_header(path, lines[0].split(","))
     robot = meta.get("robot") if isinstance(meta.get("robot"), dict) else {}
     adc_max = (1 << int(robot["adc_bits"])) - 1 if "adc_bits" in robot else None  # type: ignore[index,operator,call-overload]
-    data, present = _parse_rows(path, lines[1:], columns, adc_max)
+    data, present = _parse_rows(path, lines[1:], columns, adc_max, bool(meta.get("tracker_gaps")),
+                                ordered_times)
     n = len(data)
     if meta.get("rows") is not None and meta.get("rows") != n:
         raise RecordingError(f"{path}: the sidecar says {meta['rows']} rows, the file holds {n}")
     col = {name: k for k, name in enumerate(columns)}
+    ir_on, ir_amb = ir_columns(sum(c.startswith("ir_on_") for c in columns))
 
     def group(names: tuple[str, ...] | list[str], dtype: type = float) -> np.ndarray:
         return data[:, [col[c] for c in names]].astype(dtype)
 
     return Recording(
         t=data[:, 0].copy(), cmd=group(["cmd_l", "cmd_r"]), enc=group(["enc_l", "enc_r"], np.int64),
-        ir_on=group(IR_ON, np.int64), ir_amb=group(IR_AMB, np.int64), vbat=data[:, col["vbat"]].copy(),
+        ir_on=group(ir_on, np.int64),
+        ir_amb=group(ir_amb, np.int64) if present.get(ir_amb, True) else np.zeros((n, len(ir_amb)), np.int64),
+        vbat=data[:, col["vbat"]].copy(),
         pose=group(POSE) if present[POSE] else None, meta=meta, path=path,
         emitter=data[:, col["emitter_pct"]].copy() if present.get(("emitter_pct",)) else None,
         firmware=group(FIRMWARE_VIEW) if present.get(FIRMWARE_VIEW) else None,
+        ambient_recorded=present.get(ir_amb, True),
     )
 
 
@@ -240,26 +298,45 @@ def _read_lines(path: Path) -> list[str]:
 
 
 def _check_header(path: Path, header: list[str]) -> list[str]:
-    if header in (COLUMNS, COLUMNS_V1):
+    """The header of a version-2 recording of any number of IR sensors, or of a version-1 one of eight."""
+    n_ir = sum(c.startswith("ir_on_") for c in header)
+    expected = columns(n_ir) if n_ir <= MAX_IR else COLUMNS
+    if header in (expected, COLUMNS_V1):
         return header
-    missing = [c for c in COLUMNS if c not in header]
-    extra = [c for c in header if c not in COLUMNS]
+    missing = [c for c in expected if c not in header]
+    extra = [c for c in header if c not in expected]
     detail = []
     if missing:
         detail.append("missing " + ", ".join(missing))
     if extra:
         detail.append("unexpected " + ", ".join(extra))
+    if n_ir > MAX_IR:
+        detail.append(f"{n_ir} IR sensors, at most {MAX_IR}")
     if not detail:
         detail.append("columns out of order")
     raise RecordingError(f"{path}:1: header is not the recording header ({'; '.join(detail)}); "
-                         f"expected: {','.join(COLUMNS)}")
+                         f"expected: {','.join(expected)}")
 
 
-def _parse_rows(path: Path, lines: list[str], columns: list[str],
-                adc_max: int | None) -> tuple[np.ndarray, dict[tuple[str, ...], bool]]:
-    """Every cell checked; optional groups (emitter, firmware view, pose) all-or-nothing and alike in every row."""
+def _optional_groups(columns: list[str]) -> list[tuple[tuple[str, ...], list[int]]]:
+    """The groups that may be empty, with their column indices: the fixed ones and the ambient readings."""
+    names = [g for g in _OPTIONAL_GROUPS if g[0] in columns]
+    ambient = tuple(c for c in columns if c.startswith("ir_amb_"))
+    if ambient:
+        names.append(ambient)
+    return [(g, [columns.index(c) for c in g]) for g in names]
+
+
+def _group_label(names: tuple[str, ...]) -> str:
+    return _GROUP_LABELS.get(names) or "the ambient IR readings (ir_amb_*)"
+
+
+def _parse_rows(path: Path, lines: list[str], columns: list[str], adc_max: int | None,
+                tracker_gaps: bool = False, ordered_times: bool = True) -> tuple[np.ndarray, dict[tuple[str, ...], bool]]:
+    """Every cell checked; optional groups all-or-nothing in a row and alike in every row (the pose may
+    differ from row to row where tracker_gaps)."""
     data = np.zeros((len(lines), len(columns)))
-    groups = [(g, [columns.index(c) for c in g]) for g in _OPTIONAL_GROUPS if g[0] in columns]
+    groups = _optional_groups(columns)
     present: dict[tuple[str, ...], bool] = {}
     for row_index, cells in enumerate(csv.reader(io.StringIO("\n".join(lines)))):
         lineno = row_index + 2
@@ -271,14 +348,16 @@ def _parse_rows(path: Path, lines: list[str], columns: list[str],
             if any(empty) and not all(empty):
                 raise RecordingError(f"{path}:{lineno}: {', '.join(names)} must be all present or all empty")
             here = not all(empty)
-            if present.setdefault(names, here) != here:
-                raise RecordingError(f"{path}:{lineno}: {_GROUP_LABELS[names]} is {'present' if here else 'missing'} "
+            if tracker_gaps and names == POSE:
+                present[names] = present.get(names, False) or here
+            elif present.setdefault(names, here) != here:
+                raise RecordingError(f"{path}:{lineno}: {_group_label(names)} is {'present' if here else 'missing'} "
                                      f"here but not in the rows before")
             if not here:
                 empty_cols.update(idx)
         for k, (name, cell) in enumerate(zip(columns, cells)):
             data[row_index, k] = math.nan if k in empty_cols else _cell(path, lineno, name, cell, adc_max)
-        if row_index and data[row_index, 0] <= data[row_index - 1, 0]:
+        if ordered_times and row_index and data[row_index, 0] <= data[row_index - 1, 0]:
             raise RecordingError(f"{path}:{lineno}: column 't': {cells[0]} does not increase "
                                  f"(previous row: {data[row_index - 1, 0]!r})")
     for names, _idx in groups:
@@ -287,10 +366,11 @@ def _parse_rows(path: Path, lines: list[str], columns: list[str],
 
 
 def _cell(path: Path, lineno: int, name: str, cell: str, adc_max: int | None) -> float:
+    integer = name in _INT_COLUMNS or name.startswith("ir_")
     try:
-        value = int(cell) if name in _INT_COLUMNS else float(cell)
+        value = int(cell) if integer else float(cell)
     except ValueError:
-        kind = "an integer" if name in _INT_COLUMNS else "a number"
+        kind = "an integer" if integer else "a number"
         raise RecordingError(f"{path}:{lineno}: column '{name}': {cell!r} is not {kind}") from None
     if not math.isfinite(value):
         raise RecordingError(f"{path}:{lineno}: column '{name}': {cell!r} is not finite")
@@ -319,4 +399,24 @@ def _load_sidecar(path: Path, required: bool) -> dict[str, object]:
     period = meta.get("sample_period")
     if not isinstance(period, (int, float)) or period <= 0:
         raise RecordingError(f"{side}: 'sample_period' must be a positive number of seconds, got {period!r}")
+    why = drive_refusal(meta)
+    if why:
+        raise RecordingError(f"{side}: {why}")
     return meta
+
+
+def drive_refusal(meta: dict[str, object]) -> str | None:
+    """Why the sidecar's "drive" block and "bench" flag are refused, or None (docs/recordings.md)."""
+    if "bench" in meta and not isinstance(meta["bench"], bool):
+        return f"'bench' must be true or false, got {meta['bench']!r}"
+    block = meta.get("drive", {"kind": "current"})  # none: every recording before drives had a name
+    if not isinstance(block, dict) or block.get("kind") not in DRIVES:
+        return f"the drive block must be an object whose 'kind' is one of {', '.join(DRIVES)}, got {block!r}"
+    kind = block["kind"]
+    if block.get("unit", DRIVE_UNITS[kind]) != DRIVE_UNITS[kind]:
+        return f"the drive block's unit must be {DRIVE_UNITS[kind]!r} for a {kind} drive, got {block['unit']!r}"
+    robot = meta.get("robot")
+    said = robot.get("drive", "current") if isinstance(robot, dict) else kind
+    if said != kind:
+        return f"the robot's parameters say drive {said!r}, the drive block says {kind!r}"
+    return None

@@ -19,7 +19,8 @@ from host_sim.sensors import ir_sensor
 from host_sim.robot.batch import BatchResult, BatchSim, robot_params
 from host_sim.controller.hardware_io import Actuate
 from host_sim.robot.sim_robot import SimRobot
-from host_sim.physics.params import RobotParams
+from host_sim.physics.dynamics import ParamBatch
+from host_sim.physics.params import DRIVES, RobotParams
 from host_sim.recordings.recording import Recording
 from host_sim.physics.world import World
 
@@ -33,8 +34,8 @@ class ReplayResult:
     t: np.ndarray  # (n,) s
     enc: np.ndarray  # (n, 2) simulated encoder ticks
     pose: np.ndarray  # (n, 3) simulated pose of C
-    ir_on: np.ndarray  # (n, 8)
-    ir_amb: np.ndarray  # (n, 8)
+    ir_on: np.ndarray  # (n, S) for the S pairs of p.ir_bearings; (n, 0) for the drive alone (replay_drive)
+    ir_amb: np.ndarray  # (n, S); (n, 0) for the drive alone
     start: int  # the recording row it started from
 
 
@@ -42,7 +43,7 @@ class ReplayResult:
 class ReplayInputs:
     """What rows start..stop-1 of a recording gave the robot, and how time passed between them."""
 
-    cmd: np.ndarray  # (T, 2) current references, A, held from row j to row j + 1
+    cmd: np.ndarray  # (T, 2) commands in the recording's drive's unit (A for current), held from row j to row j + 1
     period: np.ndarray  # (T,) s from row j to row j + 1
     emitter: np.ndarray  # (T,) % emitter pulse width in force for row j's on-reading
     t0: float  # time of row start
@@ -58,9 +59,9 @@ def replay_inputs(rec: Recording, start: int = 0, stop: int | None = None,
                   nominal_timing: bool | None = None) -> ReplayInputs:
     """The one reading of a recording's timing, emitter power and start, for every replay.
 
-    Timing: one nominal sample period per row for fixed-step simulator
-    recordings (nominal_timing None), else the recorded times (the last
-    row lasts one sample period).  Emitter power: the recording's own
+    Timing: whole nominal sample periods per row for fixed-step simulator
+    recordings (nominal_timing None; two where a row was lost), else the
+    recorded times (the last row lasts one sample period).  Emitter power: the recording's own
     emitter_pct column; for version-1 recordings without it, the sidecar's
     emitter_pct (default 60 %), 0 for a simulator run's first row (its
     emitters are not on until the first actuation).
@@ -72,9 +73,12 @@ def replay_inputs(rec: Recording, start: int = 0, stop: int | None = None,
         nominal_timing = rec.source == "simulator" and rec.meta.get("mode") == "fixed"
     n = stop - start
     period = np.full(n, rec.sample_period)
+    inner = np.arange(start, stop) + 1 < len(rec)
+    recorded = np.diff(rec.t[start:min(stop + 1, len(rec))])[: int(inner.sum())]
     if not nominal_timing:
-        inner = np.arange(start, stop) + 1 < len(rec)
-        period[inner] = np.diff(rec.t[start:min(stop + 1, len(rec))])[: int(inner.sum())]
+        period[inner] = recorded
+    else:  # the exact period, not the times' rounding; a row the checks found missing leaves a step of two
+        period[inner] = np.maximum(np.round(recorded / rec.sample_period), 1.0) * rec.sample_period
     if rec.emitter is not None:
         emitter = rec.emitter[start:stop].astype(float)
     else:
@@ -85,8 +89,25 @@ def replay_inputs(rec: Recording, start: int = 0, stop: int | None = None,
                         starts_at_rest(rec, start))
 
 
+def with_drive(rec: Recording, params: Any) -> Any:
+    """params (a RobotParams, a sequence of them or a ParamBatch) with the drive the recording's commands are for
+    (its sidecar's drive block: docs/recordings.md), whatever they said."""
+    code = float(DRIVES.index(rec.drive))
+    if isinstance(params, RobotParams):
+        return params if params.drive == code else params.replace(drive=code)
+    if isinstance(params, ParamBatch):
+        if np.all(params.drive == code):
+            return params
+        return ParamBatch({k: (np.full(params.n, code) if k == "drive" else getattr(params, k)) for k in params.names})
+    return [with_drive(rec, p) for p in params]
+
+
 def state_at(rec: Recording, k: int, p: RobotParams) -> tuple[tuple[float, ...], tuple[float, float]]:
-    """(q, v) of the model at row k, from the recording alone."""
+    """(q, v) of the model at row k, from the recording alone (on a bench without a tracker: at the origin)."""
+    if rec.pose is None and rec.bench:
+        theta = [motors.encoder_angle(int(rec.enc[k, i]), p, i) for i in range(2)]
+        v = (0.0, 0.0) if starts_at_rest(rec, k) else wheel_speeds_at(rec, k, p)
+        return dynamics.q_from_axle_pose(0.0, 0.0, 0.0, p, theta[0], theta[1]), (float(v[0]), float(v[1]))
     if rec.pose is None:
         raise ReplayError("replay from a recorded state needs the tracker pose (x, y, phi columns), "
                           "and this recording has none")
@@ -100,6 +121,17 @@ def state_at(rec: Recording, k: int, p: RobotParams) -> tuple[tuple[float, ...],
         theta = [motors.encoder_angle(int(rec.enc[k, i]), p, i) for i in range(2)]
     v = (0.0, 0.0) if starts_at_rest(rec, k) else wheel_speeds_at(rec, k, p)
     q = dynamics.q_from_axle_pose(x, y, phi, p, theta[0], theta[1])
+    return q, (float(v[0]), float(v[1]))
+
+
+def state_or_origin(rec: Recording, k: int, p: RobotParams) -> tuple[tuple[float, ...], tuple[float, float]]:
+    """state_at, or where the tracker has no pose at row k, the wheels' state at the origin (of an empty
+    world: the encoders alone say nothing of where the robot is)."""
+    if rec.pose is not None and bool(rec.pose_rows[k]):
+        return state_at(rec, k, p)
+    theta = [motors.encoder_angle(int(rec.enc[k, w]), p, w) for w in range(2)]
+    q = dynamics.q_from_axle_pose(0.0, 0.0, 0.0, p, theta[0], theta[1])
+    v = (0.0, 0.0) if starts_at_rest(rec, k) else wheel_speeds_at(rec, k, p)
     return q, (float(v[0]), float(v[1]))
 
 
@@ -159,9 +191,9 @@ def sliding_rows(rec: Recording, p: RobotParams) -> tuple[np.ndarray, np.ndarray
 
     A replay started at rest or rolling where the robot slid (braking on ice: the wheels stopped, the body
     still going; or pressed into a wall, the wheels turning, the body still) starts a way off the truth.
-    Without a tracker nothing slides."""
+    Without a tracker, or on a bench, nothing slides."""
     n = len(rec)
-    if rec.pose is None or n < 2 * SLOPE_ROWS + 1:
+    if rec.pose is None or n < 2 * SLOPE_ROWS + 1 or rec.bench:
         return np.zeros(n, dtype=bool), np.zeros((n, 3))
     body = tracked_velocity(rec)
     rolling = rolling_velocity(rec, p)
@@ -220,7 +252,8 @@ def replay(rec: Recording, p: RobotParams, world: World, start: int = 0, stop: i
     the same order: a simulator recording then replays bit for bit.
     """
     inputs = replay_inputs(rec, start, stop, nominal_timing)
-    robot = SimRobot(world, p, seed=seed, noise=seed is not None)
+    p = with_drive(rec, p)
+    robot = SimRobot(world, p, seed=seed, noise=seed is not None, bench=rec.bench)
     robot.q, robot.v = state_at(rec, start, p)
     slides, body = sliding_rows(rec, p)
     if slides[start] and not inputs.at_rest:
@@ -229,8 +262,8 @@ def replay(rec: Recording, p: RobotParams, world: World, start: int = 0, stop: i
     n = len(inputs.cmd)
     enc = np.zeros((n, 2), dtype=np.int64)
     pose = np.zeros((n, 3))
-    ir_on = np.zeros((n, 8), dtype=np.int64)
-    ir_amb = np.zeros((n, 8), dtype=np.int64)
+    ir_on = np.zeros((n, len(p.ir_bearings)), dtype=np.int64)
+    ir_amb = np.zeros((n, len(p.ir_bearings)), dtype=np.int64)
     t = np.zeros(n)
     for j in range(n):
         t[j] = robot.t
@@ -243,6 +276,8 @@ def replay(rec: Recording, p: RobotParams, world: World, start: int = 0, stop: i
         enc[j] = robot.encoder_ticks()
         left, right = inputs.cmd[j]
         robot.actuate(Actuate(round(left * 1000), round(right * 1000), robot.emitter_pct))
+        if p.drive:  # not a current in mA: the command as it stands, in its drive's unit
+            robot.i_ref = (float(left), float(right))
         h = float(inputs.period[j]) / substeps
         for _ in range(substeps):
             robot.advance(h)
@@ -263,18 +298,21 @@ def replay_batch(rec: Recording, params_list: Any, start: int = 0, *, stop: int 
     Every robot starts in the state the recording has at row `start` (state_at
     with that robot's parameters) and is fed the recorded current references.
     params_list: a RobotParams, a sequence of N, or a ParamBatch (with `base`).
-    world: default the recording's own (its sidecar), no walls when it has none.
+    world: default the recording's own (its sidecar), no walls when it has none or no tracker placed the
+    robot at `start` (state_or_origin: the robot then starts at the origin).
     """
     from host_sim.physics.world import world_from_dict
 
     inputs = replay_inputs(rec, start, stop, nominal_timing)
-    if world is None and isinstance(rec.meta.get("world"), dict):
+    tracked = rec.pose is not None and bool(rec.pose_rows[start])
+    if world is None and tracked and isinstance(rec.meta.get("world"), dict):
         world = world_from_dict(rec.meta["world"], f"{rec.path or 'recording'} (sidecar world)")
-    params, robots = robot_params(params_list, base)
-    states = [state_at(rec, start, p) for p in robots]
+    params, robots = robot_params(with_drive(rec, params_list), base)
+    states = [state_or_origin(rec, start, p) for p in robots]
     q = np.array([s[0] for s in states], dtype=float).reshape(-1, 5)
     v = np.array([s[1] for s in states], dtype=float).reshape(-1, 2)
-    sim = BatchSim(world, params, q=q, v=v, t=inputs.t0, base=base, cycle_s=rec.sample_period, substeps=substeps)
+    sim = BatchSim(world, params, q=q, v=v, t=inputs.t0, base=base, cycle_s=rec.sample_period, substeps=substeps,
+                   bench=rec.bench)
     slides, body = sliding_rows(rec, robots[0])
     if slides[start] and not inputs.at_rest:
         sim.start_sliding(np.ones(sim.n, dtype=bool), np.tile(body[start], (sim.n, 1)))
@@ -285,3 +323,13 @@ def replay_batch(rec: Recording, params_list: Any, start: int = 0, *, stop: int 
                             emitter=inputs.emitter)
     result.start = start
     return result
+
+
+def replay_drive(rec: Recording, p: RobotParams, start: int = 0, substeps: int = 8) -> ReplayResult:
+    """The drive alone, open loop in an empty world from the state at `start` (state_or_origin): what a
+    recording without a world (or without a tracker) can be compared on, the encoders (and the pose)."""
+    res = replay_batch(rec, p, start, world=None, substeps=substeps, sensors=False)
+    n = res.enc.shape[0]
+    t = res.t if res.t.ndim == 1 else res.t[:, 0]
+    empty = np.zeros((n, 0), dtype=np.int64)
+    return ReplayResult(t, res.enc[:, 0], res.pose[:, 0], empty, empty.copy(), start)

@@ -16,7 +16,7 @@ from typing import Any, TypeGuard, Union, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
-from host_sim.physics import contact, drivetrain, drivetrain_effects, dynamics, backlash, effects, motors
+from host_sim.physics import contact, drivetrain, drivetrain_effects, dynamics, backlash, effects, motors, speed_loop
 from host_sim.sensors import ir_sensor
 from host_sim.physics.dynamics import ParamBatch, Params, PerRobot
 from host_sim.controller.hardware_io import CYCLE_S
@@ -26,7 +26,6 @@ from host_sim.physics.world import World
 
 SUBSTEPS = 8
 VECTOR_CONTACTS_FROM = 64  # robots in one contact step from which the vectorised solve is the faster
-N_SENSORS = ir_sensor.N_SENSORS
 # RobotParams fields the IR model reads: robots that agree on all of them
 # share one ir_sensor.read_sensors call.
 IR_FIELDS = tuple(f.name for f in dataclasses.fields(RobotParams)
@@ -103,7 +102,7 @@ class BatchSim:
     def __init__(self, world: World | None, params: ParamSets,
                  poses: ArrayLike | None = None, *, q: ArrayLike | None = None, v: ArrayLike | None = None, t: float = 0.0,
                  base: RobotParams | None = None, cycle_s: float = CYCLE_S, substeps: int = SUBSTEPS,
-                 emitter_pct: float = 60.0, initial_emitter_pct: float | None = None) -> None:
+                 emitter_pct: float = 60.0, initial_emitter_pct: float | None = None, bench: bool = False) -> None:
         """
         world: the walls (None: no walls).  params: one RobotParams (shared), N of them, or a ParamBatch.
         poses: (N, 3) x, y, phi of C, wheel angles 0, at rest; or q (N, 5) and
@@ -111,17 +110,17 @@ class BatchSim:
         base: the non-scalar parameters (IR polynomial coefficients) when
         params is a ParamBatch.  emitter_pct: the IR emitter power (%) every
         actuation sets; initial_emitter_pct: the power in force at the first
-        reading (default emitter_pct; 0 for a robot that has not actuated yet).
+        reading (default emitter_pct; 0 for a robot that has not actuated yet).  bench: the
+        body held, the wheels off the floor (docs/recordings.md).
         """
-        if substeps < 1:
-            raise ValueError("substeps must be >= 1")
-        if not cycle_s > 0:
-            raise ValueError("cycle_s must be > 0")
+        if substeps < 1 or not cycle_s > 0:
+            raise ValueError("substeps must be >= 1" if substeps < 1 else "cycle_s must be > 0")
         self.world = world if world is not None else World(name="no walls", size=(1.0, 1.0), walls=[])
         self.cycle_s = float(cycle_s)
         self.substeps = int(substeps)
         self.emitter_pct = float(emitter_pct)
         self.base = base or RobotParams()
+        self.bench = bool(bench)
         n_hint = None
         for arr, width in ((poses, 3), (q, 5)):
             if arr is not None:
@@ -247,11 +246,7 @@ class BatchSim:
         self._wheel_radius = shared.wheel_radius if shared is not None else batch.wheel_radius
         self._half_axle = shared.half_axle if shared is not None else batch.half_axle
         self._shared = shared is not None
-        # The library's drive effects (host_sim/physics/drivetrain_effects.py): None while all are absent (the fast path).
-        self._fx = drivetrain_effects.Drive.of(batch) if drivetrain_effects.active(batch) else None
-        self._delay = batch.actuator_delay.copy() if np.any(batch.actuator_delay != 0.0) else None
-        # backlash: the gear's gap per wheel (motor angle / N - wheel angle), the play's middle at the start
-        self.gear_gap = np.zeros((self.n, 2)) if self._fx is not None and np.any(self._fx.play) else None
+        self._set_drive(batch)
         self._gear_engaged = np.ones((self.n, 2), dtype=bool)  # at the end of the rolling substep under way
         self._per_wheel_ticks = bool(np.any(batch.ticks_per_rev_delta_l != 0) or np.any(batch.ticks_per_rev_delta_r != 0))
         # IR groups: (indices or None for all, RobotParams).
@@ -271,6 +266,20 @@ class BatchSim:
                                for g, i in enumerate(first)]
         if len(self._ir_groups) == 1:
             self._ir_groups = [(None, self._ir_groups[0][1])]
+
+    def _set_drive(self, batch: ParamBatch) -> None:
+        """The drive's optional parts: effects, actuator delay, gears' play, the wheel_speed drive's loop."""
+        # The library's drive effects, the bridge drives and the bench (host_sim/physics/drivetrain_effects.py):
+        # None while all are absent (the fast path).
+        self._fx = drivetrain_effects.Drive.of(batch) if drivetrain_effects.active(batch) or self.bench else None
+        self._delay = batch.actuator_delay.copy() if np.any(batch.actuator_delay != 0.0) else None
+        # backlash: the gear's gap per wheel (motor angle / N - wheel angle), the play's middle at the start;
+        # on a bench a wheel spins with its gear as one (bench_step)
+        self.gear_gap = np.zeros((self.n, 2)) if (
+            self._fx is not None and np.any(self._fx.play) and not self.bench) else None
+        on = batch.drive == drivetrain_effects.WHEEL_SPEED  # the wheel_speed drive's own loop (speed_loop.py)
+        self._speed = speed_loop.SpeedLoop(batch.speed_kp, batch.speed_ki, batch.speed_loop_period, on) \
+            if on.any() else None
 
     # ------------------------------------------------------------------ state
     @property
@@ -303,6 +312,11 @@ class BatchSim:
         the backlash's gap)."""
         return self.q[:, 3:5] if self.gear_gap is None else self.q[:, 3:5] + self.gear_gap
 
+    @property
+    def n_ir(self) -> int:
+        """The IR pairs of every robot's ring (ir_bearings; one ring for the whole batch)."""
+        return len(self._ir_groups[0][1].ir_bearings)
+
     def read_sensors(self, rng: np.random.Generator | None = None,
                      pose: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(adc_on, adc_off), each (N, 8): the IR ring now, at the emitter power in force.
@@ -317,8 +331,8 @@ class BatchSim:
             if self._ir_history is None:
                 self._ir_history = ir_sensor.PoseHistory(latency)
             self._ir_history.add(self.t, pose)
-        on = np.empty((self.n, N_SENSORS), dtype=np.int64)
-        off = np.empty((self.n, N_SENSORS), dtype=np.int64)
+        on = np.empty((self.n, self.n_ir), dtype=np.int64)
+        off = np.empty((self.n, self.n_ir), dtype=np.int64)
         for idx, p in self._ir_groups:
             at, t = pose, self.t
             if p.ir_latency > 0:
@@ -339,7 +353,15 @@ class BatchSim:
         contact step)."""
         if self._delay is not None:
             i_ref = self._delayed(i_ref, dt)
+        if self._speed is not None:  # set-points to the loop, its volts to the bridge
+            counted = self.encoder_ticks() * (2.0 * np.pi / drivetrain_effects.ticks_per_rev(self.params))
+            i_ref = self._speed.command(i_ref, self.t, counted, self.v, self.vbat)
         q0, v0 = self.q, self.v
+        if self.bench:
+            self.q, self.v, self.current, self.vbat = drivetrain_effects.bench_step(
+                q0, v0, i_ref, dt, self._fx)  # type: ignore[arg-type]
+            self.t = self.t + dt
+            return
         if self.gear_gap is not None:
             q1, v1, ok, i_ref, gear = self._gear_step(q0, v0, i_ref, dt)
         elif self._fx is None:
@@ -561,8 +583,8 @@ class BatchSim:
         theta = np.empty((n_rows, n, 2))
         pose = np.empty((n_rows, n, 3))
         vbat = np.empty((n_rows, n))
-        ir_on = np.empty((n_rows, n, N_SENSORS), dtype=np.int64) if sensors else None
-        ir_amb = np.empty((n_rows, n, N_SENSORS), dtype=np.int64) if sensors else None
+        ir_on = np.empty((n_rows, n, self.n_ir), dtype=np.int64) if sensors else None
+        ir_amb = np.empty((n_rows, n, self.n_ir), dtype=np.int64) if sensors else None
         collisions0 = self.collisions.copy()
         for j in range(n_rows):
             t_out[j] = self.t

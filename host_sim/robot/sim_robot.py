@@ -25,7 +25,8 @@ class SimRobot:
     _ir_history: ir_sensor.PoseHistory | None = None  # the poses at the last readings, for ir_latency
 
     def __init__(self, world: World, params: RobotParams, pose: tuple[float, float, float] | None = None,
-                 seed: int | None = 0, noise: bool = True) -> None:
+                 seed: int | None = 0, noise: bool = True, bench: bool = False) -> None:
+        """bench: the body held, the wheels off the floor (a bench recording's replay, BatchSim's bench)."""
         self.world = world
         self.p = params
         x, y, phi = pose if pose is not None else world.start
@@ -49,8 +50,8 @@ class SimRobot:
         # With any drive effect of the library present the robot runs as a BatchSim of one: the effects'
         # physics is written once (host_sim/physics/drivetrain_effects.py), so this and the batch twin are the same code.
         self._effects = None
-        if drivetrain_effects.active(params) or params.actuator_delay != 0.0:
-            self._effects = BatchSim(world, params, q=[self.q], v=[self.v], substeps=1)
+        if drivetrain_effects.active(params) or params.actuator_delay != 0.0 or bench:
+            self._effects = BatchSim(world, params, q=[self.q], v=[self.v], substeps=1, bench=bench)
 
     @property
     def pose(self) -> tuple[float, float, float]:

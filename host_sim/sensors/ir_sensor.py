@@ -1,4 +1,4 @@
-"""The IR proximity ring of the paper (section 3.3): eight emitter/phototransistor pairs on the rim.
+"""The IR proximity ring of the paper (section 3.3): emitter/phototransistor pairs on the rim (ir_bearings; eight).
 
 Reflected light = C P(L) A(angle) F(x) along each sensor's axis (or its beam), plus the ambient light
 of the world and its lamps, noise and the ADC.  `read_sensors` reads one robot (pose (3,)) or N
@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike
 from host_sim.physics.params import DEFAULT, RobotParams
 from host_sim.physics.world import World
 
-N_SENSORS = 8
+N_SENSORS = 8  # the firmware's ring (the default ir_bearings); a robot's own ring: len(p.ir_bearings)
 BEARINGS = tuple(i * math.pi / 4 for i in range(N_SENSORS))  # rad from the heading, S1..S8
 NAMES = tuple(f"S{i + 1}" for i in range(N_SENSORS))
 LAMP_MIN_DISTANCE = 0.10  # m: a lamp closer than this counts as this far (no 1/d^2 blow-up)
@@ -103,17 +103,20 @@ class _Consts:
     def _effects(self, p: RobotParams, beam_offsets: list[float]) -> None:
         """The per-pair effects (host_sim/physics/effects.py); None where absent, so the reading skips them."""
         r = p.body_radius
+        self.bearings = tuple(p.ir_bearings)  # the pairs' mounts on the rim
+        self.bearing_array = np.array(self.bearings)
+        self.n = len(self.bearings)
         self.misaligned = any(d != 0.0 for d in p.ir_misalignment)
-        self.axis_bearings = tuple(b + d for b, d in zip(BEARINGS, p.ir_misalignment))  # turned axes
+        self.axis_bearings = tuple(b + d for b, d in zip(self.bearings, p.ir_misalignment))  # turned axes
         self.ray_bearings = tuple(a + o for a in self.axis_bearings for o in beam_offsets)  # sensor-major
         self.axis_origins: tuple[tuple[float, float], ...] | None = None
         self.ray_origins: tuple[tuple[float, float], ...] | None = None
-        self.r_cos = [r] * N_SENSORS  # body_radius * cos(misalignment): the mount's distance along the axis
+        self.r_cos = [r] * self.n  # body_radius * cos(misalignment): the mount's distance along the axis
         if self.misaligned:
             # A pair turns about its mount on the rim: its rays start r (u_mount - u_axis) from the
             # centre, so that a ray's length minus r is still the distance from the sensor.
             self.axis_origins = tuple((r * (math.cos(b) - math.cos(a)), r * (math.sin(b) - math.sin(a)))
-                                      for b, a in zip(BEARINGS, self.axis_bearings))
+                                      for b, a in zip(self.bearings, self.axis_bearings))
             self.ray_origins = tuple(o for o in self.axis_origins for _ in beam_offsets)
             self.r_cos = [r * math.cos(d) for d in p.ir_misalignment]
         self.r_cos_col = np.array(self.r_cos)[:, None]
@@ -177,9 +180,12 @@ def check_params(p: RobotParams) -> None:
 
 def _effect_problems(p: RobotParams) -> list[str]:
     problems = []
+    n = len(p.ir_bearings)
+    if n < 1:
+        problems.append("ir_bearings needs one bearing at least")
     for name in ("ir_gain_scale", "ir_misalignment", "ir_offset", "ambient_leakage"):
-        if len(getattr(p, name)) != N_SENSORS:
-            problems.append(f"{name} needs {N_SENSORS} values, one per sensor")
+        if len(getattr(p, name)) != n:
+            problems.append(f"{name} needs {n} values, one per sensor (ir_bearings)")
     if any(g < 0 for g in p.ir_gain_scale):
         problems.append(f"ir_gain_scale must be >= 0, got {p.ir_gain_scale}")
     if any(not abs(d) < math.pi / 2 for d in p.ir_misalignment):
@@ -256,19 +262,17 @@ def response(distance: ArrayLike, angle: ArrayLike, power_pct: ArrayLike, p: Rob
 # --------------------------------------------------------------------------- #
 # Geometry of the ring
 # --------------------------------------------------------------------------- #
-_BEAR = np.array(BEARINGS)
-
-
 def sensor_axes(poses: ArrayLike, p: RobotParams = DEFAULT) -> tuple[np.ndarray, np.ndarray]:
-    """(mounts, axes), unit vectors (..., 8, 2) of robots at poses (..., 3).
+    """(mounts, axes), unit vectors (..., S, 2) of robots at poses (..., 3), S = len(p.ir_bearings).
 
-    Sensor k sits on the rim at C + body_radius * mounts[k] (bearing 45 k
-    degrees) and looks along axes[k]: its mount direction turned by
-    ir_misalignment[k] (the same array when no pair is misaligned).
+    Sensor k sits on the rim at C + body_radius * mounts[k] (ir_bearings[k];
+    45 k degrees on the firmware's ring) and looks along axes[k]: its mount
+    direction turned by ir_misalignment[k] (the same array when no pair is
+    misaligned).
     """
     q = np.asarray(poses, dtype=float)
-    mounts = _unit(q[..., 2:3] + _BEAR)
     c = _consts(p)
+    mounts = _unit(q[..., 2:3] + c.bearing_array)
     return mounts, (_unit(q[..., 2:3] + np.array(c.axis_bearings)) if c.misaligned else mounts)
 
 
@@ -311,7 +315,7 @@ def _reflected_batch(world: World, poses: np.ndarray, power_pct: ArrayLike, p: R
         refl = response(dist, ang, power_pct, p)
     else:  # the beam: n rays per sensor, the weighted sum of their reflections
         d, ang, _hit = world.cast_robots(poses, c.ray_bearings, c.reach, c.ray_origins)
-        shape = poses.shape[:-1] + (N_SENSORS, c.beam_n)
+        shape = poses.shape[:-1] + (c.n, c.beam_n)
         power = np.asarray(power_pct, dtype=float)
         rays = response(np.maximum(d - p.body_radius, 0.0).reshape(shape), ang.reshape(shape),
                         power[..., None] if power.ndim else power, p)
@@ -424,14 +428,14 @@ def _ambient_one(world: World, x: float, y: float, phi: float, t: float, p: Robo
                  c: _Consts) -> tuple[list[float], list[float]]:
     """_ambient_batch for one robot: (off, on) per sensor."""
     base = p.ir_ambient if world.ambient is None else world.ambient
-    amb_off = [base] * N_SENSORS
+    amb_off = [base] * c.n
     if not world.lamps:
         return amb_off, amb_off
     seen = world.lamps_visible(np.array([x, y])).tolist()
     levels_off = np.asarray(world.lamp_levels(t)).tolist()
     levels_on = np.asarray(world.lamp_levels(t + p.ir_on_delay)).tolist() if world.flickers else levels_off
     amb_on = list(amb_off) if world.flickers else amb_off
-    mounts = [(math.cos(phi + b), math.sin(phi + b)) for b in BEARINGS]
+    mounts = [(math.cos(phi + b), math.sin(phi + b)) for b in c.bearings]
     axes = [(math.cos(phi + a), math.sin(phi + a)) for a in c.axis_bearings] if c.misaligned else None
     r, r_cos, dmin2 = p.body_radius, c.r_cos, LAMP_MIN_DISTANCE ** 2
     for (lx, ly), vis, lev_off, lev_on in zip(world.lamp_xy.tolist(), seen, levels_off, levels_on):
@@ -462,9 +466,9 @@ def _counts_one(c: _Consts, amb_off: list[float], amb_on: list[float], refl: lis
         on = [v + o for v, o in zip(on, c.offset)]
     top = c.adc_max
     if rng is not None and noise_sd > 0:
-        noise = (rng.standard_normal(2 * N_SENSORS) * noise_sd).tolist()
+        noise = (rng.standard_normal(2 * c.n) * noise_sd).tolist()
         off_i = [round(a + e) for a, e in zip(amb_off, noise)]
-        on_i = [round(v + e) for v, e in zip(on, noise[N_SENSORS:])]
+        on_i = [round(v + e) for v, e in zip(on, noise[c.n:])]
     else:
         off_i = [round(a) for a in amb_off]
         on_i = [round(v) for v in on]
@@ -485,7 +489,7 @@ def _read_one(world: World, x: float, y: float, phi: float, power_pct: float, t:
     refl = _reflected_one(c, dist.tolist(), ang.tolist(), p.ir_gain * float(power_term(power_pct, p)), p.body_radius)
     if c.beam_n > 1:  # the beam: the weighted sum of each sensor's rays
         n, w = c.beam_n, c.beam_w_list
-        refl = [sum(w[j] * refl[k * n + j] for j in range(n)) for k in range(N_SENSORS)]
+        refl = [sum(w[j] * refl[k * n + j] for j in range(n)) for k in range(c.n)]
     if c.gain_scale is not None:
         refl = [v * g for v, g in zip(refl, c.gain_scale)]
     amb_off, amb_on = _ambient_one(world, x, y, phi, t, p, c)

@@ -79,12 +79,13 @@ def default_workers() -> int:
 
 def load(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     from host_sim.physics.params import DEFAULT, ParamsError, load_params, params_from_dict
+    from host_sim.recordings.checks import check_recording
     from host_sim.recordings.recording import RecordingError, load_recording
     from host_sim.physics.world import WorldError, world_by_name_or_path, world_from_dict
 
     try:
-        rec = load_recording(args.recording)
-        test = load_recording(args.test) if getattr(args, "test", None) else None
+        rec = load_recording(args.recording, ordered_times=False)
+        test = load_recording(args.test, ordered_times=False) if getattr(args, "test", None) else None
         if args.params:
             params = load_params(args.params)
         elif isinstance(rec.meta.get("robot"), dict) and rec.meta["robot"]:
@@ -97,6 +98,8 @@ def load(args: argparse.Namespace):  # type: ignore[no-untyped-def]
             world = world_from_dict(rec.meta["world"], f"{args.recording} (sidecar world)")
         else:
             world = None
+        rec = check_recording(rec, params)  # the test recording too: both are replayed by the same twin
+        test = check_recording(test, params) if test is not None else None
     except (RecordingError, ParamsError, WorldError) as exc:
         raise CliError(str(exc)) from None
     return rec, params, world, test
@@ -132,6 +135,7 @@ def run(args: argparse.Namespace) -> int:
         fitted = result.model.params if result.model is not None else params
         with writing("--write-params", args.write_params):
             Path(args.write_params).write_text(json.dumps(fitted.to_json(), indent=1) + "\n")
+        use = "sim" if fitted.drive_kind == "current" else "replay"  # the firmware in sim commands currents
         print(f"wrote {args.write_params}: the twin with {len(result.effects)} fitted effect(s); "
-              f"use it with twinbot sim --params {args.write_params}")
+              f"use it with twinbot {use} --params {args.write_params}")
     return 0

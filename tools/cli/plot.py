@@ -81,7 +81,7 @@ def register_recording(figures: Any, name: str, summary: str) -> None:
 
     p = figures.add_parser(name, help=summary,
                            description="A recording at a glance: the trajectory when it has a tracker pose (over "
-                                       "its world), the wheel commands, the encoder speeds, the battery, and the "
+                                       "its world; else the firmware's odometry), the wheel commands, the encoder speeds, the battery, and the "
                                        "IR readings with the emitters on and off, over time.")
     p.add_argument("recording", metavar="REC.csv", type=input_file, help="a recording (CSV + JSON sidecar)")
     add_source_arguments(p)
@@ -94,15 +94,16 @@ def run_recording(args: argparse.Namespace) -> int:
 
     from host_sim.figures.runs import save_recording
     from tools.arguments import CliError
-    from tools.cli.replay import load_inputs
+    from tools.cli.replay import load_inputs, print_notes
 
     png = args.png or str(Path(args.recording).with_suffix(".png"))
     try:
         image_file(png)
     except argparse.ArgumentTypeError as exc:
         raise CliError(f"--png {exc}") from None
-    rec, params, world = load_inputs(args, need_world=False)
+    rec, params, world = load_inputs(args)
     with writing("--png", png):
         path = save_recording(png, rec, params, world)
     print(path)
+    print_notes(rec)
     return 0

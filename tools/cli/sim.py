@@ -86,6 +86,10 @@ def load_inputs(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         world = world_by_name_or_path(args.world, params.body_radius)
     except (ParamsError, WorldError) as exc:
         raise CliError(str(exc)) from None
+    if params.drive_kind != "current":  # the firmware commands motor currents (docs/motors.md "Drives")
+        raise CliError(f"{args.params}: drive '{params.drive_kind}': the firmware in the loop commands motor "
+                       f"currents, so the simulation runs a current drive; a {params.drive_kind} robot's "
+                       f"recordings replay and diagnose with its drive (twinbot replay, twinbot diagnose)")
     return params, world
 
 
