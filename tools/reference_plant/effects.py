@@ -114,7 +114,7 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in (
     Effect("motor_resistance", "wheel", "armature_resistance", "ohm", _N.armature_resistance[0],
            ((7.0, 8.5), (12.0, 16.0)), "the winding's resistance (another motor, a hot one, worn brushes): "
            "under a bridge it sets the current a duty drives", _wheel_field("armature_resistance")),
-    Effect("driver_deadband", "robot", "driver_deadband", "-", 0.0, ((0.03, 0.12),),
+    Effect("driver_deadband", "robot", "driver_deadband", "-", 0.0, ((0.02, 0.06),),
            "the share of full duty the bridge swallows (its dead time, a driver's threshold)",
            _robot_field("driver_deadband")),
     Effect("speed_loop_kp", "robot", "speed_kp", "V s/rad", _N.speed_kp, ((0.04, 0.07), (0.15, 0.3)),
