@@ -292,6 +292,19 @@ def test_sindy_naming_criterion() -> None:
 # --------------------------------------------------------------------------- #
 # The suite end to end
 # --------------------------------------------------------------------------- #
+def test_a_suite_of_another_drive_draws_only_that_drives_effects() -> None:
+    """--drive wheel_speed: every case's effect is one a wheel_speed robot may have, and the suite still holds
+    a control and an out-of-library case."""
+    from tools.reference_plant.cases import concealed_names, kinds
+
+    seeds = bench_diagnose.compose_suite(0, 12, "wheel_speed")
+    drawn = [concealed_names(s, 1, "wheel_speed") for s in seeds]
+    assert [] in drawn and all(set(names) <= set(kinds("tuning", "wheel_speed")) for names in drawn)
+    assert any(set(names) & {"speed_loop_kp", "speed_loop_ki", "motor_resistance", "driver_deadband"}
+               for names in drawn)
+    assert "current_limit" not in {n for names in drawn for n in names}
+
+
 def test_the_suite_holds_a_control_and_an_out_of_library_case() -> None:
     from tools.reference_plant.cases import concealed_names
 

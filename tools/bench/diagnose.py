@@ -18,6 +18,7 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from pathlib import Path
 from typing import Any
 
+from host_sim.physics.params import DRIVES
 from tools.bench.report import print_targets
 
 TARGET_NAMED = 0.95  # share of concealed (excited, in-library) effects named with the right side
@@ -41,10 +42,12 @@ DESCRIPTION = """\
      robot_draw.py).  --split tuning (the default) draws seeds 0..9999 and
      the kinds decision rules may be set on; --split final, seeds 100000 +
      --seed on, adds the held-back kinds (cable_drag, encoder_drift,
-     weakening_motor).  The suite holds at least one control and one
-     effect outside the library: if the seeds drew none, the last cases
-     are swapped for the next seeds that do.  Recordings go to DIR/recordings,
-     answer keys apart to DIR/answer_keys.
+     weakening_motor).  --drive gives every case's robot that drive (an
+     H-bridge for voltage, duty and wheel_speed; current by default) and
+     draws only the effects of that drive.  The suite holds at least one
+     control and one effect outside the library: if the seeds drew none,
+     the last cases are swapped for the next seeds that do.  Recordings go
+     to DIR/recordings, answer keys apart to DIR/answer_keys.
   2. Diagnose blind: host_sim.diagnosis.diagnose on each recording, with the
      robot and the world of its sidecar, nothing else (the worker is given
      the recording's path only); timed per recording.
@@ -83,6 +86,9 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
     p.add_argument("--effects", type=int_range(1, 3), default=1,
                    help="effects concealed at once in each in-library case (default 1; 2 or 3 add others, each "
                         "drawn apart, to the same cases: diagnosis selects up to 3)")
+    p.add_argument("--drive", choices=DRIVES, default="current",
+                   help="the drive of every case's robot (default current, the firmware's; the others give it an "
+                        "H-bridge and record the commands in their unit: docs/proving-ground.md \"Drives\")")
     p.add_argument("--jobs", type=int_range(1, 256), default=2, help="worker processes (default 2)")
     p.add_argument("--workers", type=int_range(1, 64), default=1,
                    help="processes per diagnosis, as twinbot diagnose --workers (default 1; with --jobs 1 "
@@ -102,7 +108,7 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
 # --------------------------------------------------------------------------- #
 # The suite
 # --------------------------------------------------------------------------- #
-def compose_suite(seed: int, n: int) -> list[int]:
+def compose_suite(seed: int, n: int, drive: str = "current") -> list[int]:
     """n case seeds from `seed` on, with at least one control and one out-of-library case (n >= 2; which
     cases they are does not depend on --effects, which adds effects to the in-library cases only)."""
     from tools.reference_plant.cases import concealed_names
@@ -113,23 +119,24 @@ def compose_suite(seed: int, n: int) -> list[int]:
     wants = [("control", lambda names: not names), ("out of library", lambda names: bool(set(names) & unlisted))]
     nxt, slot = seed + n, n - 1
     for _label, test in wants if n >= 2 else []:
-        if any(test(concealed_names(s)) for s in seeds):
+        if any(test(concealed_names(s, 1, drive)) for s in seeds):
             continue
-        while not test(concealed_names(nxt)):
+        while not test(concealed_names(nxt, 1, drive)):
             nxt += 1
         # Swap out a case from the end that is neither a control nor out of the library.
-        while slot >= 0 and any(t(concealed_names(seeds[slot])) for _l, t in wants):
+        while slot >= 0 and any(t(concealed_names(seeds[slot], 1, drive)) for _l, t in wants):
             slot -= 1
         seeds[slot] = nxt
         nxt, slot = nxt + 1, slot - 1
     return sorted(seeds)
 
 
-def generate(seed: int, rec_dir: str, key_dir: str, duration: float, n_effects: int = 1) -> str:
+def generate(seed: int, rec_dir: str, key_dir: str, duration: float, n_effects: int = 1,
+             drive: str = "current") -> str:
     """Worker: record case `seed` on the plant; returns the recording's path (its key goes to key_dir)."""
     from tools.reference_plant.cases import make_case
 
-    rec_path, _key = make_case(seed, rec_dir, duration=duration, key_dir=key_dir, n_effects=n_effects)
+    rec_path, _key = make_case(seed, rec_dir, duration=duration, key_dir=key_dir, n_effects=n_effects, drive=drive)
     return str(rec_path)
 
 
@@ -175,7 +182,7 @@ def diagnose_blind(rec_path: str, workers: int = 1) -> dict[str, Any]:
 
 
 def run_suite(seeds: list[int], out_dir: Path, duration: float, jobs: int, quiet: bool,
-              workers: int = 1, n_effects: int = 1) -> dict[int, dict[str, Any]]:
+              workers: int = 1, n_effects: int = 1, drive: str = "current") -> dict[int, dict[str, Any]]:
     """Generate and diagnose every case on `jobs` processes (each diagnosis on `workers`); each case is
     diagnosed once it is recorded."""
     from tqdm import tqdm  # type: ignore[import-untyped]
@@ -187,7 +194,7 @@ def run_suite(seeds: list[int], out_dir: Path, duration: float, jobs: int, quiet
             tqdm(total=2 * len(seeds), desc="generate + diagnose", unit="step", file=sys.stderr,
                  disable=quiet) as bar:
         pending: dict[Future[Any], tuple[str, int]] = {
-            pool.submit(generate, s, str(rec_dir), str(key_dir), duration, n_effects): ("generate", s)
+            pool.submit(generate, s, str(rec_dir), str(key_dir), duration, n_effects, drive): ("generate", s)
             for s in seeds}
         while pending:
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
@@ -559,15 +566,17 @@ def run(args: argparse.Namespace) -> int:
     else:
         from tools.reference_plant.cases import first_seed
 
-        seeds = compose_suite(first_seed(args.split, args.seed), args.cases)
+        seeds = compose_suite(first_seed(args.split, args.seed), args.cases, args.drive)
         with tempfile.TemporaryDirectory(prefix="twinbot-bench-diagnose-") as tmp:
             out_dir = Path(args.out) if args.out else Path(tmp)
-            results = run_suite(seeds, out_dir, args.duration, args.jobs, args.quiet, args.workers, args.effects)
+            results = run_suite(seeds, out_dir, args.duration, args.jobs, args.quiet, args.workers, args.effects,
+                                args.drive)
             rows = score_all(seeds, results, out_dir)
         command = (f"twinbot bench diagnose --cases {args.cases} --seed {args.seed} --split {args.split} "
                    f"--duration {args.duration:g} "
                    f"--jobs {args.jobs}" + (f" --workers {args.workers}" if args.workers > 1 else "")
-                   + (f" --effects {args.effects}" if args.effects > 1 else ""))
+                   + (f" --effects {args.effects}" if args.effects > 1 else "")
+                   + (f" --drive {args.drive}" if args.drive != "current" else ""))
     import pysindy  # type: ignore[import-untyped]
 
     report: dict[str, Any] = {

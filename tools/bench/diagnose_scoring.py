@@ -224,7 +224,8 @@ def traction_demand(plant: dict[str, Any], rec: Recording) -> np.ndarray:
     """(n, 2) N: the largest force each tyre could be asked for in each period.
 
     The motor's torque at the commanded current (within the driver's limit
-    and the voltage left after back-EMF), plus the wheel's own inertia
+    and the voltage left after back-EMF; for a bridge drive, the current its
+    volts could push against a braking back-EMF), plus the wheel's own inertia
     torque (from the encoders' second difference), over the radius: an
     upper bound of the contact force, since friction only lowers it.
     """
@@ -236,8 +237,13 @@ def traction_demand(plant: dict[str, Any], rec: Recording) -> np.ndarray:
     dt = rec.sample_period
     omega = np.gradient(rec.enc.astype(float) * 2 * np.pi / ticks, dt, axis=0)
     alpha = np.gradient(omega, dt, axis=0)
-    i = np.minimum(np.abs(rec.cmd), float(plant["current_limit"]))
-    i = np.minimum(i, (volts + kt * n_gear * np.abs(omega)) / ohm)  # braking against back-EMF allows more
+    emf = kt * n_gear * np.abs(omega)
+    if rec.drive == "current":
+        i = np.minimum(np.abs(rec.cmd), float(plant["current_limit"]))
+    else:  # a bridge: at most the volts it applies, plus a back-EMF it brakes against, over R
+        applied = {"duty": np.abs(rec.cmd) * volts, "voltage": np.abs(rec.cmd)}.get(rec.drive, volts)
+        i = (applied + emf) / ohm
+    i = np.minimum(i, (volts + emf) / ohm)  # braking against back-EMF allows more
     torque = float(plant["gear_efficiency"]) * n_gear * kt * i + float(plant["wheel_inertia"]) * np.abs(alpha)
     return torque / radius  # type: ignore[no-any-return]
 

@@ -18,6 +18,7 @@ from host_sim.loops.excitation import ExcitedController
 from host_sim.controller.sil import SilController
 from host_sim.physics.world import BUILTIN_NAMES, World, builtin_world
 from tools.reference_plant import effects
+from tools.reference_plant.drive_commands import DriveCommands, with_drive
 from tools.reference_plant.recorder import record
 from tools.reference_plant.robot_draw import draw_robot
 from tools.reference_plant.robot_model import PlantSpec, datasheet_spec, nominal_spec
@@ -49,9 +50,11 @@ def first_seed(split: str, offset: int = 0) -> int:
     return offset if split == "tuning" else FINAL_FIRST_SEED + offset
 
 
-def kinds(split: str) -> list[str]:
-    """The effect kinds a split draws from: the final split holds every kind, tuning all but HELD_BACK."""
-    return [name for name in effects.EFFECTS if split == "final" or name not in HELD_BACK]
+def kinds(split: str, drive: str = "current") -> list[str]:
+    """The effect kinds a split draws from for a case of `drive`: the final split holds every kind, tuning all
+    but HELD_BACK; each kind only on the drives it belongs to (a current drive has no deadband)."""
+    return [name for name, e in effects.EFFECTS.items()
+            if (split == "final" or name not in HELD_BACK) and drive in e.drives]
 
 
 def truth_file(key_dir: str | Path, name: str) -> Path:
@@ -69,19 +72,19 @@ def _start(world: World, rng: np.random.Generator) -> tuple[float, float, float]
     return float(xs[ix[k]]), float(ys[iy[k]]), float(rng.uniform(-math.pi, math.pi))
 
 
-def draw_effect(rng: np.random.Generator, spec: PlantSpec | None = None,
-                split: str = "tuning") -> tuple[PlantSpec, list[dict[str, object]]]:
+def draw_effect(rng: np.random.Generator, spec: PlantSpec | None = None, split: str = "tuning",
+                drive: str = "current") -> tuple[PlantSpec, list[dict[str, object]]]:
     """A plant spec (the drawn robot `spec`) with at most one concealed effect of the split's kinds, and its
     description for the answer key."""
     spec = spec if spec is not None else nominal_spec()
     if rng.random() < CONTROL_SHARE:
         return spec, []
-    pool = kinds(split)
+    pool = kinds(split, drive)
     return _conceal(spec, effects.EFFECTS[pool[int(rng.integers(len(pool)))]], rng)
 
 
-def draw_more(spec: PlantSpec, concealed: list[dict[str, object]], seed: int,
-              count: int) -> tuple[PlantSpec, list[dict[str, object]]]:
+def draw_more(spec: PlantSpec, concealed: list[dict[str, object]], seed: int, count: int,
+              drive: str = "current") -> tuple[PlantSpec, list[dict[str, object]]]:
     """spec and its key entries with in-library effects added until `count` are concealed, each of a name not
     yet concealed, drawn from its own stream.  Controls and out-of-library cases stay as they are: the
     first is the absence of any effect, the second a mismatch the library must not explain away."""
@@ -91,7 +94,7 @@ def draw_more(spec: PlantSpec, concealed: list[dict[str, object]], seed: int,
     while len(concealed) < count:
         rng = np.random.default_rng([seed, 2024, len(concealed)])
         taken = {e["name"] for e in concealed}
-        pool = [e for e in effects.EFFECTS.values() if e.in_library and e.name not in taken]
+        pool = [e for e in effects.EFFECTS.values() if e.in_library and e.name not in taken and drive in e.drives]
         spec, entry = _conceal(spec, pool[int(rng.integers(len(pool)))], rng)
         concealed += entry
     return spec, concealed
@@ -135,10 +138,10 @@ def case_rng(seed: int) -> np.random.Generator:
     return np.random.default_rng([seed, 2024])
 
 
-def concealed_names(seed: int, n_effects: int = 1) -> list[str]:
+def concealed_names(seed: int, n_effects: int = 1, drive: str = "current") -> list[str]:
     """The effects case `seed` will conceal, without recording it (for composing a suite)."""
-    drawn = draw_effect(case_rng(seed), draw_robot(seed), split_of(seed))
-    return [str(e["name"]) for e in draw_more(*drawn, seed, n_effects)[1]]
+    drawn = draw_effect(case_rng(seed), draw_robot(seed), split_of(seed), drive)
+    return [str(e["name"]) for e in draw_more(*drawn, seed, n_effects, drive)[1]]
 
 
 def _pick_drive(rng: np.random.Generator) -> tuple[object, dict[str, object]]:
@@ -172,15 +175,19 @@ def case_robot(seed: int, robot: str = "drawn") -> PlantSpec:
     return draw_robot(seed) if robot == "drawn" else datasheet_spec(paper_ir=True)
 
 
-def make_case(seed: int, out_dir: str | Path, duration: float = 90.0,
-              key_dir: str | Path | None = None, n_effects: int = 1, robot: str = "drawn") -> tuple[Path, Path]:
-    """Record one blind case (an in-library one concealing `n_effects` effects) on `robot` (ROBOTS); returns
-    (recording path, answer key path).  The effect, world, start and drive do not depend on `robot`."""
+def make_case(seed: int, out_dir: str | Path, duration: float = 90.0, key_dir: str | Path | None = None,
+              n_effects: int = 1, robot: str = "drawn", drive: str = "current") -> tuple[Path, Path]:
+    """Record one blind case (an in-library one concealing `n_effects` effects) on `robot` (ROBOTS) with
+    `drive` (drive_commands.DRIVES); returns (recording path, answer key path).  The effect, world, start and
+    excitation do not depend on `robot`."""
     rng = case_rng(seed)
-    spec, concealed = draw_more(*draw_effect(rng, case_robot(seed, robot), split_of(seed)), seed, n_effects)
+    spec = with_drive(case_robot(seed, robot), drive, seed)
+    spec, concealed = draw_more(*draw_effect(rng, spec, split_of(seed), drive), seed, n_effects, drive)
     world = builtin_world(BUILTIN_NAMES[int(rng.integers(len(BUILTIN_NAMES)))])
     start = _start(world, rng)
     controller, how = _pick_drive(rng)
+    if drive != "current":
+        controller, how = DriveCommands(controller, drive), {**how, "drive": drive}
     spec = _set_in_run(spec, concealed, start, duration)
     out_dir = Path(out_dir)
     key_dir = Path(key_dir) if key_dir is not None else out_dir / "answer_keys"

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from host_sim.physics.effects import LIBRARY
+from host_sim.physics.params import DRIVES
 from tools.reference_plant.robot_model import PlantSpec, nominal_spec
 
 Where = str | int  # "left" | "right" | "both", or a sensor index
@@ -37,6 +38,12 @@ class Effect:
     def in_library(self) -> bool:
         """The twin's library has an effect of this name (the scorer compares the two by name)."""
         return self.name in LIBRARY
+
+    @property
+    def drives(self) -> tuple[str, ...]:
+        """The drives a case concealing it may have: the library effect's (a deadband needs a bridge), all for
+        one outside the library."""
+        return tuple(LIBRARY[self.name].drives) if self.in_library else DRIVES
 
     def draw(self, rng: np.random.Generator) -> float:
         lo, hi = self.ranges[int(rng.integers(len(self.ranges)))]
@@ -104,6 +111,16 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in (
     Effect("current_limit", "robot", "current_limit", "A", _N.current_limit, ((0.025, 0.045),),
            "the drivers' current limit set low (a wrong current-sense resistor): shows when the references "
            "exceed it", _robot_field("current_limit")),
+    Effect("motor_resistance", "wheel", "armature_resistance", "ohm", _N.armature_resistance[0],
+           ((7.0, 8.5), (12.0, 16.0)), "the winding's resistance (another motor, a hot one, worn brushes): "
+           "under a bridge it sets the current a duty drives", _wheel_field("armature_resistance")),
+    Effect("driver_deadband", "robot", "driver_deadband", "-", 0.0, ((0.02, 0.06),),
+           "the share of full duty the bridge swallows (its dead time, a driver's threshold)",
+           _robot_field("driver_deadband")),
+    Effect("speed_loop_kp", "robot", "speed_kp", "V s/rad", _N.speed_kp, ((0.04, 0.07), (0.15, 0.3)),
+           "the robot's own wheel-speed loop's proportional gain", _robot_field("speed_kp")),
+    Effect("speed_loop_ki", "robot", "speed_ki", "V/rad", _N.speed_ki, ((0.3, 0.6), (1.8, 3.5)),
+           "the robot's own wheel-speed loop's integral gain", _robot_field("speed_ki")),
     Effect("battery_resistance", "robot", "battery_resistance", "ohm", 0.0, ((0.5, 3.0),),
            "the battery's internal resistance: the voltage sags with the current drawn",
            _robot_field("battery_resistance")),

@@ -1,8 +1,8 @@
 """The plant: the MuJoCo robot stepped with its drivers, battery, encoders, IR ring and tracker.
 
-Each 1 ms MuJoCo step its own drivers turn the current references into wheel torques; `sense()` and
-`actuate()` speak host_sim's Sense / Actuate, so any of the twin's controllers drives it as it drives the
-twin's SimRobot.  Equations and readings: docs/proving-ground.md, "The robot in MuJoCo".
+Each 1 ms MuJoCo step its own drivers (current loops, or an H-bridge: hbridge.py) turn the commands into wheel
+torques; `sense()` and `actuate()` speak host_sim's Sense / Actuate, so any of the twin's controllers drives it
+as it drives the twin's SimRobot.  Equations and readings: docs/proving-ground.md, "The robot in MuJoCo".
 """
 from __future__ import annotations
 
@@ -14,8 +14,9 @@ import numpy as np
 
 from host_sim.controller.hardware_io import TICK_MASK, Actuate, Sense
 from host_sim.physics.world import World
-from tools.reference_plant import ir_law, ir_paper
+from tools.reference_plant import hbridge, ir_law, ir_paper
 from tools.reference_plant.robot_model import SLIP_MIN_SPEED, PlantSpec, build_model, drive_joint, ir_group_mask
+from tools.reference_plant.wheel_speed_loop import WheelSpeedLoop
 
 N_SENSORS = 8
 RAY_HEIGHT = 0.03  # m above the floor: the IR surfaces' mid-height
@@ -68,7 +69,10 @@ class Plant:
         self._ray_mask = ir_group_mask()
         self._geomid = np.zeros(1, dtype=np.int32)
         self._normal = np.zeros(3)
-        self.i_ref = (0.0, 0.0)  # A, what the driver regulates to now
+        self.cmd = (0.0, 0.0)  # the command in force, in the drive's unit (A: what the current driver regulates to)
+        self._speed_loop = WheelSpeedLoop(spec.speed_kp, spec.speed_ki, spec.speed_loop_period,
+                                          spec.board_ticks_per_rev) if spec.drive == "wheel_speed" else None
+        self._loop_volts = (0.0, 0.0)  # the speed loop's output now (V)
         self.current = (0.0, 0.0)  # A flowing
         self._pending: deque[tuple[float, tuple[float, float]]] = deque()
         self.emitter_pct = 0
@@ -137,9 +141,13 @@ class Plant:
 
     # ------------------------------------------------------------------ I/O
     def actuate(self, a: Actuate) -> None:
-        ref = (a.i_left_ma / 1000.0, a.i_right_ma / 1000.0)
-        self._pending.append((self.t + self.spec.actuator_delay - 1e-9, ref))
-        self.emitter_pct = a.emitter_pct
+        """The firmware's current references (mA), for a current drive."""
+        self.command((a.i_left_ma / 1000.0, a.i_right_ma / 1000.0), a.emitter_pct)
+
+    def command(self, cmd: tuple[float, float], emitter_pct: int) -> None:
+        """Commands in the drive's unit (A, V, a signed duty, or a wheel-speed set-point in rad/s)."""
+        self._pending.append((self.t + self.spec.actuator_delay - 1e-9, (float(cmd[0]), float(cmd[1]))))
+        self.emitter_pct = emitter_pct
 
     def sense(self) -> Sense:
         off, on = self.read_ir()
@@ -155,7 +163,9 @@ class Plant:
         m, d = self.model, self.data
         for _ in range(int(round(duration / self.dt))):
             while self._pending and self._pending[0][0] <= d.time:
-                self.i_ref = self._pending.popleft()[1]
+                self.cmd = self._pending.popleft()[1]
+            if self._speed_loop is not None:
+                self._loop_volts = self._speed_loop.volts(self.t, self.encoder_ticks(), self.cmd, self.v_term)
             self._drive()
             self._loads()
             mujoco.mj_step(m, d)
@@ -185,23 +195,39 @@ class Plant:
             w = float(d.qvel[self._drive_v[k]])
             kt = self.torque_constant(k)
             emf = kt * s.gear_ratio * w
-            i_ref = min(max(self.i_ref[k], -s.current_limit), s.current_limit)
-            if s.inductance[k] > 0:
-                i, u = self._current_loop(k, i_ref, emf, v_bat)
-            else:  # the ideal driver: the reference, within what the voltage allows
-                ohm = s.armature_resistance[k]
-                i = min(max(i_ref, (-v_bat - emf) / ohm), (v_bat - emf) / ohm)
-                u = ohm * i + emf
+            i, p = self._regulated(k, emf, v_bat) if s.drive == "current" else self._bridged(k, emf, v_bat)
             torque = s.gear_efficiency * s.gear_ratio * kt * i
             if s.ripple[k] > 0:
                 angle = float(d.qpos[self._drive_q[k]]) * s.ripple_teeth[k] + s.ripple_phase[k]
                 torque *= 1.0 + s.ripple[k] * math.sin(angle)
             d.ctrl[k] = torque
-            power += u * i
+            power += p
             currents.append(i)
         self.current = (currents[0], currents[1])
         i_batt = s.quiescent_current + power / s.battery_voltage
         self.v_term = s.battery_voltage - s.battery_resistance * i_batt
+
+    def _regulated(self, k: int, emf: float, v_bat: float) -> tuple[float, float]:
+        """The current driver: (the step's mean current, the power it draws), the reference within the limit."""
+        s = self.spec
+        i_ref = min(max(self.cmd[k], -s.current_limit), s.current_limit)
+        if s.inductance[k] > 0:
+            i, u = self._current_loop(k, i_ref, emf, v_bat)
+        else:  # the ideal driver: the reference, within what the voltage allows
+            ohm = s.armature_resistance[k]
+            i = min(max(i_ref, (-v_bat - emf) / ohm), (v_bat - emf) / ohm)
+            u = ohm * i + emf
+        return i, u * i
+
+    def _bridged(self, k: int, emf: float, v_bat: float) -> tuple[float, float]:
+        """The H-bridge at the drive's duty, PWM cycle by cycle over the step: (mean current, battery power)."""
+        s = self.spec
+        command = self._loop_volts[k] if s.drive == "wheel_speed" else self.cmd[k]
+        duty = command if s.drive == "duty" else command / max(v_bat, 1e-6)
+        self._coil[k], i, i_batt = hbridge.step(
+            self._coil[k], hbridge.after_deadband(duty, s.driver_deadband), emf, v_bat, s.armature_resistance[k],
+            s.bridge_inductance[k], s.pwm_frequency, s.pwm_decay == "brake", self.dt)
+        return i, v_bat * i_batt
 
     def _current_loop(self, k: int, i_ref: float, emf: float, v_bat: float) -> tuple[float, float]:
         """One step of a digital PI current loop (LOOP_STEPS per step) on the motor's R and L, its output

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from host_sim.controller.hardware_io import CYCLE_S, Actuate, Sense
-from host_sim.physics.params import DEFAULT
+from host_sim.physics.params import DEFAULT, DRIVE_UNITS
 from host_sim.recordings.recording import RecordingWriter
 from host_sim.physics.world import World
 from tools.reference_plant.plant import Plant
@@ -94,10 +94,13 @@ def run(plant: Plant, controller: object, duration: float, writer: RecordingWrit
         exact = plant.encoder_position()
         s = plant.sense()
         a: Actuate = controller.cycle(s)  # type: ignore[attr-defined]
-        plant.actuate(a)
+        # a controller of another drive says its command in that drive's unit (drive_commands.py)
+        to_drive = getattr(controller, "command", None)
+        cmd = to_drive(a) if to_drive is not None else (a.i_left_ma / 1000.0, a.i_right_ma / 1000.0)
+        plant.command(cmd, a.emitter_pct)
         lost = plant.spec.drop_share > 0 and timing.random() < plant.spec.drop_share
         if writer is not None and not lost:
-            writer.row(plant.t, (a.i_left_ma / 1000.0, a.i_right_ma / 1000.0), (s.enc_l, s.enc_r), s.adc_on,
+            writer.row(plant.t, cmd, (s.enc_l, s.enc_r), s.adc_on,
                        s.adc_off, s.vbat_mv / 1000.0, seen, emitter_pct=pct)
         if not lost:
             truth.poses.append(pose)
@@ -109,11 +112,18 @@ def run(plant: Plant, controller: object, duration: float, writer: RecordingWrit
 def record(path: str | Path, spec: PlantSpec, world: World, controller: object, duration: float, seed: int = 0,
            pose: tuple[float, float, float] | None = None, extra: dict[str, object] | None = None
            ) -> Truth:
-    """Run a scenario and write it as a recording; returns the truth (not written)."""
+    """Run a scenario and write it as a recording; returns the truth (not written).  The commands are in the
+    drive's unit; the sidecar's robot and its drive block say which (docs/recordings.md "The drive")."""
     plant = Plant(spec, world, pose, seed)
     meta = {"plant": "mujoco", "controller": getattr(controller, "name", "?"), "seed": seed,
             "emitter_pct": getattr(controller, "emitter_pct", 60), **(extra or {})}
-    with RecordingWriter(path, source="robot", sample_period=CYCLE_S, robot=DEFAULT.to_json(),
+    robot = DEFAULT.to_json()
+    if spec.drive != "current":  # the robot's design, known as its datasheet is: its drive and its bridge's decay
+        robot.update(drive=spec.drive, pwm_decay=spec.pwm_decay)
+        unit = DRIVE_UNITS[spec.drive]
+        meta["drive"] = {"kind": spec.drive, "unit": unit, "source_unit": unit,
+                         "full_scale": 1.0 if spec.drive == "duty" else None}
+    with RecordingWriter(path, source="robot", sample_period=CYCLE_S, robot=robot,
                          world=world.to_dict(), extra=meta) as writer:
         truth = run(plant, controller, duration, writer, seed=seed)
     return truth

@@ -110,6 +110,16 @@ class PlantSpec:
     adc_clip: float = 0.0  # counts at which the IR readings clip; 0 = the ADC's full scale
     cable_drag: float = 0.0  # N per m of distance from the anchor
     cable_anchor: Pair = (0.0, 0.0)  # m, where the tether is fixed
+    # --- the drive (docs/proving-ground.md, "Drives"): what the commands are; the others drive an H-bridge
+    drive: str = "current"  # "current" | "voltage" | "duty" | "wheel_speed"
+    pwm_decay: str = "coast"  # the bridge's off-phase: "coast" (fast decay, diodes) or "brake" (slow decay)
+    driver_deadband: float = 0.0  # fraction of full duty below which the bridge gives nothing
+    pwm_frequency: float = 20000.0  # Hz
+    bridge_inductance: Pair = (2.0e-4, 2.0e-4)  # H, the winding's L under PWM (`inductance` is the current loop's)
+    speed_kp: float = 0.1  # V s/rad, the robot's own wheel-speed loop
+    speed_ki: float = 1.0  # V/rad
+    speed_loop_period: float = 0.01  # s
+    board_ticks_per_rev: float = 1200.0  # counts per wheel turn the robot's board believes (its speed loop's)
 
     def replace(self, **changes: object) -> PlantSpec:
         return dataclasses.replace(self, **changes)  # type: ignore[arg-type]
@@ -136,7 +146,9 @@ def datasheet_spec(paper_ir: bool = False) -> PlantSpec:
         current_limit=p.current_limit, actuator_delay=0.0, battery_voltage=p.battery_voltage,
         battery_resistance=0.0, quiescent_current=0.08, vbat_noise=0.005, floor_friction=1.0,
         torsional_friction=0.0, caster_friction=0.0, wall_friction=0.3, floor_tilt=0.0, floor_tilt_direction=0.0,
-        ticks_per_rev=two(p.ticks_per_rev),
+        ticks_per_rev=two(p.ticks_per_rev), pwm_frequency=p.pwm_frequency,
+        bridge_inductance=two(p.motor_inductance), speed_kp=p.speed_kp, speed_ki=p.speed_ki,
+        speed_loop_period=p.speed_loop_period, board_ticks_per_rev=p.ticks_per_rev,
         ir=ir_paper.datasheet_ir() if paper_ir else {
             **ir_law.NOMINAL, "ambient": p.ir_ambient, "noise": p.ir_noise, "on_delay": p.ir_on_delay,
             "adc_max": float((1 << int(p.adc_bits)) - 1)},
