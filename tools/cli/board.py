@@ -193,6 +193,16 @@ def prepare_flash(args: argparse.Namespace, scratch: Path) -> tuple[str, str]:
 STARTUP_S = 1.0  # a board that stops this soon never booted: say why instead of where to connect
 
 
+def serve_until_it_stops(board: VirtualBoard, stderr_path: Path, offset: int) -> int:
+    """Name the board's port for the user and wait: a board that stops by itself is trouble (status 1)."""
+    print(f"  talk to it: twinbot serial {board.path}   |   flash it: twinbot flash --port {board.path}")
+    print("  Ctrl-C stops the board.", flush=True)
+    while board.alive():
+        time.sleep(0.2)
+    print(f"twinbot board: {board_trouble(board, stderr_path, offset)}", file=sys.stderr)
+    return 1
+
+
 def board_trouble(board: VirtualBoard, stderr_path: Path, offset: int) -> str:
     """Why a board stopped: its exit status and the last line it printed (stdout: MicroPython's
     tracebacks) or wrote on stderr (the supervisor's)."""
@@ -244,12 +254,7 @@ def run_in(args: argparse.Namespace, scratch: Path) -> int:
             print(f"  hardware: simulator at 127.0.0.1:{hw_port}")
         if args.late or args.jitter:
             print(f"  link: LATE, the board's output reaches the pty {args.late:g} +- {args.jitter:g} ms later")
-        print(f"  talk to it: twinbot serial {board.path}   |   flash it: twinbot flash --port {board.path}")
-        print("  Ctrl-C stops the board.", flush=True)
-        while board.alive():
-            time.sleep(0.2)
-        print(f"twinbot board: {board_trouble(board, stderr_path, offset)}", file=sys.stderr)
-        return 1
+        return serve_until_it_stops(board, stderr_path, offset)
     except KeyboardInterrupt:
         return 0
     finally:
@@ -296,12 +301,7 @@ def serve_rp2040(board, stderr_path: Path, offset: int, image: Path) -> int:  # 
         print(f"twinbot board: {board.path}", flush=True)
         print(f"  image: {image} on an emulated RP2040 (rp2040js, 125 MHz), its REPL on USB CDC")
         print("  hardware: the chip's own pins, at rest (no twin drives them)")
-        print(f"  talk to it: twinbot serial {board.path}   |   flash it: twinbot flash --port {board.path}")
-        print("  Ctrl-C stops the board.", flush=True)
-        while board.alive():
-            time.sleep(0.2)
-        print(f"twinbot board: {board_trouble(board, stderr_path, offset)}", file=sys.stderr)
-        return 1
+        return serve_until_it_stops(board, stderr_path, offset)
     except KeyboardInterrupt:
         return 0
     finally:
