@@ -171,8 +171,10 @@ def test_ctrl_c_is_one_line(tmp_path: Path) -> None:
     out = tmp_path / "o"
     sweep_cmd = [sys.executable, "-m", "tools.cli.main", "sweep", "--rules", "first", "--world", "maze", "--seeds",
                  "8", "--duration", "36000", "--workers", "2", "--out", str(out)]
+    # A suite started in the background (`nohup ... &`) hands its children SIGINT ignored, and Python then
+    # keeps it ignored; a terminal's Ctrl-C is what this test means, so the sweep gets SIGINT's default.
     proc = subprocess.Popen(sweep_cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+                            start_new_session=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         # into the runs (a Ctrl-C while the workers start is ignored, so repeat it until it lands); the runs last
         # far longer than the ceiling (8 x 10 sim h: minutes idle), so a slow start on a loaded machine cannot

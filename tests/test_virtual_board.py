@@ -327,8 +327,11 @@ def _repl_lines(stderr: str) -> list[str]:
 
 
 def _harness(port: str, *args: str) -> subprocess.Popen:
+    # A suite started in the background (`nohup ... &`) hands its children SIGINT ignored, and Python then
+    # keeps it ignored; _stop means a terminal's Ctrl-C, so the harness gets SIGINT's default.
     return subprocess.Popen([sys.executable, "-m", "tools.cli.main", "serial", port, "--quiet", *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 
 
 def _stderr_until(proc: subprocess.Popen, text: str) -> str:
