@@ -133,24 +133,29 @@ def typecheck_micropython(workdir: Path) -> subprocess.CompletedProcess[str]:
     return subprocess.run(cmd, capture_output=True, text=True, cwd=REPO_ROOT, env=env, check=False)
 
 
-def wasm_port() -> Path:
-    """The webassembly port's folder, installed with `npm ci` from host_sim/board/wasm/ if needed."""
-    node, npm = shutil.which("node"), shutil.which("npm")
-    if not node or not npm:
-        raise RigError("the 32-bit MicroPython (webassembly port) needs Node.js: install node and npm")
-    installed = WASM_DIR / "node_modules" / WASM_PACKAGE / "package.json"
-    wanted = json.loads((WASM_DIR / "package.json").read_text())["dependencies"][WASM_PACKAGE]
+def npm_installed(folder: Path, package: str, needs: str) -> Path:
+    """folder, with its package.json's pinned `package` installed there by `npm ci` if needed; needs names
+    what wants Node.js, for the error when it is missing."""
+    if not shutil.which("node") or not shutil.which("npm"):
+        raise RigError(f"{needs} needs Node.js: install node and npm")
+    installed = folder / "node_modules" / package / "package.json"
+    wanted = json.loads((folder / "package.json").read_text())["dependencies"][package]
     # One install at a time: `npm ci` first deletes node_modules, so a second process (a parallel test
     # worker, a bench beside the tests) would find it half gone.
-    with open(WASM_DIR / ".install.lock", "w") as lock:
+    with open(folder / ".install.lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
         if installed.exists() and json.loads(installed.read_text()).get("version") == wanted:
-            return WASM_DIR
-        r = subprocess.run([npm, "ci", "--prefix", str(WASM_DIR), "--no-audit", "--no-fund"],
+            return folder
+        r = subprocess.run(["npm", "ci", "--prefix", str(folder), "--no-audit", "--no-fund"],
                            capture_output=True, text=True, check=False, timeout=600)
     if r.returncode != 0 or not installed.exists():
-        raise RigError(f"npm ci in {WASM_DIR} failed: {(r.stderr or r.stdout).strip()[-2000:]}")
-    return WASM_DIR
+        raise RigError(f"npm ci in {folder} failed: {(r.stderr or r.stdout).strip()[-2000:]}")
+    return folder
+
+
+def wasm_port() -> Path:
+    """The webassembly port's folder, installed with `npm ci` from host_sim/board/wasm/ if needed."""
+    return npm_installed(WASM_DIR, WASM_PACKAGE, "the 32-bit MicroPython (webassembly port)")
 
 
 def wasm_path(host: Path) -> str:

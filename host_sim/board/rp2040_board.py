@@ -7,15 +7,11 @@ by --image/--bootrom or TWINBOT_RP2040_IMAGE/TWINBOT_RP2040_BOOTROM (docs/rp2040
 """
 from __future__ import annotations
 
-import fcntl
-import json
 import os
-import shutil
-import subprocess
 import time
 from pathlib import Path
 
-from host_sim.board.micropython_runner import REPO_ROOT, RigError
+from host_sim.board.micropython_runner import REPO_ROOT, RigError, npm_installed
 from host_sim.board.virtual_board import VirtualBoard
 
 RP2040_DIR = REPO_ROOT / "host_sim" / "board" / "rp2040"
@@ -49,20 +45,7 @@ def image_files(image: str | None = None, bootrom: str | None = None) -> tuple[P
 
 def emulator() -> Path:
     """The bridge's folder, with rp2040js installed there by `npm ci` if needed."""
-    if not shutil.which("node") or not shutil.which("npm"):
-        raise RigError("the emulated RP2040 needs Node.js: install node and npm")
-    installed = RP2040_DIR / "node_modules" / EMULATOR_PACKAGE / "package.json"
-    wanted = json.loads((RP2040_DIR / "package.json").read_text())["dependencies"][EMULATOR_PACKAGE]
-    # One install at a time: `npm ci` first deletes node_modules under any other process using it.
-    with open(RP2040_DIR / ".install.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        if installed.exists() and json.loads(installed.read_text()).get("version") == wanted:
-            return RP2040_DIR
-        r = subprocess.run(["npm", "ci", "--prefix", str(RP2040_DIR), "--no-audit", "--no-fund"],
-                           capture_output=True, text=True, check=False, timeout=600)
-    if r.returncode != 0 or not installed.exists():
-        raise RigError(f"npm ci in {RP2040_DIR} failed: {(r.stderr or r.stdout).strip()[-2000:]}")
-    return RP2040_DIR
+    return npm_installed(RP2040_DIR, EMULATOR_PACKAGE, "the emulated RP2040")
 
 
 def bridge_command(image: Path, bootrom: Path, flash: Path | None = None) -> list[str]:
