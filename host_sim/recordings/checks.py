@@ -66,12 +66,6 @@ def speed_memory(p: RobotParams) -> float:
     return inertia * top_speed(p) / p.coulomb_friction if p.coulomb_friction > 0 else math.inf
 
 
-def drive_kind(rec: Recording, p: RobotParams) -> str:
-    """The drive the commands are for: the recording's own (its sidecar's drive block; current without
-    one), which replay and the diagnosis take over any parameters' (replay.with_drive)."""
-    return rec.drive
-
-
 def check_recording(rec: Recording, p: RobotParams) -> Recording:
     """The recording mended (repeated rows dropped, clocks and encoders unwrapped) with its notes; raises
     RecordingCheckError on what cannot be mended (tests/test_recording_checks.py)."""
@@ -218,7 +212,7 @@ def _unwrap_counter(step: np.ndarray, ticks: np.ndarray) -> tuple[np.ndarray, li
 def check_units(rec: Recording, p: RobotParams, where: str) -> None:
     """Refuse commands, a tracker pose or an encoder in a unit the twin does not read, naming the likely
     unit and the fix rather than guessing."""
-    kind = drive_kind(rec, p)
+    kind = rec.drive  # the recording's own drive, which replay and the diagnosis take (replay.with_drive)
     if kind == "current":
         _check_current(rec, p, where)
     elif kind == "duty" and len(rec) and np.abs(rec.cmd).max() > 1.0:
