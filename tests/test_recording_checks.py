@@ -124,6 +124,21 @@ def test_a_clock_reset_is_refused(clean, tmp_path):
     refused(corrupt(clean, tmp_path, shift), "row 400: the clock goes back from 15.960 s to 0.000 s, a reset")
 
 
+def test_a_restart_the_recorder_saw_is_refused_not_replayed_as_an_encoder_step(clean, tmp_path):
+    """The board restarted before row 400: the writer carries its time on and says so in the sidecar; the
+    counters start again from 0 there, a step back no wheel turns in one period, nor a wrap."""
+    def restart(h: list[str], rows: Rows) -> Rows:
+        for name in ("enc_l", "enc_r"):
+            zero = int(rows[400][h.index(name)])
+            rows = column(h, rows, name, lambda e, zero=zero: str(int(e) - zero), first=400)  # type: ignore[misc]
+        return rows
+
+    path = corrupt(clean, tmp_path, restart)
+    sidecar = Path(str(path) + ".json")
+    sidecar.write_text(json.dumps(json.loads(sidecar.read_text()) | {"clock_resets": [400]}))
+    refused(path, "row 400 (t 16.000 s): the robot's clock was reset before it", ("diagnose",))
+
+
 def test_a_wrapped_clock_is_unwrapped_with_a_note(clean, tmp_path):
     """A raw 16-bit millisecond clock: it goes back by 65.536 s, and one period later it is."""
     wrap = lambda h, rows: column(h, rows, "t", lambda t: repr(float(t) + 65.536 - 16.0), first=0)  # noqa: E731

@@ -1,13 +1,15 @@
 """One meaning for recordings: the writer's two entry points, the firmware's view, version 1 files."""
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
 import pytest
 
 from host_sim.physics.params import DEFAULT
-from host_sim.recordings.recording import COLUMNS, COLUMNS_V1, RecordingError, RecordingWriter, load_recording
+from host_sim.recordings.recording import (COLUMNS, COLUMNS_V1, RecordingError, RecordingWriter, load_recording,
+                                           sidecar_path)
 from host_sim.recordings.replay import replay_inputs
 from host_sim.controller.sil import SilController
 from host_sim.loops.simulation import Simulation
@@ -34,6 +36,21 @@ def test_telemetry_rows_unwrap_the_robot_clock_and_skip_repeats(tmp_path):
     assert np.allclose(rec.t, [0.0, 0.04])
     assert np.allclose(rec.cmd[0], [0.12, -0.04]) and rec.enc[1].tolist() == [10, -3]
     assert rec.emitter is None and rec.firmware is None and rec.pose is None  # an older firmware reports neither
+
+
+def test_a_clock_reset_keeps_recording_with_time_carrying_on_and_says_so_in_the_sidecar(tmp_path):
+    path = tmp_path / "r.csv"
+    with RecordingWriter(path, source="robot", sample_period=0.04) as w:
+        for tick in (5000, 5040, 5080):
+            assert w.telemetry(telemetry(tick))
+        assert w.telemetry(telemetry(12, enc_l=0, enc_r=0))  # the board restarted: its clock and counters too
+        assert not w.telemetry(telemetry(12))  # a repeated tick is still dropped
+        for tick in (52, 92):  # long before the new clock passes the old one
+            assert w.telemetry(telemetry(tick))
+        assert json.loads(sidecar_path(path).read_text())["clock_resets"] == [3]  # said before the close
+    rec = load_recording(path)
+    assert np.allclose(rec.t, [0.0, 0.04, 0.08, 0.12, 0.16, 0.2])  # one firmware period across the reset
+    assert rec.meta["clock_resets"] == [3] and rec.enc[3].tolist() == [0, 0]
 
 
 def test_the_firmwares_view_is_recorded_in_si_units(tmp_path):

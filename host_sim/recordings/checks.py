@@ -70,12 +70,29 @@ def check_recording(rec: Recording, p: RobotParams) -> Recording:
     """The recording mended (repeated rows dropped, clocks and encoders unwrapped) with its notes; raises
     RecordingCheckError on what cannot be mended (tests/test_recording_checks.py)."""
     where = str(rec.path or "recording")
+    check_resets(rec, where)
     keep, t, notes = check_times(rec.t, speed_memory(p), where)
     rec = _rows(rec, keep, t)
     enc, enc_notes = check_encoders(rec, np.flatnonzero(keep), p, where)
     rec = dataclasses.replace(rec, enc=enc)
     check_units(rec, p, where)
     return dataclasses.replace(rec, notes=[*rec.notes, *notes, *enc_notes])
+
+
+def check_resets(rec: Recording, where: str) -> None:
+    """Refuse a recording whose recorder saw the robot's clock go back (the sidecar's clock_resets): the
+    board restarted there, its encoders and odometry count again from 0, and a step across it is no physics
+    (nor a counter wrap) to replay (tests/test_recording_checks.py)."""
+    resets = rec.meta.get("clock_resets") or []
+    if not isinstance(resets, list) or not all(isinstance(k, int) and 0 <= k < len(rec) for k in resets):
+        raise RecordingCheckError(f"{where}: the sidecar's clock_resets must list row numbers of the recording, "
+                                  f"got {resets!r}")
+    if resets:
+        k = resets[0]
+        more = f" ({len(resets) - 1} more such resets)" if len(resets) > 1 else ""
+        raise RecordingCheckError(
+            f"{where}: row {k} (t {rec.t[k]:.3f} s): the robot's clock was reset before it{more}, the robot "
+            f"restarted: its encoders and odometry count again from 0; cut the recording there and use each part")
 
 
 def _rows(rec: Recording, keep: np.ndarray, t: np.ndarray) -> Recording:

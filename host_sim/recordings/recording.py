@@ -21,6 +21,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
+from firmware.config import DEFAULT_CYCLE_MS
 from firmware.hal import TICK_MASK
 from firmware.odometry import HEADING_TURN
 from host_sim.physics.params import DRIVE_UNITS, DRIVES
@@ -148,9 +149,10 @@ class RecordingWriter:
 
     def telemetry(self, f: dict[str, object], *, t: float | None = None,
                   pose: tuple[float, float, float] | None = None, emitter_pct: float | None = None) -> bool:
-        """One TELEMETRY frame's fields as a row; False if it repeats a tick or the clock went back (a reset).
+        """One TELEMETRY frame's fields as a row; False if it repeats the tick before (the same cycle twice).
 
-        t: the time of the row (default: the robot's clock, unwrapped, from its first frame).
+        t: the time of the row (default: the robot's clock, unwrapped, from its first frame; after a clock
+        reset, one firmware period after the row before, the reset's row kept in the sidecar's clock_resets).
         emitter_pct: the emitter power truly in force for the on-reading (a simulator knows it), instead of
         the firmware's report.
         Fields an older firmware does not send (emitter_pct, set-points, odometry) are left empty.
@@ -158,8 +160,11 @@ class RecordingWriter:
         tick = int(f["tick_ms"])  # type: ignore[call-overload]
         if self._last_tick is not None:
             step = (tick - self._last_tick) & TICK_MASK
-            if step == 0 or step > _UNWRAP_LIMIT:
+            if step == 0:
                 return False
+            if step > _UNWRAP_LIMIT:  # the board restarted: keep recording (tests/test_recordings.py)
+                step = DEFAULT_CYCLE_MS
+                self._clock_reset()
             self._t_ms += step
         self._last_tick = tick
         firmware = None
@@ -175,6 +180,14 @@ class RecordingWriter:
                  emitter_pct=None if emitter is None else float(emitter),  # type: ignore[arg-type]
                  firmware=firmware)
         return True
+
+    def _clock_reset(self) -> None:
+        """Say in the sidecar, at once, that the robot's clock went back before the next row: its encoders and
+        odometry count again from 0 there, which loading's checks refuse to replay across (checks.py)."""
+        resets = self.meta.setdefault("clock_resets", [])
+        assert isinstance(resets, list)
+        resets.append(self.rows)
+        self._write_sidecar()
 
     def close(self) -> None:
         if self._file.closed:
