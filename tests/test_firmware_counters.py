@@ -30,6 +30,6 @@ def test_on_micropython_64_bit() -> None:
 
 
 def test_on_micropython_32_bit(wasm_micropython: object) -> None:
-    r = run_micropython_wasm(MP_DIR / "counters_check.py")
+    r = run_micropython_wasm(MP_DIR / "counters_check.py", path=[MP_DIR])
     assert r.returncode == 0, r.stdout + r.stderr
     assert f"counters: {len(counters_check.CHECKS)} checks ok" in r.stdout

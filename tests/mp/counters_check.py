@@ -8,13 +8,13 @@ run on CPython (tests/test_firmware_counters.py), so every interpreter saturates
 Prints 'counters: N checks ok'; exits 1 on failure.
 """
 import struct
-import sys
 
 try:
     import micropython
 except ImportError:  # CPython: no heap lock, the values are still checked
     micropython = None
 
+from check_runner import checks, run
 from firmware.robot import Robot
 from firmware.hal_testbench import TestHal
 from protocol import cobs, fields
@@ -195,20 +195,11 @@ def check_clock_and_encoder_fields_wrap():
     assert out[2] == -0x40000000 and out[3] == -16, out
 
 
-CHECKS = [name for name in sorted(globals()) if name.startswith("check_")]
+CHECKS = checks(globals())
 
 
 def main():
-    failed = 0
-    for name in CHECKS:
-        try:
-            globals()[name]()
-        except Exception as exc:  # noqa: BLE001
-            failed += 1
-            print("counters: FAIL", name, repr(exc))
-    if failed:
-        sys.exit(1)
-    print("counters:", len(CHECKS), "checks ok")
+    run("counters", globals())
 
 
 if __name__ == "__main__":

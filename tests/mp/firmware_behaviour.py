@@ -8,6 +8,7 @@ them all under MicroPython and prints 'behaviour: N checks ok'.
 import struct
 import sys
 
+from check_runner import checks, run
 from firmware.fuzzy import FuzzyController
 from firmware.robot import BreakToRepl, Robot
 from firmware.stall import StallGuard
@@ -619,20 +620,11 @@ def check_odometry_follows_the_wheels():
     assert odo.x_um > 0 and abs(odo.y_um) < odo.x_um // 20, (odo.x_um, odo.y_um)
 
 
-CHECKS = [name for name in sorted(globals()) if name.startswith("check_")]
+CHECKS = checks(globals())
 
 
 def main():
-    failed = 0
-    for name in CHECKS:
-        try:
-            globals()[name]()
-        except Exception as exc:  # noqa: BLE001
-            failed += 1
-            print("behaviour: FAIL", name, repr(exc))
-    if failed:
-        sys.exit(1)
-    print("behaviour:", len(CHECKS), "checks ok")
+    run("behaviour", globals())
 
 
 if __name__ == "__main__":
