@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, TypeVar
@@ -331,17 +332,22 @@ def _check_ranges(changes: dict[str, object], where: str) -> None:
             raise ParamsError(f"{where}: '{name}' is beyond +-{MAX_MAGNITUDE:g}, got {value}")
 
 
-def load_params(path: str | Path) -> RobotParams:
+def read_json(path: str | os.PathLike[str], what: str, error: type[ValueError] = ParamsError) -> object:
+    """A JSON file's content; `error` says in one line, naming the file, why it cannot be read (a file that
+    is missing, not UTF-8 text, or not JSON).  what: the kind of file, e.g. "parameter file"."""
     path = Path(path)
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        return json.loads(path.read_text(encoding="utf-8"))
     except OSError as exc:
-        raise ParamsError(f"{path}: cannot read: {exc.strerror}") from exc
+        raise error(f"{path}: cannot read: {exc.strerror}") from None
     except UnicodeDecodeError as exc:
-        raise ParamsError(f"{path}: not a parameter file: byte {exc.start} is not UTF-8 text") from exc
+        raise error(f"{path}: not a {what}: byte {exc.start} is not UTF-8 text") from None
     except json.JSONDecodeError as exc:
-        raise ParamsError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from exc
-    return params_from_dict(data, str(path))
+        raise error(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
+
+
+def load_params(path: str | Path) -> RobotParams:
+    return params_from_dict(read_json(path, "parameter file"), str(path))
 
 
 DEFAULT = RobotParams()

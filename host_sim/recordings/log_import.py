@@ -7,7 +7,6 @@ Timing (gaps, repeated times, resets) is for the recording's loading checks, not
 from __future__ import annotations
 
 import csv
-import json
 import math
 import os
 from dataclasses import dataclass
@@ -15,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from host_sim.physics.params import DRIVE_UNITS, PWM_DECAYS, ParamsError, RobotParams, params_from_dict
+from host_sim.physics.params import DRIVE_UNITS, PWM_DECAYS, ParamsError, RobotParams, params_from_dict, read_json
 from host_sim.recordings.recording import MAX_IR, UNITS, RecordingWriter
 
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6}
@@ -112,16 +111,9 @@ def read_log(path: str | os.PathLike[str]) -> Log:
     return Log(path, header, body)
 
 
-def read_json(path: str | os.PathLike[str], what: str) -> dict[str, object]:
-    path = Path(path)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise LogImportError(f"{path}: cannot read: {exc.strerror}") from None
-    except UnicodeDecodeError as exc:
-        raise LogImportError(f"{path}: not a {what}: byte {exc.start} is not UTF-8 text") from None
-    except json.JSONDecodeError as exc:
-        raise LogImportError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
+def read_json_object(path: str | os.PathLike[str], what: str) -> dict[str, object]:
+    """A JSON file holding an object (a robot parameter file, a MAP); LogImportError says why not."""
+    data = read_json(path, what, LogImportError)
     if not isinstance(data, dict):
         raise LogImportError(f"{path}: a {what} is a JSON object")
     return data
@@ -129,7 +121,7 @@ def read_json(path: str | os.PathLike[str], what: str) -> dict[str, object]:
 
 def load_robot(path: str | os.PathLike[str]) -> tuple[RobotParams, dict[str, object]]:
     """(the twin's parameters, the robot block for the sidecar)."""
-    data = read_json(path, "robot parameter file")
+    data = read_json_object(path, "robot parameter file")
     try:
         return params_from_dict(data, str(path)), dict(data)
     except ParamsError as exc:
@@ -371,7 +363,7 @@ def write(imported: Imported, out: str | os.PathLike[str], log_path: Path) -> in
 def import_log(log_path: str | os.PathLike[str], map_path: str | os.PathLike[str],
                robot_path: str | os.PathLike[str], out: str | os.PathLike[str]) -> Imported:
     """Read and check LOG, MAP and ROBOT, then write the recording OUT (and OUT.json)."""
-    mapping = MapReader(map_path, read_json(map_path, "MAP"))
+    mapping = MapReader(map_path, read_json_object(map_path, "MAP"))
     params, robot = load_robot(robot_path)
     log = read_log(log_path)
     imported = convert(log, mapping, params, robot)
