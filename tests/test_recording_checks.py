@@ -14,7 +14,7 @@ from typing import Callable
 import pytest
 
 from host_sim.physics.params import DEFAULT
-from host_sim.recordings.checks import check_recording, speed_memory, top_speed
+from host_sim.recordings.checks import RecordingCheckError, check_recording, speed_memory, top_speed
 from host_sim.recordings.recording import load_recording
 from tests.helpers import run_twinbot
 
@@ -136,7 +136,10 @@ def test_a_restart_the_recorder_saw_is_refused_not_replayed_as_an_encoder_step(c
     path = corrupt(clean, tmp_path, restart)
     sidecar = Path(str(path) + ".json")
     sidecar.write_text(json.dumps(json.loads(sidecar.read_text()) | {"clock_resets": [400]}))
-    refused(path, "row 400 (t 16.000 s): the robot's clock was reset before it", ("diagnose",))
+    refused(path, "row 400 (t 16.000 s): the robot restarted just before it (its clock was reset", ("diagnose",))
+    sidecar.write_text(json.dumps(json.loads(sidecar.read_text()) | {"clock_resets": [400, 100000]}))
+    with pytest.raises(RecordingCheckError, match="clock_resets must list row numbers of the recording"):
+        check_recording(load_recording(path), DEFAULT)
 
 
 def test_a_wrapped_clock_is_unwrapped_with_a_note(clean, tmp_path):

@@ -89,10 +89,11 @@ def check_resets(rec: Recording, where: str) -> None:
                                   f"got {resets!r}")
     if resets:
         k = resets[0]
-        more = f" ({len(resets) - 1} more such resets)" if len(resets) > 1 else ""
+        more = f", {len(resets) - 1} more after it" if len(resets) > 1 else ""
         raise RecordingCheckError(
-            f"{where}: row {k} (t {rec.t[k]:.3f} s): the robot's clock was reset before it{more}, the robot "
-            f"restarted: its encoders and odometry count again from 0; cut the recording there and use each part")
+            f"{where}: row {k} (t {rec.t[k]:.3f} s): the robot restarted just before it (its clock was reset: the "
+            f"sidecar's clock_resets{more}): its encoders and odometry count again from 0 there; cut the recording "
+            f"there and use each part")
 
 
 def _rows(rec: Recording, keep: np.ndarray, t: np.ndarray) -> Recording:
