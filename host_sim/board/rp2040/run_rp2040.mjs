@@ -32,6 +32,7 @@ const CYCLE_NS = 1e9 / 125e6; // the emulator's clock: 125 MHz, as rp2040js's ow
 const BATCH = 100_000; // instructions between looks at the host's bytes: a REPL round trip waits for one
 const INBOUND_PAUSE = 1 << 16;
 const INBOUND_RESUME = 1 << 14;
+const USB_FRAME_NS = 1e6; // a full-speed USB frame
 const FLASH_CALLS = { RE: 0xe0, RP: 0xe1 }; // the bootrom's flash_range_erase, flash_range_program
 
 export function parseArgs(argv) {
@@ -106,6 +107,37 @@ function serveFlashCall(mcu, imm8) {
   return true;
 }
 
+// rp2040js answers the device's every OUT read at once, with a zero-length packet when the host has nothing
+// to send; the device re-arms and is answered again, an interrupt storm that took most of the emulated CPU
+// (docs/rp2040.md).  Here an empty read is answered when the host's bytes come (pump) or, empty, after one
+// 1 ms USB frame, as a host that polls once a frame.
+function holdEmptyReads(current) {
+  const { cdc } = current;
+  const usb = current.mcu.usbCtrl;
+  const answer = usb.onEndpointRead;
+  let waiting = null;
+  const frameEnd = current.sim.clock.createAlarm(() => {
+    const read = waiting;
+    waiting = null;
+    if (read) answer(...read);
+  });
+  usb.onEndpointRead = (endpoint, size) => {
+    if (endpoint !== cdc.outEndpoint || !cdc.txFIFO.empty) {
+      answer(endpoint, size);
+      return;
+    }
+    waiting = [endpoint, size];
+    frameEnd.schedule(USB_FRAME_NS);
+  };
+  current.answerWaitingRead = () => {
+    if (!waiting || cdc.txFIFO.empty) return;
+    const read = waiting;
+    waiting = null;
+    frameEnd.cancel();
+    answer(...read);
+  };
+}
+
 // The twin's side of the pins: JSON lines on a socket the Python side opened (host_sim/board/rp2040_pins.py).
 // In: {"sense": readings} once a cycle; out: {"boot": N}, {"held": true}, {"actuate": outputs}.
 function openTwin(fd, currentBoard) {
@@ -164,6 +196,7 @@ function main() {
       current.announce.schedule(HOST_PORT_DELAY_NS);
     };
     cdc.onSerialData = (bytes) => process.stdout.write(Buffer.from(bytes));
+    holdEmptyReads(current);
     // REASON bit 1 (FORCE) is a software reset (machine.reset()); bit 0 (TIMER) a watchdog expiry.  The
     // watchdog is stopped at once: rp2040js's expired timer fires again at every tick until it is.
     const watchdog = mcu.peripherals[WATCHDOG_BASE >>> 12]; // rp2040js names it only by address
@@ -247,6 +280,7 @@ function main() {
       if (used === chunk.length) inbound.shift();
       else inbound[0] = chunk.subarray(used);
     }
+    if (board) board.answerWaitingRead();
     if (inboundBytes < INBOUND_RESUME) process.stdin.resume();
   }
   setInterval(pump, 2);
