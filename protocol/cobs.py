@@ -129,9 +129,10 @@ if not IS_MICROPYTHON:
 
 def encode(data: bytes | bytearray | memoryview) -> bytes:
     """COBS-encode a whole block (any length); no delimiter."""
-    n = len(data)
+    src = data if isinstance(data, (bytes, bytearray)) else bytes(data)  # encode_into needs find()
+    n = len(src)
     dst = bytearray(n + n // 254 + 1)
-    m = encode_into(data, n, dst)
+    m = encode_into(src, n, dst)
     return bytes(dst[:m])
 
 
