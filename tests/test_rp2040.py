@@ -145,6 +145,50 @@ def test_duties_give_back_the_firmware_s_values() -> None:
                        for v in range(full_scale + 1))
 
 
+PINS_CHECK = """
+import { PinDriver } from %s;
+const counts = [0, 0], levels = {};
+const gpio = Array.from({ length: 30 }, (_, n) => ({
+  irqStatus: 0, outputValue: false,
+  setInputValue(v) {  // the firmware's handlers (firmware/hal_rp2040.py _edge_left, _edge_right) on channel A
+    levels[n] = v;
+    if (n === 6) counts[0] += v !== !!levels[7] ? 1 : -1;
+    if (n === 8) counts[1] += v === !!levels[9] ? 1 : -1;
+  },
+}));
+const alarm = { schedule() {}, cancel() {} };
+const watchdog = { enable: true, writeUint32() {} };
+const mcu = { gpio, clock: { createAlarm: () => alarm, nanos: 0 }, adc: { completeADCRead() {} },
+  core: { currentMode: 0 }, peripherals: { [0x40058000 >>> 12]: watchdog },
+  pwm: { channels: Array.from({ length: 8 }, () => ({ cc: 0, top: 6249 })) } };
+const pins = { mux: [10, 11, 12], ir_adc: 0, battery_adc: 2, emitter: 13, motor_pwm: [16, 18], motor_dir: [17, 19],
+  enc_a: [6, 8], enc_b: [7, 9], mirrored: [false, true] };
+const reports = [];
+const driver = new PinDriver(mcu, pins, (m) => reports.push(m));
+const seen = [];
+for (const enc of [[0, 0], [5, -3], [2, 4], [-7, 4]]) {
+  driver.apply({ off: [0, 0, 0, 0, 0, 0, 0, 0], on: [0, 0, 0, 0, 0, 0, 0, 0], enc, battery: 0 });
+  for (let k = 0; k < 40; k++) driver.nextEdge();
+  seen.push([...counts]);
+  watchdog.writeUint32(4, 1);
+}
+console.log(JSON.stringify({ seen, reports: reports.map((m) => Object.keys(m)[0]), held: driver.held }));
+"""
+
+
+def test_encoder_edges_count_as_the_firmware_counts(tmp_path: Path) -> None:
+    """The pin driver's edges on channels A and B, counted by the firmware's own rule (the right motor
+    mirrored), reach the twin's counts both ways; each cycle's end reports the outputs and holds the chip."""
+    emulator()
+    script = tmp_path / "check.mjs"
+    script.write_text(PINS_CHECK % json.dumps((BRIDGE.parent / "pins.mjs").as_uri()))
+    r = subprocess.run(["node", str(script)], capture_output=True, text=True, timeout=60, check=False)
+    assert r.returncode == 0, r.stderr
+    got = json.loads(r.stdout)
+    assert got["seen"] == [[0, 0], [5, -3], [2, 4], [-7, 4]]
+    assert got["reports"] == ["actuate"] * 4 and got["held"]
+
+
 @NEEDS_IMAGE
 def test_sixty_seconds_on_the_emulated_pico_are_the_sil_run(tmp_path: Path) -> None:
     """Issue 41's SIL-equivalent run: a blank emulated Pico flashed by `twinbot flash` (HELLO), then 60 s of
