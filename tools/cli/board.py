@@ -5,9 +5,8 @@ this relays its stdin/stdout to a pty that `twinbot serial`, mpremote or a termi
 a Pico's /dev/ttyACM0.  Its hardware is the robot's twin in --world, in real time; drive it as
 the real robot (`twinbot serial /dev/pts/N --command autonomous 0 0`).  --standin serves fixed
 readings instead.  --late MS [--jitter MS] delays what the board sends, to try the late-signal
-twin against a real host (docs/firmware.md, docs/late-signal-twin.md).  --rp2040 runs an
-rp2 MicroPython image (--image FIRMWARE.uf2 --bootrom ROM) on an emulated Pico instead, the twin on
-its pins in lockstep with the firmware's cycles (docs/rp2040.md).
+twin against a real host (docs/firmware.md, docs/late-signal-twin.md).  --rp2040: an rp2 image
+(--image, --bootrom) on an emulated Pico, the twin on its pins in lockstep (docs/rp2040.md).
 """
 from __future__ import annotations
 
