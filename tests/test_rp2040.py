@@ -222,7 +222,7 @@ def test_sixty_seconds_on_the_emulated_pico_are_the_sil_run(tmp_path: Path) -> N
         board.close()
         link.close()
     sil = Simulation(room, DEFAULT, SilController(1), seed=3).run_fixed(60.0)
-    assert len(pico.t) == 1500 and link.watchdog_trips == 0
+    assert len(pico.t) == 1500 and b"(watchdog)" not in board.log()  # no cycle stalled the chip
     assert np.array_equal(sil.cmd, pico.cmd), f"{wall_s:.0f} s of wall time"
     assert np.array_equal(sil.pose, pico.pose) and pico.collisions == sil.collisions
     assert np.hypot(*(pico.pose[-1, :2] - pico.pose[0, :2])) > 0.5  # it explored
