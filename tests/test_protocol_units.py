@@ -101,6 +101,41 @@ def test_cobs_encoded_length_is_n_plus_one(data: bytes) -> None:
     assert cobs.encode_into(data, len(data), dst, 0) == len(data) + 1
 
 
+def _cobs_byte_loop(src: bytes, n: int, dst: bytearray, dpos: int) -> int:
+    """COBS a byte at a time, the textbook loop: the reference for the firmware's run-at-a-time encoder."""
+    code_pos, out, code = dpos, dpos + 1, 1
+    for i in range(n):
+        if src[i] == 0:
+            dst[code_pos] = code
+            code_pos, out, code = out, out + 1, 1
+            continue
+        dst[out] = src[i]
+        out += 1
+        code += 1
+        if code == 0xFF:
+            dst[code_pos] = code
+            code_pos, code = out, 1
+            if i + 1 == n:
+                return out
+            out += 1
+    dst[code_pos] = code
+    return out
+
+
+@SETTINGS
+@given(st.lists(st.sampled_from([0, 1, 0xFF]), max_size=40), st.integers(0, 600), st.integers(0, 3))
+def test_cobs_by_runs_is_the_byte_loop(pattern: list[int], extra: int, dpos: int) -> None:
+    """The firmware's COBS encoder (runs found with find()) writes the same bytes and ends at the same place
+    as the byte loop, for any data: zeros anywhere, runs of 253, 254 and 255 non-zero bytes, a prefix of src."""
+    runs = [b"\x00" if p == 0 else bytes([7]) * (253 + p % 3) if p == 0xFF else b"\x05" for p in pattern]
+    data = (b"".join(runs) + bytes(range(1, 256)) * 3)[: len(b"".join(runs)) + extra]
+    for n in {len(data), len(data) // 2, 0}:
+        expected, got, fast = (bytearray(n + n // 254 + 8) for _ in range(3))
+        end = _cobs_byte_loop(data, n, expected, dpos)
+        assert cobs.encode_into_pure(bytearray(data), n, got, dpos) == end and got == expected
+        assert cobs.encode_into(memoryview(data), n, fast, dpos) == end and fast == expected
+
+
 def _both_decoders(src: bytes, start: int, end: int, cap: int) -> tuple[int, bytes, int, bytes]:
     d1 = bytearray(cap)
     d2 = bytearray(cap)

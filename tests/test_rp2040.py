@@ -132,3 +132,97 @@ def test_flash_vectors_cycles_and_watchdog_on_the_rp2_build(tmp_path: Path) -> N
     assert f["cycle"]["alloc_bytes_per_cycle"] == 0 and f["cycle"]["heap_locked_cycles_ok"]
     assert f["cycle"]["heap_free"] >= 100 * 1024 and f["cycle"]["max_us"] < 40_000
     assert f["watchdog"]["watchdog_reset"] and f["watchdog"]["hello_after"], f["watchdog"]
+
+
+def test_duties_give_back_the_firmware_s_values() -> None:
+    """The bridge reports PWM compare values (6,250 counts at 20 kHz, fewer than duty_u16's 65,536): every
+    current in mA and every emitter power in % the firmware can set comes back exactly."""
+    from host_sim.board.rp2040_pins import _compare_value, value_of_duty
+
+    for full_scale in (1000, 100):
+        for top_plus_1 in (6250, 65535):
+            assert all(value_of_duty(_compare_value(v, full_scale, top_plus_1), top_plus_1, full_scale) == v
+                       for v in range(full_scale + 1))
+
+
+PINS_CHECK = """
+import { PinDriver } from %s;
+const counts = [0, 0], levels = {};
+const gpio = Array.from({ length: 30 }, (_, n) => ({
+  irqStatus: 0, outputValue: false,
+  setInputValue(v) {  // the firmware's handlers (firmware/hal_rp2040.py _edge_left, _edge_right) on channel A
+    levels[n] = v;
+    if (n === 6) counts[0] += v !== !!levels[7] ? 1 : -1;
+    if (n === 8) counts[1] += v === !!levels[9] ? 1 : -1;
+  },
+}));
+const alarm = { schedule() {}, cancel() {} };
+const watchdog = { enable: true, writeUint32() {} };
+const mcu = { gpio, clock: { createAlarm: () => alarm, nanos: 0 }, adc: { completeADCRead() {} },
+  core: { currentMode: 0 }, peripherals: { [0x40058000 >>> 12]: watchdog },
+  pwm: { channels: Array.from({ length: 8 }, () => ({ cc: 0, top: 6249 })) } };
+const pins = { mux: [10, 11, 12], ir_adc: 0, battery_adc: 2, emitter: 13, motor_pwm: [16, 18], motor_dir: [17, 19],
+  enc_a: [6, 8], enc_b: [7, 9], mirrored: [false, true] };
+const reports = [];
+const driver = new PinDriver(mcu, pins, (m) => reports.push(m));
+const seen = [];
+for (const enc of [[0, 0], [5, -3], [2, 4], [-7, 4]]) {
+  driver.apply({ off: [0, 0, 0, 0, 0, 0, 0, 0], on: [0, 0, 0, 0, 0, 0, 0, 0], enc, battery: 0 });
+  for (let k = 0; k < 40; k++) driver.nextEdge();
+  seen.push([...counts]);
+  watchdog.writeUint32(4, 1);
+}
+console.log(JSON.stringify({ seen, reports: reports.map((m) => Object.keys(m)[0]), held: driver.held }));
+"""
+
+
+def test_encoder_edges_count_as_the_firmware_counts(tmp_path: Path) -> None:
+    """The pin driver's edges on channels A and B, counted by the firmware's own rule (the right motor
+    mirrored), reach the twin's counts both ways; each cycle's end reports the outputs and holds the chip."""
+    emulator()
+    script = tmp_path / "check.mjs"
+    script.write_text(PINS_CHECK % json.dumps((BRIDGE.parent / "pins.mjs").as_uri()))
+    r = subprocess.run(["node", str(script)], capture_output=True, text=True, timeout=60, check=False)
+    assert r.returncode == 0, r.stderr
+    got = json.loads(r.stdout)
+    assert got["seen"] == [[0, 0], [5, -3], [2, 4], [-7, 4]]
+    assert got["reports"] == ["actuate"] * 4 and got["held"]
+
+
+@NEEDS_IMAGE
+def test_sixty_seconds_on_the_emulated_pico_are_the_sil_run(tmp_path: Path) -> None:
+    """Issue 41's SIL-equivalent run: a blank emulated Pico flashed by `twinbot flash` (HELLO), then 60 s of
+    the firmware in autonomous mode with the twin on its pins (ADC, encoder edges, PWM duties), in lockstep:
+    the same commands and the same trajectory as the SIL run of the same world and seed, bit for bit."""
+    import time
+
+    import numpy as np
+
+    from host_sim.board.pil import PilLink
+    from host_sim.board.rp2040_board import Rp2040Board, Rp2040Controller
+    from host_sim.controller.sil import SilController
+    from host_sim.loops.simulation import Simulation
+    from host_sim.physics.params import DEFAULT
+    from host_sim.physics.world import builtin_world
+    from tools.bench.firmware_rp2040 import flash_and_hello
+
+    room = builtin_world("paper_room")
+    link = PilLink()
+    board = Rp2040Board(*image_files(), tmp_path / "bridge.log", hw_port=link.port)
+    try:
+        assert board.wait_port_up(timeout=300), board.log()
+        flashed = flash_and_hello(board)
+        assert flashed["hello"], flashed
+        controller = Rp2040Controller(board, link, 1)
+        t0 = time.monotonic()
+        pico = Simulation(room, DEFAULT, controller, seed=3).run_fixed(60.0)
+        wall_s = time.monotonic() - t0
+        controller.close()
+    finally:
+        board.close()
+        link.close()
+    sil = Simulation(room, DEFAULT, SilController(1), seed=3).run_fixed(60.0)
+    assert len(pico.t) == 1500 and b"(watchdog)" not in board.log()  # no cycle stalled the chip
+    assert np.array_equal(sil.cmd, pico.cmd), f"{wall_s:.0f} s of wall time"
+    assert np.array_equal(sil.pose, pico.pose) and pico.collisions == sil.collisions
+    assert np.hypot(*(pico.pose[-1, :2] - pico.pose[0, :2])) > 0.5  # it explored

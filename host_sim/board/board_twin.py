@@ -2,8 +2,9 @@
 
 `twinbot board` starts a virtual board whose hardware link connects here.  Every control
 period, in real time, the simulator sends the board what its sensors read (HW_SENSE) and
-applies the currents the firmware answers (HW_ACTUATE).  The user drives the board through
-its serial port as the real robot; when the board resets, the robot stays where it was.
+applies the currents the firmware answers (HW_ACTUATE); for the emulated RP2040, slower than
+real time, in lockstep with the board's cycles instead (docs/rp2040.md).  The user drives the
+board through its serial port as the real robot; when the board resets, the robot stays where it was.
 """
 from __future__ import annotations
 
@@ -32,8 +33,11 @@ class _LinkOnly:
 
 
 class BoardTwin:
-    def __init__(self, world: World, params: RobotParams, seed: int = 0, speed: float = 1.0) -> None:
-        self.link = PilLink(watchdog_s=WATCHDOG_S)
+    def __init__(self, world: World, params: RobotParams, seed: int = 0, speed: float = 1.0,
+                 lockstep: bool = False) -> None:
+        # In lockstep the board's own clock paces the twin; the RP2040's watchdog is then the chip's.
+        self.lockstep = lockstep
+        self.link = PilLink(watchdog_s=None if lockstep else WATCHDOG_S)
         self.port = self.link.port
         self.speed = speed
         self.sim = Simulation(world, params, _LinkOnly(self.link), seed=seed)
@@ -53,7 +57,10 @@ class BoardTwin:
                 continue  # no board yet (or it is rebooting)
             self.sessions += 1
             try:
-                self.sim.run_realtime(float("inf"), speed=self.speed, stop=self._stop.is_set)
+                if self.lockstep:
+                    self.sim.run_fixed(float("inf"), stop=self._stop.is_set)
+                else:
+                    self.sim.run_realtime(float("inf"), speed=self.speed, stop=self._stop.is_set)
             except RuntimeError as exc:  # the board stopped its firmware or reset
                 self.error = str(exc)
             finally:

@@ -54,7 +54,7 @@ class VirtualBoard:
         self._stderr = open(stderr_path, "ab") if stderr_path else subprocess.DEVNULL
         command, env = self.board_command()
         self.proc = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                     stderr=self._stderr, env=env, bufsize=0)
+                                     stderr=self._stderr, env=env, bufsize=0, pass_fds=self.board_fds())
         self.dropped = 0  # bytes the board sent while nobody read the port
         self._tail = b""  # the board's last output: a traceback when it dies (the unix port prints it on stdout)
         self._stop = threading.Event()
@@ -65,6 +65,10 @@ class VirtualBoard:
         """The board's process: its command line and environment (the emulated RP2040 has its own)."""
         env = dict(os.environ, TWINBOT_HW=f"127.0.0.1:{self.hw_port}", MICROPYPATH="")
         return [micropython_exe(), str(SUPERVISOR), self.flash], env
+
+    def board_fds(self) -> tuple[int, ...]:
+        """File descriptors the board's process inherits besides its stdio (the emulated RP2040's pins)."""
+        return ()
 
     def _relay(self) -> None:
         assert self.proc.stdin is not None and self.proc.stdout is not None

@@ -134,16 +134,21 @@ class Simulation:
             self._rows.cycle(robot.t, pose, s, a, robot.emitter_used)
 
     def run_fixed(self, duration: float, speed: float = math.inf,
-                  progress: Callable[[float], None] | None = None, stop_at_exit: bool = False) -> RunResult:
+                  progress: Callable[[float], None] | None = None, stop_at_exit: bool = False,
+                  stop: Callable[[], bool] | None = None) -> RunResult:
         """Fixed step: n substeps of cycle/n per control period; exactly repeatable.
 
         stop_at_exit: end the run when the robot leaves the world's area (it found the exit).
+        stop: checked before each period; with an infinite duration, the run ends only when it says so
+        (a twin in lockstep with an emulated board, host_sim/board/board_twin.py).
         """
-        n_cycles = int(round(duration / self.cycle_s))
+        n_cycles = int(round(duration / self.cycle_s)) if math.isfinite(duration) else -1
         dt = self.cycle_s / self.substeps
         robot = self.robot
         start = time.perf_counter()
-        for k in range(n_cycles):
+        k = -1
+        while k + 1 != n_cycles and not (stop and stop()):
+            k += 1
             self.control()
             if stop_at_exit and self.exit_time is not None:
                 break

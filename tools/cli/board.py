@@ -5,8 +5,8 @@ this relays its stdin/stdout to a pty that `twinbot serial`, mpremote or a termi
 a Pico's /dev/ttyACM0.  Its hardware is the robot's twin in --world, in real time; drive it as
 the real robot (`twinbot serial /dev/pts/N --command autonomous 0 0`).  --standin serves fixed
 readings instead.  --late MS [--jitter MS] delays what the board sends, to try the late-signal
-twin against a real host (docs/firmware.md, docs/late-signal-twin.md).  --rp2040 runs an
-rp2 MicroPython image (--image FIRMWARE.uf2 --bootrom ROM) on an emulated Pico instead (docs/rp2040.md).
+twin against a real host (docs/firmware.md, docs/late-signal-twin.md).  --rp2040: an rp2 image
+(--image, --bootrom) on an emulated Pico, the twin on its pins in lockstep (docs/rp2040.md).
 """
 from __future__ import annotations
 
@@ -129,7 +129,7 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
                    help="the board's flash as a littlefs image file (blank if new); with --rp2040, the "
                         "MicroPython rp2 .uf2 to run (default: $TWINBOT_RP2040_IMAGE)")
     p.add_argument("--rp2040", action="store_true",
-                   help="an emulated Raspberry Pi Pico (rp2040js) running --image, its pins at rest")
+                   help="an emulated Raspberry Pi Pico (rp2040js) running --image, the twin on its pins")
     p.add_argument("--bootrom", metavar="FILE", type=input_file,
                    help="with --rp2040: the RP2040's 16 KB bootrom (default: $TWINBOT_RP2040_BOOTROM)")
     p.add_argument("--flash-kb", type=int_range(64, 65536, unit="KB"), default=1024,
@@ -262,37 +262,49 @@ def run_in(args: argparse.Namespace, scratch: Path) -> int:
         if standin:
             standin.stop()
         if twin:
-            x, y, phi = twin.pose
-            print(f"twinbot board: the twin ended at x={x:.3f} m, y={y:.3f} m, heading {phi:.2f} rad, "
-                  f"{plural(twin.sim.robot.collisions, 'collision')}")
-            twin.stop()
+            say_where_the_twin_ended(twin)
 
 
 RP2040_STARTUP_S = 120.0  # the emulated boot runs at a fraction of real time on a loaded host
-NOT_ON_RP2040 = ("flash_dir", "blank", "standin", "hw_port", "late", "jitter")
+NOT_ON_RP2040 = ("flash_dir", "blank", "standin", "late", "jitter")
 
 
 def run_rp2040(args: argparse.Namespace) -> int:
-    """`twinbot board --rp2040`: the emulated Pico behind a pty, with the virtual board's face."""
+    """`twinbot board --rp2040`: the emulated Pico behind a pty, with the virtual board's face; the twin
+    in --world (or the simulator at --hw-port) drives its pins in lockstep with the firmware's cycles."""
     from host_sim.board.micropython_runner import RigError
     from host_sim.board.rp2040_board import Rp2040Board, image_files
 
     clash = [name for name in NOT_ON_RP2040 if getattr(args, name)]
-    if clash or args.world != "paper_room":
-        option = "--" + (clash[0] if clash else "world").replace("_", "-")
-        raise CliError(f"{option} is not for --rp2040: the emulated Pico's pins are at rest, its flash its own")
+    if clash:
+        raise CliError(f"--{clash[0].replace('_', '-')} is not for --rp2040: the emulated Pico's pins are the "
+                       f"twin's, its flash its own")
+    world = load_world(args)
     try:
         image, bootrom = image_files(args.image, args.bootrom)
+    except RigError as exc:
+        raise CliError(str(exc)) from None
+    twin = None
+    if world is not None:
+        from host_sim.board.board_twin import BoardTwin
+        from host_sim.physics.params import DEFAULT
+
+        twin = BoardTwin(world, DEFAULT, lockstep=True)
+        twin.start()
+    try:
         with tempfile.TemporaryDirectory(prefix="twinbot-board-") as scratch:
             stderr_path = Path(args.log) if args.log else Path(scratch) / "board-stderr.txt"
             offset = stderr_path.stat().st_size if stderr_path.exists() else 0
-            board = Rp2040Board(image, bootrom, stderr_path)
-            return serve_rp2040(board, stderr_path, offset, image)
+            board = Rp2040Board(image, bootrom, stderr_path, hw_port=twin.port if twin else args.hw_port)
+            return serve_rp2040(board, stderr_path, offset, image, twin)
     except RigError as exc:
         raise CliError(str(exc)) from None
+    finally:
+        if twin:
+            say_where_the_twin_ended(twin)
 
 
-def serve_rp2040(board, stderr_path: Path, offset: int, image: Path) -> int:  # type: ignore[no-untyped-def]
+def serve_rp2040(board, stderr_path: Path, offset: int, image: Path, twin) -> int:  # type: ignore[no-untyped-def]
     try:
         if not board.wait_port_up(timeout=RP2040_STARTUP_S):
             trouble = board_trouble(board, stderr_path, offset) if not board.alive() else \
@@ -300,12 +312,23 @@ def serve_rp2040(board, stderr_path: Path, offset: int, image: Path) -> int:  # 
             raise CliError(f"{trouble}; image: {image}")
         print(f"twinbot board: {board.path}", flush=True)
         print(f"  image: {image} on an emulated RP2040 (rp2040js, 125 MHz), its REPL on USB CDC")
-        print("  hardware: the chip's own pins, at rest (no twin drives them)")
+        if twin:
+            print(f"  hardware: the simulated twin in {twin.sim.world.name} on the chip's pins, in lockstep with "
+                  f"the firmware's cycles (slower than real time)")
+        else:
+            print(f"  hardware: simulator at 127.0.0.1:{board.pins.hw_port}, on the chip's pins")
         return serve_until_it_stops(board, stderr_path, offset)
     except KeyboardInterrupt:
         return 0
     finally:
         board.close()
+
+
+def say_where_the_twin_ended(twin) -> None:  # type: ignore[no-untyped-def]
+    x, y, phi = twin.pose
+    print(f"twinbot board: the twin ended at x={x:.3f} m, y={y:.3f} m, heading {phi:.2f} rad, "
+          f"{plural(twin.sim.robot.collisions, 'collision')}")
+    twin.stop()
 
 
 def load_world(args: argparse.Namespace):  # type: ignore[no-untyped-def]

@@ -1,6 +1,6 @@
 // An emulated Raspberry Pi Pico (rp2040js) running a MicroPython rp2 UF2 image that the user provides.
 //
-// usage: node run_rp2040.mjs --image FIRMWARE.uf2 --bootrom BOOTROM [--flash FILE]
+// usage: node run_rp2040.mjs --image FIRMWARE.uf2 --bootrom BOOTROM [--flash FILE] [--twin-fd FD --pins JSON]
 //
 // The board's USB CDC (MicroPython's REPL) is this process's stdin/stdout, byte for byte: the Python
 // side (host_sim/board/rp2040_board.py) puts a pseudo-terminal in front of it.  BOOTROM is the RP2040's
@@ -8,9 +8,12 @@
 // bootrom.ts): MicroPython calls its flash and float routines.  A watchdog expiry (or machine.reset())
 // restarts the chip with its flash kept, as a real reset does; each start is announced on stderr as
 // `rp2040: boot N (REASON)`.  --flash loads a flash image (UF2 blocks keep their addresses, a .bin is the
-// whole flash from offset 0) and saves the flash back there on exit; docs/rp2040.md.
+// whole flash from offset 0) and saves the flash back there on exit.  --twin-fd couples the robot's twin to the
+// pins (pins.mjs): JSON lines on that socket, the pin map in --pins; docs/rp2040.md.
 import fs from "node:fs";
+import net from "node:net";
 import { Simulator, USBCDC, ConsoleLogger, LogLevel } from "rp2040js";
+import { PinDriver } from "./pins.mjs";
 
 const FLASH_BASE = 0x10000000;
 const UF2_MAGIC = [0x0a324655, 0x9e5d5157];
@@ -29,16 +32,19 @@ const CYCLE_NS = 1e9 / 125e6; // the emulator's clock: 125 MHz, as rp2040js's ow
 const BATCH = 100_000; // instructions between looks at the host's bytes: a REPL round trip waits for one
 const INBOUND_PAUSE = 1 << 16;
 const INBOUND_RESUME = 1 << 14;
+const USB_FRAME_NS = 1e6; // a full-speed USB frame
 const FLASH_CALLS = { RE: 0xe0, RP: 0xe1 }; // the bootrom's flash_range_erase, flash_range_program
 
 export function parseArgs(argv) {
-  const opts = { image: null, bootrom: null, flash: null };
+  const opts = { image: null, bootrom: null, flash: null, "twin-fd": null, pins: null };
   for (let i = 0; i < argv.length; i++) {
     const key = argv[i].replace(/^--/, "");
     if (!(key in opts) || i + 1 >= argv.length) throw new Error(`unknown or incomplete argument ${argv[i]}`);
     opts[key] = argv[++i];
   }
-  if (!opts.image || !opts.bootrom) throw new Error("usage: run_rp2040.mjs --image FIRMWARE.uf2 --bootrom BOOTROM [--flash FILE]");
+  if (!opts.image || !opts.bootrom || !opts["twin-fd"] !== !opts.pins) {
+    throw new Error("usage: run_rp2040.mjs --image FIRMWARE.uf2 --bootrom BOOTROM [--flash FILE] [--twin-fd FD --pins JSON]");
+  }
   return opts;
 }
 
@@ -101,6 +107,56 @@ function serveFlashCall(mcu, imm8) {
   return true;
 }
 
+// rp2040js answers the device's every OUT read at once, with a zero-length packet when the host has nothing
+// to send; the device re-arms and is answered again, an interrupt storm that took most of the emulated CPU
+// (docs/rp2040.md).  Here an empty read is answered when the host's bytes come (pump) or, empty, after one
+// 1 ms USB frame, as a host that polls once a frame.
+function holdEmptyReads(current) {
+  const { cdc } = current;
+  const usb = current.mcu.usbCtrl;
+  const answer = usb.onEndpointRead;
+  let waiting = null;
+  const frameEnd = current.sim.clock.createAlarm(() => {
+    const read = waiting;
+    waiting = null;
+    if (read) answer(...read);
+  });
+  usb.onEndpointRead = (endpoint, size) => {
+    if (endpoint !== cdc.outEndpoint || !cdc.txFIFO.empty) {
+      answer(endpoint, size);
+      return;
+    }
+    waiting = [endpoint, size];
+    frameEnd.schedule(USB_FRAME_NS);
+  };
+  current.answerWaitingRead = () => {
+    if (!waiting || cdc.txFIFO.empty) return;
+    const read = waiting;
+    waiting = null;
+    frameEnd.cancel();
+    answer(...read);
+  };
+}
+
+// The twin's side of the pins: JSON lines on a socket the Python side opened (host_sim/board/rp2040_pins.py).
+// In: {"sense": readings} once a cycle; out: {"boot": N}, {"held": true}, {"actuate": outputs}.
+function openTwin(fd, currentBoard) {
+  const socket = new net.Socket({ fd, readable: true, writable: true });
+  let text = "";
+  socket.on("data", (chunk) => {
+    text += chunk.toString("latin1");
+    let end;
+    while ((end = text.indexOf("\n")) >= 0) {
+      const message = JSON.parse(text.slice(0, end));
+      text = text.slice(end + 1);
+      const board = currentBoard();
+      if (message.sense && board?.pins) board.pins.apply(message.sense);
+    }
+  });
+  socket.on("error", () => {});
+  return { send: (message) => socket.write(JSON.stringify(message) + "\n") };
+}
+
 function main() {
   let opts, image, bootrom;
   try {
@@ -118,6 +174,8 @@ function main() {
   }
   let board = null;
   let boots = 0;
+  const twin = opts["twin-fd"] ? openTwin(Number(opts["twin-fd"]), () => board) : null;
+  const pins = opts.pins ? JSON.parse(opts.pins) : null;
 
   // carried: the old chip's watchdog REASON and scratch registers, which a watchdog reset keeps.
   function start(reason, carried = null) {
@@ -134,10 +192,11 @@ function main() {
     const current = { sim, mcu, cdc, portAt: Infinity, stopped: false };
     cdc.onDeviceConnected = () => {
       current.portAt = sim.clock.nanos + HOST_PORT_DELAY_NS;
-      const announce = sim.clock.createAlarm(() => process.stderr.write(`rp2040: USB serial port up (boot ${boots})\n`));
-      announce.schedule(HOST_PORT_DELAY_NS);
+      current.announce = sim.clock.createAlarm(() => portUp(current));
+      current.announce.schedule(HOST_PORT_DELAY_NS);
     };
     cdc.onSerialData = (bytes) => process.stdout.write(Buffer.from(bytes));
+    holdEmptyReads(current);
     // REASON bit 1 (FORCE) is a software reset (machine.reset()); bit 0 (TIMER) a watchdog expiry.  The
     // watchdog is stopped at once: rp2040js's expired timer fires again at every tick until it is.
     const watchdog = mcu.peripherals[WATCHDOG_BASE >>> 12]; // rp2040js names it only by address
@@ -154,18 +213,35 @@ function main() {
       const kept = { reason: watchdog.reason, scratch: watchdog.scratchData.slice() };
       setImmediate(() => restart(reason, kept));
     };
+    if (twin) {
+      current.pins = new PinDriver(mcu, pins, twin.send);
+      current.pins.onResume = () => setImmediate(() => run(current));
+      // Held for the twin, the chip's clock stops while the host's goes on: its port is up by then.
+      current.pins.onHold = () => {
+        if (current.portAt !== Infinity) portUp(current);
+      };
+    }
     board = current;
     boots += 1;
     process.stderr.write(`rp2040: boot ${boots} (${reason})\n`);
+    if (twin) twin.send({ boot: boots });
     mcu.core.PC = FLASH_BASE; // boot stage 2 at the start of flash, as the bootrom would enter it
     run(current);
   }
 
+  function portUp(current) {
+    if (current.announced) return;
+    current.announced = true;
+    current.announce.cancel();
+    current.portAt = Math.min(current.portAt, current.sim.clock.nanos);
+    process.stderr.write(`rp2040: USB serial port up (boot ${boots})\n`);
+  }
+
   // rp2040js's Simulator.execute() with a smaller batch and setImmediate: the host's bytes get in sooner.
   function run(current) {
-    const { mcu } = current;
+    const { mcu, pins } = current;
     const clock = current.sim.clock;
-    for (let i = 0; i < BATCH && !current.stopped; i++) {
+    for (let i = 0; i < BATCH && !current.stopped && !pins?.held; i++) {
       if (mcu.core.waiting) {
         const nanos = clock.nanosToNextAlarm;
         clock.tick(nanos);
@@ -174,7 +250,7 @@ function main() {
         clock.tick(mcu.core.executeInstruction() * CYCLE_NS);
       }
     }
-    if (!current.stopped) setImmediate(() => run(current));
+    if (!current.stopped && !pins?.held) setImmediate(() => run(current));
   }
 
   function restart(reason, carried) {
@@ -204,6 +280,7 @@ function main() {
       if (used === chunk.length) inbound.shift();
       else inbound[0] = chunk.subarray(used);
     }
+    if (board) board.answerWaitingRead();
     if (inboundBytes < INBOUND_RESUME) process.stdin.resume();
   }
   setInterval(pump, 2);
