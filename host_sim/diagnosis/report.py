@@ -313,20 +313,28 @@ def _diagnose_fitted(rec: Recording, tol: Tolerance, world: World | None, second
                             f"no name is given")
         final = result.model = chain[0]
         result.after, result.after_long, result.fit_after = first, comparisons[-1], dict(first.fit)
+    _name(result, final, chain, remaining, tol, (first, after), test_block)
+    return result, chain, objective, base
+
+
+def _name(result: Diagnosis, final: Model, chain: list[Model], remaining: list[dict[str, Any]], tol: Tolerance,
+          compared: tuple[Comparison, Comparison], test_block: bool) -> None:
+    """The effects named and the verdict: none within the tolerance (the robot as built), and without a test
+    block only those that explain what they answer for (block_verdict.judge_held_out); compared: the twin
+    the effects were sought from and the fitted one, on the same held-out windows."""
     result.effects = [_effect_entry(final, i, chain) for i in range(len(final.effects))
                       if not tol.within(final.effects[i].name, final.values[i])]
     if len(result.effects) < len(final.effects):
         result.notes.append("fitted within the datasheet's tolerance, the robot as built and not named: " + ", ".join(
             c.label() for c, v in zip(final.effects, final.values) if tol.within(c.name, v)))
     result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")} for item in remaining]
-    if not final.effects:
+    if not result.effects:
         result.verdict = "unexplained"
         result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")} for item in result.located]
     else:
         result.verdict = "explained" if not remaining else "partly explained"
         if not test_block:  # with one, the block's rules judge what is named (judge_test_block)
-            judge_held_out(result, first, after, chain)
-    return result, chain, objective, base
+            judge_held_out(result, *compared, chain)
 
 
 def _within_tolerance(result: Diagnosis, rec: Recording, world: World | None, first: Comparison, tol: Tolerance,
