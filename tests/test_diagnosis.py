@@ -107,7 +107,6 @@ def test_the_rounding_ceiling_is_what_rounding_alone_costs_a_right_twin():
     ("encoder_scale", "both", 40.0),  # 3.3 %: the firmware's loop leaves 1.6 % more counts a window
     ("backlash", "right", 0.15),
     ("actuator_delay", "both", 0.06),
-    ("battery_resistance", "both", 3.0),
     ("caster_drag", "both", 0.1),
     ("turning_resistance", "both", 0.004),
 ])
@@ -134,11 +133,13 @@ def test_an_effect_injected_into_the_twin_is_named_measured_and_fitted(tmp_path,
 ])
 def test_two_effects_at_once_are_both_named(tmp_path, first, second):
     """Once the first is fitted, the held-out residuals of all the channels together are within their noise,
-    while the second's are still located: the locator, not that sum, says whether to seek another."""
+    while the second's are still located: the locator, not that sum, says whether to seek another.  The
+    battery's pair is diagnosed with its voltage taken as exact: under the exploration's steady current a
+    sag is one with a lower open-circuit voltage, which the datasheet's tolerance admits."""
     params = DEFAULT
     for effect, site, value in (first, second):
         params = E.apply(params, effect, site, [value])
-    d = diagnose(record(tmp_path, params), DEFAULT, ROOM)
+    d = diagnose(record(tmp_path, params), DEFAULT, ROOM, bands={} if first[0] == "battery_resistance" else None)
     assert d.verdict == "explained", d.summary()
     assert sorted(e["name"] for e in d.effects) == sorted([first[0], second[0]]), d.summary()
     for effect, site, value in (first, second):
@@ -179,7 +180,7 @@ def test_a_blind_pair_is_named_in_full_on_the_reference_plant(tmp_path, monkeypa
         return choose(obj, current, tried, cands, located)
 
     monkeypatch.setattr(F, "choose", watched)
-    d = diagnose(rec, DEFAULT, world)
+    d = diagnose(rec, DEFAULT, world, bands={})  # the datasheet taken as exact: the steps below are the rule's
     row = scoring.score_case(key, d.to_json(), rec, DEFAULT)
     assert row["outcome"] == "right", d.summary()
     assert all(e["param"]["error"] < scoring.PARAM_TOLERANCE for e in row["effects"]), row["effects"]
@@ -191,7 +192,10 @@ def test_a_blind_pair_is_named_in_full_on_the_reference_plant(tmp_path, monkeypa
     assert second["sigma"]["turn"] < 0.1 * first["sigma"]["turn"]
     assert second["cost_test"] == pytest.approx(second["cost_now"], rel=1e-9)  # its cost under those weights
     monkeypatch.setattr(F, "choose", choose)
-    assert diagnose(rec, DEFAULT, world, workers=2).to_json() == d.to_json()
+    assert diagnose(rec, DEFAULT, world, workers=2, bands={}).to_json() == d.to_json()
+    # within the datasheet's tolerance (the default), the build fitted beside each effect: named in full too
+    row = scoring.score_case(key, diagnose(rec, DEFAULT, world).to_json(), rec, DEFAULT)
+    assert row["outcome"] == "right" and all(e["param"]["error"] < scoring.PARAM_TOLERANCE for e in row["effects"])
 
 
 def record_manoeuvre(tmp_path, params, duration=30.0):
@@ -207,11 +211,14 @@ def record_manoeuvre(tmp_path, params, duration=30.0):
     ("traction_limit", 0.1),  # ice: the wheels spin in the steps
     ("current_limit", 0.05),  # the speed loop asks for up to 0.12 A
     ("mass", 0.7),
+    ("battery_resistance", 3.0),  # the voltage is known within its state of charge: a sag shows as it varies
 ])
 def test_an_effect_only_the_identification_manoeuvre_excites_is_named(tmp_path, effect, true_value):
     """Effects of pushing hard, which the exploration never does (record_manoeuvre).  A grip's cost has a
     narrow valley: screened on three trials across 0.02-2 the ice was named a current limit
-    (fit.screen_trials)."""
+    (fit.screen_trials).  A battery's resistance under the exploration's steady current is one with a lower
+    open-circuit voltage, which the datasheet's tolerance admits (docs/diagnosis.md, "Within the
+    datasheet's tolerance")."""
     d = diagnose(record_manoeuvre(tmp_path, E.apply(DEFAULT, effect, "both", [true_value])), DEFAULT, ARENA)
     assert d.verdict == "explained" and [e["name"] for e in d.effects] == [effect], d.summary()
     (param,) = d.effects[0]["params"].values()
@@ -313,7 +320,9 @@ def test_an_odometry_sized_error_is_located_over_whole_windows(tmp_path, nominal
 def test_an_encoder_error_under_the_threshold_over_1_s_is_located_over_5_s(tmp_path):
     """An encoder 1.5 % fine, under the manoeuvre's open-loop drive.  Each window's twin enters at the speed
     the counts give at the nominal scale (its lead-in matches them), and that start takes back nearly half
-    the error over 1 s (0.8 % more counts, under the 1 % threshold) but little of it over 5 s (1.3 %)."""
+    the error over 1 s (0.8 % more counts, under the 1 % threshold) but little of it over 5 s (1.3 %).  The
+    diagnosis is told the datasheet is exact: within its tolerance a wheel 1.4 % small with a motor and
+    friction 1.3 % weak is all but this encoder (docs/diagnosis.md, "Within the datasheet's tolerance")."""
     from host_sim.diagnosis.compare import compare_all
 
     counts = ("count_l", "count_r")
@@ -324,7 +333,7 @@ def test_an_encoder_error_under_the_threshold_over_1_s_is_located_over_5_s(tmp_p
     nominal = record_manoeuvre(tmp_path, DEFAULT, 60.0)
     first, longer = compare_all(nominal, DEFAULT, ARENA)
     assert not first.findings and rule_margins(first, nominal, DEFAULT, ARENA, longer)["scale"][0] < 1
-    d = diagnose(rec, DEFAULT, ARENA)
+    d = diagnose(rec, DEFAULT, ARENA, bands={})
     assert d.verdict == "explained" and [e["name"] for e in d.effects] == ["encoder_scale"], d.summary()
     (param,) = d.effects[0]["params"].values()
     assert param["value"] == pytest.approx(18.0, rel=0.15)
@@ -495,7 +504,7 @@ def test_an_effect_seen_in_one_channel_is_judged_on_that_channels_held_out_resid
     totals; an effect that removes most of them earns its place even when all the held-out residuals drop by
     less than MIN_HELD_OUT_GAIN, and not on a channel that was not located."""
     from host_sim.diagnosis.compare import compare
-    from host_sim.diagnosis.fit import MIN_HELD_OUT_GAIN, Model, _earns_its_place
+    from host_sim.diagnosis.fit import MIN_HELD_OUT_GAIN, Model, earns_its_place
     from host_sim.diagnosis.report import fit_objective
 
     narrow = DEFAULT.replace(half_axle=0.046)
@@ -519,10 +528,10 @@ def test_an_effect_seen_in_one_channel_is_judged_on_that_channels_held_out_resid
     without.cost_test = float(without.r_test @ without.r_test)
     with_it = Model([], [], narrow, 0.0, float(noise @ noise), 0, r_test=noise)
     assert 1 - with_it.cost_test / without.cost_test < MIN_HELD_OUT_GAIN
-    accepted, gain = _earns_its_place(obj, without, with_it, 1e-9, ["turn"])
+    accepted, gain = earns_its_place(obj, without, with_it, 1e-9, ["turn"])
     assert accepted and gain > 0.8
-    assert not _earns_its_place(obj, without, with_it, 1e-9, ["heading_rate"])[0]
-    assert not _earns_its_place(obj, without, with_it, 0.5, ["turn"])[0]  # the training windows must still find it
+    assert not earns_its_place(obj, without, with_it, 1e-9, ["heading_rate"])[0]
+    assert not earns_its_place(obj, without, with_it, 0.5, ["turn"])[0]  # the training windows must still find it
 
 
 def test_the_chosen_effect_is_the_best_of_those_that_pass_held_out(tmp_path, nominal_run):
@@ -913,7 +922,7 @@ def test_a_fit_ends_once_its_steps_gain_little(tmp_path, monkeypatch):
 
     monkeypatch.setattr(fit.optimize, "least_squares", counted)
     rec = record(tmp_path, E.apply(DEFAULT, "battery_resistance", "both", [3.0]))
-    d = diagnose(rec, DEFAULT, ROOM)
+    d = diagnose(rec, DEFAULT, ROOM, bands={})  # the datasheet's voltage exact: no calibration's fits counted
     assert [e["name"] for e in d.effects] == ["battery_resistance"], d.summary()
     assert d.effects[0]["params"]["resistance"]["value"] == pytest.approx(3.0, rel=0.15)
     assert len(sols) == 3 and sum(s.nfev for s in sols) <= 8, [s.nfev for s in sols]
@@ -966,7 +975,7 @@ def test_once_the_fitted_twin_leaves_nothing_located_no_further_effect_is_sought
         judged.append(twin.torque_constant_delta_r), compare_all(rec, twin, *a, **kw))[1])
     rec = record(tmp_path, E.apply(DEFAULT, "torque_constant", "right", [-6e-4]))
     said: list[str] = []
-    d = diagnose(rec, DEFAULT, ROOM, progress=said.append)
+    d = diagnose(rec, DEFAULT, ROOM, progress=said.append, bands={})  # no calibration's comparisons counted
     assert d.verdict == "explained" and [e["name"] for e in d.effects] == ["torque_constant"], d.summary()
     assert "effect 2: locating what the fitted twin leaves" in said, said
     assert not any(line.startswith("effect 2: screening") for line in said), said

@@ -200,4 +200,4 @@ def test_without_the_opt_in_there_is_no_test_block(twin_run, monkeypatch):
     assert seen and all(t_end == twin_run.t[-1] for t_end in seen)
     doc = d.to_json()
     assert d.verdict == "match" and not d.fit_test and set(doc["fit"]) == {"before", "after", "ceiling", "judged"}
-    assert not {"closest", "changes", "test_judgements"} & set(doc)
+    assert not {"changes", "test_judgements"} & set(doc) and doc["closest"] is None  # closest: always said

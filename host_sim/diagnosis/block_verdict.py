@@ -82,17 +82,8 @@ def _judge_named(result: Any, block: Recording, before: Comparison, after: Compa
     located = list(dict.fromkeys(item["channel"] for item in result.located))
     judged = judge_channels(after, block.t, located)
     result.test_judgements = [j.to_json() for j in judged.values()]
-    kept, closest = [], None
-    for entry in result.effects:
-        own = family(entry["name"], entry.get("wheel", entry.get("sensor", "both")), located)
-        if own and all(c in judged and judged[c].explains for c in own):
-            kept.append(entry)
-            continue
-        removes = removed_percent(before, after, own) if own else 0.0
-        label = entry["name"] + (f"({entry['wheel']})" if entry.get("wheel", "both") != "both" else "") + (
-            f"({entry['sensor']})" if "sensor" in entry else "")
-        if removes > 0 and (closest is None or removes > closest["removes_percent"]):
-            closest = {"name": label, "removes_percent": round(float(removes), 1)}
+    kept, closest = _keep_explaining(result, before, after, located,
+                                     lambda own: all(c in judged and judged[c].explains for c in own))
     failing = [j for j in judged.values() if not j.explains]
     result.unexplained += [{"channel": j.channel, "regime": "on the test block", "spans": _span(result),
                             "words": test_block_words(j, result.fit_test)} for j in failing]
@@ -101,6 +92,39 @@ def _judge_named(result: Any, block: Recording, before: Comparison, after: Compa
         say("fitting the named effects on each half of the recording")
         _changes(result, objective, params, located)
     _settle(result, chain)
+
+
+def judge_held_out(result: Any, before: Comparison, after: Comparison, chain: list[Model]) -> None:
+    """Without a test block, the same rule on the held-out windows: an effect is named only where the fitted
+    twin leaves none of the located channels it answers for located; else it is at most "closest"
+    (tests/test_tolerance.py::test_an_effect_that_leaves_its_channels_located_is_not_named)."""
+    left = {item["channel"] for item in result.unexplained}
+    # a channel the fit made a mismatch of counts as one it leaves
+    located = list(dict.fromkeys([item["channel"] for item in result.located] + sorted(left)))
+    result.effects, result.closest = _keep_explaining(result, before, after, located,
+                                                      lambda own: not left.intersection(own))
+    if result.effects or result.closest is not None:
+        _settle(result, chain)
+    if not result.effects:  # nothing named: everything located is left unexplained
+        result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")} for item in result.located]
+
+
+def _keep_explaining(result: Any, before: Comparison, after: Comparison, located: list[str],
+                     explains: Callable[[list[str]], bool]) -> tuple[list[dict[str, Any]], dict[str, Any] | None]:
+    """(the effects that explain the located channels they answer for, the closest of the others: the one
+    that removes the most of its channels' residual, if any removes some)."""
+    kept, closest = [], None
+    for entry in result.effects:
+        own = family(entry["name"], entry.get("wheel", entry.get("sensor", "both")), located)
+        if own and explains(own):
+            kept.append(entry)
+            continue
+        removes = removed_percent(before, after, own) if own else 0.0
+        label = entry["name"] + (f"({entry['wheel']})" if entry.get("wheel", "both") != "both" else "") + (
+            f"({entry['sensor']})" if "sensor" in entry else "")
+        if removes > 0 and (closest is None or removes > closest["removes_percent"]):
+            closest = {"name": label, "removes_percent": round(float(removes), 1)}
+    return kept, closest
 
 
 def _changes(result: Any, objective: Objective, params: RobotParams, located: list[str]) -> None:

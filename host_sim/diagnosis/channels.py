@@ -23,6 +23,11 @@ MOTION = ("forward", "lateral", "heading_rate")
 IR = tuple(f"ir_{k}" for k in range(MAX_IR_PAIRS))
 AMBIENT = tuple(f"amb_{k}" for k in range(MAX_IR_PAIRS))
 # Each window's totals (locate.locate_scale), where an odometry-sized error shows: channel -> its total.
+# The IR law is the datasheet's typical curve, known at its calibration points to about the spread of one
+# batch's pairs: a reading that departs from it by less, in a regime, is a part's own curve, not a fault
+# (docs/diagnosis.md, "Within the datasheet's tolerance"; tests/test_tolerance.py::
+# test_an_ir_curve_within_its_tolerance_is_not_located).
+IR_RESPONSE_TOLERANCE = 0.15
 ACCUMULATED = {"forward": "travel", "heading_rate": "turn", "wheel_l": "count_l", "wheel_r": "count_r"}
 
 
@@ -54,6 +59,7 @@ class Channel:
     noise_floor: float  # the residual's standard deviation when the twin is right (quantisation, sensor noise)
     locate: bool = True  # residuals per period (True) or accumulated along the window (pose)
     relative: bool = True  # a mismatch must also be large against the signal (not for levels: vbat, ambient)
+    tolerance: float = 0.0  # a bias within this share of the signal is the model's own tolerance (locate)
 
     def residual(self, s: int = 0) -> np.ndarray:
         """(W, T - 1) recorded minus the twin with parameter set s."""
@@ -133,7 +139,8 @@ def sensor_channels(rec: Recording, rows: np.ndarray, robots: list[RobotParams],
     amb_twin = amb.astype(float).transpose(1, 0, 2, 3)
     chans = []
     for k in range(rec.n_ir):
-        chans.append(Channel(IR[k], "counts", refl_rec[..., k], refl_twin[..., k], float(np.sqrt(2) * p.ir_noise + 0.5)))
+        chans.append(Channel(IR[k], "counts", refl_rec[..., k], refl_twin[..., k], float(np.sqrt(2) * p.ir_noise + 0.5),
+                             tolerance=IR_RESPONSE_TOLERANCE))
         chans.append(Channel(AMBIENT[k], "counts", rec.ir_amb[rows][..., k].astype(float), amb_twin[..., k],
                              float(p.ir_noise + 0.5), relative=False))
     return chans

@@ -21,6 +21,7 @@ from scipy import optimize, stats
 from host_sim.physics import effects as E
 from host_sim.diagnosis.channels import (ACCUMULATED, AMBIENT, IR, MOTION, WHEELS, Channel, build_channels,
                                         drive_channel, judged_windows, sensor_channel, sensor_channels)
+from host_sim.diagnosis.tolerance import Tolerance
 from host_sim.diagnosis.windows import Windows, by_step_parts, run_windows
 from host_sim.physics.params import DEFAULT, RobotParams
 from host_sim.recordings.recording import Recording
@@ -144,6 +145,7 @@ class Objective:
         self.test_columns: dict[str, np.ndarray] = {}  # channel (or window total) -> its held-out residuals' columns
         self.train_windows = np.zeros(0, dtype=int)  # each training residual's window: the intervals' clusters
         self.clustered_intervals = False  # window-clustered sandwich intervals (with a test block) or the Jacobian's
+        self.tolerance: Tolerance | None = None  # the datasheet's: an effect within it is the robot as built
 
     def residuals(self, robots: list[RobotParams], part: str = "both") -> tuple[np.ndarray, np.ndarray]:
         """(train (N, n), test (N, m)) weighted residuals of N twins: with workers (select), the robots
@@ -365,19 +367,21 @@ def _around(x: np.ndarray, half: np.ndarray, sizes: list[int], lo: np.ndarray,
 
 
 def _sandwich_intervals(x: np.ndarray, jac: np.ndarray, r: np.ndarray, sizes: list[int], lo: np.ndarray,
-                        hi: np.ndarray, windows: np.ndarray) -> list[list[tuple[float, float]]]:
+                        hi: np.ndarray, windows: np.ndarray, prior: np.ndarray | None = None
+                        ) -> list[list[tuple[float, float]]]:
     """95 % intervals from a cluster-robust sandwich, a run of touching windows the cluster (touching_runs):
     (J'J)^-1 (sum over clusters of J_g' r_g r_g' J_g) (J'J)^-1 G / (G - 1), with a t quantile on G - 1
     degrees of freedom (G clusters).  The residuals within a window are correlated (a start state, a speed
     loop), and the twin's own error is in them; apart runs are close to independent, so they carry the
-    evidence (tests/test_verdict.py::test_the_intervals_hold_the_true_value_about_95_times_in_100)."""
+    evidence (tests/test_verdict.py::test_the_intervals_hold_the_true_value_about_95_times_in_100).
+    prior: a prior's information (k, k), added to the bread (calibrate.refit_jointly's nuisances)."""
     k = jac.shape[1]
     ids, group = np.unique(windows, return_inverse=True) if windows.size == r.size else (np.zeros(1), np.zeros(r.size, int))
     g = len(ids)
     scores = np.zeros((g, k))
     np.add.at(scores, group, jac * r[:, None])  # each window's J_w' r_w
     try:
-        bread = np.linalg.pinv(jac.T @ jac)
+        bread = np.linalg.pinv(jac.T @ jac + (prior if prior is not None else 0.0))
         cov = bread @ (scores.T @ scores) @ bread * (g / max(g - 1, 1))
         half = float(stats.t.isf(0.025, max(g - 1, 1))) * np.sqrt(np.clip(np.diag(cov), 0.0, None))
     except np.linalg.LinAlgError:
@@ -580,21 +584,26 @@ def _stop_workers(pool: ProcessPoolExecutor) -> None:
     pool.shutdown(wait=True, cancel_futures=True)
 
 
+Refine = Callable[[Model], tuple[Model, RobotParams]]  # a chosen model -> (it refitted, the base from then on)
+
+
 def select(obj: Objective, base: RobotParams, cands: list[Candidate],
            progress: Callable[[str], None] | None = None, located: list[str] | None = None,
-           workers: int = 1, still_located: Callable[[Model, Objective], list[str]] | None = None) -> list[Model]:
+           workers: int = 1, still_located: Callable[[Model, Objective], list[str]] | None = None,
+           refine: Refine | None = None) -> list[Model]:
     """Forward selection, then backward elimination: the chain of accepted models, nominal first.
     workers > 1: each step's screening (by step parts, in shares) and its shortlist's fits run in that many
     processes (forked: where a platform cannot fork, in this one).
     still_located(model, obj): the channels the locator still finds with that twin (report.diagnose); none,
     and no further effect is sought; some, and the next effect's located gain is taken on them.  It may set
     obj.sigma, the weights of the next step (the noise that twin leaves): the twin's costs are then taken
-    again under them."""
+    again under them.  refine(model): each chosen model refitted with what else the base holds (the robot's
+    build: calibrate.refit_jointly), and the base the next effects are fitted on."""
     global _OBJECTIVE
     fitters = _fitting_pool(obj, workers)
     obj.workers, obj.worker_count = fitters, workers
     try:
-        return _select(obj, base, cands, progress, located, still_located)
+        return _select(obj, base, cands, progress, located, still_located, refine)
     except BaseException:  # Ctrl-C above all: the workers' fits are dropped, not awaited
         if fitters is not None:
             _stop_workers(fitters)
@@ -607,8 +616,8 @@ def select(obj: Objective, base: RobotParams, cands: list[Candidate],
 
 
 def _select(obj: Objective, base: RobotParams, cands: list[Candidate], progress: Callable[[str], None] | None,
-            located: list[str] | None, still_located: Callable[[Model, Objective], list[str]] | None = None
-            ) -> list[Model]:
+            located: list[str] | None, still_located: Callable[[Model, Objective], list[str]] | None = None,
+            refine: Refine | None = None) -> list[Model]:
     say = progress or (lambda _t: None)
     now_located = located or []  # what the next effect's located gain is taken on
     r_train, r_test = obj.residuals([base])
@@ -652,8 +661,29 @@ def _select(obj: Objective, base: RobotParams, cands: list[Candidate], progress:
             break
         best.rivals = [m for m in tried if m is not best and m.cost_test <= best.cost_test * (1 + AMBIGUITY)]
         best.alternatives = [m.effects[-1].label() for m in best.rivals]
+        if refine is not None:
+            say(f"effect {step + 1}: fitting {best.effects[-1].label()} and the robot's build together")
+            refined, build = refine(best)
+            if not _beyond_the_build(obj, build, current, refined, now_located):
+                # the build, refitted beside it, explains as much: the effect was the robot as built
+                cands = [c for c in cands if c != best.effects[-1]]
+                continue
+            best, base = refined, build
         chain.append(best)
     return backward(obj, base, chain, say, located or [])
+
+
+def _beyond_the_build(obj: Objective, base: RobotParams, current: Model, refined: Model, located: list[str]) -> bool:
+    """Whether a chosen effect, refitted with the robot's build (select's refine), still earns its place
+    against that build with the effects before it: else what it explained was the build
+    (tests/test_tolerance.py::test_a_robot_within_its_tolerance_is_a_match)."""
+    without = _apply_all(base, current.effects, current.values)
+    r_train, r_test = obj.residuals([without])
+    before = Model(current.effects, current.values, without, float(r_train[0] @ r_train[0]),
+                   float(r_test[0] @ r_test[0]), int(r_train.size), r_test=r_test[0])
+    p = f_test(before.cost_train, refined.cost_train, _sizes(refined.values) - _sizes(current.values),
+               refined.n_train, _sizes(refined.values))
+    return earns_its_place(obj, before, refined, p, located)[0]
 
 
 def _costs_again(obj: Objective, model: Model) -> Model:
@@ -672,9 +702,11 @@ def choose(obj: Objective, current: Model, tried: list[Model], cands: list[Candi
     model's p_value and located_gain."""
     passing = []
     for m in tried:
+        if getattr(obj, "tolerance", None) is not None and obj.tolerance.within(m.effects[-1].name, m.values[-1]):
+            continue  # the robot as built, not a fault (tests/test_tolerance.py::test_an_effect_within_tolerance_is_not_named)
         m.p_value = f_test(current.cost_train, m.cost_train, _sizes(m.values) - _sizes(current.values), m.n_train,
                            _sizes(m.values))
-        accepted, m.located_gain = _earns_its_place(obj, current, m, m.p_value, located)
+        accepted, m.located_gain = earns_its_place(obj, current, m, m.p_value, located)
         if accepted:
             passing.append(m)
     passing = [m for m in passing if not _constant_in_disguise(obj.rec, m, passing)]
@@ -706,7 +738,7 @@ def _constant_in_disguise(rec: Recording, m: Model, passing: list[Model]) -> boo
                for o in passing)
 
 
-def _earns_its_place(obj: Objective, without: Model, with_it: Model, p_value: float,
+def earns_its_place(obj: Objective, without: Model, with_it: Model, p_value: float,
                      located: list[str]) -> tuple[bool, float]:
     """(whether an effect stays, its located gain).  It stays if it is significant on the training windows
     (p_value of the F test) and it improves the held-out windows: all their weighted residuals by
@@ -734,7 +766,7 @@ def backward(obj: Objective, base: RobotParams, chain: list[Model],
         say(f"checking that {final.effects[i].label()} is still needed")
         reduced = fit_model(obj, base, effects, values)
         p = f_test(reduced.cost_train, final.cost_train, len(final.values[i]), final.n_train, _sizes(final.values))
-        if _earns_its_place(obj, reduced, final, p, located or [])[0]:
+        if earns_its_place(obj, reduced, final, p, located or [])[0]:
             continue
         rebuilt = chain[:1]
         for n in range(1, len(effects) + 1):
@@ -744,6 +776,6 @@ def backward(obj: Objective, base: RobotParams, chain: list[Model],
             m.rivals = chain[rest[n - 1] + 1].rivals
             rebuilt.append(m)
         for prev, m in zip(rebuilt, rebuilt[1:]):  # each step's located gain, for its evidence
-            m.located_gain = _earns_its_place(obj, prev, m, m.p_value, located or [])[1]
+            m.located_gain = earns_its_place(obj, prev, m, m.p_value, located or [])[1]
         return backward(obj, base, rebuilt, say, located)
     return chain

@@ -284,7 +284,7 @@ def locate_channel(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regime
         return None
     sigma = noise_level(ch, r)
     bins: list[dict[str, object]] = []
-    y = ch.y[keep] if ch.relative else np.zeros_like(r)
+    y = _signal(ch, keep, r)
     overall = _bin_stats(r.ravel(), sigma, y.ravel())
     if overall is not None:
         bins.append({"regime": "", "key": "all", **overall})
@@ -317,6 +317,14 @@ def locate_channel(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regime
                    float(chosen["mean"]), float(chosen["z"]), sigma, bins)  # type: ignore[arg-type]
 
 
+def _signal(ch: Channel, keep: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """The recorded signal a bias is held against (bin_margin: RELATIVE_MIN of it), scaled up where the
+    channel's model is known only to a wider share (Channel.tolerance); zeros for a level."""
+    if not ch.relative:
+        return np.zeros_like(r)
+    return ch.y[keep] * max(1.0, ch.tolerance / RELATIVE_MIN)
+
+
 def bias_margin(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regimes) -> tuple[float, str]:
     """The largest bin margin of a channel (bin_margin), over the whole and every regime bin that
     locate_channel judges, and that bin's key: locate_channel locates the channel at 1 or more."""
@@ -324,7 +332,7 @@ def bias_margin(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regimes) 
     if r.size == 0:
         return 0.0, ""
     sigma = noise_level(ch, r)
-    y = ch.y[keep] if ch.relative else np.zeros_like(r)
+    y = _signal(ch, keep, r)
     parts = [("all", np.ones(r.shape, dtype=bool))]
     for name, (labels, words) in reg.labels.items():
         if name.startswith(relevant_regimes(ch.name)):

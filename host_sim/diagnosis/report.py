@@ -16,12 +16,15 @@ import numpy as np
 from host_sim.physics import effects as E
 from host_sim.diagnosis.tell_apart import tell_apart
 from host_sim.diagnosis.compare import Comparison, compare_all, stratify
-from host_sim.diagnosis.fit import Model, Objective, candidates_for, fit_totals, objective_channels, select
-from host_sim.diagnosis.channels import ACCUMULATED, WHEELS, judged_windows, ring_comparable
+from host_sim.diagnosis.fit import Model, Objective, Refine, candidates_for, fit_totals, objective_channels, select
+from host_sim.diagnosis.channels import ACCUMULATED, WHEELS, drive_channel, judged_windows, ring_comparable
 from host_sim.diagnosis.locate import Finding, noise_level, regimes, total_noise
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
 from host_sim.diagnosis.testblock import TestBlockError, check_test_recording, split_test_block
-from host_sim.diagnosis.block_verdict import judge_test_block
+from host_sim.diagnosis.block_verdict import judge_held_out, judge_test_block
+from host_sim.diagnosis.calibrate import (Calibration, Nuisance, calibrate, drive_located, drive_nuisances,
+                                          edge_binds, located_sensors, refit_jointly, sensor_nuisances)
+from host_sim.diagnosis.tolerance import BANDS, Tolerance
 from host_sim.diagnosis.phrasing import checked, sentence
 from host_sim.physics.params import DEFAULT, RobotParams
 from host_sim.recordings.recording import Recording
@@ -56,6 +59,8 @@ class Diagnosis:
     changes: list[dict[str, Any]] = field(default_factory=list)  # effects whose halves differ: not named
     test_judgements: list[dict[str, Any]] = field(default_factory=list)  # verdict.Judgement per channel judged
     model: Model | None = None  # the fitted twin, when effects were tried
+    calibration: Calibration | None = None  # the twin calibrated within the datasheet's tolerance
+    located_datasheet: list[dict[str, Any]] = field(default_factory=list)  # what the datasheet twin showed
     after: Comparison | None = None  # the fitted twin judged on the same windows
     after_long: Comparison | None = None  # ... and on the longest ones (pictures)
 
@@ -64,9 +69,12 @@ class Diagnosis:
                "effects": self.effects, "fit": {"before": _finite(self.fit_before), "after": _finite(self.fit_after),
                                                 "ceiling": _finite(self.fit_ceiling), "judged": self.fit_judged},
                "unexplained": self.unexplained, "notes": self.notes, "recording_checks": self.recording_checks}
+        if self.calibration is not None:
+            doc["calibration"] = {"values": self.calibration.to_json(), "located_before": self.located_datasheet}
+        doc["closest"] = self.closest
         if self.fit_test:  # judged on a test block (diagnose's test_block): its figures and rules' findings
             doc["fit"]["test"] = {k: (_finite(v) if isinstance(v, dict) else v) for k, v in self.fit_test.items()}
-            doc |= {"closest": self.closest, "changes": self.changes, "test_judgements": self.test_judgements}
+            doc |= {"changes": self.changes, "test_judgements": self.test_judgements}
         return doc
 
     def summary(self) -> str:
@@ -86,7 +94,8 @@ class Diagnosis:
             lines.append(f"  unexplained: {item['words']}")
         if self.closest is not None:
             lines.append(f"  closest in the library: {self.closest['name']}, which removes "
-                         f"{self.closest['removes_percent']:.0f} % of it (on the test block; not named)")
+                         f"{self.closest['removes_percent']:.0f} % of it" + (" (on the test block; not named)"
+                                                                              if self.fit_test else " (not named)"))
         shown = [k for k in self.fit_before if not k.startswith("amb_")]
         lines.append("  held-out fit % per channel (1 s windows), before" + (" -> after" if self.effects else "") + ": "
                      + ", ".join(f"{k} {self.fit_before[k]:.0f}" + (f" -> {self.fit_after.get(k, float('nan')):.0f}"
@@ -211,19 +220,22 @@ def check_judgeable(rec: Recording, first: Comparison) -> None:
 
 def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
              seconds: tuple[float, ...] = DEFAULT_SECONDS, progress: Callable[[str], None] | None = None,
-             workers: int = 1, test_block: float | Recording | None = None) -> Diagnosis:
+             workers: int = 1, test_block: float | Recording | None = None,
+             bands: dict[str, float] | None = None) -> Diagnosis:
     """Compare, locate and fit, the verdict judged on the held-out windows.  With test_block (opt-in), all
     that runs on all but a test block, which the verdict is then judged on (judge_test_block): the last
     test_block share of rec's 1 s windows (a float, e.g. testblock.TEST_FRACTION), or a second recording
-    of the same robot and world; the intervals are then the window-clustered sandwich.
+    of the same robot and world.
     workers > 1: each step's screening and its shortlisted fits run in that many processes (the same
-    figures, sooner: fit.select)."""
+    figures, sooner: fit.select).  bands: the datasheet's tolerance (tolerance.BANDS by default), within
+    which the twin is calibrated before anything is named."""
     params = with_drive(rec, params)  # the recording's commands are for its own drive (docs/recordings.md)
+    tol = Tolerance(params, dict(BANDS if bands is None else bands))
     rec, gap_notes = without_gapped_pose(rec)
     if isinstance(test_block, Recording):
         test_block = without_gapped_pose(test_block)[0]
     if test_block is None:
-        result = _diagnose_fitted(rec, params, world, seconds, progress, workers)[0]
+        result = _diagnose_fitted(rec, tol, world, seconds, progress, workers)[0]
         result.notes[:0] = gap_notes
         return result
     try:
@@ -234,20 +246,22 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
             fitted, block = split_test_block(rec, float(test_block), seconds[0])
     except TestBlockError as exc:
         raise DiagnosisError(str(exc)) from None
-    result, chain, objective = _diagnose_fitted(fitted, params, world, seconds, progress, workers, clustered=True)
+    result, chain, objective, base = _diagnose_fitted(fitted, tol, world, seconds, progress, workers, test_block=True)
     result.notes[:0] = gap_notes
     result.recording = str(rec.path or "recording")
     if isinstance(test_block, Recording):  # a second recording: its own checks' notes
         result.recording_checks += [n.to_json() | {"test": True} for n in block.notes]
-    judge_test_block(result, block, params, world, chain, objective, seconds[0], progress)
+    judge_test_block(result, block, base, world, chain, objective, seconds[0], progress)
     return result
 
 
-def _diagnose_fitted(rec: Recording, params: RobotParams, world: World | None, seconds: tuple[float, ...],
-                     progress: Callable[[str], None] | None, workers: int, clustered: bool = False
-                     ) -> tuple[Diagnosis, list[Model], Objective | None]:
+def _diagnose_fitted(rec: Recording, tol: Tolerance, world: World | None, seconds: tuple[float, ...],
+                     progress: Callable[[str], None] | None, workers: int, test_block: bool = False
+                     ) -> tuple[Diagnosis, list[Model], Objective | None, RobotParams]:
     """The diagnosis on rec (with a test block: the part fitted): (its result, the chain of models, the
-    objective); clustered: the intervals are the window-clustered sandwich (fit.Objective)."""
+    objective, the twin the effects were fitted to: calibrated within tolerance); test_block: a test block
+    follows, whose rules then judge what is named (block_verdict.judge_test_block)."""
+    params = tol.datasheet
     notes = check_data(rec, world, params)
     say = progress or (lambda _text: None)
     say("comparing the twin with the recording")
@@ -276,10 +290,14 @@ def _diagnose_fitted(rec: Recording, params: RobotParams, world: World | None, s
     result.notes += excitation_notes(rec, first, params, world)
     if not result.located:
         result.fit_after = dict(first.fit)
-        return result, [], None
+        return result, [], None, params
     judge = _judge(rec, world, seconds, first.windows.held_out)
-    objective = fit_objective(rec, world, first, clustered)
-    chain = _fit(objective, params, first, say, workers, still_located=_relocate(judge))
+    base, first = _within_tolerance(result, rec, world, first, tol, judge, say)
+    if not result.located:
+        return result, [], None, base
+    objective = fit_objective(rec, world, first)
+    objective.tolerance = tol
+    chain = _fit_with_the_build(result, objective, base, first, tol, say, workers, judge)
     final = result.model = chain[-1]
     say("judging the fitted twin")
     afters = judge(final.params)
@@ -295,14 +313,92 @@ def _diagnose_fitted(rec: Recording, params: RobotParams, world: World | None, s
                             f"no name is given")
         final = result.model = chain[0]
         result.after, result.after_long, result.fit_after = first, comparisons[-1], dict(first.fit)
-    result.effects = [_effect_entry(final, i, chain) for i in range(len(final.effects))]
+    _name(result, final, chain, remaining, tol, (first, after), test_block)
+    return result, chain, objective, base
+
+
+def _name(result: Diagnosis, final: Model, chain: list[Model], remaining: list[dict[str, Any]], tol: Tolerance,
+          compared: tuple[Comparison, Comparison], test_block: bool) -> None:
+    """The effects named and the verdict: none within the tolerance (the robot as built), and without a test
+    block only those that explain what they answer for (block_verdict.judge_held_out); compared: the twin
+    the effects were sought from and the fitted one, on the same held-out windows."""
+    result.effects = [_effect_entry(final, i, chain) for i in range(len(final.effects))
+                      if not tol.within(final.effects[i].name, final.values[i])]
+    if len(result.effects) < len(final.effects):
+        result.notes.append("fitted within the datasheet's tolerance, the robot as built and not named: " + ", ".join(
+            c.label() for c, v in zip(final.effects, final.values) if tol.within(c.name, v)))
     result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")} for item in remaining]
-    if not final.effects:
+    if not result.effects:
         result.verdict = "unexplained"
         result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")} for item in result.located]
     else:
         result.verdict = "explained" if not remaining else "partly explained"
-    return result, chain, objective
+        if not test_block:  # with one, the block's rules judge what is named (judge_test_block)
+            judge_held_out(result, *compared, chain)
+
+
+def _within_tolerance(result: Diagnosis, rec: Recording, world: World | None, first: Comparison, tol: Tolerance,
+                      judge: Callable[[RobotParams], list[Comparison]], say: Callable[[str], None]
+                      ) -> tuple[RobotParams, Comparison]:
+    """Calibrate the twin within the datasheet's tolerance (calibrate.py) and locate again: where nothing is
+    left (and no edge holds back a fault), a match, the robot as built, and (the calibrated twin, its
+    comparison); else (the datasheet's twin, its comparison), where the effects are sought
+    (tests/test_tolerance.py::test_a_robot_within_its_tolerance_is_a_match)."""
+    located = [f.channel for f in first.findings]
+    drive = drive_nuisances(tol, "vbat" in [c.name for c in first.channels], rec.bench) if drive_located(located) else []
+    sensors = sensor_nuisances(tol, located_sensors(located))
+    if not drive and not sensors:
+        return tol.datasheet, first
+    say("calibrating the twin within the datasheet's tolerance")
+    cal, binding = Calibration(tol.datasheet), []
+    for group in (drive, sensors):  # the sensors read the recorded track: apart, they run no physics
+        if group:
+            objective = _group_objective(rec, world, first, group)
+            part = calibrate(objective, cal.params, tol, group)
+            if part.at_edge() and edge_binds(objective, cal.params, tol, part, located):
+                binding += part.at_edge()
+            cal = Calibration(part.params, cal.nuisances + part.nuisances, cal.values + part.values,
+                              cal.bands + part.bands)
+    result.notes.append(f"calibrated within the datasheet's tolerance: {cal.words()}")
+    if binding:
+        # The data takes the build beyond its tolerance: a fault, which the build took up in part (so that
+        # nothing may be left located) (tests/test_tolerance.py::test_a_fault_the_build_can_almost_take_up_is_still_named).
+        result.notes.append("held at the tolerance's edge (" + ", ".join(n.label() for n in binding) + "): the "
+                            "mismatch lies beyond the tolerance")
+    left = [f.channel for f in judge(cal.params)[0].findings]
+    if not binding and not left:
+        calibrated = judge(cal.params)[0]
+        result.calibration, result.located_datasheet, result.located = cal, result.located, []
+        result.after, result.fit_after = calibrated, dict(calibrated.fit)
+        return cal.params, calibrated
+    # Where a group's edge binds, or its channels are still located, its effects are sought from the
+    # datasheet's values: a build fitted without the fault took up part of it and would bias each effect
+    # fitted on top; the build is fitted beside each effect chosen instead (_fit_with_the_build).  A group
+    # its calibration explains keeps it.
+    reset = {n for n in cal.nuisances if n in binding or any(_answers(n, c) for c in left)}
+    reset |= {n for n in cal.nuisances if n.index is None and any(m.index is None for m in reset)}  # the drive: one group
+    cal = cal.at_datasheet(tol, reset)
+    result.calibration = cal
+    start = judge(cal.params)[0]
+    result.located = [_located(start, f) for f in start.findings]
+    return cal.params, start
+
+
+def _answers(n: Nuisance, channel: str) -> bool:
+    """A nuisance's group answers for the channel: the drive's for the drive's, a sensor's gain for its own."""
+    return drive_channel(channel) if n.index is None else channel in (f"ir_{n.index}", f"amb_{n.index}")
+
+
+def _group_objective(rec: Recording, world: World | None, first: Comparison, group: list) -> Objective:
+    """The objective a group of nuisances is calibrated on: the drive's channels for the drive's, the
+    sensors' own for their gains, weighed as a fit weighs them (objective_sigma)."""
+    located = [f.channel for f in first.findings]
+    sensors = {n.index for n in group if n.index is not None}
+    wanted = objective_channels(located, [c.name for c in first.channels])
+    names = [n for n in wanted if (int(n.split("_")[1]) in sensors if n.startswith(("ir_", "amb_")) else not sensors)]
+    totals = fit_totals(located) if not sensors else ()
+    return Objective(rec, first.windows, world, names, objective_sigma(first, names, totals), first.contact,
+                     first.unjudged, totals)
 
 
 def _judge(rec: Recording, world: World | None, seconds: tuple[float, ...], held_out: np.ndarray
@@ -355,16 +451,41 @@ def _located(cmp: Comparison, f: Finding) -> dict[str, Any]:
 
 
 def _fit(objective: Objective, params: RobotParams, first: Comparison, say: Callable[[str], None], workers: int = 1,
-         still_located: Callable[[Model, Objective], list[str]] | None = None) -> list[Model]:
+         still_located: Callable[[Model, Objective], list[str]] | None = None, refine: Refine | None = None
+         ) -> list[Model]:
     located = [f.channel for f in first.findings]
     offered = candidates_for(located, params.drive_kind, objective.rec.bench)
     return select(objective, params, offered, progress=say, located=located, workers=workers,
-                  still_located=still_located)
+                  still_located=still_located, refine=refine)
 
 
-def fit_objective(rec: Recording, world: World | None, first: Comparison, clustered: bool = False) -> Objective:
+def _fit_with_the_build(result: Diagnosis, objective: Objective, base: RobotParams, first: Comparison,
+                        tol: Tolerance, say: Callable[[str], None], workers: int,
+                        judge: Callable[[RobotParams], list[Comparison]]) -> list[Model]:
+    """The effects chosen (fit.select), each chosen one refitted with the robot's build within its tolerance
+    (calibrate.refit_jointly) before the next is sought; result.calibration ends as the build fitted last."""
+    build = result.calibration
+    if build is None or not build.nuisances:
+        return _fit(objective, base, first, say, workers, still_located=_relocate(judge))
+    builds: dict[int, tuple[Model, Calibration]] = {}  # by id of each refitted model (kept alive): its build
+
+    def refine(model: Model) -> tuple[Model, RobotParams]:
+        joint, fitted = refit_jointly(objective, tol, build, model)
+        builds[id(joint)] = (joint, fitted)
+        return joint, fitted.params
+
+    chain = _fit(objective, base, first, say, workers, still_located=_relocate(judge), refine=refine)
+    if chain[-1].effects and id(chain[-1]) not in builds:  # backward elimination refitted the chain
+        say("fitting the effects and the robot's build together")
+        chain[-1] = refine(chain[-1])[0]
+    result.calibration = builds[id(chain[-1])][1] if chain[-1].effects else build
+    return chain
+
+
+def fit_objective(rec: Recording, world: World | None, first: Comparison, clustered: bool = True) -> Objective:
     """What a fit minimises: the located channels and their family, each on the windows it is judged on
-    (the drive's away from the walls); clustered: its fits' intervals are the window-clustered sandwich."""
+    (the drive's away from the walls); clustered: its fits' intervals are the window-clustered sandwich
+    (always in a diagnosis; the Jacobian's, widened for correlation, otherwise)."""
     located = [f.channel for f in first.findings]
     names = objective_channels(located, [c.name for c in first.channels])
     totals = fit_totals(located)

@@ -274,6 +274,11 @@ def apply(p: RobotLike, name: str, site: str | int, values: list[float]) -> Robo
     return dataclasses.replace(p, **changes)  # type: ignore[type-var]
 
 
+def targets(name: str, site: str | int) -> list[tuple[str, int | None]]:
+    """The (field, tuple index) pairs effect `name` sets at this site."""
+    return [target for _prm, fields in _fields(LIBRARY[name], site) for target in fields]
+
+
 def values(p: object, name: str, site: str | int) -> list[float]:
     """The effect's parameter values in p at site (for "both" wheels: the left's)."""
     out = []

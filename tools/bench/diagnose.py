@@ -21,14 +21,16 @@ from typing import Any
 from host_sim.physics.params import DRIVES
 from tools.bench.report import print_targets
 
-TARGET_NAMED = 0.95  # share of concealed (excited, in-library) effects named with the right side
-TARGET_PARAMS = 0.95  # share of the rightly named effects whose parameter is within scoring.PARAM_TOLERANCE
+# The targets are the diagnosis issue's, set before any suite scored them (docs/proving-ground.md).
+TARGET_NAMED = 0.90  # share of concealed (excited, in-library) effects named with the right side
+TARGET_PARAMS = 0.90  # share of the rightly named effects whose parameter is within scoring.PARAM_TOLERANCE
 TARGET_WHEEL_FIT = 90.0  # held-out fit % after, on both wheels ...
 TARGET_WHEEL_SHARE = 0.95  # ... in this share of the cases (controls and in-library effects)
 TARGET_FALSE_ALARMS = 0.05  # share of controls whose verdict is not "match"
-TARGET_UNLISTED = 0.90  # share of out-of-library effects called unexplained / partly explained, rightly located
+TARGET_UNLISTED = 0.95  # share of out-of-library effects called unexplained / partly explained, rightly located
 TARGET_COVERAGE = (0.85, 0.99)  # share of the named effects' 95 % intervals that hold the true value
-TARGET_SECONDS = 30.0  # CPU seconds per 90 s recording (median), all of a diagnosis's processes
+TARGET_SECONDS = 10.0  # CPU seconds per 90 s recording (median), all of a diagnosis's processes
+TARGET_SECONDS_MAX = 60.0  # ... and the slowest
 REFERENCE_SECONDS = 90.0
 
 DESCRIPTION = """\
@@ -288,7 +290,7 @@ def totals(rows: list[dict[str, Any]]) -> dict[str, Any]:
     showing = [r for r in listed if "not_excited" not in r]  # cases that show at least one of their effects
     controls = [r for r in rows if r["kind"] == "control"]
     alarms = [r for r in controls if r["outcome"] != "right"]
-    unlisted = [r for r in rows if r["kind"] == "out of library"]
+    unlisted = [r for r in rows if r["kind"] == "out of library" and "not_excited" not in r]  # shown ones
     flagged = [r for r in unlisted if r["outcome"] == "right"]
     judged = controls + listed
     wheel_ok = [r for r in judged if (r.get("fit_after") or -1e9) >= TARGET_WHEEL_FIT]
@@ -419,8 +421,9 @@ def targets(t: dict[str, Any]) -> list[dict[str, Any]]:
          "text": f"95 % intervals of the named effects holding the drawn truth, {TARGET_COVERAGE[0]:.0%}-"
                  f"{TARGET_COVERAGE[1]:.0%}: {t['intervals_covered']}/{t['intervals']} ({_pct(t['coverage_share'])})"},
         {"name": "seconds", "met": None if t["cpu_seconds_median"] != t["cpu_seconds_median"]
-            else t["cpu_seconds_median"] <= TARGET_SECONDS,
-         "text": f"<= {TARGET_SECONDS:.0f} s per {REFERENCE_SECONDS:.0f} s recording (median over the diagnoses that "
+            else t["cpu_seconds_median"] <= TARGET_SECONDS and t["cpu_seconds_max"] <= TARGET_SECONDS_MAX,
+         "text": f"<= {TARGET_SECONDS:.0f} s median, {TARGET_SECONDS_MAX:.0f} s max per {REFERENCE_SECONDS:.0f} s "
+                 f"recording (over the diagnoses that "
                  f"reached a verdict; CPU time of its processes): {t['cpu_seconds_median']:.1f} s "
                  f"(max {t['cpu_seconds_max']:.1f} s; wall {t['seconds_median']:.1f} s, max {t['seconds_max']:.1f} s, "
                  f"on the machine's load)"},

@@ -171,6 +171,10 @@ def not_excited(effect: dict[str, Any], plant: dict[str, Any], rec: Recording) -
         if share < MIN_EXCITED_SHARE:
             return (f"the drive can ask more than {100 * TRACTION_MARGIN:.0f} % of the grip (mu = {value:.2f}) "
                     f"in {100 * share:.1f} % of the periods{where}")
+    elif name == "adc_clipping":  # the plant's readings stop at the clip: none there, none clipped
+        clipped = ((rec.ir_on >= value - 0.5) | (rec.ir_amb >= value - 0.5)).any(axis=1)
+        if clipped.mean() < MIN_EXCITED_SHARE:
+            return f"a reading reaches the {value:.0f}-count clip in {100 * clipped.mean():.1f} % of the periods"
     elif name in ("ir_gain", "ir_misalignment", "ir_latency"):
         sensors = [int(effect["sensor"])] if "sensor" in effect else list(range(8))
         seen = ((rec.ir_on - rec.ir_amb)[:, sensors] > WALL_SEEN_COUNTS).any(axis=1)
@@ -268,6 +272,9 @@ def score_case(key: dict[str, Any], diagnosis: dict[str, Any] | None, rec: Recor
         return row
     if row["kind"] == "out of library":
         row.update(_score_unlisted(diagnosis, concealed))
+        reasons = [r for e in concealed if not e["in_library"] and (r := not_excited(e, key["plant"], rec))]
+        if reasons and row["outcome"] == "missed":  # a match on a recording that cannot show it is no miss
+            row["not_excited"] = "; ".join(reasons)
     else:
         row.update(_score_listed(concealed, key["plant"], diagnosis, nominal, rec))
     if diagnosis is None and str(error).startswith("refused"):

@@ -19,7 +19,12 @@ held-out windows; where the residuals are not noise, the mismatch is located
 by regime (speed, acceleration, turning, direction, command, heading, battery,
 distance to the walls) and by time, and said in words.  Effects from the
 library are then fitted and kept only if they improve the held-out windows,
-and the verdict is judged on those held-out windows.  Opt-in: --test-fraction F
+and the verdict is judged on those held-out windows.  Before any effect, the
+twin is calibrated within the datasheet's tolerance (each wheel's radius,
+torque constant and friction, the track, the battery, each sensor's gain;
+--tolerance FILE gives other bands): a robot built within it is a match, and
+an effect is named only beyond it, and only where the twin fitted with it
+leaves none of the channels it answers for located.  Opt-in: --test-fraction F
 (the last F of the windows) or --test REC2.csv (a second recording) is a test
 block that no fit nor rule sees, and the verdict is judged there instead: an
 effect is named only if the twin fitted with it leaves noise there (near its
@@ -65,6 +70,9 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
                        help="keep the last F of the 1 s windows (0.25: a quarter; at least 6 windows) as a test "
                             "block that no fit nor rule sees, the verdict judged there with its rules "
                             "(default: no test block)")
+    p.add_argument("--tolerance", metavar="FILE", type=input_file,
+                   help="the datasheet's tolerance, relative bands by value: {\"wheel_radius\": 0.01, ...} "
+                        "(default: docs/diagnosis.md, \"Within the datasheet's tolerance\"; 0 turns one off)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=run)
 
@@ -82,8 +90,10 @@ def load(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     from host_sim.recordings.checks import check_recording
     from host_sim.recordings.recording import RecordingError, load_recording
     from host_sim.physics.world import WorldError, world_by_name_or_path, world_from_dict
+    from host_sim.diagnosis.tolerance import ToleranceError, load_bands
 
     try:
+        args.bands = load_bands(args.tolerance) if getattr(args, "tolerance", None) else None
         rec = load_recording(args.recording, ordered_times=False)
         test = load_recording(args.test, ordered_times=False) if getattr(args, "test", None) else None
         if args.params:
@@ -100,7 +110,7 @@ def load(args: argparse.Namespace):  # type: ignore[no-untyped-def]
             world = None
         rec = check_recording(rec, params)  # the test recording too: both are replayed by the same twin
         test = check_recording(test, params) if test is not None else None
-    except (RecordingError, ParamsError, WorldError) as exc:
+    except (RecordingError, ParamsError, WorldError, ToleranceError) as exc:
         raise CliError(str(exc)) from None
     return rec, params, world, test
 
@@ -116,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         result = diagnose(rec, params, world, progress=progress, workers=args.workers or default_workers(),
-                          test_block=test if test is not None else args.test_fraction)
+                          test_block=test if test is not None else args.test_fraction, bands=args.bands)
     except DiagnosisError as exc:
         raise CliError(f"{args.recording}: {exc}") from None
     print(result.summary())
@@ -132,7 +142,8 @@ def run(args: argparse.Namespace) -> int:
             Path(args.html).write_text(page, encoding="utf-8")
         print(f"wrote {args.html}")
     if args.write_params:
-        fitted = result.model.params if result.model is not None else params
+        fitted = (result.model.params if result.model is not None
+                  else result.calibration.params if result.calibration is not None else params)
         with writing("--write-params", args.write_params):
             Path(args.write_params).write_text(json.dumps(fitted.to_json(), indent=1) + "\n")
         use = "sim" if fitted.drive_kind == "current" else "replay"  # the firmware in sim commands currents
