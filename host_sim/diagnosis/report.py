@@ -342,7 +342,8 @@ def _within_tolerance(result: Diagnosis, rec: Recording, world: World | None, fi
                       ) -> tuple[RobotParams, Comparison]:
     """Calibrate the twin within the datasheet's tolerance (calibrate.py) and locate again: where nothing is
     left (and no edge holds back a fault), a match, the robot as built, and (the calibrated twin, its
-    comparison); else (the datasheet's twin, its comparison), where the effects are sought
+    comparison); else (the twin the effects are sought from, each group that does not explain its own
+    channels back at the datasheet's values, and its comparison)
     (tests/test_tolerance.py::test_a_robot_within_its_tolerance_is_a_match)."""
     located = [f.channel for f in first.findings]
     drive = drive_nuisances(tol, "vbat" in [c.name for c in first.channels], rec.bench) if drive_located(located) else []
