@@ -130,3 +130,13 @@ def test_every_benchmark_takes_the_option(bench_only: None, name: str, tmp_path:
     with pytest.raises(SystemExit) as exc:
         cli.main(["bench", name, "--markdown", str(tmp_path)])
     assert exc.value.code == 2 and "--markdown" in capsys.readouterr().err
+
+
+def test_each_drives_diagnosis_suite_has_its_own_section():
+    """bench diagnose --drive duty writes its own section of docs/benchmarks.md beside the current drive's."""
+    from tools.cli.main import build_parser
+
+    parser = build_parser()
+    for drive, section in (("current", "diagnose"), ("duty", "diagnose-duty"), ("wheel_speed", "diagnose-wheel_speed")):
+        args = parser.parse_args(["bench", "diagnose", "--drive", drive])
+        assert args.markdown_section(args) == section

@@ -104,7 +104,9 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
     p.add_argument("--board-controls", action="store_true",
                    help="also record the firmware on the virtual board over the serial link, idle and with three "
                         "busy processes per core, and diagnose each: both must be a match (tools/bench/board_control.py)")
-    p.set_defaults(func=run)
+    # each drive's suite its own section of the page: a PWM robot's score does not replace the current drive's
+    p.set_defaults(func=run, markdown_section=lambda args: "diagnose" if args.drive == "current"
+                   else f"diagnose-{args.drive}")
 
 
 # --------------------------------------------------------------------------- #
