@@ -103,8 +103,7 @@ def judge_held_out(result: Any, before: Comparison, after: Comparison, chain: li
     located = list(dict.fromkeys([item["channel"] for item in result.located] + sorted(left)))
     result.effects, result.closest = _keep_explaining(result, before, after, located,
                                                       lambda own: not left.intersection(own))
-    if result.effects or result.closest is not None:
-        _settle(result, chain)
+    _settle(result, chain)
     if not result.effects:  # nothing named: everything located is left unexplained
         result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")} for item in result.located]
 

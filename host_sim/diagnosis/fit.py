@@ -675,8 +675,8 @@ def _select(obj: Objective, base: RobotParams, cands: list[Candidate], progress:
 
 def _beyond_the_build(obj: Objective, base: RobotParams, current: Model, refined: Model, located: list[str]) -> bool:
     """Whether a chosen effect, refitted with the robot's build (select's refine), still earns its place
-    against that build with the effects before it: else what it explained was the build
-    (tests/test_tolerance.py::test_a_robot_within_its_tolerance_is_a_match)."""
+    against that build with the effects before it: else what it explained was the build (docs/diagnosis.md,
+    "The build and the effects together")."""
     without = _apply_all(base, current.effects, current.values)
     r_train, r_test = obj.residuals([without])
     before = Model(current.effects, current.values, without, float(r_train[0] @ r_train[0]),
