@@ -95,6 +95,26 @@ class _SubParams:
         return value[self._s] if isinstance(value, np.ndarray) and value.ndim >= 1 else value
 
 
+class _WrittenBack:
+    """A state array of BatchSim that a float step of one robot may hold apart (BatchSim._one_state): reading
+    or setting it writes that state back first."""
+
+    def __init__(self, field: str, doc: str) -> None:
+        self.field, self.__doc__ = field, doc
+
+    def __get__(self, sim: Any, owner: type | None = None) -> Any:
+        if sim is None:
+            return self
+        if sim._one_state is not None:
+            sim._write_back()
+        return getattr(sim, self.field)
+
+    def __set__(self, sim: Any, value: np.ndarray) -> None:
+        if sim._one_state is not None:
+            sim._write_back()
+        setattr(sim, self.field, value)
+
+
 class BatchSim:
     """N robots stepped together: state q (N, 5), v (N, 2) as in host_sim/physics/dynamics.py."""
 
@@ -293,44 +313,9 @@ class BatchSim:
     _one_checked_at, _one_gap = (0.0, 0.0, 0.0), -1.0
     _one_forces: tuple[list[list[float]], dict[int, list[float]]] | None = None
 
-    @property
-    def q(self) -> np.ndarray:
-        """(N, 5): x_G, y_G, phi, theta_l, theta_r as in host_sim/physics/dynamics.py."""
-        if self._one_state is not None:
-            self._write_back()
-        return self._q
-
-    @q.setter
-    def q(self, q: np.ndarray) -> None:
-        if self._one_state is not None:
-            self._write_back()
-        self._q = q
-
-    @property
-    def v(self) -> np.ndarray:
-        """(N, 2) rad/s, the wheels' speeds."""
-        if self._one_state is not None:
-            self._write_back()
-        return self._v
-
-    @v.setter
-    def v(self, v: np.ndarray) -> None:
-        if self._one_state is not None:
-            self._write_back()
-        self._v = v
-
-    @property
-    def current(self) -> np.ndarray:
-        """(N, 2) A, the motor currents of the last substep (mid-step)."""
-        if self._one_state is not None:
-            self._write_back()
-        return self._current
-
-    @current.setter
-    def current(self, current: np.ndarray) -> None:
-        if self._one_state is not None:
-            self._write_back()
-        self._current = current
+    q = _WrittenBack("_q", "(N, 5): x_G, y_G, phi, theta_l, theta_r as in host_sim/physics/dynamics.py.")
+    v = _WrittenBack("_v", "(N, 2) rad/s, the wheels' speeds.")
+    current = _WrittenBack("_current", "(N, 2) A, the motor currents of the last substep (mid-step).")
 
     def floats_of_one(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
         """(q, v) of the first robot as Python floats, without writing a float step's state back."""
