@@ -534,6 +534,25 @@ def test_an_effect_seen_in_one_channel_is_judged_on_that_channels_held_out_resid
     assert not earns_its_place(obj, without, with_it, 0.5, ["turn"])[0]  # the training windows must still find it
 
 
+def test_the_search_stops_when_an_effect_clears_no_channel(tmp_path):
+    """Two faults of the drive; when the locator finds every channel it found before still located after
+    the first effect, the search stops there: a second effect would be fitted on what the first could not
+    touch.  Told that the first cleared a channel, the same search goes on to a second."""
+    from host_sim.diagnosis.fit import candidates_for, select
+    from host_sim.diagnosis.report import fit_objective
+
+    rec = record(tmp_path, E.apply(DEFAULT, "dry_friction", "left", [3e-3]).replace(half_axle=0.046))
+    first = compare(rec, DEFAULT, ROOM)
+    located = [f.channel for f in first.findings]
+    assert len(located) > 1
+    offered = candidates_for(located, DEFAULT.drive_kind, False)
+    for still, goes_on in ((located, False), (located[1:], True)):
+        said: list[str] = []
+        select(fit_objective(rec, ROOM, first), DEFAULT, offered, progress=said.append, located=located,
+               still_located=lambda _model, _obj, left=still: list(left))
+        assert any(s.startswith("effect 2: screening") for s in said) == goes_on, said
+
+
 def test_the_chosen_effect_is_the_best_of_those_that_pass_held_out(tmp_path, nominal_run):
     """One candidate fits the training windows best (lowest BIC) but makes the held-out windows worse;
     another fits them a little less well and removes the held-out mismatch: the second is chosen, and

@@ -15,7 +15,7 @@ import numpy as np
 from scipy import optimize
 
 from host_sim.diagnosis.channels import drive_channel, sensor_channel
-from host_sim.diagnosis.fit import (FIT_FTOL, FIT_XTOL, Model, Objective, _sandwich_intervals, earns_its_place,
+from host_sim.diagnosis.fit import (FIT_FTOL, FIT_XTOL, Model, Objective, sandwich_intervals, earns_its_place,
                                    f_test, touching_runs)
 from host_sim.physics import effects as E
 from host_sim.diagnosis.tolerance import Tolerance
@@ -167,7 +167,7 @@ def refit_jointly(obj: Objective, tol: Tolerance, cal: Calibration, model: Model
     train, test = obj.residuals([robot(x)])
     n = train.shape[1]  # the data's rows; the prior's follow
     info = np.diag(np.where(np.isfinite(sd), 1.0 / sd, 0.0) ** 2)
-    ci = _sandwich_intervals(x, jac[:n], r_train[:n], [1] * len(nuis) + sizes, lo, hi,
+    ci = sandwich_intervals(x, jac[:n], r_train[:n], [1] * len(nuis) + sizes, lo, hi,
                              touching_runs(obj.windows, obj.train_windows), info)[len(nuis):]
     values = [[float(v) for v in x[len(nuis) + sum(sizes[:k]):len(nuis) + sum(sizes[:k + 1])]]
               for k in range(len(sizes))]

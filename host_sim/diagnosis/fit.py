@@ -296,7 +296,7 @@ def fit_model(obj: Objective, base: RobotParams, effects: list[Candidate], start
     r_train, jac, r_test = evaluate(sol.x)
     model = Model(list(effects), unpack(sol.x), _apply_all(base, effects, unpack(sol.x)),
                   float(r_train @ r_train), float(r_test @ r_test), int(r_train.size), r_test=r_test)
-    model.ci95 = (_sandwich_intervals(sol.x, jac, r_train, sizes, lo, hi, touching_runs(obj.windows, obj.train_windows))
+    model.ci95 = (sandwich_intervals(sol.x, jac, r_train, sizes, lo, hi, touching_runs(obj.windows, obj.train_windows))
                   if obj.clustered_intervals else _intervals(sol.x, jac, r_train, sizes, lo, hi))
     return model
 
@@ -343,7 +343,7 @@ def touching_runs(windows: Windows, which: np.ndarray) -> np.ndarray:
 def _intervals(x: np.ndarray, jac: np.ndarray, r: np.ndarray, sizes: list[int], lo: np.ndarray,
                hi: np.ndarray) -> list[list[tuple[float, float]]]:
     """95 % intervals from the Jacobian, widened for the residuals' correlation along each window (the
-    default; a diagnosis with a test block uses _sandwich_intervals)."""
+    default; a diagnosis with a test block uses sandwich_intervals)."""
     n, k = jac.shape
     s2 = float(r @ r) / max(n - k, 1)
     rho = float(np.corrcoef(r[:-1], r[1:])[0, 1]) if n > 2 and r.std() > 0 else 0.0
@@ -366,7 +366,7 @@ def _around(x: np.ndarray, half: np.ndarray, sizes: list[int], lo: np.ndarray,
     return out
 
 
-def _sandwich_intervals(x: np.ndarray, jac: np.ndarray, r: np.ndarray, sizes: list[int], lo: np.ndarray,
+def sandwich_intervals(x: np.ndarray, jac: np.ndarray, r: np.ndarray, sizes: list[int], lo: np.ndarray,
                         hi: np.ndarray, windows: np.ndarray, prior: np.ndarray | None = None
                         ) -> list[list[tuple[float, float]]]:
     """95 % intervals from a cluster-robust sandwich, a run of touching windows the cluster (touching_runs):
@@ -633,6 +633,10 @@ def _select(obj: Objective, base: RobotParams, cands: list[Candidate], progress:
             left = still_located(current, obj)
             if not left:
                 break  # the mismatch located is gone: a further effect would fit what the locator calls noise
+            if set(left) >= set(now_located):
+                # The last effect cleared no channel: the next would be fitted on model error as much as a fault
+                # (tests/test_diagnosis.py::test_the_search_stops_when_an_effect_clears_no_channel).
+                break
             chain[-1] = current = _costs_again(obj, current)
             # What is left and the fit can weigh; if the fit weighs none of it, what the nominal twin showed.
             now_located = [c for c in left if c in obj.test_columns] or (located or [])

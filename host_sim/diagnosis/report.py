@@ -377,7 +377,9 @@ def _within_tolerance(result: Diagnosis, rec: Recording, world: World | None, fi
     # fitted on top; the build is fitted beside each effect chosen instead (_fit_with_the_build).  A group
     # its calibration explains keeps it.
     reset = {n for n in cal.nuisances if n in binding or any(_answers(n, c) for c in left)}
-    reset |= {n for n in cal.nuisances if n.index is None and any(m.index is None for m in reset)}  # the drive: one group
+    # The drive's mechanics are one group; the battery is read directly, so it goes back only for its own
+    # channel (tests/test_tolerance.py::test_the_battery_keeps_its_calibration_when_the_drive_goes_back).
+    reset |= {n for n in cal.nuisances if _mechanical(n) and any(_mechanical(m) for m in reset)}
     cal = cal.at_datasheet(tol, reset)
     result.calibration = cal
     start = judge(cal.params)[0]
@@ -386,8 +388,16 @@ def _within_tolerance(result: Diagnosis, rec: Recording, world: World | None, fi
 
 
 def _answers(n: Nuisance, channel: str) -> bool:
-    """A nuisance's group answers for the channel: the drive's for the drive's, a sensor's gain for its own."""
-    return drive_channel(channel) if n.index is None else channel in (f"ir_{n.index}", f"amb_{n.index}")
+    """A nuisance's group answers for the channel: the battery's for its reading, the drive's mechanics for
+    the drive's other channels, a sensor's gain for its own."""
+    if n.index is not None:
+        return channel in (f"ir_{n.index}", f"amb_{n.index}")
+    return channel == "vbat" if n.quantity == "battery_voltage" else drive_channel(channel) and channel != "vbat"
+
+
+def _mechanical(n: Nuisance) -> bool:
+    """One of the drive's mechanics (a wheel's, a motor's, the track), not the battery or a sensor."""
+    return n.index is None and n.quantity != "battery_voltage"
 
 
 def _group_objective(rec: Recording, world: World | None, first: Comparison, group: list) -> Objective:

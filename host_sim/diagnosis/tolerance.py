@@ -5,13 +5,12 @@ Reference: docs/diagnosis.md, "Within the datasheet's tolerance".
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
 
 from host_sim.physics import effects as E
-from host_sim.physics.params import RobotParams
+from host_sim.physics.params import RobotParams, read_json
 
 # Relative ± bands, the tolerance a datasheet states for a batch of robots (the reasons: docs/diagnosis.md).
 BANDS: dict[str, float] = {
@@ -74,10 +73,7 @@ class Tolerance:
 
 def load_bands(path: str | Path) -> dict[str, float]:
     """BANDS with those a JSON file gives ({"wheel_radius": 0.01, ...}: relative ± bands; 0 turns one off)."""
-    try:
-        data = json.loads(Path(path).read_text())
-    except (OSError, ValueError) as exc:
-        raise ToleranceError(f"{path}: cannot read the tolerance file: {exc}") from None
+    data = read_json(path, "tolerance file", ToleranceError)
     if not isinstance(data, dict):
         raise ToleranceError(f"{path}: a tolerance file is a JSON object of relative bands by datasheet value")
     bands = dict(BANDS)
