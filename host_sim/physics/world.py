@@ -16,14 +16,14 @@ from typing import Any, Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from host_sim.physics.params import read_json
+from host_sim.physics.params import DEFAULT, read_json
 
 WORLDS_DIR = Path(__file__).resolve().parents[1] / "worlds"
 BUILTIN_NAMES = ("paper_room", "maze", "arena")
 TOP_KEYS = {"name", "description", "size", "walls", "start", "lamps", "ambient"}
 LAMP_KEYS = {"x", "y", "level", "flicker_hz", "flicker_depth"}
 DEFAULT_FLICKER_DEPTH = 0.3  # fraction of the lamp's level, when flicker_hz is given
-DEFAULT_BODY_RADIUS = 0.060  # m; params.RobotParams.body_radius, for the start check
+DEFAULT_BODY_RADIUS = DEFAULT.body_radius  # m, for the start check and the free cells
 _EPS = 1e-9  # m, geometric tolerance
 # Bounds that keep a world's set-up and runs to seconds and megabytes.  The
 # coverage grid (host_sim/loops/coverage.py, cells of GRID_RESOLUTION) and the
