@@ -16,12 +16,14 @@ from typing import Any, Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
+from host_sim.physics.params import DEFAULT, read_json
+
 WORLDS_DIR = Path(__file__).resolve().parents[1] / "worlds"
 BUILTIN_NAMES = ("paper_room", "maze", "arena")
 TOP_KEYS = {"name", "description", "size", "walls", "start", "lamps", "ambient"}
 LAMP_KEYS = {"x", "y", "level", "flicker_hz", "flicker_depth"}
 DEFAULT_FLICKER_DEPTH = 0.3  # fraction of the lamp's level, when flicker_hz is given
-DEFAULT_BODY_RADIUS = 0.060  # m; params.RobotParams.body_radius, for the start check
+DEFAULT_BODY_RADIUS = DEFAULT.body_radius  # m, for the start check and the free cells
 _EPS = 1e-9  # m, geometric tolerance
 # Bounds that keep a world's set-up and runs to seconds and megabytes.  The
 # coverage grid (host_sim/loops/coverage.py, cells of GRID_RESOLUTION) and the
@@ -811,17 +813,7 @@ def _check_start_is_clear(world: World, where: str, body_radius: float) -> None:
 def load_world(path: str | Path, body_radius: float = DEFAULT_BODY_RADIUS) -> World:
     """Read and validate a world file; WorldError names the file, the entry and the problem."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise WorldError(f"{path}: cannot read: {exc.strerror}") from exc
-    except UnicodeDecodeError as exc:
-        raise WorldError(f"{path}: not a world file: byte {exc.start} is not UTF-8 text") from exc
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise WorldError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from exc
-    return world_from_dict(data, str(path), body_radius)
+    return world_from_dict(read_json(path, "world file", WorldError), str(path), body_radius)
 
 
 def save_world(world: World, path: str | Path) -> None:

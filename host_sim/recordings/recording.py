@@ -24,7 +24,7 @@ import numpy as np
 from firmware.config import DEFAULT_CYCLE_MS
 from firmware.hal import TICK_MASK
 from firmware.odometry import HEADING_TURN
-from host_sim.physics.params import DRIVE_UNITS, DRIVES
+from host_sim.physics.params import DRIVE_UNITS, DRIVES, read_json
 
 FORMAT = "twinbot-recording"
 VERSION = 2
@@ -400,10 +400,7 @@ def _load_sidecar(path: Path, required: bool) -> dict[str, object]:
             raise RecordingError(f"{side}: the sidecar of {path.name} is missing (it holds the robot parameters, "
                                  f"the world and the sample period)")
         return {}
-    try:
-        meta = json.loads(side.read_text())
-    except json.JSONDecodeError as exc:
-        raise RecordingError(f"{side}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from exc
+    meta = read_json(side, "recording sidecar", RecordingError)
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise RecordingError(f"{side}: not a twinbot recording sidecar (format must be '{FORMAT}')")
     if meta.get("version") not in READABLE_VERSIONS:

@@ -21,6 +21,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Callable
 
 from host_sim.board.virtual_board import VirtualBoard, factory_image
 from host_sim.controller.hardware_io import TICK_MASK
@@ -234,35 +235,34 @@ def run_in(args: argparse.Namespace, scratch: Path) -> int:
     world = load_world(args)  # before anything is started or written
     flash, described = prepare_flash(args, scratch)
     standin, twin, hw_port = start_hardware(args, world)
-    stderr_path = Path(args.log) if args.log else scratch / "board-stderr.txt"
-    offset = stderr_path.stat().st_size if stderr_path.exists() else 0
+    stderr_path, offset = board_stderr(args.log, scratch)
     board = VirtualBoard(flash, hw_port, stderr_path, late_s=args.late / 1000.0, jitter_s=args.jitter / 1000.0)
+    lines = [f"  flash: {described}"]
+    if standin:
+        lines.append("  hardware: STAND-IN with fixed readings (a wall ahead, wheels that do not turn)")
+    elif twin and world:
+        lines.append(f"  hardware: the simulated twin in {world.name}, real time "
+                     f"(start at x={world.start[0]:.2f} m, y={world.start[1]:.2f} m)")
+    else:
+        lines.append(f"  hardware: simulator at 127.0.0.1:{hw_port}")
+    if args.late or args.jitter:
+        lines.append(f"  link: LATE, the board's output reaches the pty {args.late:g} +- {args.jitter:g} ms later")
     try:
-        deadline = time.monotonic() + STARTUP_S
-        while board.alive() and time.monotonic() < deadline:
-            time.sleep(0.05)
-        if not board.alive():
-            raise CliError(f"{board_trouble(board, stderr_path, offset)}; flash: {described}")
-        print(f"twinbot board: {board.path}", flush=True)
-        print(f"  flash: {described}")
-        if standin:
-            print("  hardware: STAND-IN with fixed readings (a wall ahead, wheels that do not turn)")
-        elif twin and world:
-            print(f"  hardware: the simulated twin in {world.name}, real time "
-                  f"(start at x={world.start[0]:.2f} m, y={world.start[1]:.2f} m)")
-        else:
-            print(f"  hardware: simulator at 127.0.0.1:{hw_port}")
-        if args.late or args.jitter:
-            print(f"  link: LATE, the board's output reaches the pty {args.late:g} +- {args.jitter:g} ms later")
-        return serve_until_it_stops(board, stderr_path, offset)
-    except KeyboardInterrupt:
-        return 0
+        return serve_board(board, stderr_path, offset, lambda: virtual_board_trouble(board, stderr_path, offset,
+                                                                                     described), lines)
     finally:
-        board.close()
         if standin:
             standin.stop()
         if twin:
             say_where_the_twin_ended(twin)
+
+
+def virtual_board_trouble(board: VirtualBoard, stderr_path: Path, offset: int, described: str) -> str | None:
+    """Why the board stopped within STARTUP_S of starting, or None when it is still running."""
+    deadline = time.monotonic() + STARTUP_S
+    while board.alive() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return None if board.alive() else f"{board_trouble(board, stderr_path, offset)}; flash: {described}"
 
 
 RP2040_STARTUP_S = 120.0  # the emulated boot runs at a fraction of real time on a loaded host
@@ -284,19 +284,19 @@ def run_rp2040(args: argparse.Namespace) -> int:
         image, bootrom = image_files(args.image, args.bootrom)
     except RigError as exc:
         raise CliError(str(exc)) from None
-    twin = None
-    if world is not None:
-        from host_sim.board.board_twin import BoardTwin
-        from host_sim.physics.params import DEFAULT
-
-        twin = BoardTwin(world, DEFAULT, lockstep=True)
-        twin.start()
+    _, twin, hw_port = start_hardware(args, world, lockstep=True)
     try:
         with tempfile.TemporaryDirectory(prefix="twinbot-board-") as scratch:
-            stderr_path = Path(args.log) if args.log else Path(scratch) / "board-stderr.txt"
-            offset = stderr_path.stat().st_size if stderr_path.exists() else 0
-            board = Rp2040Board(image, bootrom, stderr_path, hw_port=twin.port if twin else args.hw_port)
-            return serve_rp2040(board, stderr_path, offset, image, twin)
+            stderr_path, offset = board_stderr(args.log, Path(scratch))
+            board = Rp2040Board(image, bootrom, stderr_path, hw_port=hw_port)
+            lines = [f"  image: {image} on an emulated RP2040 (rp2040js, 125 MHz), its REPL on USB CDC"]
+            if twin:
+                lines.append(f"  hardware: the simulated twin in {twin.sim.world.name} on the chip's pins, in "
+                             f"lockstep with the firmware's cycles (slower than real time)")
+            else:
+                lines.append(f"  hardware: simulator at 127.0.0.1:{hw_port}, on the chip's pins")
+            return serve_board(board, stderr_path, offset, lambda: rp2040_trouble(board, stderr_path, offset,
+                                                                                   image), lines)
     except RigError as exc:
         raise CliError(str(exc)) from None
     finally:
@@ -304,19 +304,33 @@ def run_rp2040(args: argparse.Namespace) -> int:
             say_where_the_twin_ended(twin)
 
 
-def serve_rp2040(board, stderr_path: Path, offset: int, image: Path, twin) -> int:  # type: ignore[no-untyped-def]
+def rp2040_trouble(board, stderr_path: Path, offset: int, image: Path) -> str | None:  # type: ignore[no-untyped-def]
+    """Why the emulated Pico's USB serial port did not come up within RP2040_STARTUP_S, or None when it did."""
+    if board.wait_port_up(timeout=RP2040_STARTUP_S):
+        return None
+    trouble = board_trouble(board, stderr_path, offset) if not board.alive() else \
+        f"its USB serial port did not come up within {RP2040_STARTUP_S:g} s"
+    return f"{trouble}; image: {image}"
+
+
+def board_stderr(log: str | None, scratch: Path) -> tuple[Path, int]:
+    """Where the board's stderr goes (--log, else the scratch folder), and how long that file already is:
+    board_trouble reads only what this board wrote."""
+    stderr_path = Path(log) if log else scratch / "board-stderr.txt"
+    return stderr_path, stderr_path.stat().st_size if stderr_path.exists() else 0
+
+
+def serve_board(board, stderr_path: Path, offset: int, start_trouble: Callable[[], str | None],  # type: ignore[no-untyped-def]
+                lines: list[str]) -> int:
+    """Wait for the board to start (start_trouble: why it did not, or None), name its port and then `lines`
+    (what it runs on), and serve it until it stops; Ctrl-C is a clean stop (0).  The board is closed either way."""
     try:
-        if not board.wait_port_up(timeout=RP2040_STARTUP_S):
-            trouble = board_trouble(board, stderr_path, offset) if not board.alive() else \
-                f"its USB serial port did not come up within {RP2040_STARTUP_S:g} s"
-            raise CliError(f"{trouble}; image: {image}")
+        trouble = start_trouble()
+        if trouble:
+            raise CliError(trouble)
         print(f"twinbot board: {board.path}", flush=True)
-        print(f"  image: {image} on an emulated RP2040 (rp2040js, 125 MHz), its REPL on USB CDC")
-        if twin:
-            print(f"  hardware: the simulated twin in {twin.sim.world.name} on the chip's pins, in lockstep with "
-                  f"the firmware's cycles (slower than real time)")
-        else:
-            print(f"  hardware: simulator at 127.0.0.1:{board.pins.hw_port}, on the chip's pins")
+        for line in lines:
+            print(line)
         return serve_until_it_stops(board, stderr_path, offset)
     except KeyboardInterrupt:
         return 0
@@ -344,8 +358,9 @@ def load_world(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         raise CliError(str(exc)) from None
 
 
-def start_hardware(args: argparse.Namespace, world):  # type: ignore[no-untyped-def]
-    """(stand-in, twin, TCP port) of the board's hardware link."""
+def start_hardware(args: argparse.Namespace, world, lockstep: bool = False):  # type: ignore[no-untyped-def]
+    """(stand-in, twin, TCP port) of the board's hardware link; lockstep: the twin steps with the firmware's
+    cycles (the emulated Pico) instead of in real time."""
     if args.hw_port is not None:
         return None, None, args.hw_port
     if args.standin:
@@ -355,6 +370,6 @@ def start_hardware(args: argparse.Namespace, world):  # type: ignore[no-untyped-
     from host_sim.board.board_twin import BoardTwin
     from host_sim.physics.params import DEFAULT
 
-    twin = BoardTwin(world, DEFAULT)
+    twin = BoardTwin(world, DEFAULT, lockstep=lockstep)
     twin.start()
     return None, twin, twin.port
