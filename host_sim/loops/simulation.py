@@ -247,8 +247,9 @@ class _RecordingRows:
 
     def cycle(self, t: float, pose: tuple[float, float, float], s: Sense, a: Actuate, emitter_pct: int) -> None:
         if self.telemetry is None:
-            self.writer.row(t, (self.command(a.i_left_ma), self.command(a.i_right_ma)), (s.enc_l, s.enc_r), s.adc_on,
-                            s.adc_off, s.vbat_mv / 1000.0, pose, emitter_pct=emitter_pct)
+            cmd = (self.command(a.i_left_ma), self.command(a.i_right_ma))
+            self.writer.row(t, cmd, (s.enc_l, s.enc_r), s.adc_on, s.adc_off, s.vbat_mv / 1000.0, pose,
+                            emitter_pct=emitter_pct)
             return
         self.truth[s.tick_ms] = (t, pose, emitter_pct)
         if len(self.truth) > TRUTH_KEPT:  # a cycle the firmware never reported (it faulted): forget it
@@ -263,5 +264,6 @@ class _RecordingRows:
         for f in frames:
             truth = self.truth.pop(int(f["tick_ms"]), None)  # type: ignore[call-overload]
             if truth is not None:  # else a frame from before this run
-                cmd = (self.command(int(f["i_ref_l_ma"])), self.command(int(f["i_ref_r_ma"])))  # type: ignore[call-overload]
+                refs = int(f["i_ref_l_ma"]), int(f["i_ref_r_ma"])  # type: ignore[call-overload]
+                cmd = (self.command(refs[0]), self.command(refs[1]))
                 self.writer.telemetry(f, t=truth[0], pose=truth[1], emitter_pct=truth[2], cmd=cmd)

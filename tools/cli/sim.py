@@ -60,8 +60,9 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
                    help="physics substeps per 40 ms control period, 1..1000 (default 8)")
     p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the sensor noise, >= 0 (default 0)")
     p.add_argument("--no-noise", action="store_true", help="noise-free sensors")
-    p.add_argument("--params", metavar="FILE", help="robot parameters JSON (any subset; see host_sim/physics/params.py); a wheel_speed "
-                                            "drive is refused")
+    p.add_argument("--params", metavar="FILE",
+                   help="robot parameters JSON (any subset; see host_sim/physics/params.py); its drive may be "
+                        "current, duty or voltage (docs/motors.md \"Drives\")")
     p.add_argument("--stop-at-exit", action="store_true",
                    help="end the run when the robot leaves the world's area (found the exit), "
                         "instead of simulating it off the map until --duration")

@@ -1,8 +1,9 @@
 """Cases for robots of other drives: the plant given an H-bridge, and the firmware's references as that robot's commands.
 
 `with_drive(spec, drive, seed)` makes the robot a voltage, duty or wheel_speed one (its bridge's decay mode drawn
-from a stream of its own; the bridge drives the robot's own winding); `DriveCommands` turns the firmware's current references into the
-drive's unit, the command that would push that current through the stalled winding.  docs/proving-ground.md.
+from a stream of its own, into the robot's own winding); `DriveCommands` turns the firmware's current references
+into the drive's unit, the command that would push that current through the stalled winding.
+docs/proving-ground.md.
 """
 from __future__ import annotations
 
