@@ -6,6 +6,7 @@ integration of the switched circuit written here, and the drives run through Sim
 """
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -241,15 +242,60 @@ def test_the_drive_effects_change_the_twin_and_sim_robot_agrees(fields):
 
 
 def test_twinbot_sim_refuses_a_drive_the_firmware_cannot_command(tmp_path):
+    """A wheel_speed robot closes its own wheel loops, as the firmware does: sim says so in one line, status 2."""
     import argparse
 
+    from tests.helpers import run_twinbot
     from tools.arguments import CliError
     from tools.cli.sim import load_inputs
 
     path = tmp_path / "robot.json"
-    path.write_text('{"drive": "duty"}')
-    with pytest.raises(CliError, match="commands motor currents"):
+    path.write_text('{"drive": "wheel_speed"}')
+    with pytest.raises(CliError, match="the firmware closes its own wheel loops and a set-point robot has its own"):
         load_inputs(argparse.Namespace(params=str(path), world="paper_room"))
+    r = run_twinbot("sim", "--params", str(path), "--duration", "1")
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert "drive 'wheel_speed'" in r.stderr and "Traceback" not in r.stderr
+    for kind in ("duty", "voltage"):  # a bridge takes the duty the firmware's HAL writes
+        path.write_text(json.dumps({"drive": kind}))
+        assert load_inputs(argparse.Namespace(params=str(path), world="paper_room"))[0].drive_kind == kind
+
+
+def test_the_hal_duty_is_the_rp2040_hals(monkeypatch):
+    """hardware_io.hal_duty, what a bridge robot's twin is given, is the duty firmware/hal_rp2040.py `_drive`
+    writes (its PWM register over 65535, the sign on the direction pin), full scale and clipping included."""
+    import sys
+    import types
+
+    from firmware.config import CURRENT_FULL_SCALE_MA
+    from host_sim.controller.hardware_io import firmware_command, hal_duty
+
+    machine = types.ModuleType("machine")
+    for name in ("ADC", "PWM", "WDT", "Pin"):
+        setattr(machine, name, object)
+    machine.mem32 = None
+    monkeypatch.setitem(sys.modules, "machine", machine)
+    monkeypatch.setitem(sys.modules, "micropython", types.ModuleType("micropython"))
+    monkeypatch.delitem(sys.modules, "firmware.hal_rp2040", raising=False)
+    from firmware.hal_rp2040 import Rp2040Hal
+
+    class Out:
+        def value(self, v):
+            self.v = v
+
+        def duty_u16(self, v):
+            self.v = v
+
+    hal = types.SimpleNamespace(motor_dir=[Out()], motor_pwm=[Out()])
+    for ma in (0, 1, -1, 7, 250, -333, 999, CURRENT_FULL_SCALE_MA, -CURRENT_FULL_SCALE_MA, 1500, -32000):
+        Rp2040Hal._drive(hal, 0, ma)
+        sign = -1 if hal.motor_dir[0].v else 1
+        assert hal_duty(ma) == sign * hal.motor_pwm[0].v / 65535, ma
+    assert hal_duty(CURRENT_FULL_SCALE_MA // 2) == pytest.approx(0.5, abs=2e-5) and hal_duty(-5000) == -1.0
+    assert firmware_command(RobotParams(drive="voltage", battery_voltage=6.0))(-5000) == -6.0
+    assert firmware_command(DEFAULT)(-250) == -0.25  # a current drive: the reference in A, as ever
+    with pytest.raises(ValueError, match="wheel-speed loops"):
+        firmware_command(RobotParams(drive="wheel_speed"))
 
 
 @pytest.mark.slow

@@ -361,7 +361,8 @@ def test_a_case_on_the_datasheet_robot_is_the_same_case_without_the_draw(tmp_pat
     touched = {effects.EFFECTS[e["name"]].param for e in sheet["effects"]}
     changed = {k for k, v in base.items() if json.loads(json.dumps(v)) != sheet["plant"][k]}
     assert changed <= touched | {"body_inertia"}  # the effects alone (a mass carries its inertia)
-    assert drawn["plant"]["inductance"] != [0.0, 0.0] and sheet["plant"]["inductance"] == [0.0, 0.0]
+    assert drawn["plant"]["current_loop_hz"] > 0 and sheet["plant"]["current_loop_hz"] == 0  # an ideal driver
+    assert sheet["plant"]["inductance"] == [DEFAULT.motor_inductance] * 2 != drawn["plant"]["inductance"]
     assert sheet["plant"]["ir"]["law"] == "paper" and "law" not in drawn["plant"]["ir"]
     paper = datasheet_spec(paper_ir=True).ir
     for x, angle, pct in ((0.05, 0.0, 60), (0.15, 0.3, 60), (0.012, 0.6, 100), (0.3, 0.2, 40)):
@@ -413,7 +414,7 @@ def test_inductance_delays_the_currents_rise_by_l_over_r():
     """A step the current loop cannot follow (its PI saturates at the battery): the winding's current rises
     as 1 - exp(-t R / L), reaching 63 % of V / R after about L / R."""
     def rise(henry: float) -> float:
-        plant = Plant(DATASHEET.replace(inductance=(henry, henry)), None, (0.0, 0.0, 0.0), 0)
+        plant = Plant(DATASHEET.replace(inductance=(henry, henry), current_loop_hz=300.0), None, (0.0, 0.0, 0.0), 0)
         target = 0.63 * plant.v_term / DATASHEET.armature_resistance[0]
         for step in range(200):
             i, _u = plant._current_loop(0, 0.7, 0.0, plant.v_term)

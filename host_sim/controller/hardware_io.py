@@ -4,23 +4,26 @@ Every controller takes a control cycle's readings (a `Sense`: what a HW_SENSE fr
 carries) and returns its outputs (an `Actuate`: a HW_ACTUATE).  Robots (SimRobot or any
 plant) and controllers (SIL, PIL, replay) meet here and nowhere else, so this module
 imports no physics and no firmware runtime.  The firmware's own numbers (control period,
-tick mask, rule-set names) are taken from the firmware (docs/firmware.md).
+tick mask, rule-set names, the HAL's full-scale current) are taken from the firmware
+(docs/firmware.md); how its current references reach each drive: docs/motors.md "Drives".
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
-from firmware.config import DEFAULT_CYCLE_MS
+from firmware.config import CURRENT_FULL_SCALE_MA, DEFAULT_CYCLE_MS
 from firmware.fuzzy import RULE_SET_NAMES
 from firmware.hal import TICK_MASK
-from host_sim.physics.params import RobotParams
+from host_sim.physics.params import DRIVE_UNITS, RobotParams
 from protocol import messages as M
 from protocol.framing import FrameEncoder
 
 CYCLE_S = DEFAULT_CYCLE_MS / 1000.0  # s, the firmware's control period
 RULE_SETS = {name: index for index, name in enumerate(RULE_SET_NAMES)}  # "first" -> 0, "refined" -> 1
 
-__all__ = ["CYCLE_S", "RULE_SETS", "TICK_MASK", "Actuate", "IdleController", "Sense", "setup_frames"]
+__all__ = ["CYCLE_S", "RULE_SETS", "TICK_MASK", "Actuate", "IdleController", "Sense", "setup_frames", "hal_duty",
+           "firmware_command", "firmware_drive_block", "FIRMWARE_DRIVES"]
 
 
 @dataclass
@@ -42,6 +45,45 @@ class Actuate:
     i_left_ma: int  # current references
     i_right_ma: int
     emitter_pct: int  # IR emitter pulse width, the light power L
+
+
+DUTY_STEPS = 65535  # the RP2040 HAL's PWM register (duty_u16) at full duty
+# The drives the firmware's current references can run (docs/motors.md "Drives"): a wheel_speed robot closes
+# its own wheel loops, and so does the firmware, so set-points cannot come from it.
+FIRMWARE_DRIVES = ("current", "voltage", "duty")
+
+
+def hal_duty(ma: int) -> float:
+    """The signed PWM duty (fraction) the RP2040 HAL writes for a current reference of ma (firmware/hal_rp2040.py
+    `_drive`): |ma| / CURRENT_FULL_SCALE_MA in 16-bit steps, clipped to full duty
+    (tests/test_drives.py::test_the_hal_duty_is_the_rp2040_hals)."""
+    mag = abs(int(ma))
+    steps = min(mag * DUTY_STEPS // CURRENT_FULL_SCALE_MA, DUTY_STEPS)
+    return (-steps if ma < 0 else steps) / DUTY_STEPS
+
+
+def firmware_command(p: RobotParams) -> Callable[[int], float]:
+    """How a firmware current reference (mA) reaches robot p's drive, in the drive's unit (params.DRIVE_UNITS):
+    a current regulator takes it in A; an H-bridge takes the duty the HAL writes (duty drive), or that duty
+    times the battery voltage (voltage drive).  ValueError for a drive the firmware cannot run."""
+    kind = p.drive_kind
+    if kind == "current":
+        return lambda ma: ma / 1000.0
+    if kind == "duty":
+        return hal_duty
+    if kind == "voltage":
+        volts = p.battery_voltage
+        return lambda ma: hal_duty(ma) * volts
+    raise ValueError(f"drive '{kind}': the robot closes its own wheel-speed loops and the firmware closes its "
+                     f"own, so the firmware's currents cannot set its set-points")
+
+
+def firmware_drive_block(p: RobotParams) -> dict[str, object]:
+    """The recording sidecar's drive block for the firmware's commands on robot p (docs/recordings.md "The drive
+    block"): the HAL's full scale in the firmware's unit (mA) and what it gives in the drive's unit."""
+    kind = p.drive_kind
+    return {"kind": kind, "unit": DRIVE_UNITS[kind], "source_unit": "mA", "full_scale": CURRENT_FULL_SCALE_MA,
+            "at_full_scale": firmware_command(p)(CURRENT_FULL_SCALE_MA)}
 
 
 FIRMWARE_IR_PAIRS = 8  # the firmware's HAL reads eight phototransistors a cycle (Sense.adc_on)

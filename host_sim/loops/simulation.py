@@ -16,7 +16,7 @@ from typing import Callable
 
 import numpy as np
 
-from host_sim.controller.hardware_io import CYCLE_S, Actuate, Sense
+from host_sim.controller.hardware_io import CYCLE_S, Actuate, Sense, firmware_command
 from host_sim.loops.coverage import Coverage
 from host_sim.robot.sim_robot import SimRobot
 from host_sim.physics.params import RobotParams
@@ -95,7 +95,7 @@ class Simulation:
         self.substeps = substeps
         self.cycle_s = cycle_s
         self.recorder = recorder
-        self._rows = _RecordingRows(recorder, controller) if recorder is not None else None
+        self._rows = _RecordingRows(recorder, controller, params) if recorder is not None else None
         self.coverage = Coverage(world, params.body_radius, coverage_resolution)
         self._t: list[float] = []
         self._pose: list[tuple[float, float, float]] = []
@@ -114,7 +114,7 @@ class Simulation:
         if self._rows is not None:
             self._rows.finish()
         self.recorder = recorder
-        self._rows = _RecordingRows(recorder, self.controller) if recorder is not None else None
+        self._rows = _RecordingRows(recorder, self.controller, self.params) if recorder is not None else None
 
     # One control instant: readings -> controller -> currents; log it.
     def control(self) -> None:
@@ -234,19 +234,22 @@ class _RecordingRows:
     robot, plus the simulator's truth (time and pose) as the tracker columns;
     TELEMETRY is matched to its cycle by the tick, since over PIL's serial
     port it may arrive a cycle late.  A controller without firmware (a
-    replay) gives its readings and outputs directly.
+    replay) gives its readings and outputs directly.  The commands are
+    written as they reach the robot's drive, in its unit (firmware_command).
     """
 
-    def __init__(self, writer: RecordingWriter, controller: object) -> None:
+    def __init__(self, writer: RecordingWriter, controller: object, params: RobotParams) -> None:
         self.writer = writer
+        self.command = firmware_command(params)
         self.telemetry: Callable[..., list[dict[str, object]]] | None = getattr(controller, "telemetry", None)
         # tick -> (time, pose, emitter power in force): the simulator's truth for the row of that cycle
         self.truth: dict[int, tuple[float, tuple[float, float, float], int]] = {}
 
     def cycle(self, t: float, pose: tuple[float, float, float], s: Sense, a: Actuate, emitter_pct: int) -> None:
         if self.telemetry is None:
-            self.writer.row(t, (a.i_left_ma / 1000.0, a.i_right_ma / 1000.0), (s.enc_l, s.enc_r), s.adc_on,
-                            s.adc_off, s.vbat_mv / 1000.0, pose, emitter_pct=emitter_pct)
+            cmd = (self.command(a.i_left_ma), self.command(a.i_right_ma))
+            self.writer.row(t, cmd, (s.enc_l, s.enc_r), s.adc_on, s.adc_off, s.vbat_mv / 1000.0, pose,
+                            emitter_pct=emitter_pct)
             return
         self.truth[s.tick_ms] = (t, pose, emitter_pct)
         if len(self.truth) > TRUTH_KEPT:  # a cycle the firmware never reported (it faulted): forget it
@@ -261,4 +264,6 @@ class _RecordingRows:
         for f in frames:
             truth = self.truth.pop(int(f["tick_ms"]), None)  # type: ignore[call-overload]
             if truth is not None:  # else a frame from before this run
-                self.writer.telemetry(f, t=truth[0], pose=truth[1], emitter_pct=truth[2])
+                refs = int(f["i_ref_l_ma"]), int(f["i_ref_r_ma"])  # type: ignore[call-overload]
+                cmd = (self.command(refs[0]), self.command(refs[1]))
+                self.writer.telemetry(f, t=truth[0], pose=truth[1], emitter_pct=truth[2], cmd=cmd)

@@ -148,13 +148,15 @@ class RecordingWriter:
         self.rows += 1
 
     def telemetry(self, f: dict[str, object], *, t: float | None = None,
-                  pose: tuple[float, float, float] | None = None, emitter_pct: float | None = None) -> bool:
+                  pose: tuple[float, float, float] | None = None, emitter_pct: float | None = None,
+                  cmd: tuple[float, float] | None = None) -> bool:
         """One TELEMETRY frame's fields as a row; False if it repeats the tick before (the same cycle twice).
 
         t: the time of the row (default: the robot's clock, unwrapped, from its first frame; after a clock
         reset, one firmware period after the row before, the reset's row kept in the sidecar's clock_resets).
         emitter_pct: the emitter power truly in force for the on-reading (a simulator knows it), instead of
-        the firmware's report.
+        the firmware's report.  cmd: the commands as they reached the robot's drive, in its unit (a simulator
+        knows them; docs/recordings.md "The drive block"), instead of the firmware's current references in A.
         Fields an older firmware does not send (emitter_pct, set-points, odometry) are left empty.
         """
         tick = int(f["tick_ms"])  # type: ignore[call-overload]
@@ -173,8 +175,9 @@ class RecordingWriter:
                         int(f["odo_x"]) / 1e6, int(f["odo_y"]) / 1e6,  # type: ignore[call-overload]
                         _heading_rad(int(f["odo_heading"])))  # type: ignore[call-overload]
         emitter = f.get("emitter_pct") if emitter_pct is None else emitter_pct
-        self.row(self._t_ms / 1000.0 if t is None else t,
-                 (int(f["i_ref_l_ma"]) / 1000.0, int(f["i_ref_r_ma"]) / 1000.0),  # type: ignore[call-overload]
+        if cmd is None:
+            cmd = (int(f["i_ref_l_ma"]) / 1000.0, int(f["i_ref_r_ma"]) / 1000.0)  # type: ignore[call-overload]
+        self.row(self._t_ms / 1000.0 if t is None else t, cmd,
                  (int(f["enc_l"]), int(f["enc_r"])), list(f["ir_on"]), list(f["ir_amb"]),  # type: ignore[call-overload]
                  int(f["vbat_mv"]) / 1000.0, pose,  # type: ignore[call-overload]
                  emitter_pct=None if emitter is None else float(emitter),  # type: ignore[arg-type]

@@ -275,9 +275,10 @@ def replay(rec: Recording, p: RobotParams, world: World, start: int = 0, stop: i
             ir_amb[j] = s.adc_off
         enc[j] = robot.encoder_ticks()
         left, right = inputs.cmd[j]
-        robot.actuate(Actuate(round(left * 1000), round(right * 1000), robot.emitter_pct))
         if p.drive:  # not a current in mA: the command as it stands, in its drive's unit
             robot.i_ref = (float(left), float(right))
+        else:
+            robot.actuate(Actuate(round(left * 1000), round(right * 1000), robot.emitter_pct))
         h = float(inputs.period[j]) / substeps
         for _ in range(substeps):
             robot.advance(h)

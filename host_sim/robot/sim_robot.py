@@ -12,7 +12,7 @@ import numpy as np
 from host_sim.physics import dynamics, motors
 from host_sim.robot.batch import BatchSim
 from host_sim.sensors import ir_sensor
-from host_sim.controller.hardware_io import TICK_MASK, Actuate, Sense
+from host_sim.controller.hardware_io import TICK_MASK, Actuate, Sense, firmware_command
 from host_sim.physics.params import RobotParams
 from host_sim.physics.world import World
 
@@ -28,7 +28,7 @@ class SimRobot:
         x, y, phi = pose if pose is not None else world.start
         q = dynamics.q_from_axle_pose(float(x), float(y), float(phi), params)
         self.batch = BatchSim(world, params, q=[q], substeps=1, bench=bench)  # holds the state and steps it
-        self.i_ref = (0.0, 0.0)  # A
+        self.i_ref = (0.0, 0.0)  # the commands in the drive's unit (A for a current drive)
         self.emitter_pct = 0  # set by the last actuation
         self.emitter_used = 0  # in force for the last sense(): its on-readings' light power
         self.rng = np.random.default_rng(seed) if noise else None
@@ -134,7 +134,10 @@ class SimRobot:
         return px, py, pphi, t
 
     def actuate(self, a: Actuate) -> None:
-        self.i_ref = (a.i_left_ma / 1000.0, a.i_right_ma / 1000.0)
+        """The firmware's outputs: its current references reach the drive as its HAL writes them
+        (hardware_io.firmware_command); ValueError for a drive the firmware cannot run (wheel_speed)."""
+        command = firmware_command(self.p)
+        self.i_ref = (command(a.i_left_ma), command(a.i_right_ma))
         self.emitter_pct = a.emitter_pct
 
     def advance(self, dt: float) -> None:

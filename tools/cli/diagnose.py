@@ -146,7 +146,9 @@ def run(args: argparse.Namespace) -> int:
                   else result.calibration.params if result.calibration is not None else params)
         with writing("--write-params", args.write_params):
             Path(args.write_params).write_text(json.dumps(fitted.to_json(), indent=1) + "\n")
-        use = "sim" if fitted.drive_kind == "current" else "replay"  # the firmware in sim commands currents
+        from host_sim.controller.hardware_io import FIRMWARE_DRIVES
+
+        use = "sim" if fitted.drive_kind in FIRMWARE_DRIVES else "replay"  # the drives the firmware can run
         print(f"wrote {args.write_params}: the twin with {len(result.effects)} fitted effect(s); "
               f"use it with twinbot {use} --params {args.write_params}")
     return 0

@@ -111,7 +111,7 @@ def settings_from(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     from tools.gui.app import Settings
     from tools.cli.sim import load_inputs
 
-    params, world = load_inputs(args)
+    params, world = load_inputs(args, drives=("current",))  # its recordings write the firmware's currents in A
     if args.screenshot and args.frames is None:
         raise CliError("--screenshot needs --frames N (headless run)")
     if args.replay:

@@ -4,7 +4,9 @@ The firmware explores the world with the chosen rule set, either in this
 process (SIL, default) or on a virtual board under MicroPython (--pil).
 Prints the coverage of the free area, the time to 90 % coverage, the
 collisions and the real-time factor; --png draws the trajectory, --record
-writes a recording (CSV + JSON sidecar, docs/recordings.md).
+writes a recording (CSV + JSON sidecar, docs/recordings.md).  A duty or voltage
+robot (--params) takes the PWM duty the firmware's HAL makes of its current
+references; a wheel_speed robot is refused (docs/motors.md "Drives").
 """
 from __future__ import annotations
 
@@ -58,7 +60,9 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
                    help="physics substeps per 40 ms control period, 1..1000 (default 8)")
     p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the sensor noise, >= 0 (default 0)")
     p.add_argument("--no-noise", action="store_true", help="noise-free sensors")
-    p.add_argument("--params", metavar="FILE", help="robot parameters JSON (any subset; see host_sim/physics/params.py)")
+    p.add_argument("--params", metavar="FILE",
+                   help="robot parameters JSON (any subset; see host_sim/physics/params.py); its drive may be "
+                        "current, duty or voltage (docs/motors.md \"Drives\")")
     p.add_argument("--stop-at-exit", action="store_true",
                    help="end the run when the robot leaves the world's area (found the exit), "
                         "instead of simulating it off the map until --duration")
@@ -77,7 +81,10 @@ def parse_speed(speed: str | float, mode: str) -> float:
     return float(speed)
 
 
-def load_inputs(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+def load_inputs(args: argparse.Namespace, drives: tuple[str, ...] | None = None):  # type: ignore[no-untyped-def]
+    """(params, world) from --params and --world; CliError for a robot whose drive is not among `drives`
+    (default: those the firmware can run, hardware_io.FIRMWARE_DRIVES)."""
+    from host_sim.controller.hardware_io import FIRMWARE_DRIVES
     from host_sim.physics.params import DEFAULT, ParamsError, load_params
     from host_sim.physics.world import WorldError, world_by_name_or_path
 
@@ -86,10 +93,13 @@ def load_inputs(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         world = world_by_name_or_path(args.world, params.body_radius)
     except (ParamsError, WorldError) as exc:
         raise CliError(str(exc)) from None
-    if params.drive_kind != "current":  # the firmware commands motor currents (docs/motors.md "Drives")
-        raise CliError(f"{args.params}: drive '{params.drive_kind}': the firmware in the loop commands motor "
-                       f"currents, so the simulation runs a current drive; a {params.drive_kind} robot's "
-                       f"recordings replay and diagnose with its drive (twinbot replay, twinbot diagnose)")
+    allowed = drives or FIRMWARE_DRIVES
+    if params.drive_kind not in allowed:  # docs/motors.md "Drives"
+        why = ("the firmware closes its own wheel loops and a set-point robot has its own, so the firmware cannot "
+               "drive it" if params.drive_kind not in FIRMWARE_DRIVES else
+               f"this command runs {' or '.join(allowed)} drives only")
+        raise CliError(f"{args.params}: drive '{params.drive_kind}': {why}; its recordings replay and diagnose "
+                       f"with its drive (twinbot replay, twinbot diagnose)")
     return params, world
 
 
@@ -185,6 +195,18 @@ def exit_text(result) -> str:  # type: ignore[no-untyped-def]
     return text
 
 
+def drive_meta(params) -> dict[str, object]:  # type: ignore[no-untyped-def]
+    """The sidecar's drive block and units for a robot whose bridge takes the firmware's commands as its HAL
+    writes them (docs/recordings.md "The drive block"); nothing for a current drive, the sidecar's default."""
+    from host_sim.controller.hardware_io import firmware_drive_block
+    from host_sim.recordings.recording import UNITS
+
+    if params.drive_kind == "current":
+        return {}
+    block = firmware_drive_block(params)
+    return {"drive": block, "units": {**UNITS, "cmd_l": block["unit"], "cmd_r": block["unit"]}}
+
+
 def run(args: argparse.Namespace) -> int:
     params, world = load_inputs(args)
     recorder = None
@@ -197,7 +219,7 @@ def run(args: argparse.Namespace) -> int:
                                        extra={"controller": "PIL" if args.pil else "SIL", "rules": args.rules,
                                               "excitation": "manoeuvre" if args.excite else "exploration",
                                               "seed": args.seed, "mode": args.mode, "substeps": args.substeps,
-                                              "noise": not args.no_noise, "emitter_pct": 60})
+                                              "noise": not args.no_noise, "emitter_pct": 60, **drive_meta(params)})
         except RecordingError as exc:
             raise CliError(str(exc)) from None
     try:

@@ -1,8 +1,9 @@
 """Cases for robots of other drives: the plant given an H-bridge, and the firmware's references as that robot's commands.
 
-`with_drive(spec, drive, seed)` makes the robot a voltage, duty or wheel_speed one (its bridge's decay mode and
-winding drawn from a stream of their own); `DriveCommands` turns the firmware's current references into the
-drive's unit, the command that would push that current through the stalled winding.  docs/proving-ground.md.
+`with_drive(spec, drive, seed)` makes the robot a voltage, duty or wheel_speed one (its bridge's decay mode drawn
+from a stream of its own, into the robot's own winding); `DriveCommands` turns the firmware's current references
+into the drive's unit, the command that would push that current through the stalled winding.
+docs/proving-ground.md.
 """
 from __future__ import annotations
 
@@ -12,22 +13,20 @@ from host_sim.controller.hardware_io import Actuate, Sense
 from host_sim.physics.params import DEFAULT, DRIVES
 from tools.reference_plant.robot_model import PlantSpec
 
-INDUCTANCE_SPREAD = 0.1  # relative sd of the winding's inductance about the datasheet's
 BRAKE_SHARE = 0.5  # share of bridge robots whose bridge brakes (slow decay) in its off-phase
 
 
 def with_drive(spec: PlantSpec, drive: str, seed: int) -> PlantSpec:
-    """spec driven by `drive`: unchanged for a current drive; a bridge's decay mode and its winding's inductance
-    drawn for the others (stream [seed, 2024, 9]: the case's effect, world and excitation do not move)."""
+    """spec driven by `drive`: unchanged for a current drive; for the others a bridge, whose decay mode is drawn
+    (stream [seed, 2024, 9]: the case's effect, world and excitation do not move), into the winding the robot
+    already has (PlantSpec.inductance, drawn with the robot: robot_draw.py)."""
     if drive not in DRIVES:
         raise ValueError(f"drive {drive!r} is not one of {', '.join(DRIVES)}")
     if drive == "current":
         return spec
     rng = np.random.default_rng([seed, 2024, 9])
     decay = "brake" if rng.random() < BRAKE_SHARE else "coast"
-    henry = tuple(float(h) * (1.0 + INDUCTANCE_SPREAD * float(np.clip(rng.standard_normal(), -3, 3)))
-                  for h in spec.bridge_inductance)
-    return spec.replace(drive=drive, pwm_decay=decay, bridge_inductance=henry)
+    return spec.replace(drive=drive, pwm_decay=decay)
 
 
 def per_amp(drive: str) -> float:

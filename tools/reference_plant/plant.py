@@ -45,6 +45,9 @@ class Plant:
 
     def __init__(self, spec: PlantSpec, world: World | None, pose: tuple[float, float, float] | None = None,
                  seed: int = 0, timestep: float = 0.001) -> None:
+        if min(spec.inductance) <= 0 and (spec.drive != "current" or spec.current_loop_hz > 0):
+            raise ValueError(f"a current loop or an H-bridge drives the motor's winding: its inductance must be "
+                             f"> 0, got {spec.inductance}")
         self.spec = spec
         self.world = world
         self.model = build_model(spec, world, timestep)
@@ -211,7 +214,7 @@ class Plant:
         """The current driver: (the step's mean current, the power it draws), the reference within the limit."""
         s = self.spec
         i_ref = min(max(self.cmd[k], -s.current_limit), s.current_limit)
-        if s.inductance[k] > 0:
+        if s.current_loop_hz > 0:
             i, u = self._current_loop(k, i_ref, emf, v_bat)
         else:  # the ideal driver: the reference, within what the voltage allows
             ohm = s.armature_resistance[k]
@@ -226,7 +229,7 @@ class Plant:
         duty = command if s.drive == "duty" else command / max(v_bat, 1e-6)
         self._coil[k], i, i_batt = hbridge.step(
             self._coil[k], hbridge.after_deadband(duty, s.driver_deadband), emf, v_bat, s.armature_resistance[k],
-            s.bridge_inductance[k], s.pwm_frequency, s.pwm_decay == "brake", self.dt)
+            s.inductance[k], s.pwm_frequency, s.pwm_decay == "brake", self.dt)
         return i, v_bat * i_batt
 
     def _current_loop(self, k: int, i_ref: float, emf: float, v_bat: float) -> tuple[float, float]:

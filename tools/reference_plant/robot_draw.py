@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from host_sim.physics.params import DEFAULT
 from tools.reference_plant.robot_model import PlantSpec, datasheet_spec
 
 TRUNCATE = 3.0  # standard deviations: a normal draw beyond this is drawn again
@@ -57,12 +58,14 @@ def _datasheet_values(spec: PlantSpec, rng: np.random.Generator) -> PlantSpec:
 def _missing_physics(spec: PlantSpec, rng: np.random.Generator) -> PlantSpec:
     """The physics the twin lacks, each on at a drawn level (docs/proving-ground.md gives the reasons)."""
     u = rng.uniform
+    henry = DEFAULT.motor_inductance
     teeth = float(rng.choice([36.0, 40.0, 45.0, 50.0]))  # one gearbox design: the same output stage both sides
     edges = tuple(tuple(float(np.clip(EDGE_SD * rng.standard_normal(), -0.25, 0.25))
                         for _ in range(EDGES_PER_MOTOR_TURN)) for _ in range(2))
     ir = {**spec.ir, "noise": u(2.0, 5.0)}
     return spec.replace(
-        inductance=(u(0.6e-3, 1.5e-3), u(0.6e-3, 1.5e-3)), current_loop_hz=u(200.0, 500.0),
+        # the winding a datasheet states (the twin's motor_inductance), each motor's within 15 % of it
+        inductance=(henry * u(0.85, 1.15), henry * u(0.85, 1.15)), current_loop_hz=u(200.0, 500.0),
         stiction_ratio=(u(1.1, 1.35), u(1.1, 1.35)), stribeck_speed=u(0.5, 2.0),
         ripple=(u(0.01, 0.04), u(0.01, 0.04)), ripple_teeth=(teeth, teeth),
         ripple_phase=(u(-np.pi, np.pi), u(-np.pi, np.pi)), slip_stiffness=1.75 * u(8.0, 20.0),

@@ -86,8 +86,9 @@ class PlantSpec:
     tracker_noise_xy: float = 0.001  # m, sd
     tracker_noise_phi: float = math.radians(0.3)  # rad, sd
     # --- physics the twin lacks (docs/proving-ground.md, "Physics the twin lacks"); 0 = off
-    inductance: Pair = (0.0, 0.0)  # H; 0 = an ideal driver (the current is its reference within the step)
-    current_loop_hz: float = 300.0  # the driver's PI current loop's bandwidth
+    inductance: Pair = (2.0e-4, 2.0e-4)  # H, the motor's winding: the current loop's plant and the bridge's load
+    current_loop_hz: float = 300.0  # the driver's PI current loop's bandwidth; 0 = an ideal driver (the current
+    # is its reference within the step)
     stiction_ratio: Pair = (1.0, 1.0)  # breakaway / Coulomb torque (Stribeck curve)
     stribeck_speed: float = 1.0  # rad/s at the wheel over which friction falls from breakaway to Coulomb
     ripple: Pair = (0.0, 0.0)  # gear-mesh torque ripple, fraction of the transmitted torque
@@ -115,7 +116,6 @@ class PlantSpec:
     pwm_decay: str = "coast"  # the bridge's off-phase: "coast" (fast decay, diodes) or "brake" (slow decay)
     driver_deadband: float = 0.0  # fraction of full duty below which the bridge gives nothing
     pwm_frequency: float = 20000.0  # Hz
-    bridge_inductance: Pair = (2.0e-4, 2.0e-4)  # H, the winding's L under PWM (`inductance` is the current loop's)
     speed_kp: float = 0.1  # V s/rad, the robot's own wheel-speed loop
     speed_ki: float = 1.0  # V/rad
     speed_loop_period: float = 0.01  # s
@@ -147,7 +147,7 @@ def datasheet_spec(paper_ir: bool = False) -> PlantSpec:
         battery_resistance=0.0, quiescent_current=0.08, vbat_noise=0.005, floor_friction=1.0,
         torsional_friction=0.0, caster_friction=0.0, wall_friction=0.3, floor_tilt=0.0, floor_tilt_direction=0.0,
         ticks_per_rev=two(p.ticks_per_rev), pwm_frequency=p.pwm_frequency,
-        bridge_inductance=two(p.motor_inductance), speed_kp=p.speed_kp, speed_ki=p.speed_ki,
+        inductance=two(p.motor_inductance), current_loop_hz=0.0, speed_kp=p.speed_kp, speed_ki=p.speed_ki,
         speed_loop_period=p.speed_loop_period, board_ticks_per_rev=p.ticks_per_rev,
         ir=ir_paper.datasheet_ir() if paper_ir else {
             **ir_law.NOMINAL, "ambient": p.ir_ambient, "noise": p.ir_noise, "on_delay": p.ir_on_delay,
