@@ -241,8 +241,10 @@ def test_the_drive_effects_change_the_twin_and_sim_robot_agrees(fields):
     assert np.allclose(robot.pose, sim.pose[0], atol=1e-9)
 
 
-def test_twinbot_sim_refuses_a_drive_the_firmware_cannot_command(tmp_path):
-    """A wheel_speed robot closes its own wheel loops, as the firmware does: sim says so in one line, status 2."""
+def test_twinbot_sim_runs_a_wheel_speed_robot_and_the_gui_still_refuses_it(tmp_path):
+    """sim runs the firmware on every drive, a wheel_speed robot's set-points the HAL's duty times its top speed
+    (hardware_io.firmware_command); the GUI, whose recordings write the firmware's currents in A, runs current
+    robots only and says so in one line, status 2."""
     import argparse
 
     from tests.helpers import run_twinbot
@@ -251,14 +253,16 @@ def test_twinbot_sim_refuses_a_drive_the_firmware_cannot_command(tmp_path):
 
     path = tmp_path / "robot.json"
     path.write_text('{"drive": "wheel_speed"}')
-    with pytest.raises(CliError, match="the firmware closes its own wheel loops and a set-point robot has its own"):
-        load_inputs(argparse.Namespace(params=str(path), world="paper_room"))
     r = run_twinbot("sim", "--params", str(path), "--duration", "1")
-    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
-    assert "drive 'wheel_speed'" in r.stderr and "Traceback" not in r.stderr
-    for kind in ("duty", "voltage"):  # a bridge takes the duty the firmware's HAL writes
+    assert r.returncode == 0 and "coverage" in r.stdout and not r.stderr, r.stdout + r.stderr
+    for kind in ("duty", "voltage", "wheel_speed"):  # a bridge takes the duty the firmware's HAL writes
         path.write_text(json.dumps({"drive": kind}))
         assert load_inputs(argparse.Namespace(params=str(path), world="paper_room"))[0].drive_kind == kind
+        with pytest.raises(CliError, match=f"drive '{kind}': this command runs current drives only"):
+            load_inputs(argparse.Namespace(params=str(path), world="paper_room"), drives=("current",))
+    r = run_twinbot("gui", "--params", str(path), "--frames", "1")
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert "drive 'wheel_speed'" in r.stderr and "Traceback" not in r.stderr
 
 
 def test_the_hal_duty_is_the_rp2040_hals(monkeypatch):
@@ -294,8 +298,9 @@ def test_the_hal_duty_is_the_rp2040_hals(monkeypatch):
     assert hal_duty(CURRENT_FULL_SCALE_MA // 2) == pytest.approx(0.5, abs=2e-5) and hal_duty(-5000) == -1.0
     assert firmware_command(RobotParams(drive="voltage", battery_voltage=6.0))(-5000) == -6.0
     assert firmware_command(DEFAULT)(-250) == -0.25  # a current drive: the reference in A, as ever
-    with pytest.raises(ValueError, match="wheel-speed loops"):
-        firmware_command(RobotParams(drive="wheel_speed"))
+    set_point = RobotParams(drive="wheel_speed", battery_voltage=6.0, torque_constant=0.004, gear_ratio=30.0)
+    assert firmware_command(set_point)(-5000) == pytest.approx(-50.0)  # full duty: V / (k_e N), the top speed
+    assert firmware_command(set_point)(CURRENT_FULL_SCALE_MA // 4) == hal_duty(CURRENT_FULL_SCALE_MA // 4) * 6.0 / 0.12
 
 
 @pytest.mark.slow

@@ -211,14 +211,12 @@ def test_sim_runs_the_papers_explorer_alone_on_request():
     assert float(lines[()]) > 1.5 * float(lines[("--no-stall-guard",)]), lines
 
 
-@pytest.mark.parametrize("robot", [{"drive": "duty", "pwm_decay": "coast", "motor_inductance": 2e-3},
-                                   {"drive": "voltage", "battery_resistance": 0.3}])
-def test_sim_runs_a_bridge_robot_and_its_recording_replays_and_diagnoses_as_a_match(tmp_path, robot):
-    """A duty or voltage robot runs the firmware unchanged, its currents reaching the bridge as the RP2040 HAL
-    writes them (hardware_io.firmware_command); the recording carries the drive, and replay and diagnose of it
-    feed the same drive: the replayed wheels are the recorded ones and the diagnosis says match."""
+def sim_record_replay(tmp_path, robot: dict[str, object]):
+    """Run the firmware 30 s on the robot `robot` gives, with --record; check the recording's drive block, its
+    commands (what hardware_io.firmware_command makes of the firmware's currents) and that replay gives back its
+    encoders and pose exactly.  (the recording file, the recording, the robot's params)"""
     from firmware.config import CURRENT_FULL_SCALE_MA
-    from host_sim.controller.hardware_io import firmware_command
+    from host_sim.controller.hardware_io import firmware_command, top_speed
     from host_sim.physics.params import load_params
 
     params_file, rec_file = tmp_path / "robot.json", tmp_path / "run.csv"
@@ -229,15 +227,37 @@ def test_sim_runs_a_bridge_robot_and_its_recording_replays_and_diagnoses_as_a_ma
     p = load_params(params_file)
     block = rec.meta["drive"]
     assert rec.drive == robot["drive"] and block["source_unit"] == "mA" and block["full_scale"] == CURRENT_FULL_SCALE_MA
-    assert block["at_full_scale"] == (1.0 if robot["drive"] == "duty" else p.battery_voltage)
+    at_full_scale = {"duty": 1.0, "voltage": p.battery_voltage, "wheel_speed": top_speed(p)}[p.drive_kind]
+    assert block["at_full_scale"] == at_full_scale
     assert rec.meta["units"]["cmd_l"] == block["unit"] and np.abs(rec.cmd).max() <= block["at_full_scale"]
     assert np.ptp(rec.enc, axis=0).min() > 1000  # the firmware drove it: explored, both wheels turning
     again = replay(rec, load_params(params_file), ROOM, exact_sensors=True, seed=None)
     np.testing.assert_array_equal(again.enc, rec.enc)
     np.testing.assert_array_equal(again.pose, rec.pose)
-    d = run_twinbot("diagnose", str(rec_file))
-    assert d.returncode == 0 and f"{rec_file}: match" in d.stdout, d.stdout + d.stderr
     short = Simulation(ROOM, p, SilController(1, params=p), seed=2).run_fixed(2.0)
     command = firmware_command(p)
     np.testing.assert_array_equal(rec.cmd[:len(short.t)], [[command(round(1000 * c)) for c in row]
                                                           for row in short.cmd])
+    return rec_file, rec, p
+
+
+@pytest.mark.parametrize("robot", [{"drive": "duty", "pwm_decay": "coast", "motor_inductance": 2e-3},
+                                   {"drive": "voltage", "battery_resistance": 0.3}])
+def test_sim_runs_a_bridge_robot_and_its_recording_replays_and_diagnoses_as_a_match(tmp_path, robot):
+    """A duty or voltage robot runs the firmware unchanged, its currents reaching the bridge as the RP2040 HAL
+    writes them (hardware_io.firmware_command); the recording carries the drive, and replay and diagnose of it
+    feed the same drive: the replayed wheels are the recorded ones and the diagnosis says match."""
+    rec_file, _rec, _p = sim_record_replay(tmp_path, robot)
+    d = run_twinbot("diagnose", str(rec_file))
+    assert d.returncode == 0 and f"{rec_file}: match" in d.stdout, d.stdout + d.stderr
+
+
+def test_sim_runs_a_wheel_speed_robot_and_its_recording_replays(tmp_path):
+    """A wheel_speed robot runs the firmware unchanged, its board taking the HAL's duty as a fraction of its top
+    speed (hardware_io.top_speed): the set-points are recorded in rad/s and replay gives back the wheels.
+    (Diagnose of it is not asserted: its windows start the robot's own speed loop afresh, docs/motors.md.)"""
+    from host_sim.controller.hardware_io import top_speed
+
+    _rec_file, rec, p = sim_record_replay(tmp_path, {"drive": "wheel_speed", "speed_kp": 0.2})
+    assert rec.meta["units"]["cmd_l"] == "rad/s" and top_speed(p) == pytest.approx(7.4 / (0.0038 * 50))
+    assert np.abs(rec.cmd).max() > 0.1 * top_speed(p)  # set-points, not the firmware's amperes

@@ -23,7 +23,7 @@ CYCLE_S = DEFAULT_CYCLE_MS / 1000.0  # s, the firmware's control period
 RULE_SETS = {name: index for index, name in enumerate(RULE_SET_NAMES)}  # "first" -> 0, "refined" -> 1
 
 __all__ = ["CYCLE_S", "RULE_SETS", "TICK_MASK", "Actuate", "IdleController", "Sense", "setup_frames", "hal_duty",
-           "firmware_command", "firmware_drive_block", "FIRMWARE_DRIVES"]
+           "top_speed", "firmware_command", "firmware_drive_block", "FIRMWARE_DRIVES"]
 
 
 @dataclass
@@ -48,9 +48,9 @@ class Actuate:
 
 
 DUTY_STEPS = 65535  # the RP2040 HAL's PWM register (duty_u16) at full duty
-# The drives the firmware's current references can run (docs/motors.md "Drives"): a wheel_speed robot closes
-# its own wheel loops, and so does the firmware, so set-points cannot come from it.
-FIRMWARE_DRIVES = ("current", "voltage", "duty")
+# The drives the firmware's current references can run (docs/motors.md "Drives"): every one; a wheel_speed
+# robot's board takes the HAL's duty as a fraction of its top speed (firmware_command).
+FIRMWARE_DRIVES = ("current", "voltage", "duty", "wheel_speed")
 
 
 def hal_duty(ma: int) -> float:
@@ -62,10 +62,17 @@ def hal_duty(ma: int) -> float:
     return (-steps if ma < 0 else steps) / DUTY_STEPS
 
 
+def top_speed(p: RobotParams) -> float:
+    """The no-load wheel speed (rad/s) robot p's bridge gives at full duty: the nominal battery_voltage over
+    the back-EMF constant through the gear (torque_constant * gear_ratio), where e = k_e N w meets V_s."""
+    return p.battery_voltage / (p.torque_constant * p.gear_ratio)
+
+
 def firmware_command(p: RobotParams) -> Callable[[int], float]:
     """How a firmware current reference (mA) reaches robot p's drive, in the drive's unit (params.DRIVE_UNITS):
     a current regulator takes it in A; an H-bridge takes the duty the HAL writes (duty drive), or that duty
-    times the battery voltage (voltage drive).  ValueError for a drive the firmware cannot run."""
+    times the battery voltage (voltage drive); a set-point robot's board takes that duty as a fraction of its
+    top speed (wheel_speed drive: top_speed), so the firmware's wheel PI sits outside the robot's speed loop."""
     kind = p.drive_kind
     if kind == "current":
         return lambda ma: ma / 1000.0
@@ -74,8 +81,10 @@ def firmware_command(p: RobotParams) -> Callable[[int], float]:
     if kind == "voltage":
         volts = p.battery_voltage
         return lambda ma: hal_duty(ma) * volts
-    raise ValueError(f"drive '{kind}': the robot closes its own wheel-speed loops and the firmware closes its "
-                     f"own, so the firmware's currents cannot set its set-points")
+    if kind == "wheel_speed":
+        speed = top_speed(p)
+        return lambda ma: hal_duty(ma) * speed
+    raise ValueError(f"drive '{kind}': not one the firmware's HAL can drive")
 
 
 def firmware_drive_block(p: RobotParams) -> dict[str, object]:

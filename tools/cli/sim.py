@@ -4,9 +4,9 @@ The firmware explores the world with the chosen rule set, either in this
 process (SIL, default) or on a virtual board under MicroPython (--pil).
 Prints the coverage of the free area, the time to 90 % coverage, the
 collisions and the real-time factor; --png draws the trajectory, --record
-writes a recording (CSV + JSON sidecar, docs/recordings.md).  A duty or voltage
-robot (--params) takes the PWM duty the firmware's HAL makes of its current
-references; a wheel_speed robot is refused (docs/motors.md "Drives").
+writes a recording (CSV + JSON sidecar, docs/recordings.md).  A bridge robot
+(--params) takes the PWM duty the firmware's HAL makes of its current references,
+a wheel_speed robot's board that duty times its top speed (docs/motors.md "Drives").
 """
 from __future__ import annotations
 
@@ -62,7 +62,7 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-noise", action="store_true", help="noise-free sensors")
     p.add_argument("--params", metavar="FILE",
                    help="robot parameters JSON (any subset; see host_sim/physics/params.py); its drive may be "
-                        "current, duty or voltage (docs/motors.md \"Drives\")")
+                        "any: current, voltage, duty or wheel_speed (docs/motors.md \"Drives\")")
     p.add_argument("--stop-at-exit", action="store_true",
                    help="end the run when the robot leaves the world's area (found the exit), "
                         "instead of simulating it off the map until --duration")
@@ -95,11 +95,9 @@ def load_inputs(args: argparse.Namespace, drives: tuple[str, ...] | None = None)
         raise CliError(str(exc)) from None
     allowed = drives or FIRMWARE_DRIVES
     if params.drive_kind not in allowed:  # docs/motors.md "Drives"
-        why = ("the firmware closes its own wheel loops and a set-point robot has its own, so the firmware cannot "
-               "drive it" if params.drive_kind not in FIRMWARE_DRIVES else
-               f"this command runs {' or '.join(allowed)} drives only")
-        raise CliError(f"{args.params}: drive '{params.drive_kind}': {why}; its recordings replay and diagnose "
-                       f"with its drive (twinbot replay, twinbot diagnose)")
+        raise CliError(f"{args.params}: drive '{params.drive_kind}': this command runs {' or '.join(allowed)} "
+                       f"drives only; its recordings replay and diagnose with its drive (twinbot replay, "
+                       f"twinbot diagnose)")
     return params, world
 
 
