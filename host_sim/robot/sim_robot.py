@@ -135,7 +135,7 @@ class SimRobot:
 
     def actuate(self, a: Actuate) -> None:
         """The firmware's outputs: its current references reach the drive as its HAL writes them
-        (hardware_io.firmware_command); ValueError for a drive the firmware cannot run (wheel_speed)."""
+        (hardware_io.firmware_command), a wheel_speed robot's board as set-points (the duty times its top speed)."""
         command = firmware_command(self.p)
         self.i_ref = (command(a.i_left_ma), command(a.i_right_ma))
         self.emitter_pct = a.emitter_pct
