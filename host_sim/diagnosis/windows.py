@@ -215,6 +215,9 @@ def _run_windows(rec: Recording, windows: Windows, params: Any, world: World | N
     # Each window's twin lives its own rows' recorded durations, a late row (the board's loop overran) or a
     # missed cycle as long as it lasted (tests/test_diagnosis.py::test_a_board_whose_loop_overran_matches).
     period = np.repeat(inputs.period[idx].T, n_sets, axis=1)  # (T, W * N)
+    # A set-point robot's own loop has been holding its wheels: its twin does not wind up from 0 in each window
+    # (tests/test_simulation.py::test_sim_runs_a_wheel_speed_robot_and_its_recording_replays).
+    sim.hold_speeds()
     _seed_commands(sim, rec, inputs.cmd, first, n_sets)
     sim.engage_gears(np.repeat(_last_push(inputs.cmd, first), n_sets, axis=0))
     if windows.sliding is not None and windows.body is not None:  # where the tracker saw the robot slide

@@ -27,6 +27,7 @@ SCRUB_SMOOTHING_SPEED = 0.01  # rad/s at the wheel: and the tyres' scrub over th
 CASTER_BEHIND = 0.045  # m: the caster sits on the body's axis this far behind C (3/4 of the body radius)
 MIN_ROTOR_SHARE = 0.05  # the motor side's inertia is at least this share of wheel_inertia (backlash)
 SUPPLY_NEWTON = 8  # Newton steps on the supply voltage (converged to 1e-12 V_bat once the limits in force are found)
+HOLD_BISECTIONS = 30  # halvings of the duty's [-1, 1]: 2e-9 of full duty
 # RobotParams fields that switch this path on when any robot has them away from 0: the library's (effects.py).
 FIELDS = effects.fields_needing("drivetrain_effects")
 # and these, which only a drive other than current reads (that drive takes this path anyway)
@@ -167,6 +168,22 @@ def _drive_currents(cmd: np.ndarray, w: np.ndarray, volts: np.ndarray, d: Drive)
     if np.all(d.kind):
         return i
     return np.where(d.kind == CURRENT, _currents(np.clip(cmd, -d.lim, d.lim), emf, volts, d.res)[0], i)
+
+
+def holding_volts(w: np.ndarray, d: Drive) -> np.ndarray:
+    """(N, 2) the volts across each motor (a voltage command) whose bridge current holds its wheel at speed w
+    against the dry and viscous friction, (t_c sign(w) + c_v w) / (eta N k_t), with the bridge's own law (coast
+    decay at light load is not the linear average): bisection on the duty, at the battery's open-circuit
+    voltage.  Where a set-point robot's loop stands after holding w (BatchSim.hold_speeds)."""
+    want = (d.t_c * np.sign(w) + d.c_v * w) / (d.eta * d.gear * d.kt)
+    emf, vb = d.kt * d.gear * w, d.v_bat[:, None]
+    lo, hi = -np.ones_like(w), np.ones_like(w)
+    for _ in range(HOLD_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        i = motors.bridge_current(motors.bridge_duty(mid, d.deadband, d.dead_time, d.f_pwm), emf, vb, d.res_w,
+                                  d.ind, d.f_pwm, d.brake)
+        lo, hi = np.where(i < want, mid, lo), np.where(i < want, hi, mid)
+    return 0.5 * (lo + hi) * vb
 
 
 def _bridge_supply(cmd: np.ndarray, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray]:

@@ -354,6 +354,13 @@ class BatchSim:
             self.gear_gap = gap
             self.rotor_speed = self.v.copy()  # the motor sides turn with their wheels
 
+    def hold_speeds(self) -> None:
+        """The wheel_speed drive's loops as if they had held the wheels at their present speeds: each integral
+        at the volts that keep a wheel turning at its speed against its friction
+        (drivetrain_effects.holding_volts)."""
+        if self._speed is not None and self._fx is not None:
+            self._speed.hold(drivetrain_effects.holding_volts(self.v, self._fx))
+
     def encoder_angles(self) -> np.ndarray:
         """(N, 2) what the encoders count, in wheel radians: the motor's angle / N (the wheel's, but for
         the backlash's gap)."""
