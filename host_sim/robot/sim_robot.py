@@ -25,6 +25,7 @@ class SimRobot:
                  seed: int | None = 0, noise: bool = True, bench: bool = False) -> None:
         """bench: the body held, the wheels off the floor (a bench recording's replay, BatchSim's bench)."""
         self.p = params
+        self._command = firmware_command(params)  # once, not each control cycle: the drive does not change
         x, y, phi = pose if pose is not None else world.start
         q = dynamics.q_from_axle_pose(float(x), float(y), float(phi), params)
         self.batch = BatchSim(world, params, q=[q], substeps=1, bench=bench)  # holds the state and steps it
@@ -136,8 +137,7 @@ class SimRobot:
     def actuate(self, a: Actuate) -> None:
         """The firmware's outputs: its current references reach the drive as its HAL writes them
         (hardware_io.firmware_command), a wheel_speed robot's board as set-points (the duty times its top speed)."""
-        command = firmware_command(self.p)
-        self.i_ref = (command(a.i_left_ma), command(a.i_right_ma))
+        self.i_ref = (self._command(a.i_left_ma), self._command(a.i_right_ma))
         self.emitter_pct = a.emitter_pct
 
     def advance(self, dt: float) -> None:
