@@ -367,8 +367,8 @@ def _around(x: np.ndarray, half: np.ndarray, sizes: list[int], lo: np.ndarray,
 
 
 def sandwich_intervals(x: np.ndarray, jac: np.ndarray, r: np.ndarray, sizes: list[int], lo: np.ndarray,
-                        hi: np.ndarray, windows: np.ndarray, prior: np.ndarray | None = None
-                        ) -> list[list[tuple[float, float]]]:
+                       hi: np.ndarray, windows: np.ndarray, prior: np.ndarray | None = None
+                       ) -> list[list[tuple[float, float]]]:
     """95 % intervals from a cluster-robust sandwich, a run of touching windows the cluster (touching_runs):
     (J'J)^-1 (sum over clusters of J_g' r_g r_g' J_g) (J'J)^-1 G / (G - 1), with a t quantile on G - 1
     degrees of freedom (G clusters).  The residuals within a window are correlated (a start state, a speed
