@@ -243,3 +243,23 @@ def test_a_warm_start_with_the_axle_torques_gives_the_same_step():
     assert all(len(f) == 3 and abs(f[2]) <= P.coulomb_friction for f in cold[4][0])
     assert any(abs(f[2]) > 0.1 * P.coulomb_friction for f in cold[4][0])  # the axles hold the wheels
     assert np.allclose(warm[0], cold[0], atol=1e-9) and np.allclose(warm[1], cold[1], atol=1e-7)
+
+
+def test_breakaway_friction_holds_a_wheel_coulomb_friction_lets_turn():
+    """A build with 30 % breakaway friction (stiction_l/_r, Drive.dry): from rest 1.2 times the dry friction's
+    current holds both wheels exactly, 1.4 times starts them; once turning well past the Stribeck speed, 1.2
+    times keeps them turning, at the speed the Coulomb friction alone allows."""
+    sticky = P.replace(stiction_l=0.3, stiction_r=0.3, stribeck_speed=0.5)
+
+    def run(currents):
+        sim = BatchSim(OPEN, sticky, poses=[OPEN.start], substeps=8)
+        res = sim.run_inputs(np.asarray(currents, dtype=float), sensors=False)
+        return sim, res
+
+    sim, res = run(np.full((100, 2), 1.2 * BREAKAWAY))
+    assert not res.enc.any() and (sim.v == 0.0).all()
+    sim, res = run(np.full((100, 2), 1.4 * BREAKAWAY))
+    assert (sim.v > 0.0).all()
+    sim, res = run(np.vstack([np.full((100, 2), 0.1), np.full((400, 2), 1.2 * BREAKAWAY)]))
+    held = 0.2 * P.coulomb_friction / P.viscous_friction  # the net 0.2 T_c against c_v w
+    assert sim.v[0] == pytest.approx([held, held], rel=0.05)

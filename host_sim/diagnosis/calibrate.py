@@ -1,8 +1,8 @@
 """Calibrate the twin within the datasheet's tolerance: the robot's own build, fitted before any effect.
 
-Each wheel's radius, torque constant and friction, the track, the battery's voltage and each located
-sensor's gain are fitted as nuisance parameters, bounded by their bands (tolerance.py) with a Gaussian
-prior of half a band, on the training windows alone.  Reference: docs/diagnosis.md, "Within the
+Each wheel's radius, torque constant, friction and breakaway friction, the track, the battery's voltage
+and each located sensor's gain are fitted as nuisance parameters, bounded by their bands (tolerance.py)
+with a Gaussian prior of half a band, on the training windows alone.  Reference: docs/diagnosis.md, "Within the
 datasheet's tolerance".
 """
 from __future__ import annotations
@@ -18,17 +18,18 @@ from host_sim.diagnosis.channels import drive_channel, sensor_channel
 from host_sim.diagnosis.fit import (FIT_FTOL, FIT_XTOL, Model, Objective, sandwich_intervals, earns_its_place,
                                    f_test, touching_runs)
 from host_sim.physics import effects as E
-from host_sim.diagnosis.tolerance import Tolerance
+from host_sim.diagnosis.tolerance import ABSOLUTE, Tolerance
 from host_sim.physics.params import RobotParams
 
 PRIOR_SD = 0.5  # of a band: a band holds about 95 % of robots built to the datasheet (±2 sd)
 MAX_EVALUATIONS = 20  # of the least-squares fit; each runs every training window for each parameter
 AT_EDGE = 0.98  # of a band: a value fitted this far out sits at the tolerance's edge (said so in the report)
+START_INSIDE = 0.1  # of a band: where a one-sided nuisance's fit starts (inside)
 RELEASE = 5.0  # bands: how far an edge's nuisance may go when freed to ask whether it holds back a fault
-PER_WHEEL = ("wheel_radius", "torque_constant", "coulomb_friction", "viscous_friction")
+PER_WHEEL = ("wheel_radius", "torque_constant", "coulomb_friction", "viscous_friction", "stiction")
 WHEEL_FIELD = {"wheel_radius": "wheel_radius_delta_{w}", "torque_constant": "torque_constant_delta_{w}",
                "coulomb_friction": "coulomb_friction_delta_{w}", "viscous_friction": "viscous_friction_delta_{w}",
-               "armature_resistance": "armature_resistance_delta_{w}"}
+               "armature_resistance": "armature_resistance_delta_{w}", "stiction": "stiction_{w}"}
 
 
 @dataclass(frozen=True)
@@ -98,7 +99,9 @@ def set_values(p: RobotParams, tol: Tolerance, nuisances: list[Nuisance], x: np.
     changes: dict[str, Any] = {}
     ds = tol.datasheet
     for n, v in zip(nuisances, x):
-        if n.index is not None:
+        if n.quantity in ABSOLUTE:  # absent on the datasheet: the value itself
+            changes[n.field] = float(v)
+        elif n.index is not None:
             scales = list(changes.get(n.field, getattr(p, n.field)))
             scales[n.index] = float(getattr(ds, n.field)[n.index]) * (1.0 + float(v))
             changes[n.field] = tuple(scales)
@@ -109,14 +112,29 @@ def set_values(p: RobotParams, tol: Tolerance, nuisances: list[Nuisance], x: np.
     return dataclasses.replace(p, **changes)
 
 
+def lower_bounds(nuisances: list[Nuisance], band: np.ndarray) -> np.ndarray:
+    """Each nuisance's lower bound: -band, or 0 for a quantity absent on the datasheet (tolerance.ABSOLUTE),
+    which a build has or lacks but never holds below none."""
+    return np.where([n.quantity in ABSOLUTE for n in nuisances], 0.0, -band)
+
+
+def inside(x0: np.ndarray, lo: np.ndarray, band: np.ndarray) -> np.ndarray:
+    """x0 with each one-sided nuisance (lower bound 0) at least START_INSIDE of its band from it: started on
+    its bound, the fit's first trust-region step was rejected and it ended where it began
+    (tests/test_tolerance.py::test_a_robot_within_its_tolerance_is_a_match)."""
+    return np.where(lo == 0.0, np.maximum(x0, START_INSIDE * band), x0)
+
+
 def calibrate(obj: Objective, params: RobotParams, tol: Tolerance, nuisances: list[Nuisance]) -> Calibration:
     """The MAP fit of the nuisances on obj's training windows: weighted residuals and the prior's rows
-    x / (PRIOR_SD band), x bounded by ±band, from the datasheet (x = 0).  Nothing held out is seen."""
+    x / (PRIOR_SD band), x bounded by ±band (0..band if one-sided), from the datasheet (x = 0; inside).
+    Nothing held out is seen."""
     if not nuisances:
         return Calibration(params)
     band = np.array([tol.bands[n.quantity] for n in nuisances])
-    x = _least_squares(obj, lambda x: set_values(params, tol, nuisances, x), np.zeros(len(nuisances)), -band, band,
-                       PRIOR_SD * band)[0]
+    lo = lower_bounds(nuisances, band)
+    x = _least_squares(obj, lambda x: set_values(params, tol, nuisances, x), inside(np.zeros(len(nuisances)), lo, band),
+                       lo, band, PRIOR_SD * band)[0]
     return Calibration(set_values(params, tol, nuisances, x), list(nuisances), [float(v) for v in x],
                        [float(b) for b in band])
 
@@ -146,9 +164,9 @@ def refit_jointly(obj: Objective, tol: Tolerance, cal: Calibration, model: Model
     band = np.array([cal.bands[i] for i in keep])
     sizes = [len(v) for v in model.values]
     lo_e, hi_e = (np.concatenate([E.bounds(c.name, tol.datasheet)[j] for c in model.effects]) for j in (0, 1))
-    lo, hi = np.concatenate([-band, lo_e]), np.concatenate([band, hi_e])
-    x0 = np.clip(np.concatenate([[cal.values[i] for i in keep], np.concatenate(model.values)]),
-                 lo + 1e-3 * (hi - lo), hi - 1e-3 * (hi - lo))
+    lo, hi = np.concatenate([lower_bounds(nuis, band), lo_e]), np.concatenate([band, hi_e])
+    x0 = np.clip(np.concatenate([inside(np.array([cal.values[i] for i in keep]), lo[:len(keep)], band),
+                                 np.concatenate(model.values)]), lo + 1e-3 * (hi - lo), hi - 1e-3 * (hi - lo))
     sd = np.concatenate([PRIOR_SD * band, np.full(len(lo_e), np.inf)])
     base = set_values(tol.datasheet, tol, [n for n in cal.nuisances if n not in nuis],
                       np.array([v for n, v in zip(cal.nuisances, cal.values) if n not in nuis]))
@@ -215,10 +233,10 @@ def edge_binds(obj: Objective, params: RobotParams, tol: Tolerance, cal: Calibra
     if not edge:
         return False
     band = np.array(cal.bands)
-    lo, hi, sd = -band.copy(), band.copy(), PRIOR_SD * band
-    lo[edge], hi[edge], sd[edge] = -RELEASE * band[edge], RELEASE * band[edge], np.inf
-    freed = _least_squares(obj, lambda x: set_values(params, tol, cal.nuisances, x), np.array(cal.values),
-                           lo, hi, sd)[0]
+    lo, hi, sd = lower_bounds(cal.nuisances, band), band.copy(), PRIOR_SD * band
+    lo[edge], hi[edge], sd[edge] = np.sign(lo[edge]) * RELEASE * band[edge], RELEASE * band[edge], np.inf
+    freed = _least_squares(obj, lambda x: set_values(params, tol, cal.nuisances, x),
+                           inside(np.array(cal.values), lo, band), lo, hi, sd)[0]
     robots = [set_values(params, tol, cal.nuisances, np.array(cal.values)),
               set_values(params, tol, cal.nuisances, freed)]
     train, test = obj.residuals(robots)

@@ -25,7 +25,11 @@ BANDS: dict[str, float] = {
     "current_limit": 0.06,  # the sense resistor
     "battery_voltage": 0.15,  # the state of charge: a 2S pack's 6.4-8.4 V about 7.4 V
     "ir_gain": 0.15,  # an optical pair's efficiency, each pair its own
+    "stiction": 0.4,  # a greased gear train's breakaway friction, 0-40 % above its dry friction
 }
+# Bands of a quantity the datasheet gives as absent (0): the band is the value itself, one-sided, not a
+# fraction of the datasheet's (calibrate.set_values, calibrate.lower_bounds).
+ABSOLUTE = ("stiction",)
 # The effect parameter fields whose value is a change from a datasheet value (a wheel's delta), by the
 # datasheet field it changes; the others set the datasheet field itself (half_axle) or a relative scale
 # (ir_gain_scale, about 1).

@@ -41,9 +41,11 @@ def rotor_step(wm: np.ndarray, w_other: np.ndarray, i_ref: np.ndarray, dt: np.nd
         _volts, i = drivetrain_effects.supply(i_ref, np.where(eng, w_other, w), d)
         return d.eta * d.gear * d.kt * i - d.c_v * w
 
+    t_m = d.dry(wm)
+
     def dry(free: np.ndarray, kk: np.ndarray) -> np.ndarray:
         fl, fr, sl, sr = friction.solve_batch(free[:, 0], free[:, 1], kk[:, 0], 0.0, 0.0, kk[:, 0],
-                                              d.t_c[:, 0], d.t_c[:, 1], wm)
+                                              t_m[:, 0], t_m[:, 1], wm)
         return np.stack(friction.end_speeds_batch(free[:, 0], free[:, 1], kk[:, 0], 0.0, 0.0, kk[:, 0],
                                                   fl, fr, sl, sr), 1)
 
@@ -63,7 +65,7 @@ def phase(q: np.ndarray, v: np.ndarray, wm: np.ndarray, i_ref: np.ndarray, dt: n
 
     iw = np.where(eng, d.iw[:, None], d.iw[:, None] - d.i_r)
     q1, v1, tau, cur, volts = drivetrain_effects.drive_step(q, v, i_ref, dt, d, dc, torque, drivetrain_effects.inertia(d, iw),
-                                                       np.where(eng, d.t_c, 0.0))
+                                                       np.where(eng, d.dry(v), 0.0))
     lam = np.where(eng, tau - d.i_r * (v1 - v) / _col(dt), 0.0)
     return [q1, v1, np.where(eng, v1, wm1), lam, cur, volts]
 

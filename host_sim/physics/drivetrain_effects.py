@@ -32,13 +32,14 @@ HOLD_BISECTIONS = 30  # halvings of the duty's [-1, 1]: 2e-9 of full duty
 FIELDS = effects.fields_needing("drivetrain_effects")
 # and these, which only a drive other than current reads (that drive takes this path anyway)
 BRIDGE_FIELDS = ("drive", "armature_resistance_delta_l", "armature_resistance_delta_r")
+STICTION_FIELDS = ("stiction_l", "stiction_r")  # breakaway friction: the build's, not a library effect
 CURRENT, VOLTAGE, DUTY, WHEEL_SPEED = range(4)  # params.DRIVES, as RobotParams.drive holds them
 SLOPE_STEP = 1e-4  # rad/s: the bridge current's slope in the wheel speed by a central difference over this
 
 
 def active(p: Params) -> bool:
     """True if any drive effect is present or any drive is not current (p a RobotParams or a ParamBatch)."""
-    return any(np.any(np.asarray(getattr(p, f)) != 0.0) for f in FIELDS + BRIDGE_FIELDS)
+    return any(np.any(np.asarray(getattr(p, f)) != 0.0) for f in FIELDS + BRIDGE_FIELDS + STICTION_FIELDS)
 
 
 def _pair(a: PerRobot, b: PerRobot) -> np.ndarray:
@@ -52,6 +53,8 @@ class Drive:
     radius: np.ndarray  # (N, 2) m
     kt: np.ndarray  # (N, 2) N m/A
     t_c: np.ndarray  # (N, 2) N m
+    stiction: np.ndarray  # (N, 2) the breakaway friction beyond t_c, as a fraction of it
+    w_s: np.ndarray  # (N, 1) rad/s, the Stribeck speed
     c_v: np.ndarray  # (N, 2) N m s/rad
     lim: np.ndarray  # (N, 1) A
     gear: np.ndarray  # (N, 1)
@@ -96,6 +99,7 @@ class Drive:
                    kt=_pair(p.torque_constant + p.torque_constant_delta_l, p.torque_constant + p.torque_constant_delta_r),
                    t_c=_pair(p.coulomb_friction + p.coulomb_friction_delta_l,
                              p.coulomb_friction + p.coulomb_friction_delta_r),
+                   stiction=_pair(p.stiction_l, p.stiction_r), w_s=col(p.stribeck_speed),
                    c_v=_pair(p.viscous_friction + p.viscous_friction_delta_l,
                              p.viscous_friction + p.viscous_friction_delta_r),
                    lim=col(p.current_limit), gear=col(p.gear_ratio), eta=col(p.gear_efficiency),
@@ -112,6 +116,14 @@ class Drive:
                    ind=col(p.motor_inductance),
                    res_w=_pair(p.armature_resistance + p.armature_resistance_delta_l,
                                p.armature_resistance + p.armature_resistance_delta_r))
+
+    def dry(self, w: np.ndarray) -> np.ndarray:
+        """(N, 2) each axle's dry friction bound at wheel speeds w (N, 2) (the step's start): t_c (1 + stiction
+        exp(-(w / w_s)^2)), the breakaway at rest falling to t_c in motion (Stribeck), held over the step
+        (tests/test_friction.py::test_breakaway_friction_holds_a_wheel_coulomb_friction_lets_turn)."""
+        if not self.stiction.any():
+            return self.t_c
+        return self.t_c * (1.0 + self.stiction * np.exp(-(w / self.w_s) ** 2))
 
     def sub(self, s: np.ndarray) -> Drive:
         """Robots s only."""
@@ -175,7 +187,7 @@ def holding_volts(w: np.ndarray, d: Drive) -> np.ndarray:
     against the dry and viscous friction, (t_c sign(w) + c_v w) / (eta N k_t), with the bridge's own law (coast
     decay at light load is not the linear average): bisection on the duty, at the battery's open-circuit
     voltage.  Where a set-point robot's loop stands after holding w (BatchSim.hold_speeds)."""
-    want = (d.t_c * np.sign(w) + d.c_v * w) / (d.eta * d.gear * d.kt)
+    want = (d.dry(w) * np.sign(w) + d.c_v * w) / (d.eta * d.gear * d.kt)
     emf, vb = d.kt * d.gear * w, d.v_bat[:, None]
     lo, hi = -np.ones_like(w), np.ones_like(w)
     for _ in range(HOLD_BISECTIONS):
@@ -329,11 +341,11 @@ def drive_step(q: np.ndarray, v: np.ndarray, i_ref: ArrayLike, dt: PerRobot, d: 
     midpoint step in (u, omega) and the step's dry friction (friction.solve_batch).
 
     torque(w) -> (wheel torques, currents, V) at wheel speeds w (default wheel_torque), h the inertia in
-    (u, omega) (default d.h) and t_c (N, 2) the dry friction on the wheels (default d.t_c): the backlash's
+    (u, omega) (default d.h) and t_c (N, 2) the dry friction on the wheels (default d.dry(v)): the backlash's
     open gear (backlash.py) drives a wheel with none of them."""
     torque = torque or (lambda w: wheel_torque(i_ref, w, d))
     a, bb, c = d.h if h is None else h
-    t_c = d.t_c if t_c is None else t_c
+    t_c = d.dry(v) if t_c is None else t_c
     hdt = 0.5 * dt if np.ndim(dt) == 0 else 0.5 * np.asarray(dt)
     tau, _i, _v = torque(v)
     # the scrub's damping, linearly implicit: each (half) step's yaw inertia c grows by its step times it
@@ -434,12 +446,13 @@ def bench_step(q: np.ndarray, v: np.ndarray, i_ref: ArrayLike, dt: PerRobot, d: 
     tau, _i, _v = wheel_torque(i_ref, v, d)
     h = hdt * inv  # (N,): each wheel's response to its torque over the half step
     free = v + h[:, None] * tau
-    fl, fr, sl, sr = friction.solve_batch(free[:, 0], free[:, 1], h, zero, zero, h, d.t_c[:, 0], d.t_c[:, 1], v)
+    t_c = d.dry(v)
+    fl, fr, sl, sr = friction.solve_batch(free[:, 0], free[:, 1], h, zero, zero, h, t_c[:, 0], t_c[:, 1], v)
     v_mid = np.stack(friction.end_speeds_batch(free[:, 0], free[:, 1], h, zero, zero, h, fl, fr, sl, sr), 1)
     tau, cur, volts = wheel_torque(i_ref, v_mid, d)
     k = 2.0 * hdt * inv
     free = v + k[:, None] * tau
-    fl, fr, sl, sr = friction.solve_batch(free[:, 0], free[:, 1], k, zero, zero, k, d.t_c[:, 0], d.t_c[:, 1], v)
+    fl, fr, sl, sr = friction.solve_batch(free[:, 0], free[:, 1], k, zero, zero, k, t_c[:, 0], t_c[:, 1], v)
     v1 = np.stack(friction.end_speeds_batch(free[:, 0], free[:, 1], k, zero, zero, k, fl, fr, sl, sr), 1)
     q1 = q.copy()
     q1[:, 3:5] = q[:, 3:5] + hdt[:, None] * (v + v1)

@@ -54,6 +54,11 @@ class RobotParams:
     current_limit: float = _p(0.5, "A", "driver current limit")
     viscous_friction: float = _p(2.0e-4, "N m s/rad", "viscous friction at each wheel axle")
     coulomb_friction: float = _p(1.5e-3, "N m", "dry friction torque at each wheel axle")
+    # Breakaway friction (docs/motors.md, "Breakaway friction"): a standing axle holds (1 + stiction) times its
+    # dry friction, falling to it over stribeck_speed; absent (0) on the datasheet, fitted within tolerance.
+    stiction_l: float = _p(0.0, "-", "left axle's breakaway friction beyond its dry friction, as a fraction of it")
+    stiction_r: float = _p(0.0, "-", "right axle's breakaway friction beyond its dry friction, as a fraction of it")
+    stribeck_speed: float = _p(1.0, "rad/s", "wheel speed over which the breakaway friction falls to the dry friction")
     battery_voltage: float = _p(7.4, "V", "battery voltage feeding the drivers")
     # --- the drive (docs/motors.md "Drives"): what the commands are and what turns them into motor current ----
     drive: float = _p(0.0, "-", "actuator the commands drive: current (0), voltage (1), duty (2) or wheel_speed "
@@ -242,6 +247,7 @@ PARAM_RANGES = {
     "speed_loop_period": (1e-4, 1.0),
     "ir_saturation": (0.0, 1.0), "ir_on_delay": (0.0, 0.04), "ir_noise": (0.0, 1e4),
     "viscous_friction": (0.0, 1e3), "coulomb_friction": (0.0, 1e3),
+    "stiction_l": (0.0, 10.0), "stiction_r": (0.0, 10.0), "stribeck_speed": (1e-3, 1e3),
     "ir_blend": (1.0, 1e3), "ir_gain": (0.0, 1e6), "ir_ambient": (0.0, 1e6), "ir_near_peak": (0.0, 1.0),
     **effects.ranges(),  # the library's fields with a range of their own (current_limit), checked as these
 }

@@ -633,7 +633,8 @@ class BatchSim:
             body = np.where(rolling[:, None], drivetrain_effects.body_velocity(vs, fx), body)
             self.current[s] = cur
             forces = drivetrain_effects.body_forces(body[:, 0], body[:, 1], body[:, 2], fx)
-            t_c = fx.t_c if self.gear_gap is None else np.where(self._gear_engaged[s], fx.t_c, 0.0)
+            t_c = fx.dry(vs)
+            t_c = t_c if self.gear_gap is None else np.where(self._gear_engaged[s], t_c, 0.0)
             return tau, slope, body, {"radii": fx.radius, "body_force": forces, "axle_friction": t_c,
                                       "yaw_damping": drivetrain_effects.yaw_damping(body[:, 2], fx)}
         tau, _cur, slope = motors.wheel_torque_slope_batch(i_s, vs, cast(Params, _SubParams(self._p_motors, s)))
