@@ -134,3 +134,31 @@ def test_an_ir_curve_within_its_tolerance_is_not_located():
     assert not located(0.10, IR_RESPONSE_TOLERANCE)
     assert located(0.25, IR_RESPONSE_TOLERANCE)
     assert located(0.10, 0.0)
+
+
+def test_a_match_with_the_build_back_at_the_datasheet_says_so(as_built_run, monkeypatch):
+    """Where the calibrated build still locates a little but the drive's mechanics back at the datasheet's
+    values locate nothing, the match is that twin's: the report gives its values (not the calibrated ones),
+    what the datasheet twin located, the fit after, and a note that says so."""
+    from host_sim.diagnosis import report
+
+    real = report._judge
+
+    def judge_with_a_residue(rec, world, seconds, held_out):
+        judge = real(rec, world, seconds, held_out)
+        first = judge(DEFAULT)[0]
+
+        def wrapped(twin):
+            out = judge(twin)
+            if twin.wheel_radius_delta_l != 0.0:  # the calibrated build: the datasheet's findings stay
+                return [dataclasses.replace(out[0], findings=first.findings)] + out[1:]
+            return [dataclasses.replace(c, findings=[]) for c in out]
+
+        return wrapped
+
+    monkeypatch.setattr(report, "_judge", judge_with_a_residue)
+    d = diagnose(as_built_run, DEFAULT, ROOM)
+    assert d.verdict == "match" and not d.effects, d.summary()
+    assert any("back at the datasheet's values" in n for n in d.notes), d.notes
+    moved = {n.quantity: v for n, v in zip(d.calibration.nuisances, d.calibration.values)}
+    assert moved["wheel_radius"] == 0.0 and d.located_datasheet and d.fit_after
