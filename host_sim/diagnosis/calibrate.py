@@ -2,8 +2,8 @@
 
 Each wheel's radius, torque constant, friction and breakaway friction, the track, the battery's voltage
 and each located sensor's gain are fitted as nuisance parameters, bounded by their bands (tolerance.py)
-with a Gaussian prior of half a band, on the training windows alone.  Reference: docs/diagnosis.md, "Within the
-datasheet's tolerance".
+with a Gaussian prior of half a band, on the training windows alone.  Reference: docs/diagnosis.md,
+"Within the datasheet's tolerance".
 """
 from __future__ import annotations
 

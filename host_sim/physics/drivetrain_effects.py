@@ -184,9 +184,10 @@ def _drive_currents(cmd: np.ndarray, w: np.ndarray, volts: np.ndarray, d: Drive)
 
 def holding_volts(w: np.ndarray, d: Drive) -> np.ndarray:
     """(N, 2) the volts across each motor (a voltage command) whose bridge current holds its wheel at speed w
-    against the dry and viscous friction, (t_c sign(w) + c_v w) / (eta N k_t), with the bridge's own law (coast
-    decay at light load is not the linear average): bisection on the duty, at the battery's open-circuit
-    voltage.  Where a set-point robot's loop stands after holding w (BatchSim.hold_speeds)."""
+    against the dry and viscous friction, (T(w) sign(w) + c_v w) / (eta N k_t) (T: Drive.dry), with the
+    bridge's own law (coast decay at light load is not the linear average): bisection on the duty, at the
+    battery's open-circuit voltage.  Where a set-point robot's loop stands after holding w
+    (BatchSim.hold_speeds)."""
     want = (d.dry(w) * np.sign(w) + d.c_v * w) / (d.eta * d.gear * d.kt)
     emf, vb = d.kt * d.gear * w, d.v_bat[:, None]
     lo, hi = -np.ones_like(w), np.ones_like(w)
