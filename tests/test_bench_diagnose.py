@@ -240,6 +240,12 @@ def test_not_excited_is_read_from_the_recording(suite: dict[str, Any]) -> None:
     assert scoring.not_excited(concealed("traction_limit", "floor_friction", 1.0, 1.0), PLANT, rec)
     assert scoring.not_excited(concealed("traction_limit", "floor_friction", 0.005, 1.0), PLANT, rec) is None
     assert scoring.not_excited(DRY, PLANT, rec) is None
+    # a clip at q + 0.7 counts: the plant truncates its clipped readings to q, so rows at q show it
+    highest = np.maximum(rec.ir_on, rec.ir_amb).max(axis=1)
+    q = next(q for q in range(int(highest.max()), 0, -1) if (highest >= q).mean() >= scoring.MIN_EXCITED_SHARE)
+    assert (highest >= q + 1).mean() < scoring.MIN_EXCITED_SHARE
+    assert scoring.not_excited(concealed("adc_clipping", "adc_clip", q + 0.7, 4095.0), PLANT, rec) is None
+    assert scoring.not_excited(concealed("adc_clipping", "adc_clip", q + 1.7, 4095.0), PLANT, rec)
     row = scoring.score_case(key([concealed("current_limit", "current_limit", 1.01 * top, 0.5)]), diag("match"),
                              rec, DEFAULT)
     assert "not_excited" in row and row["outcome"] == "missed"  # reported apart by the totals

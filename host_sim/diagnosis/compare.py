@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from host_sim.diagnosis.clipping import clipped, unjudged_clips
 from host_sim.diagnosis.channels import (ACCUMULATED, IR, WHEELS, Channel, build_channels, drive_channel, fit_percent,
                                         judged_windows, rounding_ceiling)
 from host_sim.diagnosis.locate import (Finding, bias_margin, contact_windows, input_lag, ljung_box, locate_channel,
@@ -53,6 +54,10 @@ def compare(rec: Recording, params: RobotParams, world: World | None, seconds: f
     run = run_windows(rec, windows, params, world)
     unjudged = (unjudged_readings(rec, windows.index[:, 1:], params, world)
                 if rec.pose is not None and world is not None and world.n_walls else None)
+    clips = clipped(rec, params)
+    if clips:  # a clipped reading says nothing of the robot's optics (clipping.py)
+        held = unjudged_clips(clips, windows.index[:, 1:], rec.n_ir if unjudged is None else unjudged.shape[-1])
+        unjudged = held if unjudged is None else unjudged | held
     chans = build_channels(rec, windows, run, [params], world, unjudged)
     cmp = Comparison(seconds, windows, chans, contact, held_out_fit(chans, windows, contact), pose=run.pose[:, 0],
                      unjudged=unjudged, ceiling=held_out_ceiling(chans, windows, contact))

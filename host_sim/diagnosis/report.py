@@ -17,7 +17,8 @@ from host_sim.physics import effects as E
 from host_sim.diagnosis.tell_apart import tell_apart
 from host_sim.diagnosis.compare import Comparison, compare_all, stratify
 from host_sim.diagnosis.fit import Model, Objective, Refine, candidates_for, fit_totals, objective_channels, select
-from host_sim.diagnosis.channels import ACCUMULATED, WHEELS, drive_channel, judged_windows, ring_comparable
+from host_sim.diagnosis.channels import ACCUMULATED, IR, SENSOR_NAMES, WHEELS, drive_channel, judged_windows, ring_comparable
+from host_sim.diagnosis.clipping import clipped
 from host_sim.diagnosis.locate import Finding, noise_level, regimes, total_noise
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
 from host_sim.diagnosis.testblock import TestBlockError, check_test_recording, split_test_block
@@ -25,7 +26,7 @@ from host_sim.diagnosis.block_verdict import judge_held_out, judge_test_block
 from host_sim.diagnosis.calibrate import (Calibration, Nuisance, calibrate, drive_located, drive_nuisances,
                                           edge_binds, located_sensors, refit_jointly, sensor_nuisances)
 from host_sim.diagnosis.tolerance import BANDS, Tolerance
-from host_sim.diagnosis.phrasing import checked, sentence
+from host_sim.diagnosis.phrasing import checked, sentence, spans_text
 from host_sim.physics.params import DEFAULT, RobotParams
 from host_sim.recordings.recording import Recording
 from host_sim.recordings.replay import with_drive
@@ -237,6 +238,7 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     if test_block is None:
         result = _diagnose_fitted(rec, tol, world, seconds, progress, workers)[0]
         result.notes[:0] = gap_notes
+        _report_clips(result, rec, params)
         return result
     try:
         if isinstance(test_block, Recording):
@@ -252,7 +254,31 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     if isinstance(test_block, Recording):  # a second recording: its own checks' notes
         result.recording_checks += [n.to_json() | {"test": True} for n in block.notes]
     judge_test_block(result, block, base, world, chain, objective, seconds[0], progress)
+    for part in ([rec, test_block] if isinstance(test_block, Recording) else [rec]):
+        _report_clips(result, part, params)
     return result
+
+
+def _report_clips(result: Diagnosis, rec: Recording, params: RobotParams) -> None:
+    """Clipped sensors (clipping.py) are a mismatch the library does not hold: located and unexplained, one
+    item per level the readings stop at (sensors that share an ADC's reference share it), so the verdict is
+    neither a match nor wholly explained
+    (tests/test_clipping.py::test_clipped_readings_are_unexplained_and_fit_no_sensor_gain)."""
+    clips = clipped(rec, params)
+    for level in sorted({c.level for c in clips}):
+        at = [c for c in clips if c.level == level]
+        rows = np.logical_or.reduce([c.rows for c in at])
+        spans = dataclasses.replace(at[0], rows=rows).spans(rec.t)
+        names = ", ".join(SENSOR_NAMES[c.sensor] for c in at)
+        item = {"channel": IR[at[0].sensor], "sensors": [c.sensor for c in at], "regime": f"at {level} counts",
+                "spans": spans, "fit_before": min(result.fit_before.get(IR[c.sensor], math.nan) for c in at),
+                "words": f"{'sensor' if len(at) == 1 else 'sensors'} {names}: the readings stop at {level} counts, "
+                         f"below the ADC's {params.adc_max} ({sum(int(c.rows.sum()) for c in at)} readings there): "
+                         f"clipped (the ADC's reference or the amplifier), which the twin does not hold; those "
+                         f"readings are not judged, {spans_text([(a, b) for a, b in spans])}"}
+        result.located.append(item)
+        result.unexplained.append({k: item[k] for k in ("channel", "sensors", "regime", "spans", "words")})
+        result.verdict = {"match": "unexplained", "explained": "partly explained"}.get(result.verdict, result.verdict)
 
 
 def _diagnose_fitted(rec: Recording, tol: Tolerance, world: World | None, seconds: tuple[float, ...],

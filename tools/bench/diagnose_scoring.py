@@ -171,8 +171,9 @@ def not_excited(effect: dict[str, Any], plant: dict[str, Any], rec: Recording) -
         if share < MIN_EXCITED_SHARE:
             return (f"the drive can ask more than {100 * TRACTION_MARGIN:.0f} % of the grip (mu = {value:.2f}) "
                     f"in {100 * share:.1f} % of the periods{where}")
-    elif name == "adc_clipping":  # the plant's readings stop at the clip: none there, none clipped
-        clipped = ((rec.ir_on >= value - 0.5) | (rec.ir_amb >= value - 0.5)).any(axis=1)
+    elif name == "adc_clipping":  # the plant's readings stop at the clip's whole counts: none there, none clipped
+        top = math.floor(value)  # the plant truncates its clipped reading (plant.Plant.read_ir)
+        clipped = ((rec.ir_on >= top) | (rec.ir_amb >= top)).any(axis=1)
         if clipped.mean() < MIN_EXCITED_SHARE:
             return f"a reading reaches the {value:.0f}-count clip in {100 * clipped.mean():.1f} % of the periods"
     elif name in ("ir_gain", "ir_misalignment", "ir_latency"):
