@@ -94,6 +94,29 @@ def test_wrong_diagnoses_score_wrong(suite: dict[str, Any], answer: dict[str, An
     row = scoring.score_case(key([DRY]), answer, rec, DEFAULT, None if answer else "error: boom")
     assert row["outcome"] == outcome
     assert not any(e["named"] or "param" in e for e in row["effects"])
+    named = [f["name"] + f"({f['wheel']})" for f in (answer or {"effects": []})["effects"]]
+    assert row["not_concealed"] == [n for n in named if n != "dry_friction(left)"]
+
+
+def test_every_name_that_was_not_concealed_is_counted(suite: dict[str, Any]) -> None:
+    """Beside a right name, on a control, or for an out-of-library effect: each name no concealed effect has
+    (by name and site) is listed, and the totals count the cases that give one."""
+    rec = load_recording(next((suite["out"] / "recordings").glob("*.csv")))
+    beside = diag("explained", [("dry_friction", {"wheel": "left"}, "dry_friction", 0.0014),
+                                ("track_width", {}, "half_axle", 0.05)])
+    row = scoring.score_case(key([DRY]), beside, rec, DEFAULT)
+    assert row["outcome"] == "right" and row["not_concealed"] == ["track_width"]
+    assert scoring.score_case(key([DRY]), diag("explained", [("dry_friction", {"wheel": "left"}, "dry_friction",
+                                                                0.0014)]), rec, DEFAULT)["not_concealed"] == []
+    control = scoring.score_case(key([]), diag("explained", [("mass", {}, "mass", 0.5)]), rec, DEFAULT)
+    tilt = scoring.score_case(key([concealed("floor_slope", "floor_tilt", 0.01, 0.0)]),
+                              diag("partly explained", [("mass", {}, "mass", 0.5)]), rec, DEFAULT)
+    assert control["not_concealed"] == tilt["not_concealed"] == ["mass"]
+    rows = [{**r, "fit_before": 50.0, "sindy": {"error": "-"}, "seconds_per_90s": 1.0, "cpu_seconds_per_90s": 1.0,
+             "excitation": "manoeuvre", "rule_set": None} for r in (row, control, tilt)]
+    t = bench_diagnose.totals(rows)
+    assert t["naming_not_concealed"] == 3 and t["diagnosed"] == 3
+    assert t["naming_not_concealed_by_kind"] == {"control": 1, "in library": 1, "out of library": 1}
 
 
 def test_a_total_read_as_a_delta_is_a_wrong_parameter(suite: dict[str, Any]) -> None:
@@ -369,6 +392,8 @@ def test_scoreboard_structure(suite: dict[str, Any], capsys: pytest.CaptureFixtu
         answer = json.loads((suite["out"] / "answer_keys" / f"{r['case']}.answer.json").read_text())
         assert r["rule_set"] == answer["excitation"]["rule_set"] and r["excitation"] == answer["excitation"]["kind"]
     assert "named, by what drove the robot: " in out
+    assert f"cases naming an effect that was not concealed (on a control, beside a right name or instead of one): " \
+           f"{totals['naming_not_concealed']}/{totals['diagnosed']}" in out
 
 
 def test_a_kept_suite_is_scored_again_without_diagnosing(suite: dict[str, Any], tmp_path: Path,

@@ -313,7 +313,11 @@ def totals(rows: list[dict[str, Any]]) -> dict[str, Any]:
     secs = [r["seconds_per_90s"] for r in rows if "fit_before" in r] or [float("nan")]
     cpu = [r["cpu_seconds_per_90s"] for r in rows if "fit_before" in r] or [float("nan")]
     sindy_ok = [r for r in rows if "error" not in r["sindy"]]
+    diagnosed = [r for r in rows if "fit_before" in r]
+    wrong = [r for r in diagnosed if r.get("not_concealed")]
     return {
+        "diagnosed": len(diagnosed), "naming_not_concealed": len(wrong),
+        "naming_not_concealed_by_kind": {k: sum(r["kind"] == k for r in wrong) for k in sorted({r["kind"] for r in wrong})},
         "cases": len(rows), "in_library": len(listed), "concealed": len(hidden),
         "intervals": len(intervals), "intervals_covered": sum(intervals),
         "coverage_share": _share(sum(intervals), len(intervals)),
@@ -524,6 +528,9 @@ def print_report(report: dict[str, Any]) -> None:
           + ", ".join(f"{k} {v}" for k, v in sorted(t["outcomes_excited"].items())))
     print("named, by what drove the robot: "
           + ", ".join(f"{k} {named}/{n}" for k, (named, n) in sorted(t["named_by_drive"].items())))
+    kinds = ", ".join(f"{k} {n}" for k, n in t["naming_not_concealed_by_kind"].items())
+    print(f"cases naming an effect that was not concealed (on a control, beside a right name or instead of one): "
+          f"{t['naming_not_concealed']}/{t['diagnosed']}" + (f" ({kinds})" if kinds else ""))
     print(f"median parameter error of those named: "
           + ("-" if t["param_error_median"] is None else f"{100 * t['param_error_median']:.0f} %"))
     print(f"median held-out wheel fit (controls + in-library): before {_f(t['wheel_fit_before_median'])} %, "

@@ -268,6 +268,7 @@ def score_case(key: dict[str, Any], diagnosis: dict[str, Any] | None, rec: Recor
         row["fit_ceiling"] = _wheel_fit(diagnosis["fit"].get("ceiling", {}))  # a twin right but for the rounding
         if "encoders" in key and "judged" in diagnosis["fit"]:
             row["fit_perfect"] = perfect_twin_fit(key["encoders"], rec, diagnosis["fit"]["judged"])
+    row["not_concealed"] = not_concealed(diagnosis, concealed)
     if row["kind"] == "control":
         row["outcome"] = "right" if diagnosis and diagnosis["verdict"] == "match" else "false alarm"
         return row
@@ -281,6 +282,16 @@ def score_case(key: dict[str, Any], diagnosis: dict[str, Any] | None, rec: Recor
     if diagnosis is None and str(error).startswith("refused"):
         row["outcome"] = "refused"  # diagnosis declined the recording (too short, too still): a miss all the same
     return row
+
+
+def not_concealed(diagnosis: dict[str, Any] | None, concealed: list[dict[str, Any]]) -> list[str]:
+    """The effects a diagnosis names that no concealed effect is (by name and site): on a control or beside a
+    right name as much as instead of one.  A name that is wrong costs a user more than "unexplained"."""
+    if diagnosis is None:
+        return []
+    truth = {(e["name"], _site(e)) for e in concealed if e["in_library"]}
+    return [f["name"] + ("" if _site(f) is None else f"({_site(f)})") for f in diagnosis["effects"]
+            if (f["name"], _site(f)) not in truth]
 
 
 def _kind(concealed: list[dict[str, Any]]) -> str:
