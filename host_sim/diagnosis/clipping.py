@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+
 import numpy as np
 
 from host_sim.physics.params import RobotParams
@@ -38,7 +39,7 @@ class Clip:
 
 def clipped(rec: Recording, p: RobotParams) -> list[Clip]:
     """The sensors whose emitter-on readings pile up at a value under the ADC's full scale
-    (tests/test_clipping.py)."""
+    (tests/test_clipping.py::test_readings_piled_below_full_scale_are_a_clip_noisy_or_full_scale_ones_are_not)."""
     out = []
     band = max(2, math.ceil(NOISE_BAND * p.ir_noise))
     for k in range(rec.n_ir):

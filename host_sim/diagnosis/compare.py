@@ -55,7 +55,8 @@ def compare(rec: Recording, params: RobotParams, world: World | None, seconds: f
     unjudged = (unjudged_readings(rec, windows.index[:, 1:], params, world)
                 if rec.pose is not None and world is not None and world.n_walls else None)
     clips = clipped(rec, params)
-    if clips:  # a clipped reading says nothing of the robot's optics (clipping.py)
+    if clips:  # a clipped reading says nothing of the robot's optics: no gain is fitted to take it up
+        # (tests/test_clipping.py::test_clipped_readings_are_unexplained_and_fit_no_sensor_gain)
         held = unjudged_clips(clips, windows.index[:, 1:], rec.n_ir if unjudged is None else unjudged.shape[-1])
         unjudged = held if unjudged is None else unjudged | held
     chans = build_channels(rec, windows, run, [params], world, unjudged)

@@ -17,7 +17,8 @@ from host_sim.physics import effects as E
 from host_sim.diagnosis.tell_apart import tell_apart
 from host_sim.diagnosis.compare import Comparison, compare_all, stratify
 from host_sim.diagnosis.fit import Model, Objective, Refine, candidates_for, fit_totals, objective_channels, select
-from host_sim.diagnosis.channels import ACCUMULATED, IR, SENSOR_NAMES, WHEELS, drive_channel, judged_windows, ring_comparable
+from host_sim.diagnosis.channels import (ACCUMULATED, IR, SENSOR_NAMES, WHEELS, drive_channel, judged_windows,
+                                        ring_comparable)
 from host_sim.diagnosis.clipping import clipped
 from host_sim.diagnosis.locate import Finding, noise_level, regimes, total_noise
 from host_sim.diagnosis.windows import DEFAULT_SECONDS

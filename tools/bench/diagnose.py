@@ -317,7 +317,8 @@ def totals(rows: list[dict[str, Any]]) -> dict[str, Any]:
     wrong = [r for r in diagnosed if r.get("not_concealed")]
     return {
         "diagnosed": len(diagnosed), "naming_not_concealed": len(wrong),
-        "naming_not_concealed_by_kind": {k: sum(r["kind"] == k for r in wrong) for k in sorted({r["kind"] for r in wrong})},
+        "naming_not_concealed_by_kind": {k: sum(r["kind"] == k for r in wrong)
+                                         for k in sorted({r["kind"] for r in wrong})},
         "cases": len(rows), "in_library": len(listed), "concealed": len(hidden),
         "intervals": len(intervals), "intervals_covered": sum(intervals),
         "coverage_share": _share(sum(intervals), len(intervals)),
