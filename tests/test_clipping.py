@@ -34,6 +34,8 @@ def test_readings_piled_below_full_scale_are_a_clip_noisy_or_full_scale_ones_are
     # the ADC's own full scale is the twin's saturation, not a clip
     ten_bits = dataclasses.replace(DEFAULT, adc_bits=10)
     assert clipped(with_on(run, np.minimum(run.ir_on, ten_bits.adc_max)), ten_bits) == []
+    # a sensor that reads one value throughout (dead, or a log's empty IR columns) is not clipped
+    assert clipped(with_on(run, np.zeros_like(run.ir_on)), DEFAULT) == []
     # without noise a steady reading is no clip in one visit, and is one in two
     quiet = dataclasses.replace(DEFAULT, ir_noise=0.0)
     on = np.full_like(run.ir_on, 100)

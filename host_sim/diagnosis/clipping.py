@@ -4,8 +4,9 @@ are not judged, and each clip is reported as located and unexplained (docs/diagn
 
 A noisy reading that is not clipped spreads over its noise about any level it holds, so its highest value is
 rarer than the values just below it.  A clip gathers every reading beyond it onto one value: many readings
-at the top, more than in the noise band under it.  Without noise (a datasheet's ir_noise under half a count)
-a steady reading looks the same, so there the top must be reached in more than one visit.
+at the top, more than in the noise band under it, of a signal that also reads well under it (a sensor that
+reads one value throughout is dead or absent, not clipped).  Without noise (a datasheet's ir_noise under
+half a count) a steady reading looks the same, so there the top must be reached in more than one visit.
 """
 from __future__ import annotations
 
@@ -51,9 +52,10 @@ def clipped(rec: Recording, p: RobotParams) -> list[Clip]:
             continue
         at = v == top
         under = int(((v >= top - band) & (v < top)).sum())
+        below = int((v < top - band).sum())  # the signal away from the ceiling
         visits = int(at[0]) + int((np.diff(at.astype(np.int8)) == 1).sum())
         steady = p.ir_noise < 0.5 and visits < CLIP_MIN_VISITS
-        if int(at.sum()) >= CLIP_MIN_ROWS and int(at.sum()) > under and not steady:
+        if int(at.sum()) >= CLIP_MIN_ROWS and int(at.sum()) > under and below >= CLIP_MIN_ROWS and not steady:
             out.append(Clip(k, top, at))
     return out
 

@@ -313,12 +313,8 @@ def totals(rows: list[dict[str, Any]]) -> dict[str, Any]:
     secs = [r["seconds_per_90s"] for r in rows if "fit_before" in r] or [float("nan")]
     cpu = [r["cpu_seconds_per_90s"] for r in rows if "fit_before" in r] or [float("nan")]
     sindy_ok = [r for r in rows if "error" not in r["sindy"]]
-    diagnosed = [r for r in rows if "fit_before" in r]
-    wrong = [r for r in diagnosed if r.get("not_concealed")]
     return {
-        "diagnosed": len(diagnosed), "naming_not_concealed": len(wrong),
-        "naming_not_concealed_by_kind": {k: sum(r["kind"] == k for r in wrong)
-                                         for k in sorted({r["kind"] for r in wrong})},
+        **_names_not_concealed(rows),
         "cases": len(rows), "in_library": len(listed), "concealed": len(hidden),
         "intervals": len(intervals), "intervals_covered": sum(intervals),
         "coverage_share": _share(sum(intervals), len(intervals)),
@@ -349,6 +345,15 @@ def totals(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "seconds_median": _median([r["sindy"]["seconds"] for r in sindy_ok]),
         },
     }
+
+
+def _names_not_concealed(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """Of the cases diagnosed, those naming an effect that was not concealed, and how many of each kind."""
+    diagnosed = [r for r in rows if "fit_before" in r]
+    wrong = [r for r in diagnosed if r.get("not_concealed")]
+    return {"diagnosed": len(diagnosed), "naming_not_concealed": len(wrong),
+            "naming_not_concealed_by_kind": {k: sum(r["kind"] == k for r in wrong)
+                                             for k in sorted({r["kind"] for r in wrong})}}
 
 
 EffectScores = list[tuple[dict[str, Any], dict[str, Any]]]  # (case row, one of its concealed effects' scores)
