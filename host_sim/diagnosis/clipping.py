@@ -31,12 +31,6 @@ class Clip:
     level: int
     rows: np.ndarray
 
-    def spans(self, t: np.ndarray) -> list[list[float]]:
-        """[t0, t1] (s) of each run of clipped readings."""
-        edges = np.diff(np.concatenate([[0], self.rows.astype(np.int8), [0]]))
-        starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
-        return [[float(t[a]), float(t[b])] for a, b in zip(starts, ends)]
-
 
 def clipped(rec: Recording, p: RobotParams) -> list[Clip]:
     """The sensors whose emitter-on readings pile up at a value under the ADC's full scale

@@ -550,7 +550,7 @@ def spans(resid: np.ndarray, keep: np.ndarray, t: np.ndarray, sigma: float,
             hot = np.convolve(resid[w] ** 2, kernel, mode="same") >= (SCATTER_MIN * sigma) ** 2
         else:
             hot = np.abs(np.convolve(resid[w], kernel, mode="same")) >= EFFECT_MIN * sigma
-        found += _runs(hot, t[w])
+        found += runs(hot, t[w])
     merged: list[tuple[float, float]] = []
     for a, b in sorted(found):
         if merged and a - merged[-1][1] <= 2.5 * period:
@@ -560,7 +560,8 @@ def spans(resid: np.ndarray, keep: np.ndarray, t: np.ndarray, sigma: float,
     return [(round(a, 2), round(b, 2)) for a, b in merged if b - a >= SPAN_MIN_S]
 
 
-def _runs(mask: np.ndarray, t: np.ndarray) -> list[tuple[float, float]]:
+def runs(mask: np.ndarray, t: np.ndarray) -> list[tuple[float, float]]:
+    """(t at a run's first row, t at the row after its last, or its last at the end) of each run of mask."""
     edges = np.diff(np.concatenate([[0], mask.astype(int), [0]]))
     starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
     return [(float(t[a]), float(t[min(b, len(t) - 1)])) for a, b in zip(starts, ends)]

@@ -20,7 +20,7 @@ from host_sim.diagnosis.fit import Model, Objective, Refine, candidates_for, fit
 from host_sim.diagnosis.channels import (ACCUMULATED, IR, SENSOR_NAMES, WHEELS, drive_channel, judged_windows,
                                         ring_comparable)
 from host_sim.diagnosis.clipping import clipped
-from host_sim.diagnosis.locate import Finding, noise_level, regimes, total_noise
+from host_sim.diagnosis.locate import Finding, noise_level, regimes, runs, total_noise
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
 from host_sim.diagnosis.testblock import TestBlockError, check_test_recording, split_test_block
 from host_sim.diagnosis.block_verdict import judge_held_out, judge_test_block
@@ -268,15 +268,15 @@ def _report_clips(result: Diagnosis, rec: Recording, params: RobotParams) -> Non
     clips = clipped(rec, params)
     for level in sorted({c.level for c in clips}):
         at = [c for c in clips if c.level == level]
-        rows = np.logical_or.reduce([c.rows for c in at])
-        spans = dataclasses.replace(at[0], rows=rows).spans(rec.t)
+        found = runs(np.logical_or.reduce([c.rows for c in at]), rec.t)
         names = ", ".join(SENSOR_NAMES[c.sensor] for c in at)
         item = {"channel": IR[at[0].sensor], "sensors": [c.sensor for c in at], "regime": f"at {level} counts",
-                "spans": spans, "fit_before": min(result.fit_before.get(IR[c.sensor], math.nan) for c in at),
+                "spans": [list(s) for s in found],
+                "fit_before": min(result.fit_before.get(IR[c.sensor], math.nan) for c in at),
                 "words": f"{'sensor' if len(at) == 1 else 'sensors'} {names}: the readings stop at {level} counts, "
                          f"below the ADC's {params.adc_max} ({sum(int(c.rows.sum()) for c in at)} readings there): "
                          f"clipped (the ADC's reference or the amplifier), which the twin does not hold; those "
-                         f"readings are not judged, {spans_text([(a, b) for a, b in spans])}"}
+                         f"readings are not judged, {spans_text(found)}"}
         result.located.append(item)
         result.unexplained.append({k: item[k] for k in ("channel", "sensors", "regime", "spans", "words")})
         result.verdict = {"match": "unexplained", "explained": "partly explained"}.get(result.verdict, result.verdict)
