@@ -26,7 +26,8 @@ class SpeedLoop:
     def hold(self, volts: np.ndarray) -> None:
         """Each loop as if it had been holding its wheels: its integral (and output) at volts (N, 2), within the
         supply (the caller's: drivetrain_effects.holding_volts); a twin started mid-run (a diagnosis window)
-        does not wind up from 0 (tests/test_simulation.py::test_sim_runs_a_wheel_speed_robot_and_its_recording_replays)."""
+        does not wind up from 0
+        (tests/test_simulation.py::test_sim_runs_a_wheel_speed_robot_and_its_recording_replays)."""
         held = np.where(self.on[:, None], volts, 0.0)
         self.integral, self.out = held.copy(), held.copy()
 
