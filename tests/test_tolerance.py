@@ -162,3 +162,33 @@ def test_a_match_with_the_build_back_at_the_datasheet_says_so(as_built_run, monk
     assert any("back at the datasheet's values" in n for n in d.notes), d.notes
     moved = {n.quantity: v for n, v in zip(d.calibration.nuisances, d.calibration.values)}
     assert moved["wheel_radius"] == 0.0 and d.located_datasheet and d.fit_after
+
+
+def test_a_build_the_effects_fit_within_tolerance_is_a_match():
+    """The effects the fit kept all lie within the tolerance once fitted with the build: with nothing left
+    located, the robot as built explains the recording, a match that says so, with what was located before;
+    with something left, it is unexplained, and only what is left is."""
+    from host_sim.diagnosis.fit import Candidate, Model
+    from host_sim.diagnosis.report import Diagnosis, _name
+
+    tol = Tolerance(DEFAULT, dict(BANDS))
+    radius = [0.012 * DEFAULT.wheel_radius]  # +1.2 %, the band 1.5 %
+    model = Model([Candidate("wheel_radius", "left")], [radius], E.apply(DEFAULT, "wheel_radius", "left", radius),
+                  1.0, 1.0, 100)
+    assert tol.within("wheel_radius", radius)
+    located = [{"channel": "count_l", "regime": "window by window", "spans": [[2.0, 3.0]],
+                "words": "the left encoder counts 3.0 % more than the twin's window by window, 2–3 s"},
+               {"channel": "ir_4", "regime": "when turning left", "spans": [[5.0, 6.0]],
+                "words": "sensor S5 back sees less reflected light than the twin's when turning left, 5–6 s"}]
+
+    def named(remaining):
+        d = Diagnosis("run.csv", "match", [], located=list(located))
+        _name(d, model, [model], remaining, tol, (None, None), False)
+        return d
+
+    d = named([])
+    assert d.verdict == "match" and not d.effects and not d.located and not d.unexplained, d.summary()
+    assert d.located_datasheet == located and any("the robot as built" in n for n in d.notes)
+    d = named(located[1:])
+    assert d.verdict == "unexplained" and d.located == located, d.summary()
+    assert [u["channel"] for u in d.unexplained] == ["ir_4"]

@@ -201,3 +201,24 @@ def test_without_the_opt_in_there_is_no_test_block(twin_run, monkeypatch):
     doc = d.to_json()
     assert d.verdict == "match" and not d.fit_test and set(doc["fit"]) == {"before", "after", "ceiling", "judged"}
     assert not {"changes", "test_judgements"} & set(doc) and doc["closest"] is None  # closest: always said
+
+
+def test_a_match_the_fit_made_within_tolerance_is_judged_on_the_test_block_with_its_values(tmp_path):
+    """A match whose twin is the build with effects fitted within the tolerance (report._name) is judged on
+    the test block with that twin, not with the one the effects were sought from: a left wheel with twice
+    its dry friction, matched by a twin that has it, stays a match there; the datasheet's twin would not."""
+    from host_sim.diagnosis.block_verdict import judge_test_block
+    from host_sim.diagnosis.fit import Candidate, Model
+
+    value = [DEFAULT.coulomb_friction]
+    robot = E.apply(DEFAULT, "dry_friction", "left", value)
+    fitted, block = split_test_block(record(tmp_path, robot))
+
+    def judged(twin):
+        d = R.Diagnosis("run.csv", "match", [])
+        d.model = Model([Candidate("dry_friction", "left")], [value], twin, 1.0, 1.0, 100)
+        judge_test_block(d, block, DEFAULT, ROOM, [d.model], None, 1.0, None)
+        return d
+
+    assert judged(robot).verdict == "match"
+    assert judged(DEFAULT).verdict == "unexplained"

@@ -36,7 +36,7 @@ def judge_test_block(result: Any, block: Recording, params: RobotParams, world: 
                        "windows": len(every), "before": dict(before.fit), "after": dict(after.fit),
                        "ceiling": dict(after.ceiling)}
     if result.verdict == "match":
-        _judge_match(result, block, before)
+        _judge_match(result, block, after)
     elif result.effects:
         _judge_named(result, block, before, after, chain, objective, params, say)
 
@@ -51,10 +51,12 @@ def _span(result: Any) -> list[list[float]]:
     return [[result.fit_test["from_s"], result.fit_test["to_s"]]]
 
 
-def _judge_match(result: Any, block: Recording, before: Comparison) -> None:
-    """A match needs the nominal twin near its ceiling on the test block and no trend in time there, on every
-    channel (whiteness is not asked of it: nothing is named)."""
-    judged = judge_channels(before, block.t, judged_names(before))
+def _judge_match(result: Any, block: Recording, twin: Comparison) -> None:
+    """A match needs its twin (the build, with any effect fitted within the tolerance: report._name) near its
+    ceiling on the test block and no trend in time there, on every channel (whiteness is not asked of it:
+    nothing is named) (tests/test_verdict.py::
+    test_a_match_the_fit_made_within_tolerance_is_judged_on_the_test_block_with_its_values)."""
+    judged = judge_channels(twin, block.t, judged_names(twin))
     result.test_judgements = [j.to_json() for j in judged.values()]
     failing = [j for j in judged.values() if not (j.near and j.steady)]
     if failing:

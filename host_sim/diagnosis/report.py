@@ -355,9 +355,17 @@ def _name(result: Diagnosis, final: Model, chain: list[Model], remaining: list[d
         result.notes.append("fitted within the datasheet's tolerance, the robot as built and not named: " + ", ".join(
             c.label() for c, v in zip(final.effects, final.values) if tol.within(c.name, v)))
     result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")} for item in remaining]
-    if not result.effects:
+    if not result.effects and final.effects and not remaining:
+        # Every effect fitted lies within its band and, with the build, leaves nothing located: the robot as
+        # built explains the recording, a match (tests/test_tolerance.py::test_a_build_the_effects_fit_within_tolerance_is_a_match).
+        result.verdict, result.located_datasheet, result.located = "match", result.located, []
+        result.notes.append("with the build and these values, all within the datasheet's tolerance, nothing is "
+                            "located: the robot as built")
+    elif not result.effects:
         result.verdict = "unexplained"
-        result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")} for item in result.located]
+        if not final.effects:  # else what is left is what the build with its values within tolerance leaves
+            result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")}
+                                  for item in result.located]
     else:
         result.verdict = "explained" if not remaining else "partly explained"
         if not test_block:  # with one, the block's rules judge what is named (judge_test_block)
