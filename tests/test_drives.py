@@ -164,6 +164,28 @@ def test_the_wheel_speed_drive_follows_its_set_points_through_its_own_loop():
     assert np.diff(lazy_res.theta[-15:, 0, 0]).mean() / sim.cycle_s < 0.9 * 10.0
 
 
+def test_a_set_point_loop_counts_at_the_boards_scale_and_its_twin_is_smooth():
+    """The board counts each encoder at its datasheet's ticks_per_rev: a left encoder 2.6 % finer holds its
+    wheel 2.6 % under the set-point, the right at it.  With whole counts a loop's wheel moves in jumps as a
+    parameter is nudged (a count changes); the diagnosis's twin (loop_counts_whole off) moves smoothly, so
+    a finite difference gives the same slope at two steps."""
+    p = RobotParams(drive="wheel_speed", ticks_per_rev_delta_l=31.0)
+    res = BatchSim(None, p).run_inputs(np.tile([10.0, 10.0], (100, 1)), sensors=False)
+    speed = np.diff(res.theta[-26:, 0], axis=0).mean(0) / BatchSim(None, p).cycle_s
+    assert speed[0] == pytest.approx(10.0 * 1200.0 / 1231.0, rel=0.005) and speed[1] == pytest.approx(10.0, rel=0.005)
+
+    def end_angle(radius_share: float, whole: bool) -> float:
+        sim = BatchSim(None, RobotParams(drive="wheel_speed", wheel_radius=DEFAULT.wheel_radius * (1 + radius_share)))
+        sim.loop_counts_whole = whole
+        cmd = np.repeat([[8.0, 8.0], [14.0, 3.0], [-6.0, 9.0]], 10, axis=0)
+        return float(sim.run_inputs(cmd, sensors=False).theta[-1, 0, 0])
+
+    for whole, smooth in ((False, True), (True, False)):
+        base = end_angle(0.0, whole)
+        slopes = [(end_angle(h, whole) - base) / h for h in (1e-3, 1e-4)]
+        assert (abs(slopes[0] - slopes[1]) <= 0.1 * abs(slopes[0])) == smooth, (whole, slopes)
+
+
 def test_the_speed_loop_runs_at_its_own_period():
     """A loop ten times slower answers a set-point step later: its first volts are held a whole period."""
     fast = BatchSim(None, RobotParams(drive="wheel_speed"))

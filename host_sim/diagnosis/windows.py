@@ -218,6 +218,7 @@ def _run_windows(rec: Recording, windows: Windows, params: Any, world: World | N
     # A set-point robot's own loop has been holding its wheels: its twin does not wind up from 0 in each window
     # (tests/test_simulation.py::test_sim_runs_a_wheel_speed_robot_and_its_recording_replays).
     sim.hold_speeds()
+    sim.loop_counts_whole = False  # the loop's twin sees the counts' mean: its residuals smooth in its parameters
     _seed_commands(sim, rec, inputs.cmd, first, n_sets)
     sim.engage_gears(np.repeat(_last_push(inputs.cmd, first), n_sets, axis=0))
     if windows.sliding is not None and windows.body is not None:  # where the tracker saw the robot slide

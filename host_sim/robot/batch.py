@@ -304,6 +304,7 @@ class BatchSim:
         on = batch.drive == drivetrain_effects.WHEEL_SPEED  # the wheel_speed drive's own loop (speed_loop.py)
         self._speed = speed_loop.SpeedLoop(batch.speed_kp, batch.speed_ki, batch.speed_loop_period, on) \
             if on.any() else None
+        self.loop_counts_whole = True  # the loop measures whole counts, as a board does (_loop_angles)
 
     # ------------------------------------------------------------------ state
     # A BatchSim of one in floats keeps q, v and current as Python floats between its steps (numpy's cost to
@@ -344,6 +345,17 @@ class BatchSim:
         if self._per_wheel_ticks or self.gear_gap is not None:
             return motors.encoder_ticks_batch(self.encoder_angles(), self.params, wheels=True)
         return motors.encoder_ticks_batch(self.q[:, 3:5], self._p)
+
+    def _loop_angles(self) -> np.ndarray:
+        """(N, 2) the wheel angles a set-point robot's loop measures: its counts at the board's datasheet
+        2 pi / ticks_per_rev a count, so an encoder of another scale drives its wheel off the set-point
+        (tests/test_drives.py::test_a_set_point_loop_counts_at_the_boards_scale_and_its_twin_is_smooth).
+        Whole counts unless loop_counts_whole is off: the diagnosis's twin, whose residuals must change
+        smoothly with its parameters, sees their mean, the encoder's angle."""
+        counts = self.encoder_ticks() if self.loop_counts_whole else \
+            self.encoder_angles() * (drivetrain_effects.ticks_per_rev(self.params) / (2.0 * np.pi))
+        board = np.asarray(self.params.ticks_per_rev, dtype=float)
+        return counts * (2.0 * np.pi / board[:, None])
 
     def engage_gears(self, side: ArrayLike) -> None:
         """Backlash: close each gear's gap on `side` (N, 2) (+1 forward, -1 backward, 0 the middle), the
@@ -411,8 +423,7 @@ class BatchSim:
         if self._delay is not None:
             i_ref = self._delayed(i_ref, dt)
         if self._speed is not None:  # set-points to the loop, its volts to the bridge
-            counted = self.encoder_ticks() * (2.0 * np.pi / drivetrain_effects.ticks_per_rev(self.params))
-            i_ref = self._speed.command(i_ref, self.t, counted, self.v, self.vbat)
+            i_ref = self._speed.command(i_ref, self.t, self._loop_angles(), self.v, self.vbat)
         q0, v0 = self.q, self.v
         if self.bench:
             self.q, self.v, self.current, self.vbat = drivetrain_effects.bench_step(
