@@ -357,7 +357,8 @@ def _name(result: Diagnosis, final: Model, chain: list[Model], remaining: list[d
     result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")} for item in remaining]
     if not result.effects and final.effects and not remaining:
         # Every effect fitted lies within its band and, with the build, leaves nothing located: the robot as
-        # built explains the recording, a match (tests/test_tolerance.py::test_a_build_the_effects_fit_within_tolerance_is_a_match).
+        # built explains the recording, a match
+        # (tests/test_tolerance.py::test_a_build_the_effects_fit_within_tolerance_is_a_match).
         result.verdict, result.located_datasheet, result.located = "match", result.located, []
         result.notes.append("with the build and these values, all within the datasheet's tolerance, nothing is "
                             "located: the robot as built")
