@@ -170,8 +170,9 @@ def test_a_set_point_loop_counts_at_the_boards_scale_and_its_twin_is_smooth():
     parameter is nudged (a count changes); the diagnosis's twin (loop_counts_whole off) moves smoothly, so
     a finite difference gives the same slope at two steps."""
     p = RobotParams(drive="wheel_speed", ticks_per_rev_delta_l=31.0)
-    res = BatchSim(None, p).run_inputs(np.tile([10.0, 10.0], (100, 1)), sensors=False)
-    speed = np.diff(res.theta[-26:, 0], axis=0).mean(0) / BatchSim(None, p).cycle_s
+    sim = BatchSim(None, p)
+    res = sim.run_inputs(np.tile([10.0, 10.0], (100, 1)), sensors=False)
+    speed = np.diff(res.theta[-26:, 0], axis=0).mean(0) / sim.cycle_s
     assert speed[0] == pytest.approx(10.0 * 1200.0 / 1231.0, rel=0.005) and speed[1] == pytest.approx(10.0, rel=0.005)
 
     def end_angle(radius_share: float, whole: bool) -> float:
