@@ -213,10 +213,23 @@ def test_the_parameter_error_is_taken_against_the_drawn_robot() -> None:
     got = scoring.parameter_error(radius, PLANT, DEFAULT, 0.0005 + 0.00004, [0.0004, 0.0006])
     assert got["true"] == pytest.approx(0.0005) and got["error"] == pytest.approx(0.1) and got["covered"]
     assert scoring.parameter_error(radius, PLANT, DEFAULT, 0.0003, [0.0002, 0.0004])["covered"] is False
+    # the reported interval (with the model error) and the fit's own are scored apart, and the share of the
+    # effect's size (0.3 mm) the fit's would need to reach the truth: (0.2 mm - 0.1 mm) / 0.3 mm
+    both = scoring.parameter_error(radius, PLANT, DEFAULT, 0.0003, [0.0001, 0.0005], [0.0002, 0.0004])
+    assert both["covered"] is True and both["covered_fit"] is False
+    assert both["share_needed"] == pytest.approx(math.sqrt(0.0002 ** 2 - 0.0001 ** 2) / 0.0003)
     caster = concealed("caster_drag", "caster_friction", 0.02, 0.0)
     caster["params"]["caster_friction"]["drawn"] = 0.0
     rolling = {**PLANT, "caster_rolling": 0.004}
     assert scoring.parameter_error(caster, rolling, DEFAULT, 0.024 * 1.5042)["error"] == pytest.approx(0.0, abs=2e-3)
+
+
+def test_the_conformal_quantile_is_the_ceil_of_level_n_plus_one_th_score() -> None:
+    """Split-conformal: of n scores the ceil(0.95 (n + 1))-th smallest; under 19 scores no finite one holds 95 %."""
+    assert bench_diagnose.conformal_quantile(list(range(19, 0, -1)), 0.95) == 19
+    assert bench_diagnose.conformal_quantile(list(range(39)), 0.95) == 37
+    assert bench_diagnose.conformal_quantile(list(range(18)), 0.95) == math.inf
+    assert bench_diagnose.conformal_quantile([], 0.95) is None
 
 
 def test_the_parameter_table_covers_both_libraries() -> None:
@@ -412,6 +425,12 @@ def test_a_kept_suite_is_scored_again_without_diagnosing(suite: dict[str, Any], 
         [{k: r.get(k) for k in keep} for r in suite["report"]["cases"]]
     assert f"--rescore {moved}" in capsys.readouterr().out
     assert all("fit_perfect" in r for r in report["cases"] if "fit_before" in r)
+    # two kept suites scored together, one after the other (the model error's share is read off the tuning ones)
+    assert cli.main(["bench", "diagnose", "--rescore", str(moved), str(suite["out"]), "--json", str(again)]) == 0
+    both = json.loads(again.read_text())
+    assert both["seeds"] == 2 * report["seeds"] and len(both["cases"]) == 2 * len(report["cases"])
+    assert both["totals"]["intervals"] == 2 * report["totals"]["intervals"]
+    assert f"--rescore {moved} {suite['out']}" in capsys.readouterr().out
     # a suite kept before the truth files: scored alike, every case counted, diagnosis's ceiling shown
     for truth in (moved / "answer_keys").glob("*.truth.npz"):
         truth.rename(truth.with_suffix(".gone"))

@@ -56,7 +56,7 @@ def test_the_report_carries_a_sentence_per_rival():
     rival = Model([Candidate("dry_friction", "left")], [[0.0008]], FRICTION, 1.0, 1.01, 100)
     chosen.rivals, chosen.alternatives = [rival], ["dry_friction(left)"]
     nominal = Model([], [], DEFAULT, 2.0, 2.0, 100)
-    entry = _effect_entry(chosen, 0, [nominal, chosen])
+    entry = _effect_entry(chosen, 0, [nominal, chosen], DEFAULT)
     assert entry["evidence"]["explains_equally_well"] == ["dry_friction(left)"]
     (sentence,) = entry["evidence"]["told_apart_by"]
     assert sentence.startswith("wheel_radius(left) and dry_friction(left)")

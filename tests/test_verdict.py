@@ -190,6 +190,36 @@ def test_the_intervals_hold_the_true_value_about_95_times_in_100(tmp_path):
     assert 0.85 <= held / 40 <= 0.99
 
 
+def test_the_reported_interval_adds_the_twins_model_error():
+    """A named effect's reported interval is the fit's, each side widened in quadrature by MODEL_ERROR times
+    the effect's size: its distance from absent, or a limit's own value where that is less; needed_share is
+    the least share whose widening reaches the truth (the score MODEL_ERROR is the conformal quantile of)."""
+    from host_sim.diagnosis.fit import Candidate, Model
+    from host_sim.diagnosis.model_error import MODEL_ERROR, effect_size, needed_share, with_model_error
+
+    assert MODEL_ERROR > 0
+    assert effect_size("dry_friction", 0.002, DEFAULT) == 0.002  # absent: no extra friction
+    assert effect_size("track_width", DEFAULT.half_axle + 0.001, DEFAULT) == pytest.approx(0.001)
+    assert effect_size("current_limit", 0.2, DEFAULT.replace(current_limit=1.5)) == 0.2  # a limit: its value
+    lo, hi = with_model_error("dry_friction", 0.002, (0.0019, 0.0022), DEFAULT, share=0.25)
+    assert lo == pytest.approx(0.002 - math.hypot(0.0001, 0.0005))
+    assert hi == pytest.approx(0.002 + math.hypot(0.0002, 0.0005))
+    assert with_model_error("dry_friction", 0.002, (0.0019, 0.0022), DEFAULT, share=0.0) == (0.0019, 0.0022)
+    assert with_model_error("dry_friction", 0.002, (0.0019, 0.0022), DEFAULT, share=5.0)[1] == \
+        E.bounds("dry_friction", DEFAULT)[1][0]  # within the library's bounds
+    share = needed_share("dry_friction", 0.002, (0.0019, 0.0022), 0.0014, DEFAULT)
+    assert with_model_error("dry_friction", 0.002, (0.0019, 0.0022), DEFAULT, share=share)[0] == pytest.approx(0.0014)
+    assert needed_share("dry_friction", 0.002, (0.0019, 0.0022), 0.0021, DEFAULT) == 0.0  # the fit's holds it
+
+    chosen = Model([Candidate("dry_friction", "left")], [[0.002]], DEFAULT, 1.0, 1.0, 100)
+    chosen.ci95 = [[(0.0019, 0.0022)]]
+    entry = R._effect_entry(chosen, 0, [Model([], [], DEFAULT, 2.0, 2.0, 100), chosen], DEFAULT)
+    reported = entry["params"]["dry_friction"]
+    assert reported["ci95_fit"] == [0.0019, 0.0022]
+    assert reported["ci95"] == list(with_model_error("dry_friction", 0.002, (0.0019, 0.0022), DEFAULT))
+    assert reported["ci95"][0] < 0.0019 and reported["ci95"][1] > 0.0022
+
+
 def test_without_the_opt_in_there_is_no_test_block(twin_run, monkeypatch):
     """diagnose without test_block compares and judges the whole recording on its held-out windows, as
     before the test block: no test figures, no keys of the rules in the JSON."""

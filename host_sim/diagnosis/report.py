@@ -21,6 +21,7 @@ from host_sim.diagnosis.channels import (ACCUMULATED, IR, SENSOR_NAMES, WHEELS, 
                                         ring_comparable)
 from host_sim.diagnosis.clipping import clipped
 from host_sim.diagnosis.locate import Finding, noise_level, regimes, runs, total_noise
+from host_sim.diagnosis.model_error import with_model_error
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
 from host_sim.diagnosis.testblock import TestBlockError, check_test_recording, split_test_block
 from host_sim.diagnosis.block_verdict import judge_held_out, judge_test_block
@@ -349,7 +350,7 @@ def _name(result: Diagnosis, final: Model, chain: list[Model], remaining: list[d
     """The effects named and the verdict: none within the tolerance (the robot as built), and without a test
     block only those that explain what they answer for (block_verdict.judge_held_out); compared: the twin
     the effects were sought from and the fitted one, on the same held-out windows."""
-    result.effects = [_effect_entry(final, i, chain) for i in range(len(final.effects))
+    result.effects = [_effect_entry(final, i, chain, tol.datasheet) for i in range(len(final.effects))
                       if not tol.within(final.effects[i].name, final.values[i])]
     if len(result.effects) < len(final.effects):
         result.notes.append("fitted within the datasheet's tolerance, the robot as built and not named: " + ", ".join(
@@ -563,7 +564,9 @@ def objective_sigma(cmp: Comparison, names: list[str], totals: tuple[str, ...]) 
     return sigma
 
 
-def _effect_entry(model: Model, i: int, chain: list[Model]) -> dict[str, Any]:
+def _effect_entry(model: Model, i: int, chain: list[Model], datasheet: RobotParams) -> dict[str, Any]:
+    """A named effect: its values with the 95 % interval that holds the robot's value (the fit's, widened for
+    the twin's model error: model_error.py; the fit's alone is `ci95_fit`), and the evidence for it."""
     cand = model.effects[i]
     effect = E.LIBRARY[cand.name]
     entry: dict[str, Any] = {"name": cand.name}
@@ -572,7 +575,9 @@ def _effect_entry(model: Model, i: int, chain: list[Model]) -> dict[str, Any]:
     elif effect.kind == "sensor":
         entry["sensor"] = cand.site
     entry["params"] = {prm.name: {"value": model.values[i][j], "unit": prm.unit,
-                                  "ci95": list(model.ci95[i][j]) if model.ci95 else None,
+                                  "ci95": list(with_model_error(cand.name, model.values[i][j], model.ci95[i][j],
+                                                                datasheet)) if model.ci95 else None,
+                                  "ci95_fit": list(model.ci95[i][j]) if model.ci95 else None,
                                   "field": prm.field.format(w="l" if cand.site == "left" else "r")
                                   if effect.kind == "drive" and cand.site != "both" else prm.field}
                        for j, prm in enumerate(effect.params)}

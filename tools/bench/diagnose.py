@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import statistics
 import sys
@@ -18,6 +19,7 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from pathlib import Path
 from typing import Any
 
+from host_sim.diagnosis.model_error import MODEL_ERROR
 from host_sim.physics.params import DRIVES
 from tools.bench.report import print_targets
 
@@ -29,6 +31,7 @@ TARGET_WHEEL_SHARE = 0.95  # ... in this share of the cases (controls and in-lib
 TARGET_FALSE_ALARMS = 0.05  # share of controls whose verdict is not "match"
 TARGET_UNLISTED = 0.95  # share of out-of-library effects called unexplained / partly explained, rightly located
 TARGET_COVERAGE = (0.85, 0.99)  # share of the named effects' 95 % intervals that hold the true value
+CONFORMAL_LEVEL = 0.95  # the model error's share is the conformal quantile at this level (model_error.MODEL_ERROR)
 TARGET_SECONDS = 10.0  # CPU seconds per 90 s recording (median), all of a diagnosis's processes
 TARGET_SECONDS_MAX = 60.0  # ... and the slowest
 REFERENCE_SECONDS = 90.0
@@ -97,8 +100,9 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
                         "--workers 2 a case's wall time is what a user waits for on two cores)")
     p.add_argument("--out", metavar="DIR", type=output_folder,
                    help="keep the recordings and answer keys here (default: a temporary folder, removed)")
-    p.add_argument("--rescore", metavar="DIR", type=suite_folder,
-                   help="score the diagnoses a run with --out DIR kept, again (nothing generated or diagnosed)")
+    p.add_argument("--rescore", metavar="DIR", type=suite_folder, nargs="+",
+                   help="score the diagnoses runs with --out DIR kept, again and together (nothing generated or "
+                        "diagnosed)")
     p.add_argument("--json", metavar="FILE", type=output_file, help="write every figure here")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--board-controls", action="store_true",
@@ -285,10 +289,22 @@ def _share(k: int, n: int) -> float | None:
     return k / n if n else None
 
 
+def conformal_quantile(scores: list[float], level: float) -> float | None:
+    """The split-conformal quantile: the ceil(level (n + 1))-th smallest of n scores (inf when n is too few
+    for it), a bound a new score stays within with probability >= level where the scores are exchangeable
+    (Vovk et al. 2005; Angelopoulos & Bates 2023, eq. 1).  None without scores."""
+    if not scores:
+        return None
+    k = math.ceil(level * (len(scores) + 1))
+    return sorted(scores)[k - 1] if k <= len(scores) else math.inf
+
+
 def totals(rows: list[dict[str, Any]]) -> dict[str, Any]:
     listed = [r for r in rows if r["kind"] == "in library"]
     hidden, excited, named, params_ok = _concealed(listed)
     intervals = [e["param"]["covered"] for _r, e in named if e["param"].get("covered") is not None]
+    fit_alone = [e["param"]["covered_fit"] for _r, e in named if e["param"].get("covered_fit") is not None]
+    needed = [e["param"]["share_needed"] for _r, e in named if "share_needed" in e["param"]]
     showing = [r for r in listed if "not_excited" not in r]  # cases that show at least one of their effects
     controls = [r for r in rows if r["kind"] == "control"]
     alarms = [r for r in controls if r["outcome"] != "right"]
@@ -318,6 +334,8 @@ def totals(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "cases": len(rows), "in_library": len(listed), "concealed": len(hidden),
         "intervals": len(intervals), "intervals_covered": sum(intervals),
         "coverage_share": _share(sum(intervals), len(intervals)),
+        "intervals_covered_fit": sum(fit_alone), "intervals_fit": len(fit_alone),
+        "model_error_needed": conformal_quantile(needed, CONFORMAL_LEVEL), "model_error_needed_of": len(needed),
         "not_excited": len(hidden) - len(excited), "excited": len(excited), "showing": len(showing),
         "outcomes_excited": outcomes, "named_by_drive": by_drive,
         "named": len(named), "named_share": _share(len(named), len(excited)),
@@ -537,6 +555,11 @@ def print_report(report: dict[str, Any]) -> None:
     kinds = ", ".join(f"{k} {n}" for k, n in t["naming_not_concealed_by_kind"].items())
     print(f"cases naming an effect that was not concealed (on a control, beside a right name or instead of one): "
           f"{t['naming_not_concealed']}/{t['diagnosed']}" + (f" ({kinds})" if kinds else ""))
+    print(f"95 % intervals holding the truth: {t['intervals_covered']}/{t['intervals']} as reported, "
+          f"{t['intervals_covered_fit']}/{t['intervals_fit']} with the fit's spread alone (the model error they add: "
+          f"{MODEL_ERROR:.0%} of the effect's size); the share that would have held {CONFORMAL_LEVEL:.0%} here "
+          f"(conformal, over {t['model_error_needed_of']}): "
+          + ("too few to say" if t["model_error_needed"] == math.inf else _pct(t["model_error_needed"])))
     print(f"median parameter error of those named: "
           + ("-" if t["param_error_median"] is None else f"{100 * t['param_error_median']:.0f} %"))
     print(f"median held-out wheel fit (controls + in-library): before {_f(t['wheel_fit_before_median'])} %, "
@@ -572,15 +595,19 @@ def run(args: argparse.Namespace) -> int:
             print("twinbot bench diagnose: error: --rescore scores a kept suite; --out keeps a new one: "
                   "give one of them", file=sys.stderr)
             return 2
+        seeds, rows, durations = [], [], []
         try:
-            seeds, results = kept_diagnoses(Path(args.rescore))
-            rows = score_all(seeds, results, Path(args.rescore))
+            for folder in args.rescore:
+                kept, results = kept_diagnoses(Path(folder))
+                seeds += kept
+                rows += score_all(kept, results, Path(folder))
+                durations += [r["duration"] for r in results.values()]
         except (OSError, ValueError) as exc:  # a missing or broken key or recording: the loaders' one-line errors
             print(f"twinbot bench diagnose: error: {exc}", file=sys.stderr)
             return 2
         # to 0.1 s: a recording's span jitters with the firmware's period (docs/proving-ground.md, "Timing")
-        args.duration = round(statistics.median(r["duration"] for r in results.values()), 1)
-        command = f"twinbot bench diagnose --rescore {args.rescore} (the timings are the kept run's)"
+        args.duration = round(statistics.median(durations), 1)
+        command = f"twinbot bench diagnose --rescore {' '.join(args.rescore)} (the timings are the kept runs')"
     else:
         from tools.reference_plant.cases import first_seed
 

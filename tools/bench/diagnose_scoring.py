@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from host_sim.diagnosis.model_error import needed_share
 from host_sim.physics import effects as library
 from host_sim.physics.params import RobotParams
 from host_sim.recordings.recording import Recording
@@ -138,14 +139,26 @@ def true_value(effect: dict[str, Any], plant: dict[str, Any], nominal: RobotPara
 
 
 def parameter_error(effect: dict[str, Any], plant: dict[str, Any], nominal: RobotParams,
-                    fitted: float, ci95: list[float] | None = None) -> dict[str, Any]:
+                    fitted: float, ci95: list[float] | None = None,
+                    ci95_fit: list[float] | None = None) -> dict[str, Any]:
     """|fitted - true| over the effect's size on this robot (|true - its own value without it|), or over
-    |true| for the limits; `covered`: the 95 % interval holds the true value (None without one)."""
+    |true| for the limits; `covered`: the reported 95 % interval holds the true value (None without one),
+    `covered_fit`: the fit's own interval does; `share_needed`: the share of the effect's size the model
+    error would have to add to the fit's interval to hold it (model_error.needed_share, whose 95 % conformal
+    quantile over the tuning split is model_error.MODEL_ERROR)."""
     true, absent = true_value(effect, plant, nominal)
     denom = abs(true - absent) if PARAMS[effect["name"]].relative_to == "change" else abs(true)
-    covered = None if not ci95 or len(ci95) != 2 else bool(float(ci95[0]) <= true <= float(ci95[1]))
-    return {"true": true, "fitted": fitted, "absent": absent, "covered": covered,
-            "error": abs(fitted - true) / denom if denom > 0 else math.inf}
+    fit_ci = ci95_fit or ci95  # a diagnosis kept before the model error was added reported the fit's alone
+    out = {"true": true, "fitted": fitted, "absent": absent, "covered": _holds(ci95, true),
+           "covered_fit": _holds(fit_ci, true), "error": abs(fitted - true) / denom if denom > 0 else math.inf}
+    if fit_ci and len(fit_ci) == 2:
+        out["share_needed"] = needed_share(effect["name"], fitted,
+                                           (float(fit_ci[0]), float(fit_ci[1])), true, nominal)
+    return out
+
+
+def _holds(ci: list[float] | None, true: float) -> bool | None:
+    return None if not ci or len(ci) != 2 else bool(float(ci[0]) <= true <= float(ci[1]))
 
 
 def _site(entry: dict[str, Any]) -> str | int | None:
@@ -334,7 +347,7 @@ def _score_listed(concealed: list[dict[str, Any]], plant: dict[str, Any], diagno
             score["named"] = True
             fitted_param = match["params"][PARAMS[effect["name"]].library_param]
             score["param"] = parameter_error(effect, plant, nominal, float(fitted_param["value"]),
-                                             fitted_param.get("ci95"))
+                                             fitted_param.get("ci95"), fitted_param.get("ci95_fit"))
     judged = [i for i, sc in enumerate(scores) if "not_excited" not in sc] or list(range(len(scores)))
     missing = [concealed[i] for i in judged if not scores[i]["named"]]
     if not missing:
