@@ -1,12 +1,9 @@
 """A named effect's 95 % interval with the twin's own model error in it.
 
-The fit's interval (fit.sandwich_intervals) is the spread of the value across the recording's windows: it
-holds the value the twin takes, not the robot's.  A robot has physics the twin lacks (a Stribeck curve, a
-motor's inductance, tyres that give), and the effect's value takes up some of it the same way in every window,
-so no spread over windows shows it.  The reported interval adds it: each half-width becomes
-sqrt(h^2 + (MODEL_ERROR * size)^2), size the effect's size, min(|value - absent|, |value|): its distance from
-"not there", or the value itself for a limit set far below its absent value.  MODEL_ERROR is a split-conformal
-quantile of the need for it on the proving ground's tuning split, never on the split that scores it
+The fit's interval (fit.sandwich_intervals) is the spread across windows of the value the twin takes; a robot's
+physics the twin lacks shifts that value alike in every window, so no spread shows it.  The reported interval
+widens each half-width h to sqrt(h^2 + (MODEL_ERROR * size)^2), size the effect's distance from "not there" (or
+a limit's own value).  MODEL_ERROR is a split-conformal quantile set on the proving ground's tuning split alone
 (docs/diagnosis.md, "The twin's model error";
 tests/test_verdict.py::test_the_reported_interval_adds_the_twins_model_error).
 """

@@ -101,8 +101,8 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
     p.add_argument("--out", metavar="DIR", type=output_folder,
                    help="keep the recordings and answer keys here (default: a temporary folder, removed)")
     p.add_argument("--rescore", metavar="DIR", type=suite_folder, nargs="+",
-                   help="score the diagnoses runs with --out DIR kept, again and together (nothing generated or "
-                        "diagnosed)")
+                   help="score again the diagnoses that runs with --out DIR kept, several suites together "
+                        "(nothing generated or diagnosed)")
     p.add_argument("--json", metavar="FILE", type=output_file, help="write every figure here")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--board-controls", action="store_true",
@@ -299,12 +299,19 @@ def conformal_quantile(scores: list[float], level: float) -> float | None:
     return sorted(scores)[k - 1] if k <= len(scores) else math.inf
 
 
+def _model_error_totals(named: EffectScores) -> dict[str, Any]:
+    """The fit's own intervals' coverage, and the share of the effects' size the model error would have
+    needed on this suite (its conformal quantile: how model_error.MODEL_ERROR is set on the tuning split)."""
+    fit_alone = [e["param"]["covered_fit"] for _r, e in named if e["param"].get("covered_fit") is not None]
+    needed = [e["param"]["share_needed"] for _r, e in named if "share_needed" in e["param"]]
+    return {"intervals_covered_fit": sum(fit_alone), "intervals_fit": len(fit_alone),
+            "model_error_needed": conformal_quantile(needed, CONFORMAL_LEVEL), "model_error_needed_of": len(needed)}
+
+
 def totals(rows: list[dict[str, Any]]) -> dict[str, Any]:
     listed = [r for r in rows if r["kind"] == "in library"]
     hidden, excited, named, params_ok = _concealed(listed)
     intervals = [e["param"]["covered"] for _r, e in named if e["param"].get("covered") is not None]
-    fit_alone = [e["param"]["covered_fit"] for _r, e in named if e["param"].get("covered_fit") is not None]
-    needed = [e["param"]["share_needed"] for _r, e in named if "share_needed" in e["param"]]
     showing = [r for r in listed if "not_excited" not in r]  # cases that show at least one of their effects
     controls = [r for r in rows if r["kind"] == "control"]
     alarms = [r for r in controls if r["outcome"] != "right"]
@@ -333,9 +340,7 @@ def totals(rows: list[dict[str, Any]]) -> dict[str, Any]:
         **_names_not_concealed(rows),
         "cases": len(rows), "in_library": len(listed), "concealed": len(hidden),
         "intervals": len(intervals), "intervals_covered": sum(intervals),
-        "coverage_share": _share(sum(intervals), len(intervals)),
-        "intervals_covered_fit": sum(fit_alone), "intervals_fit": len(fit_alone),
-        "model_error_needed": conformal_quantile(needed, CONFORMAL_LEVEL), "model_error_needed_of": len(needed),
+        "coverage_share": _share(sum(intervals), len(intervals)), **_model_error_totals(named),
         "not_excited": len(hidden) - len(excited), "excited": len(excited), "showing": len(showing),
         "outcomes_excited": outcomes, "named_by_drive": by_drive,
         "named": len(named), "named_share": _share(len(named), len(excited)),
@@ -522,6 +527,14 @@ def format_table(header: tuple[str, ...], rows: list[tuple[str, ...]]) -> str:
     return "\n".join(lines + [" | ".join(c.ljust(w) for c, w in zip(row, widths)) for row in rows])
 
 
+def print_intervals(t: dict[str, Any]) -> None:
+    print(f"95 % intervals holding the truth: {t['intervals_covered']}/{t['intervals']} as reported, "
+          f"{t['intervals_covered_fit']}/{t['intervals_fit']} with the fit's spread alone (the model error they add: "
+          f"{MODEL_ERROR:.0%} of the effect's size); the share that would have held {CONFORMAL_LEVEL:.0%} here "
+          f"(conformal, over {t['model_error_needed_of']}): "
+          + ("too few to say" if t["model_error_needed"] == math.inf else _pct(t["model_error_needed"])))
+
+
 def print_report(report: dict[str, Any]) -> None:
     m, t = report["machine"], report["totals"]
     print("twinbot bench diagnose")
@@ -555,11 +568,7 @@ def print_report(report: dict[str, Any]) -> None:
     kinds = ", ".join(f"{k} {n}" for k, n in t["naming_not_concealed_by_kind"].items())
     print(f"cases naming an effect that was not concealed (on a control, beside a right name or instead of one): "
           f"{t['naming_not_concealed']}/{t['diagnosed']}" + (f" ({kinds})" if kinds else ""))
-    print(f"95 % intervals holding the truth: {t['intervals_covered']}/{t['intervals']} as reported, "
-          f"{t['intervals_covered_fit']}/{t['intervals_fit']} with the fit's spread alone (the model error they add: "
-          f"{MODEL_ERROR:.0%} of the effect's size); the share that would have held {CONFORMAL_LEVEL:.0%} here "
-          f"(conformal, over {t['model_error_needed_of']}): "
-          + ("too few to say" if t["model_error_needed"] == math.inf else _pct(t["model_error_needed"])))
+    print_intervals(t)
     print(f"median parameter error of those named: "
           + ("-" if t["param_error_median"] is None else f"{100 * t['param_error_median']:.0f} %"))
     print(f"median held-out wheel fit (controls + in-library): before {_f(t['wheel_fit_before_median'])} %, "
