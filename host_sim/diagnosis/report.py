@@ -350,11 +350,12 @@ def _name(result: Diagnosis, final: Model, chain: list[Model], remaining: list[d
     """The effects named and the verdict: none within the tolerance (the robot as built), and without a test
     block only those that explain what they answer for (block_verdict.judge_held_out); compared: the twin
     the effects were sought from and the fitted one, on the same held-out windows."""
-    result.effects = [_effect_entry(final, i, chain, tol.datasheet) for i in range(len(final.effects))
-                      if not tol.within(final.effects[i].name, final.values[i])]
+    built = [_as_built(final, i, tol) for i in range(len(final.effects))]
+    result.effects = [_effect_entry(final, i, chain, tol.datasheet) for i in range(len(final.effects)) if not built[i]]
     if len(result.effects) < len(final.effects):
-        result.notes.append("fitted within the datasheet's tolerance, the robot as built and not named: " + ", ".join(
-            c.label() for c, v in zip(final.effects, final.values) if tol.within(c.name, v)))
+        result.notes.append("fitted within the datasheet's tolerance, or within the twin's model error of it: the "
+                            "robot as built, not named: " + ", ".join(
+                                c.label() for c, b in zip(final.effects, built) if b))
     result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")} for item in remaining]
     if not result.effects and final.effects and not remaining:
         # Every effect fitted lies within its band and, with the build, leaves nothing located: the robot as
@@ -562,6 +563,16 @@ def objective_sigma(cmp: Comparison, names: list[str], totals: tuple[str, ...]) 
     sigma |= {ACCUMULATED[c.name]: total_noise(c, judged_windows(c.name, cmp.contact)) for c in cmp.channels
               if c.name in names and c.name in totals}
     return sigma
+
+
+def _as_built(model: Model, i: int, tol: Tolerance) -> bool:
+    """The model's effect i is the robot as built: its values lie within their bands, or its 95 % intervals
+    with the twin's model error (model_error.py) reach them."""
+    name, values = model.effects[i].name, model.values[i]
+    if tol.within(name, values):
+        return True
+    return bool(model.ci95) and tol.reaches(name, [with_model_error(name, v, ci, tol.datasheet)
+                                                   for v, ci in zip(values, model.ci95[i])])
 
 
 def _effect_entry(model: Model, i: int, chain: list[Model], datasheet: RobotParams) -> dict[str, Any]:

@@ -74,6 +74,17 @@ class Tolerance:
             inside.append(dev is not None and abs(dev[1]) <= self.bands[dev[0]])
         return bool(inside) and all(inside)
 
+    def reaches(self, effect: str, intervals: list[tuple[float, float]]) -> bool:
+        """True when every parameter's interval (its 95 % interval with the twin's model error) meets its band:
+        the robot as built may hold that value, so the fit does not show a fault
+        (tests/test_tolerance.py::test_an_effect_whose_interval_reaches_the_tolerance_is_not_named)."""
+        meets = []
+        for prm, (lo, hi) in zip(E.LIBRARY[effect].params, intervals):
+            a, b = self.deviation(prm.field, lo), self.deviation(prm.field, hi)
+            band = self.bands[a[0]] if a is not None and b is not None else None
+            meets.append(band is not None and min(a[1], b[1]) <= band and max(a[1], b[1]) >= -band)
+        return bool(meets) and all(meets)
+
 
 def load_bands(path: str | Path) -> dict[str, float]:
     """BANDS with those a JSON file gives ({"wheel_radius": 0.01, ...}: relative ± bands; 0 turns one off)."""
