@@ -28,6 +28,9 @@ def test_an_effect_within_tolerance_is_not_named():
     assert not tol.within("wheel_radius", [0.03 * DEFAULT.wheel_radius])
     assert tol.within("track_width", [1.01 * DEFAULT.half_axle])
     assert tol.within("ir_gain", [1.1]) and not tol.within("ir_gain", [1.3])
+    # a pair's axis within 2 degrees of its bearing, either way: the band is the angle itself
+    assert tol.within("ir_misalignment", [0.03]) and tol.within("ir_misalignment", [-0.03])
+    assert not tol.within("ir_misalignment", [0.08]) and not tol.within("ir_misalignment", [-0.08])
     assert not tol.within("backlash", [0.001])  # the datasheet states no tolerance of play: any is beyond
     assert not Tolerance(DEFAULT, {}).within("dry_friction", [1e-6])
 
@@ -45,15 +48,16 @@ def test_an_effect_whose_interval_reaches_the_tolerance_is_not_named():
     k = DEFAULT.torque_constant
     assert tol.reaches("torque_constant", [(-0.08 * k, -0.05 * k)]) and not tol.reaches("torque_constant", [(0.07 * k, 0.1 * k)])
     assert not tol.reaches("actuator_delay", [(0.0, 0.05)])  # no band: any delay is beyond the datasheet
+    assert tol.reaches("ir_misalignment", [(-0.06, -0.03)]) and not tol.reaches("ir_misalignment", [(0.04, 0.1)])
 
     def model(value, half, ci=True):
         return Model([Candidate("ir_gain", 4)], [[value]], DEFAULT, 0.0, 0.0, 1,
                      [[(value - half, value + half)]] if ci else [])
 
-    assert _as_built(model(1.2, 0.02), 0, tol)  # +20 %, reaching +14.2 %
-    assert not _as_built(model(1.3, 0.02), 0, tol)  # +30 %, reaching +21.7 %
-    assert not _as_built(model(1.2, 0.02, ci=False), 0, tol)  # no interval: the fitted value decides
-    assert _as_built(model(1.1, 0.001), 0, tol)  # within the band
+    assert _as_built(model(1.2, 0.02), 0, tol) == "reaches"  # +20 %, reaching +14.2 %
+    assert _as_built(model(1.3, 0.02), 0, tol) == ""  # +30 %, reaching +21.7 %: a fault
+    assert _as_built(model(1.2, 0.02, ci=False), 0, tol) == ""  # no interval: the fitted value decides
+    assert _as_built(model(1.1, 0.001), 0, tol) == "within"  # within the band
 
 
 def test_a_tolerance_file_sets_bands_and_bad_ones_are_refused(tmp_path):

@@ -18,7 +18,7 @@ from host_sim.diagnosis.channels import drive_channel, sensor_channel
 from host_sim.diagnosis.fit import (FIT_FTOL, FIT_XTOL, Model, Objective, sandwich_intervals, earns_its_place,
                                    f_test, touching_runs)
 from host_sim.physics import effects as E
-from host_sim.diagnosis.tolerance import ABSOLUTE, Tolerance
+from host_sim.diagnosis.tolerance import ABSOLUTE, ONE_SIDED, Tolerance
 from host_sim.physics.params import RobotParams
 
 PRIOR_SD = 0.5  # of a band: a band holds about 95 % of robots built to the datasheet (±2 sd)
@@ -113,9 +113,9 @@ def set_values(p: RobotParams, tol: Tolerance, nuisances: list[Nuisance], x: np.
 
 
 def lower_bounds(nuisances: list[Nuisance], band: np.ndarray) -> np.ndarray:
-    """Each nuisance's lower bound: -band, or 0 for a quantity absent on the datasheet (tolerance.ABSOLUTE),
+    """Each nuisance's lower bound: -band, or 0 for a one-sided one (tolerance.ONE_SIDED),
     which a build has or lacks but never holds below none."""
-    return np.where([n.quantity in ABSOLUTE for n in nuisances], 0.0, -band)
+    return np.where([n.quantity in ONE_SIDED for n in nuisances], 0.0, -band)
 
 
 def inside(x0: np.ndarray, lo: np.ndarray, band: np.ndarray) -> np.ndarray:

@@ -352,10 +352,11 @@ def _name(result: Diagnosis, final: Model, chain: list[Model], remaining: list[d
     the effects were sought from and the fitted one, on the same held-out windows."""
     built = [_as_built(final, i, tol) for i in range(len(final.effects))]
     result.effects = [_effect_entry(final, i, chain, tol.datasheet) for i in range(len(final.effects)) if not built[i]]
-    if len(result.effects) < len(final.effects):
-        result.notes.append("fitted within the datasheet's tolerance, or within the twin's model error of it: the "
-                            "robot as built, not named: " + ", ".join(
-                                c.label() for c, b in zip(final.effects, built) if b))
+    for why, words in (("within", "fitted within the datasheet's tolerance, the robot as built and not named"),
+                       ("reaches", "fitted beyond the datasheet's tolerance, but with the twin's model error its 95 % "
+                                   "interval reaches it: the robot as built may hold it, not named")):
+        if why in built:
+            result.notes.append(f"{words}: " + ", ".join(c.label() for c, b in zip(final.effects, built) if b == why))
     result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")} for item in remaining]
     if not result.effects and final.effects and not remaining:
         # Every effect fitted lies within its band and, with the build, leaves nothing located: the robot as
@@ -565,14 +566,15 @@ def objective_sigma(cmp: Comparison, names: list[str], totals: tuple[str, ...]) 
     return sigma
 
 
-def _as_built(model: Model, i: int, tol: Tolerance) -> bool:
-    """The model's effect i is the robot as built: its values lie within their bands, or its 95 % intervals
-    with the twin's model error (model_error.py) reach them."""
+def _as_built(model: Model, i: int, tol: Tolerance) -> str:
+    """Why the model's effect i is the robot as built: "within" (its values lie within their bands), "reaches"
+    (its 95 % intervals with the twin's model error, model_error.py, reach them), or "" (a fault)."""
     name, values = model.effects[i].name, model.values[i]
     if tol.within(name, values):
-        return True
-    return bool(model.ci95) and tol.reaches(name, [with_model_error(name, v, ci, tol.datasheet)
-                                                   for v, ci in zip(values, model.ci95[i])])
+        return "within"
+    reaches = bool(model.ci95) and tol.reaches(name, [with_model_error(name, v, ci, tol.datasheet)
+                                                      for v, ci in zip(values, model.ci95[i])])
+    return "reaches" if reaches else ""
 
 
 def _effect_entry(model: Model, i: int, chain: list[Model], datasheet: RobotParams) -> dict[str, Any]:

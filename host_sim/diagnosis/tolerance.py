@@ -26,10 +26,12 @@ BANDS: dict[str, float] = {
     "battery_voltage": 0.15,  # the state of charge: a 2S pack's 6.4-8.4 V about 7.4 V
     "ir_gain": 0.15,  # an optical pair's efficiency, each pair its own
     "stiction": 0.4,  # a greased gear train's breakaway friction, 0-40 % above its dry friction
+    "ir_misalignment": 0.035,  # rad: an IR pair's axis within 2 degrees of its bearing, as its holder is moulded
 }
-# Bands of a quantity the datasheet gives as absent (0): the band is the value itself, one-sided, not a
+# Bands of a quantity the datasheet gives as absent (0): the band is the value itself, in its unit, not a
 # fraction of the datasheet's (calibrate.set_values, calibrate.lower_bounds).
-ABSOLUTE = ("stiction",)
+ABSOLUTE = ("stiction", "ir_misalignment")
+ONE_SIDED = ("stiction",)  # a breakaway is never below the dry friction
 # The effect parameter fields whose value is a change from a datasheet value (a wheel's delta), by the
 # datasheet field it changes; the others set the datasheet field itself (half_axle) or a relative scale
 # (ir_gain_scale, about 1).
@@ -60,6 +62,8 @@ class Tolerance:
             return (of, value / nominal) if of in self.bands and nominal else None
         if base in SCALE_OF:
             return (SCALE_OF[base], value - 1.0) if SCALE_OF[base] in self.bands else None
+        if base in ABSOLUTE:
+            return (base, value) if base in self.bands else None
         if base in self.bands:
             nominal = float(getattr(self.datasheet, base))
             return (base, value / nominal - 1.0) if nominal else None
