@@ -46,7 +46,8 @@ def test_an_effect_whose_interval_reaches_the_tolerance_is_not_named():
     assert tol.reaches("ir_gain", [(1.12, 1.26)]) and tol.reaches("ir_gain", [(0.8, 0.9)])
     assert not tol.reaches("ir_gain", [(1.16, 1.3)]) and not tol.reaches("ir_gain", [(0.7, 0.84)])
     k = DEFAULT.torque_constant
-    assert tol.reaches("torque_constant", [(-0.08 * k, -0.05 * k)]) and not tol.reaches("torque_constant", [(0.07 * k, 0.1 * k)])
+    assert tol.reaches("torque_constant", [(-0.08 * k, -0.05 * k)])
+    assert not tol.reaches("torque_constant", [(0.07 * k, 0.1 * k)])
     assert not tol.reaches("actuator_delay", [(0.0, 0.05)])  # no band: any delay is beyond the datasheet
     assert tol.reaches("ir_misalignment", [(-0.06, -0.03)]) and not tol.reaches("ir_misalignment", [(0.04, 0.1)])
 

@@ -347,11 +347,11 @@ def _diagnose_fitted(rec: Recording, tol: Tolerance, world: World | None, second
 
 def _name(result: Diagnosis, final: Model, chain: list[Model], remaining: list[dict[str, Any]], tol: Tolerance,
           compared: tuple[Comparison, Comparison], test_block: bool) -> None:
-    """The effects named and the verdict: none within the tolerance (the robot as built), and without a test
+    """The effects named and the verdict: none the robot as built may hold (_as_built), and without a test
     block only those that explain what they answer for (block_verdict.judge_held_out); compared: the twin
     the effects were sought from and the fitted one, on the same held-out windows."""
     built = [_as_built(final, i, tol) for i in range(len(final.effects))]
-    result.effects = [_effect_entry(final, i, chain, tol.datasheet) for i in range(len(final.effects)) if not built[i]]
+    result.effects = [_effect_entry(final, i, chain, tol.datasheet) for i, b in enumerate(built) if not b]
     for why, words in (("within", "fitted within the datasheet's tolerance, the robot as built and not named"),
                        ("reaches", "fitted beyond the datasheet's tolerance, but with the twin's model error its 95 % "
                                    "interval reaches it: the robot as built may hold it, not named")):
@@ -359,12 +359,12 @@ def _name(result: Diagnosis, final: Model, chain: list[Model], remaining: list[d
             result.notes.append(f"{words}: " + ", ".join(c.label() for c, b in zip(final.effects, built) if b == why))
     result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")} for item in remaining]
     if not result.effects and final.effects and not remaining:
-        # Every effect fitted lies within its band and, with the build, leaves nothing located: the robot as
-        # built explains the recording, a match
+        # Every effect fitted lies within its band (or its interval reaches it) and, with the build, leaves nothing
+        # located: the robot as built explains the recording, a match
         # (tests/test_tolerance.py::test_a_build_the_effects_fit_within_tolerance_is_a_match).
         result.verdict, result.located_datasheet, result.located = "match", result.located, []
-        result.notes.append("with the build and these values, all within the datasheet's tolerance, nothing is "
-                            "located: the robot as built")
+        result.notes.append("with the build and these values, each within the datasheet's tolerance or within the "
+                            "twin's model error of it, nothing is located: the robot as built")
     elif not result.effects:
         result.verdict = "unexplained"
         if not final.effects:  # else what is left is what the build with its values within tolerance leaves

@@ -91,7 +91,8 @@ class Tolerance:
 
 
 def load_bands(path: str | Path) -> dict[str, float]:
-    """BANDS with those a JSON file gives ({"wheel_radius": 0.01, ...}: relative ± bands; 0 turns one off)."""
+    """BANDS with those a JSON file gives ({"wheel_radius": 0.01, ...}: relative ± bands, the value itself for
+    those ABSOLUTE; 0 turns one off)."""
     data = read_json(path, "tolerance file", ToleranceError)
     if not isinstance(data, dict):
         raise ToleranceError(f"{path}: a tolerance file is a JSON object of relative bands by datasheet value")
@@ -101,6 +102,7 @@ def load_bands(path: str | Path) -> dict[str, float]:
             raise ToleranceError(f"{path}: '{key}' has no tolerance (one of: {', '.join(BANDS)})")
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
                 or not 0 <= value < 1:
-            raise ToleranceError(f"{path}: '{key}' must be a relative band in 0..1, got {value!r}")
+            raise ToleranceError(f"{path}: '{key}' must be a band in 0..1 "
+                                 f"({'the value itself' if key in ABSOLUTE else 'relative'}), got {value!r}")
         bands[key] = float(value)
     return bands

@@ -71,7 +71,8 @@ def register(sub: argparse._SubParsersAction, name: str, summary: str) -> None: 
                             "block that no fit nor rule sees, the verdict judged there with its rules "
                             "(default: no test block)")
     p.add_argument("--tolerance", metavar="FILE", type=input_file,
-                   help="the datasheet's tolerance, relative bands by value: {\"wheel_radius\": 0.01, ...} "
+                   help="the datasheet's tolerance, relative bands by value (an angle in rad for ir_misalignment): "
+                        "{\"wheel_radius\": 0.01, ...} "
                         "(default: docs/diagnosis.md, \"Within the datasheet's tolerance\"; 0 turns one off)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=run)
