@@ -125,6 +125,8 @@ def test_an_effect_injected_into_the_twin_is_named_measured_and_fitted(tmp_path,
     assert lo <= param["value"] <= hi
     located = {item["channel"] for item in d.located}
     assert located and all(d.fit_after[c] > d.fit_before[c] for c in located)
+    evidence = d.effects[0]["evidence"]  # a named effect is told apart from each rival that explains as well
+    assert len(evidence["told_apart_by"]) == len(evidence["explains_equally_well"]), d.summary()
 
 
 @pytest.mark.parametrize("first,second", [

@@ -60,3 +60,26 @@ def test_the_report_carries_a_sentence_per_rival():
     assert entry["evidence"]["explains_equally_well"] == ["dry_friction(left)"]
     (sentence,) = entry["evidence"]["told_apart_by"]
     assert sentence.startswith("wheel_radius(left) and dry_friction(left)")
+
+
+def test_only_the_effects_still_named_are_told_apart():
+    """The sentences (each a pair of manoeuvre runs for a drive effect) are made once the verdict has settled
+    which effects stay named: an effect it leaves as the closest gets none, a kept one its sentence."""
+    from host_sim.diagnosis.report import Diagnosis, _tell_apart_named
+
+    def chosen(effect, site, rival_effect):
+        model = Model([Candidate(effect, site)], [[20.0]], DEFAULT, 1.0, 1.0, 100)
+        model.rivals = [Model([Candidate(rival_effect, site)], [[0.2]], DEFAULT, 1.0, 1.01, 100)]
+        model.alternatives = [f"{rival_effect}({site})"]
+        return model
+
+    result = Diagnosis("rec", "explained", [])
+    nominal = Model([], [], DEFAULT, 2.0, 2.0, 100)
+    kept, dropped = (_effect_entry(m, 0, [nominal, m], DEFAULT, result.apart)
+                     for m in (chosen("ir_offset", 3, "ambient_leakage"), chosen("ir_offset", 5, "ambient_leakage")))
+    assert kept["evidence"]["told_apart_by"] == [] and len(result.apart) == 2  # left for later
+    result.effects = [kept]  # the verdict kept one, left the other as the closest
+    _tell_apart_named(result)
+    (sentence,) = kept["evidence"]["told_apart_by"]
+    assert sentence.startswith("ir_offset(3) and ambient_leakage(3)")
+    assert dropped["evidence"]["told_apart_by"] == [] and result.apart == []

@@ -66,6 +66,9 @@ class Diagnosis:
     located_datasheet: list[dict[str, Any]] = field(default_factory=list)  # what the datasheet twin showed
     after: Comparison | None = None  # the fitted twin judged on the same windows
     after_long: Comparison | None = None  # ... and on the longest ones (pictures)
+    # each named effect's entry, label and the model that chose it: its rivals are told apart once the verdict
+    # has settled which effects stay named (_tell_apart_named)
+    apart: list[tuple[dict[str, Any], str, Model]] = field(default_factory=list, repr=False)
 
     def to_json(self) -> dict[str, Any]:
         doc = {"recording": self.recording, "verdict": self.verdict, "located": self.located,
@@ -241,6 +244,7 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
         result = _diagnose_fitted(rec, tol, world, seconds, progress, workers)[0]
         result.notes[:0] = gap_notes
         _report_clips(result, rec, params)
+        _tell_apart_named(result)
         return result
     try:
         if isinstance(test_block, Recording):
@@ -258,6 +262,7 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     judge_test_block(result, block, base, world, chain, objective, seconds[0], progress)
     for part in ([rec, test_block] if isinstance(test_block, Recording) else [rec]):
         _report_clips(result, part, params)
+    _tell_apart_named(result)
     return result
 
 
@@ -351,7 +356,7 @@ def _name(result: Diagnosis, final: Model, chain: list[Model], remaining: list[d
     block only those that explain what they answer for (block_verdict.judge_held_out); compared: the twin
     the effects were sought from and the fitted one, on the same held-out windows."""
     built = [_as_built(final, i, tol) for i in range(len(final.effects))]
-    result.effects = [_effect_entry(final, i, chain, tol.datasheet) for i, b in enumerate(built) if not b]
+    result.effects = [_effect_entry(final, i, chain, tol.datasheet, result.apart) for i, b in enumerate(built) if not b]
     for why, words in (("within", "fitted within the datasheet's tolerance, the robot as built and not named"),
                        ("reaches", "fitted beyond the datasheet's tolerance, but with the twin's model error its 95 % "
                                    "interval reaches it: the robot as built may hold it, not named")):
@@ -577,9 +582,12 @@ def _as_built(model: Model, i: int, tol: Tolerance) -> str:
     return "reaches" if reaches else ""
 
 
-def _effect_entry(model: Model, i: int, chain: list[Model], datasheet: RobotParams) -> dict[str, Any]:
+def _effect_entry(model: Model, i: int, chain: list[Model], datasheet: RobotParams,
+                  later: list[tuple[dict[str, Any], str, Model]] | None = None) -> dict[str, Any]:
     """A named effect: its values with the 95 % interval that holds the robot's value (the fit's, widened for
-    the twin's model error: model_error.py; the fit's alone is `ci95_fit`), and the evidence for it."""
+    the twin's model error: model_error.py; the fit's alone is `ci95_fit`), and the evidence for it.  With
+    `later`, the sentences telling it apart from its rivals are left to _tell_apart_named (each runs the
+    manoeuvre twice, wasted on an effect the verdict then leaves as the closest)."""
     cand = model.effects[i]
     effect = E.LIBRARY[cand.name]
     entry: dict[str, Any] = {"name": cand.name}
@@ -600,6 +608,20 @@ def _effect_entry(model: Model, i: int, chain: list[Model], datasheet: RobotPara
                          "held_out_cost_before": before.cost_test, "held_out_cost_after": step.cost_test,
                          "held_out_gain_located": step.located_gain,
                          "explains_equally_well": step.alternatives,
-                         "told_apart_by": [tell_apart((cand.label(), step.params), (r.effects[-1].label(), r.params))
-                                           for r in step.rivals]}
+                         "told_apart_by": [] if later is not None else _apart_sentences(cand.label(), step)}
+    if later is not None:
+        later.append((entry, cand.label(), step))
     return entry
+
+
+def _apart_sentences(label: str, step: Model) -> list[str]:
+    return [tell_apart((label, step.params), (r.effects[-1].label(), r.params)) for r in step.rivals]
+
+
+def _tell_apart_named(result: Diagnosis) -> None:
+    """Each effect still named: the data that would tell it apart from each rival that explains as well
+    (tests/test_diagnosis_apart.py::test_only_the_effects_still_named_are_told_apart)."""
+    for entry, label, step in result.apart:
+        if any(entry is kept for kept in result.effects):
+            entry["evidence"]["told_apart_by"] = _apart_sentences(label, step)
+    result.apart = []

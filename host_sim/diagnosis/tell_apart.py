@@ -6,6 +6,7 @@ Drive effects: both fitted twins run the identification manoeuvre, and the segme
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,8 +53,10 @@ class ManoeuvreRun:
     yaw_rate: np.ndarray  # (n,) rad/s
 
 
+@functools.lru_cache(maxsize=4)
 def run_manoeuvre(params: RobotParams, cycles: float = 1.0) -> ManoeuvreRun:
-    """One twin through the manoeuvre (firmware in the loop, HOST mode), noise-free, on an open floor."""
+    """One twin through the manoeuvre (firmware in the loop, HOST mode), noise-free, on an open floor.  Kept
+    for the next call: a chosen effect is told apart from each of its rivals with the same run of its own."""
     controller = ExcitedController(SilController(RULE_SETS["refined"], params=params))
     try:
         sim = Simulation(OPEN_FLOOR, params, controller, seed=None, noise=False)
