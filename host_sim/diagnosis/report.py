@@ -577,9 +577,14 @@ def _as_built(model: Model, i: int, tol: Tolerance) -> str:
     name, values = model.effects[i].name, model.values[i]
     if tol.within(name, values):
         return "within"
-    reaches = bool(model.ci95) and tol.reaches(name, [with_model_error(name, v, ci, tol.datasheet)
-                                                      for v, ci in zip(values, model.ci95[i])])
+    reaches = bool(model.ci95) and tol.reaches(name, _reported_intervals(model, i, tol.datasheet))
     return "reaches" if reaches else ""
+
+
+def _reported_intervals(model: Model, i: int, datasheet: RobotParams) -> list[tuple[float, float]]:
+    """Effect i's 95 % intervals as reported: the fit's, widened for the twin's model error (model_error.py)."""
+    name = model.effects[i].name
+    return [with_model_error(name, v, ci, datasheet) for v, ci in zip(model.values[i], model.ci95[i])]
 
 
 def _effect_entry(model: Model, i: int, chain: list[Model], datasheet: RobotParams,
@@ -595,9 +600,9 @@ def _effect_entry(model: Model, i: int, chain: list[Model], datasheet: RobotPara
         entry["wheel"] = cand.site
     elif effect.kind == "sensor":
         entry["sensor"] = cand.site
+    reported = _reported_intervals(model, i, datasheet) if model.ci95 else None
     entry["params"] = {prm.name: {"value": model.values[i][j], "unit": prm.unit,
-                                  "ci95": list(with_model_error(cand.name, model.values[i][j], model.ci95[i][j],
-                                                                datasheet)) if model.ci95 else None,
+                                  "ci95": list(reported[j]) if reported else None,
                                   "ci95_fit": list(model.ci95[i][j]) if model.ci95 else None,
                                   "field": prm.field.format(w="l" if cand.site == "left" else "r")
                                   if effect.kind == "drive" and cand.site != "both" else prm.field}
