@@ -479,3 +479,17 @@ def test_a_replay_from_a_middle_row_has_the_delayed_commands_on_their_way(tmp_pa
     blind = np.abs(replay.replay_batch(rec, p, start=40, stop=60, sensors=False).enc[:, 0] - rec.enc[40:60]).max()
     # what remains is the start's wheel speeds, estimated from the counts around row 40
     assert seeded < 0.05 * blind
+
+
+def test_a_sub_batch_asks_again_which_effects_its_own_robots_have():
+    """Drive's flags (a caster's drag, a scrub, a bridge, a battery's resistance) are taken once per batch and
+    steer every step; a sub-batch (Drive.sub, the robots that slip) takes its own, not its parent's: a robot
+    without a caster keeps a caster-free step beside one with."""
+    from host_sim.physics.dynamics import ParamBatch
+    d = drivetrain_effects.Drive.of(ParamBatch.from_params([P.replace(caster_drag=0.05, battery_resistance=0.5),
+                                                            P.replace(turning_resistance=0.001)]))
+    assert d.dragged and d.resistive and d.scrubbed and not d.bridged
+    alone = d.sub(np.array([1]))
+    assert not alone.dragged and not alone.resistive and alone.scrubbed
+    f_e, f_n, _m = drivetrain_effects.body_forces(np.array([0.1, 0.1]), np.zeros(2), np.zeros(2), d)
+    assert f_e[0] < 0.0 and f_e[1] == 0.0 and f_n[1] == 0.0  # the caster drags its own robot only

@@ -449,7 +449,7 @@ def _sweep_alone(state: tuple[Any, ...], one: int, sweeps: int) -> None:
     """Robot `one` of _solve_batch's state (nu, pw, pc, wheels, contacts, axles, lim, b, r, rad, ju,
     lat_l, lat_w, mu_w) swept until it settles, at most `sweeps` more times, in Python floats: each row
     the batch's arithmetic, operation for operation (so the same numbers), written back at the end."""
-    nu_a, pw_a, pc_a, wheels, contacts, axles, lim, b, r, rad, ju, lat_l, lat_w, mu_w = _floats(_take(state, one))
+    nu_a, pw_a, pc_a, wheels, contacts, axles, lim, b, r, rad, ju, lat_l, lat_w, mu_w = _one_robot(state, one)
     nu = [float(x) for x in nu_a]
     pw = [[float(pw_a[i, 0]), float(pw_a[i, 1])] for i in range(2)]
     pc = [[float(pc_a[0, w]), float(pc_a[1, w])] for w in range(pc_a.shape[1])]
@@ -524,11 +524,16 @@ def _take(x: Any, keep: np.ndarray) -> Any:
     return x[..., keep] if isinstance(x, np.ndarray) and x.ndim else x
 
 
-def _floats(x: Any) -> Any:
-    """x with its numbers as Python floats (numpy's scalars are ten times slower), arrays as they are."""
-    if isinstance(x, (tuple, list)):
-        return type(x)(_floats(y) for y in x)
-    return x if isinstance(x, np.ndarray) and x.ndim else float(x)
+def _one_robot(x: Any, one: int) -> Any:
+    """_take(x, one) with its numbers as Python floats (numpy's scalars are ten times slower), what stays an
+    array (a robot's rows) as it is: one pass, as _sweep_alone does it for each robot it sweeps on alone."""
+    kind = type(x)
+    if kind is tuple or kind is list:
+        return kind([_one_robot(y, one) for y in x])
+    if kind is np.ndarray and x.ndim:
+        y = x[..., one]
+        return y if y.ndim else float(y)
+    return float(x)
 
 
 def _solution(nu: list[np.ndarray], pw: np.ndarray, pc: np.ndarray, axles: list[tuple[Any, Any, np.ndarray]]

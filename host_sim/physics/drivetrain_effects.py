@@ -8,7 +8,8 @@ comes here too, so both twins are the same code.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+from functools import cached_property
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -51,6 +52,7 @@ class Drive:
     """Per-robot constants of the drive with effects: (N,) arrays, (N, 2) per wheel (left, right)."""
 
     radius: np.ndarray  # (N, 2) m
+    r_mean: np.ndarray  # (N,) m, the wheels' mean radius: the body forces' smoothing, taken once, not every step
     kt: np.ndarray  # (N, 2) N m/A
     t_c: np.ndarray  # (N, 2) N m
     stiction: np.ndarray  # (N, 2) the breakaway friction beyond t_c, as a fraction of it
@@ -95,7 +97,7 @@ class Drive:
         # the rotor's share of wheel_inertia: all of it but the wheel's own spin inertia (2 I_m, a thin
         # wheel's), at least MIN_ROTOR_SHARE of it (docs/effects.md, "backlash")
         i_r = np.maximum(iw - 2.0 * np.asarray(p.wheel_inertia_diam, dtype=float), MIN_ROTOR_SHARE * iw)
-        return cls(radius=r,
+        return cls(radius=r, r_mean=r.mean(1),
                    kt=_pair(p.torque_constant + p.torque_constant_delta_l, p.torque_constant + p.torque_constant_delta_r),
                    t_c=_pair(p.coulomb_friction + p.coulomb_friction_delta_l,
                              p.coulomb_friction + p.coulomb_friction_delta_r),
@@ -121,24 +123,55 @@ class Drive:
         """(N, 2) each axle's dry friction bound at wheel speeds w (N, 2) (the step's start): t_c (1 + stiction
         exp(-(w / w_s)^2)), the breakaway at rest falling to t_c in motion (Stribeck), held over the step
         (tests/test_friction.py::test_breakaway_friction_holds_a_wheel_coulomb_friction_lets_turn)."""
-        if not self.stiction.any():
+        if not self.sticky:
             return self.t_c
         return self.t_c * (1.0 + self.stiction * np.exp(-(w / self.w_s) ** 2))
 
     def sub(self, s: np.ndarray) -> Drive:
         """Robots s only."""
+        parts = {f.name: getattr(self, f.name) for f in fields(self)}  # not the cached flags below
         return Drive(**{k: (tuple(x[s] for x in v) if isinstance(v, tuple) else v[s])  # type: ignore[arg-type]
-                        for k, v in self.__dict__.items()})
+                        for k, v in parts.items()})
+
+    # Whether any robot of the batch has each: asked at every step, the same for the batch's life
+    @cached_property
+    def bridged(self) -> bool:
+        return bool(np.any(self.kind))
+
+    @cached_property
+    def all_bridged(self) -> bool:
+        return bool(np.all(self.kind))
+
+    @cached_property
+    def resistive(self) -> bool:
+        return bool(np.any(self.r_int))
+
+    @cached_property
+    def dragged(self) -> bool:
+        return bool(self.caster.any())
+
+    @cached_property
+    def scrubbed(self) -> bool:
+        return bool(self.scrub.any())
+
+    @cached_property
+    def sticky(self) -> bool:
+        return bool(self.stiction.any())
 
 
 # --------------------------------------------------------------------------- #
 # Motors and supply
 # --------------------------------------------------------------------------- #
-def _currents(c: np.ndarray, emf: np.ndarray, volts: np.ndarray, res: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(current (N, 2), d current / d V (N, 2)): the driver's clipped reference c within what V allows."""
+def _currents(c: np.ndarray, emf: np.ndarray, volts: np.ndarray, res: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(current (N, 2), the most V allows each way (hi, lo)): the driver's clipped reference c within them."""
     hi, lo = (volts[:, None] - emf) / res, (-volts[:, None] - emf) / res
-    i = np.minimum(np.maximum(c, lo), hi)
-    return i, np.where(c > hi, 1.0, np.where(c < lo, -1.0, 0.0)) / res
+    return np.minimum(np.maximum(c, lo), hi), hi, lo
+
+
+def _current_slope(c: np.ndarray, hi: np.ndarray, lo: np.ndarray, res: np.ndarray) -> np.ndarray:
+    """d current / d V (N, 2) of _currents: asked only by supply's Newton, for a battery with a resistance."""
+    return np.where(c > hi, 1.0, np.where(c < lo, -1.0, 0.0)) / res
 
 
 def supply(i_ref: ArrayLike, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray]:
@@ -148,14 +181,15 @@ def supply(i_ref: ArrayLike, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.nd
     terminal voltage) to the battery side, so the battery delivers i_e + sum(u i) / V, not
     i_e + |i_l| + |i_r| (the two agree only at full duty, u = V).  Newton on V from V_bat: the
     currents are piecewise linear in V, so it is exact once the limits in force are found."""
-    if np.any(d.kind):
+    if d.bridged:
         return _bridge_supply(np.asarray(i_ref, dtype=float), w, d)
     c = np.minimum(np.maximum(np.asarray(i_ref, dtype=float), -d.lim), d.lim)
     emf = d.kt * d.gear * w
     volts = d.v_bat.copy()
-    i, di = _currents(c, emf, volts, d.res)
-    if not np.any(d.r_int):
+    i, hi, lo = _currents(c, emf, volts, d.res)
+    if not d.resistive:
         return volts, i
+    di = _current_slope(c, hi, lo, d.res)
     for _ in range(SUPPLY_NEWTON):
         u = d.res * i + emf
         power = (u * i).sum(1)
@@ -165,7 +199,8 @@ def supply(i_ref: ArrayLike, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.nd
         d_power = ((d.res * i + u) * di).sum(1)  # d(sum u i)/dV through the clipped currents
         slope = np.maximum(1.0 + d.r_int * (d_power / volts - power / volts ** 2), 0.5)
         volts = np.clip(volts - gv / slope, 0.05 * d.v_bat, d.v_bat)
-        i, di = _currents(c, emf, volts, d.res)
+        i, hi, lo = _currents(c, emf, volts, d.res)
+        di = _current_slope(c, hi, lo, d.res)
     return volts, i
 
 
@@ -177,7 +212,7 @@ def _drive_currents(cmd: np.ndarray, w: np.ndarray, volts: np.ndarray, d: Drive)
     duty = np.where(d.kind == DUTY, cmd, cmd / vb)  # voltage and the speed loop's output: volts across the motor
     duty = motors.bridge_duty(duty, d.deadband, d.dead_time, d.f_pwm)
     i = motors.bridge_current(duty, emf, vb, d.res_w, d.ind, d.f_pwm, d.brake)
-    if np.all(d.kind):
+    if d.all_bridged:
         return i
     return np.where(d.kind == CURRENT, _currents(np.clip(cmd, -d.lim, d.lim), emf, volts, d.res)[0], i)
 
@@ -205,7 +240,7 @@ def _bridge_supply(cmd: np.ndarray, w: np.ndarray, d: Drive) -> tuple[np.ndarray
     cmd = np.broadcast_to(cmd, w.shape)
     volts = d.v_bat.copy()
     i = _drive_currents(cmd, w, volts, d)
-    if not np.any(d.r_int):
+    if not d.resistive:
         return volts, i
     emf = d.kt * d.gear * w
 
@@ -236,7 +271,7 @@ def wheel_torque_slope(i_ref: ArrayLike, w: np.ndarray, d: Drive
     """(torque, current, d torque / d w at fixed V) per wheel (N, 2), motors.wheel_torque_slope's, and
     the supply V (N,)."""
     volts, i = supply(i_ref, w, d)
-    if np.any(d.kind):  # the bridge's current: its slope by a central difference at this V
+    if d.bridged:  # the bridge's current: its slope by a central difference at this V
         cmd = np.broadcast_to(np.asarray(i_ref, dtype=float), w.shape)
         di = (_drive_currents(cmd, w + SLOPE_STEP, volts, d) - _drive_currents(cmd, w - SLOPE_STEP, volts, d))
         n_kt = d.kt * d.gear
@@ -257,27 +292,30 @@ def body_forces(u: np.ndarray, lat: np.ndarray, om: np.ndarray, d: Drive) -> tup
 
     The caster at C - a e moves at (u, l - a omega); its drag opposes that, smoothed like the axles'
     Coulomb friction (eps_v = r w_eps at the rim), the scrub torque opposes omega (eps_w, _scrub_eps)."""
-    r = d.radius.mean(1)
-    eps_v = r * SMOOTHING_SPEED
     ve, vn = u, lat - CASTER_BEHIND * om
-    speed = np.hypot(ve, vn)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        k = np.where(speed > 0.0, d.caster * np.tanh(speed / eps_v) / speed, 0.0)
+    if d.dragged:
+        speed = np.hypot(ve, vn)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            k = np.where(speed > 0.0, d.caster * np.tanh(speed / (d.r_mean * SMOOTHING_SPEED)) / speed, 0.0)
+    else:  # no caster drag in the batch: k is +0 for every robot, and -k its -0, the same figures for less
+        k = np.zeros_like(ve)
     f_e, f_n = -k * ve, -k * vn
-    m_c = -CASTER_BEHIND * f_n - d.scrub * np.tanh(om / _scrub_eps(d))  # (-a e) x (F_n n) = -a F_n
+    # without a scrub, 0 * om: tanh keeps om's sign, so the same zeros, signs and all
+    turn = np.tanh(om / _scrub_eps(d)) if d.scrubbed else om
+    m_c = -CASTER_BEHIND * f_n - d.scrub * turn  # (-a e) x (F_n n) = -a F_n
     return f_e, f_n, m_c
 
 
 def _scrub_eps(d: Drive) -> np.ndarray:
     """eps_w = r w_eps / b: the yaw rate over which the scrub torque is smoothed (its rim speed r w_eps)."""
-    return d.radius.mean(1) * SCRUB_SMOOTHING_SPEED / d.b
+    return d.r_mean * SCRUB_SMOOTHING_SPEED / d.b
 
 
 def yaw_damping(om: np.ndarray, d: Drive) -> np.ndarray | float:
     """-dM_C/d omega of the scrub (N m s/rad, >= 0): the steps take it linearly implicitly, so that a torque
     this sharp (dt T_s / eps_w up to ten times the body's yaw inertia, at 5 ms and T_s's bound) holds a yaw
     rate near 0 rather than overshooting it at every step.  0.0 when no robot has a scrub: no work on the step."""
-    if not d.scrub.any():
+    if not d.scrubbed:
         return 0.0
     eps = _scrub_eps(d)
     t = np.tanh(om / eps)
