@@ -493,3 +493,10 @@ def test_a_sub_batch_asks_again_which_effects_its_own_robots_have():
     assert not alone.dragged and not alone.resistive and alone.scrubbed
     f_e, f_n, _m = drivetrain_effects.body_forces(np.array([0.1, 0.1]), np.zeros(2), np.zeros(2), d)
     assert f_e[0] < 0.0 and f_e[1] == 0.0 and f_n[1] == 0.0  # the caster drags its own robot only
+    # without a caster or a scrub in the batch, the step skips their laws: the same figures, zeros' signs and all
+    u, lat, om = np.array([0.1, -0.1, 0.0]), np.array([0.02, -0.03, 0.0]), np.array([0.3, -0.2, -0.0])
+    bare = drivetrain_effects.Drive.of(ParamBatch.from_params([P] * 3))
+    skipped = drivetrain_effects.body_forces(u, lat, om, bare)
+    bare.__dict__.update(dragged=True, scrubbed=True)  # the laws in full, with zero drag and scrub
+    for a, b in zip(skipped, drivetrain_effects.body_forces(u, lat, om, bare)):
+        assert np.array_equal(a, b) and np.array_equal(np.signbit(a), np.signbit(b))

@@ -133,7 +133,8 @@ class Drive:
         return Drive(**{k: (tuple(x[s] for x in v) if isinstance(v, tuple) else v[s])  # type: ignore[arg-type]
                         for k, v in parts.items()})
 
-    # Whether any robot of the batch has each: asked at every step, the same for the batch's life
+    # Whether any robot of the batch has each: asked at every step, the same for the batch's life, and a
+    # sub-batch's its own (tests/test_effects_drive.py::test_a_sub_batch_asks_again_which_effects_its_own_robots_have)
     @cached_property
     def bridged(self) -> bool:
         return bool(np.any(self.kind))
@@ -298,6 +299,7 @@ def body_forces(u: np.ndarray, lat: np.ndarray, om: np.ndarray, d: Drive) -> tup
         with np.errstate(invalid="ignore", divide="ignore"):
             k = np.where(speed > 0.0, d.caster * np.tanh(speed / (d.r_mean * SMOOTHING_SPEED)) / speed, 0.0)
     else:  # no caster drag in the batch: k is +0 for every robot, and -k its -0, the same figures for less
+        # (tests/test_effects_drive.py::test_a_sub_batch_asks_again_which_effects_its_own_robots_have)
         k = np.zeros_like(ve)
     f_e, f_n = -k * ve, -k * vn
     # without a scrub, 0 * om: tanh keeps om's sign, so the same zeros, signs and all
