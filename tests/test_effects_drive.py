@@ -482,15 +482,18 @@ def test_a_replay_from_a_middle_row_has_the_delayed_commands_on_their_way(tmp_pa
 
 
 def test_a_sub_batch_asks_again_which_effects_its_own_robots_have():
-    """Drive's flags (a caster's drag, a scrub, a bridge, a battery's resistance) are taken once per batch and
-    steer every step; a sub-batch (Drive.sub, the robots that slip) takes its own, not its parent's: a robot
-    without a caster keeps a caster-free step beside one with."""
+    """Drive's flags (a caster's drag, a scrub, a bridge, a battery's resistance) and its wheels' mean radius are
+    taken once per batch and steer every step; a sub-batch (Drive.sub, the robots that slip) takes its own, not
+    its parent's: a robot without a caster keeps a caster-free step beside one with."""
     from host_sim.physics.dynamics import ParamBatch
     d = drivetrain_effects.Drive.of(ParamBatch.from_params([P.replace(caster_drag=0.05, battery_resistance=0.5),
-                                                            P.replace(turning_resistance=0.001)]))
+                                                            P.replace(turning_resistance=0.001,
+                                                                      wheel_radius_delta_r=0.001)]))
     assert d.dragged and d.resistive and d.scrubbed and not d.bridged
+    assert d.r_mean == pytest.approx([P.wheel_radius, P.wheel_radius + 0.0005], rel=1e-12)
     alone = d.sub(np.array([1]))
     assert not alone.dragged and not alone.resistive and alone.scrubbed
+    assert alone.r_mean == pytest.approx([P.wheel_radius + 0.0005], rel=1e-12)  # its own wheels' mean, not the batch's
     f_e, f_n, _m = drivetrain_effects.body_forces(np.array([0.1, 0.1]), np.zeros(2), np.zeros(2), d)
     assert f_e[0] < 0.0 and f_e[1] == 0.0 and f_n[1] == 0.0  # the caster drags its own robot only
     # without a caster or a scrub in the batch, the step skips their laws: the same figures, zeros' signs and all

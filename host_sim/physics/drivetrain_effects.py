@@ -52,7 +52,6 @@ class Drive:
     """Per-robot constants of the drive with effects: (N,) arrays, (N, 2) per wheel (left, right)."""
 
     radius: np.ndarray  # (N, 2) m
-    r_mean: np.ndarray  # (N,) m, the wheels' mean radius: the body forces' smoothing, taken once, not every step
     kt: np.ndarray  # (N, 2) N m/A
     t_c: np.ndarray  # (N, 2) N m
     stiction: np.ndarray  # (N, 2) the breakaway friction beyond t_c, as a fraction of it
@@ -97,7 +96,7 @@ class Drive:
         # the rotor's share of wheel_inertia: all of it but the wheel's own spin inertia (2 I_m, a thin
         # wheel's), at least MIN_ROTOR_SHARE of it (docs/effects.md, "backlash")
         i_r = np.maximum(iw - 2.0 * np.asarray(p.wheel_inertia_diam, dtype=float), MIN_ROTOR_SHARE * iw)
-        return cls(radius=r, r_mean=r.mean(1),
+        return cls(radius=r,
                    kt=_pair(p.torque_constant + p.torque_constant_delta_l, p.torque_constant + p.torque_constant_delta_r),
                    t_c=_pair(p.coulomb_friction + p.coulomb_friction_delta_l,
                              p.coulomb_friction + p.coulomb_friction_delta_r),
@@ -129,9 +128,14 @@ class Drive:
 
     def sub(self, s: np.ndarray) -> Drive:
         """Robots s only."""
-        parts = {f.name: getattr(self, f.name) for f in fields(self)}  # not the cached flags below
+        parts = {f.name: getattr(self, f.name) for f in fields(self)}  # not the cached values below: a sub-batch takes its own
         return Drive(**{k: (tuple(x[s] for x in v) if isinstance(v, tuple) else v[s])  # type: ignore[arg-type]
                         for k, v in parts.items()})
+
+    @cached_property
+    def r_mean(self) -> np.ndarray:
+        """(N,) m, the wheels' mean radius: the body forces' smoothing, taken once, not every step."""
+        return self.radius.mean(1)
 
     # Whether any robot of the batch has each: asked at every step, the same for the batch's life, and a
     # sub-batch's its own (tests/test_effects_drive.py::test_a_sub_batch_asks_again_which_effects_its_own_robots_have)
