@@ -427,19 +427,23 @@ def test_too_little_of_a_motion_away_from_the_walls_is_said(nominal_run):
 
 def test_a_reading_the_recorded_pose_cannot_settle_is_not_judged(nominal_run):
     """S1's axis grazing a wall's end: the twin reads ~500 counts or nothing as the pose moves by the tracker's
-    noise, so that reading is not judged; the same sensor facing the wall's middle is."""
+    noise, so that reading is not judged; the same sensor facing the wall's middle 5 cm from the rim is.
+    Nearer than where the far law takes over (ir_near_peak * ir_blend, 3.75 cm), 3 cm from the rim, the law is
+    the average of its near and far laws that no datasheet point reaches: not judged either."""
     from host_sim.diagnosis.windows import unjudged_readings
 
-    saved = nominal_run.pose[5:7].copy()  # rows with the emitters on (a simulator run's row 0 has them off)
+    saved = nominal_run.pose[5:8].copy()  # rows with the emitters on (a simulator run's row 0 has them off)
+    rim = DEFAULT.body_radius
     try:
         nominal_run.pose[5] = (1.444, 0.992, -1.02)  # paper_room's wall y = 0.9 ends at x = 1.5, where S1 looks
-        nominal_run.pose[6] = (1.75, 0.992, -np.pi / 2)  # S1 square on the same wall, 3 cm from the rim
-        doubt = unjudged_readings(nominal_run, np.array([[5, 6]]), DEFAULT, ROOM)
+        nominal_run.pose[6] = (1.75, 0.9 + rim + 0.05, -np.pi / 2)  # S1 square on the same wall, 5 cm from the rim
+        nominal_run.pose[7] = (1.75, 0.9 + rim + 0.03, -np.pi / 2)  # and 3 cm from it
+        doubt = unjudged_readings(nominal_run, np.array([[5, 6, 7]]), DEFAULT, ROOM)
     finally:
-        nominal_run.pose[5:7] = saved
-    assert doubt.shape == (1, 2, 8)
-    assert doubt[0, 0, 0] and not doubt[0, 1, 0]
-    assert not doubt[0, :, 1:].any()  # the other sensors see no wall's end
+        nominal_run.pose[5:8] = saved
+    assert doubt.shape == (1, 3, 8)
+    assert doubt[0, 0, 0] and not doubt[0, 1, 0] and doubt[0, 2, 0]
+    assert not doubt[0, :, 1:].any()  # the other sensors see no wall's end, and none so near
 
 
 def test_no_window_starts_on_a_step_of_the_identification_manoeuvre(nominal_run):

@@ -354,9 +354,11 @@ def unjudged_readings(rec: Recording, rows: np.ndarray, p: RobotParams, world: W
 
     Nor is a sensor that faces a wall the robot touches (FACING_COS): it reads the wall within millimetres
     of its mount, where the contact decides the reading (a hull pressed into the wall, a bumper's give) more
-    than the IR law.  Nor is a wall nearer the sensor than the response's maximum (ir_near_peak): on that
-    branch the law is double-valued and steep.  The grazing rule is
-    tests/test_diagnosis.py::test_a_reading_the_recorded_pose_cannot_settle_is_not_judged.
+    than the IR law.  Nor is a wall nearer the sensor than where the far law C/x^2 takes over (ir_near_peak *
+    ir_blend, 3.75 cm): nearer, the law is the paper's average of its near and far laws, which no calibration
+    point of the datasheet reaches (5, 15 and 25 cm): a part's own curve there is its optics', the diodes'
+    spacing and its window.  Both rules
+    are tests/test_diagnosis.py::test_a_reading_the_recorded_pose_cannot_settle_is_not_judged.
     """
     assert rec.pose is not None
     inputs = replay_inputs(rec)
@@ -373,6 +375,6 @@ def unjudged_readings(rec: Recording, rows: np.ndarray, p: RobotParams, world: W
     bearing = rec.pose[flat, 2:3] + np.asarray(p.ir_bearings)
     facing = -(np.cos(bearing) * away[:, :1] + np.sin(bearing) * away[:, 1:]) > FACING_COS
     doubt |= (dist < p.body_radius + CONTACT_MARGIN)[:, None] & facing
-    doubt |= ir_sensor.reflection(world, rec.pose[flat], p)[0] < p.ir_near_peak
+    doubt |= ir_sensor.reflection(world, rec.pose[flat], p)[0] < p.ir_near_peak * p.ir_blend
     return doubt.reshape(*rows.shape, len(p.ir_bearings))
 
