@@ -355,10 +355,10 @@ def unjudged_readings(rec: Recording, rows: np.ndarray, p: RobotParams, world: W
     Nor is a sensor that faces a wall the robot touches (FACING_COS): it reads the wall within millimetres
     of its mount, where the contact decides the reading (a hull pressed into the wall, a bumper's give) more
     than the IR law.  Nor is a wall nearer the sensor than where the far law C/x^2 takes over (ir_near_peak *
-    ir_blend, 3.75 cm): nearer, the law is the paper's average of its near and far laws, which no calibration
-    point of the datasheet reaches (5, 15 and 25 cm): a part's own curve there is its optics', the diodes'
-    spacing and its window.  Both rules
-    are tests/test_diagnosis.py::test_a_reading_the_recorded_pose_cannot_settle_is_not_judged.
+    ir_blend, 3.75 cm): nearer, the law is the paper's average of its near and far laws, which none of the
+    datasheet's calibration points (5, 15 and 25 cm) reaches, so a part's own curve there is its optics'
+    (the diodes' spacing, its window).  Both rules are
+    tests/test_diagnosis.py::test_a_reading_the_recorded_pose_cannot_settle_is_not_judged.
     """
     assert rec.pose is not None
     inputs = replay_inputs(rec)
