@@ -1,8 +1,9 @@
 """Calibrate the twin within the datasheet's tolerance: the robot's own build, fitted before any effect.
 
-Each wheel's radius, torque constant, friction and breakaway friction, the track, the battery's voltage
-and each located sensor's gain are fitted as nuisance parameters, bounded by their bands (tolerance.py)
-with a Gaussian prior of half a band, on the training windows alone.  Reference: docs/diagnosis.md,
+Each wheel's radius, torque constant, friction and breakaway friction, the track, the caster's rolling drag,
+the axles' Stribeck speed, the battery's voltage and each located sensor's gain are fitted as nuisance
+parameters, bounded by their bands (tolerance.py) with a Gaussian prior of half a band, on the training
+windows alone.  Reference: docs/diagnosis.md,
 "Within the datasheet's tolerance".
 """
 from __future__ import annotations
@@ -18,7 +19,7 @@ from host_sim.diagnosis.channels import drive_channel, sensor_channel
 from host_sim.diagnosis.fit import (FIT_FTOL, FIT_XTOL, Model, Objective, sandwich_intervals, earns_its_place,
                                    f_test, touching_runs)
 from host_sim.physics import effects as E
-from host_sim.diagnosis.tolerance import ABSOLUTE, ONE_SIDED, Tolerance
+from host_sim.diagnosis.tolerance import ABSOLUTE, ONE_SIDED, UNIT_OF, Tolerance
 from host_sim.physics.params import RobotParams
 
 PRIOR_SD = 0.5  # of a band: a band holds about 95 % of robots built to the datasheet (±2 sd)
@@ -72,17 +73,20 @@ class Calibration:
 
     def words(self) -> str:
         moved = [(n, v) for n, v in zip(self.nuisances, self.values) if abs(v) >= 5e-4]
-        return ", ".join(f"{n.label()} {100 * v:+.1f} %" for n, v in moved) or "no value moved"
+        return ", ".join(f"{n.label()} {v:+.3g} {UNIT_OF[n.quantity]}" if n.quantity in UNIT_OF
+                         else f"{n.label()} {100 * v:+.1f} %" for n, v in moved) or "no value moved"
 
 
 def drive_nuisances(tol: Tolerance, has_vbat: bool, bench: bool) -> list[Nuisance]:
     """The drive's: each wheel's radius (not on a bench: no floor), torque constant and friction, each
-    motor's resistance on a bridge drive, the track (not on a bench), and the battery where it is recorded."""
+    motor's resistance on a bridge drive, the track and the caster's rolling drag (not on a bench), the axles'
+    Stribeck speed, and the battery where it is recorded."""
     quantities = [q for q in PER_WHEEL if not (bench and q == "wheel_radius")]
     if tol.datasheet.drive_kind != "current":
         quantities.append("armature_resistance")
     out = [Nuisance(q, WHEEL_FIELD[q].format(w=w[0]), where=w) for q in quantities for w in ("left", "right")]
-    out += [] if bench else [Nuisance("half_axle", "half_axle")]
+    out += [] if bench else [Nuisance("half_axle", "half_axle"), Nuisance("caster_drag", "caster_drag")]
+    out += [Nuisance("stribeck_speed", "stribeck_speed")]
     out += [Nuisance("battery_voltage", "battery_voltage")] if has_vbat else []
     return [n for n in out if tol.bands.get(n.quantity, 0.0) > 0]
 

@@ -27,11 +27,14 @@ BANDS: dict[str, float] = {
     "ir_gain": 0.15,  # an optical pair's efficiency, each pair its own
     "stiction": 0.4,  # a greased gear train's breakaway friction, 0-40 % above its dry friction
     "ir_misalignment": 0.035,  # rad: an IR pair's axis within 2 degrees of its bearing, as its holder is moulded
+    "stribeck_speed": 0.5,  # the speed over which a breakaway falls to the dry friction: the grease's, stated loosely
+    "caster_drag": 0.025,  # N: a ball caster's rolling drag, a coefficient up to 0.01 on up to half the weight (5 N)
 }
 # Bands of a quantity the datasheet gives as absent (0): the band is the value itself, in its unit, not a
 # fraction of the datasheet's (calibrate.set_values, calibrate.lower_bounds).
-ABSOLUTE = ("stiction", "ir_misalignment")
-ONE_SIDED = ("stiction",)  # a breakaway is never below the dry friction
+ABSOLUTE = ("stiction", "ir_misalignment", "caster_drag")
+UNIT_OF = {"ir_misalignment": "rad", "caster_drag": "N"}  # the ABSOLUTE ones not a fraction: said in their unit
+ONE_SIDED = ("stiction", "caster_drag")  # a breakaway is never below the dry friction, nor a drag below none
 # The effect parameter fields whose value is a change from a datasheet value (a wheel's delta), by the
 # datasheet field it changes; the others set the datasheet field itself (half_axle) or a relative scale
 # (ir_gain_scale, about 1).
