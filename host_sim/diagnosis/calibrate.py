@@ -3,8 +3,7 @@
 Each wheel's radius, torque constant, friction and breakaway friction, the track, the caster's rolling drag,
 the axles' Stribeck speed, the battery's voltage and each located sensor's gain are fitted as nuisance
 parameters, bounded by their bands (tolerance.py) with a Gaussian prior of half a band, on the training
-windows alone.  Reference: docs/diagnosis.md,
-"Within the datasheet's tolerance".
+windows alone.  Reference: docs/diagnosis.md, "Within the datasheet's tolerance".
 """
 from __future__ import annotations
 
@@ -80,7 +79,8 @@ class Calibration:
 def drive_nuisances(tol: Tolerance, has_vbat: bool, bench: bool) -> list[Nuisance]:
     """The drive's: each wheel's radius (not on a bench: no floor), torque constant and friction, each
     motor's resistance on a bridge drive, the track and the caster's rolling drag (not on a bench), the axles'
-    Stribeck speed, and the battery where it is recorded."""
+    Stribeck speed, and the battery where it is recorded.  A caster always rolls with some drag, which the
+    datasheet gives as none (tests/test_tolerance.py::test_a_caster_that_rolls_with_some_drag_is_the_build_not_a_fault)."""
     quantities = [q for q in PER_WHEEL if not (bench and q == "wheel_radius")]
     if tol.datasheet.drive_kind != "current":
         quantities.append("armature_resistance")
