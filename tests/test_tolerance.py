@@ -241,3 +241,28 @@ def test_a_build_the_effects_fit_within_tolerance_is_a_match():
     d = named(located[1:])
     assert d.verdict == "unexplained" and d.located == located, d.summary()
     assert [u["channel"] for u in d.unexplained] == ["ir_4"]
+
+
+@pytest.mark.slow
+def test_the_build_is_weighed_by_the_noise_it_leaves(tmp_path):
+    """A control of the reference plant: a robot drawn within its datasheet (both torque constants about 5 %
+    strong with the gears' efficiency, the right axle's friction 4 % high), exploring with the plant's own
+    tyres, gears and caster.  Weighed by the datasheet twin's spread, which holds the very mismatch being
+    calibrated away, the build fitted the track to its edge and left the turn 2.5 % short, and the drive went
+    to the effects, unexplained.  Weighed again by the noise the calibrated twin leaves, the build explains
+    the drive: no drive channel is left and nothing is named (the plant's ambient light is its own)."""
+    from host_sim.diagnosis.channels import drive_channel
+    from host_sim.physics.world import world_from_dict
+    from host_sim.recordings.recording import load_recording
+    from tools.reference_plant.cases import make_case
+
+    rec_path, key_path = make_case(331, tmp_path)
+    assert '"effects": []' in key_path.read_text()  # a control: the robot's draw is all that departs
+    rec = load_recording(rec_path)
+    d = diagnose(rec, DEFAULT, world_from_dict(rec.meta["world"], "test"))
+    assert any(drive_channel(f.channel) for f in d.comparisons[0].findings)  # the datasheet twin's
+    assert d.calibration is not None and not d.effects, d.summary()
+    left = [item["channel"] for item in d.unexplained + d.located if drive_channel(item["channel"])]
+    assert not left, d.summary()
+    moved = {(n.quantity, n.where): v for n, v in zip(d.calibration.nuisances, d.calibration.values)}
+    assert 0.02 < moved[("torque_constant", "left")] < 0.06 and 0.02 < moved[("torque_constant", "right")] < 0.06

@@ -129,15 +129,17 @@ def inside(x0: np.ndarray, lo: np.ndarray, band: np.ndarray) -> np.ndarray:
     return np.where(lo == 0.0, np.maximum(x0, START_INSIDE * band), x0)
 
 
-def calibrate(obj: Objective, params: RobotParams, tol: Tolerance, nuisances: list[Nuisance]) -> Calibration:
+def calibrate(obj: Objective, params: RobotParams, tol: Tolerance, nuisances: list[Nuisance],
+              start: list[float] | None = None) -> Calibration:
     """The MAP fit of the nuisances on obj's training windows: weighted residuals and the prior's rows
-    x / (PRIOR_SD band), x bounded by ±band (0..band if one-sided), from the datasheet (x = 0; inside).
-    Nothing held out is seen."""
+    x / (PRIOR_SD band), x bounded by ±band (0..band if one-sided), from start (default the datasheet,
+    x = 0; inside).  Nothing held out is seen."""
     if not nuisances:
         return Calibration(params)
     band = np.array([tol.bands[n.quantity] for n in nuisances])
     lo = lower_bounds(nuisances, band)
-    x = _least_squares(obj, lambda x: set_values(params, tol, nuisances, x), inside(np.zeros(len(nuisances)), lo, band),
+    x0 = np.zeros(len(nuisances)) if start is None else np.array(start, dtype=float)
+    x = _least_squares(obj, lambda x: set_values(params, tol, nuisances, x), inside(x0, lo, band),
                        lo, band, PRIOR_SD * band)[0]
     return Calibration(set_values(params, tol, nuisances, x), list(nuisances), [float(v) for v in x],
                        [float(b) for b in band])
