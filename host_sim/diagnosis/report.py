@@ -398,14 +398,7 @@ def _within_tolerance(result: Diagnosis, rec: Recording, world: World | None, fi
     cal, binding = Calibration(tol.datasheet), []
     for group in (drive, sensors):  # the sensors read the recorded track: apart, they run no physics
         if group:
-            objective = _group_objective(rec, world, first, group)
-            part = calibrate(objective, cal.params, tol, group)
-            # Weighed again by the noise the calibrated twin leaves, and fitted once more from there: the
-            # datasheet twin's spread counts the mismatch being calibrated away as noise, and so weighs a
-            # turn or a count a few per cent off too little for the locator's test of it
-            # (tests/test_tolerance.py::test_the_build_is_weighed_by_the_noise_it_leaves).
-            objective.sigma = objective_sigma(judge(part.params)[0], objective.names, objective.totals)
-            part = calibrate(objective, cal.params, tol, group, start=part.values)
+            part, objective = _calibrate_group(rec, world, first, tol, judge, cal.params, group)
             if part.at_edge() and edge_binds(objective, cal.params, tol, part, located):
                 binding += part.at_edge()
             cal = Calibration(part.params, cal.nuisances + part.nuisances, cal.values + part.values,
@@ -442,6 +435,20 @@ def _within_tolerance(result: Diagnosis, rec: Recording, world: World | None, fi
         result.notes.append(f"the calibrated build left a little located; back at the datasheet's values "
                             f"({cal.words()}) nothing is located")
     return cal.params, start
+
+
+def _calibrate_group(rec: Recording, world: World | None, first: Comparison, tol: Tolerance,
+                     judge: Callable[[RobotParams], list[Comparison]], params: RobotParams, group: list[Nuisance]
+                     ) -> tuple[Calibration, Objective]:
+    """(a group's calibration, its objective): fitted weighed by the noise the datasheet twin leaves, then
+    weighed by the noise the calibrated twin leaves and fitted once more from there.  The datasheet twin's
+    spread counts the mismatch being calibrated away as noise, and so weighs a turn or a count a few per
+    cent off too little for the locator's test of it
+    (tests/test_tolerance.py::test_the_build_is_weighed_by_the_noise_it_leaves)."""
+    objective = _group_objective(rec, world, first, group)
+    part = calibrate(objective, params, tol, group)
+    objective.sigma = objective_sigma(judge(part.params)[0], objective.names, objective.totals)
+    return calibrate(objective, params, tol, group, start=part.values), objective
 
 
 def _answers(n: Nuisance, channel: str) -> bool:
