@@ -123,10 +123,10 @@ def test_the_build_and_the_effect_are_fitted_together(tmp_path):
 
 
 def test_an_effect_that_leaves_its_channels_located_is_not_named(tmp_path):
-    """The IR response's shape changed (a peak farther out, a shorter range): no effect of the library is
-    that, and what the library fits best leaves the sensors located, so none is named; the closest is
-    said, and the sensors are unexplained."""
-    shaped = dataclasses.replace(DEFAULT, ir_near_peak=0.024, sensor_range=0.3)
+    """The IR response's shape changed (a peak farther out, a range that ends at 20 cm, within the
+    datasheet's calibrated 25 cm): no effect of the library is that, and what the library fits best leaves
+    the sensors located, so none is named; the closest is said, and the sensors are unexplained."""
+    shaped = dataclasses.replace(DEFAULT, ir_near_peak=0.024, sensor_range=0.2)
     d = diagnose(record(tmp_path, shaped), DEFAULT, ROOM)
     assert not d.effects and d.verdict in ("unexplained", "partly explained"), d.summary()
     assert d.unexplained and all(item["channel"].startswith(("ir_", "amb_")) for item in d.unexplained)
@@ -183,6 +183,63 @@ def test_an_ir_curve_within_its_tolerance_is_not_located():
     assert not located(0.10, IR_RESPONSE_TOLERANCE)
     assert located(0.25, IR_RESPONSE_TOLERANCE)
     assert located(0.10, 0.0)
+
+
+def test_an_ir_reading_beyond_the_calibrated_range_is_known_to_its_own_size():
+    """A sensor whose reading of a wall beyond 25 cm (the datasheet's farthest calibration point) fades to
+    40 % of the twin's extrapolated law is not located there; near, 25 % under still is; and held against
+    the recorded reading alone, the far fade would have been located."""
+    from host_sim.diagnosis.channels import IR_EXTRAPOLATED_TOLERANCE, Channel, _extrapolated_scale
+    from host_sim.diagnosis.locate import Regimes, locate_channel
+
+    rng = np.random.default_rng(3)
+    windows, periods = 40, 24
+    far = np.zeros((windows, periods), dtype=bool)
+    far[::2] = True  # half the windows with the wall 30-40 cm away, half with it 5 cm away
+    twin = np.where(far, 15.0, 400.0)
+    reg = Regimes()
+    reg.add("wall_0", (~far).astype(int), {0: "with a wall beyond 25 cm", 1: "with a wall 3-12 cm from S1"})
+    keep = np.ones(windows, dtype=bool)
+    t = np.arange(windows * (periods + 1), dtype=float).reshape(windows, periods + 1) * 0.04
+
+    def located(far_share: float, near_share: float, mask: np.ndarray | None) -> bool:
+        y = twin * np.where(far, far_share, near_share) + rng.normal(0.0, 2.0, twin.shape)
+        scale = None if mask is None else _extrapolated_scale(y, twin, mask)
+        ch = Channel("ir_0", "counts", y, twin[:, None, :], 2.5, tolerance=0.15, scale=scale)
+        return locate_channel(ch, ch.residual(), keep, reg, t) is not None
+
+    assert IR_EXTRAPOLATED_TOLERANCE == 1.0
+    assert not located(0.4, 1.0, far)
+    assert located(0.4, 0.75, far)
+    assert located(0.4, 1.0, None)
+
+
+def test_ambient_light_within_the_lamps_own_size_is_the_room():
+    """A sensor that sees 40 % less of a lamp than the twin (a receiver narrower off its axis than the
+    twin's) is not located; a receiver whose reading is 8 counts low everywhere is, where no lamp shines;
+    and held against the whole reading (150 counts of room light) the lamp's 40 % would have been."""
+    from host_sim.diagnosis.channels import LAMP_RESPONSE_TOLERANCE, Channel
+    from host_sim.diagnosis.locate import Regimes, locate_channel
+
+    rng = np.random.default_rng(2)
+    windows, periods = 40, 24
+    facing = np.zeros((windows, periods), dtype=int)
+    facing[::2] = 1  # half the windows facing a lamp
+    lamp = np.where(facing == 1, 40.0, 0.0)
+    twin = 150.0 + lamp
+    reg = Regimes()
+    reg.add("heading", facing, {0: "heading -x", 1: "heading +x"})
+    keep = np.ones(windows, dtype=bool)
+    t = np.arange(windows * (periods + 1), dtype=float).reshape(windows, periods + 1) * 0.04
+
+    def located(y: np.ndarray, **how) -> bool:
+        ch = Channel("amb_0", "counts", y + rng.normal(0.0, 1.0, twin.shape), twin[:, None, :], 1.5, **how)
+        return locate_channel(ch, ch.residual(), keep, reg, t) is not None
+
+    as_room = {"tolerance": LAMP_RESPONSE_TOLERANCE, "scale": lamp}
+    assert not located(150.0 + 0.6 * lamp, **as_room)
+    assert located(twin - 8.0, **as_room)
+    assert located(150.0 + 0.6 * lamp, relative=False)
 
 
 def test_a_match_with_the_build_back_at_the_datasheet_says_so(as_built_run, monkeypatch):

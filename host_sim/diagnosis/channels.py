@@ -28,6 +28,16 @@ AMBIENT = tuple(f"amb_{k}" for k in range(MAX_IR_PAIRS))
 # (docs/diagnosis.md, "Within the datasheet's tolerance"; tests/test_tolerance.py::
 # test_an_ir_curve_within_its_tolerance_is_not_located).
 IR_RESPONSE_TOLERANCE = 0.15
+# Beyond the datasheet's farthest calibration point the law is C/x^2 extrapolated; how a pair's response
+# fades there, as its spot outgrows the wall and its cones part, is its optics', which the datasheet does not
+# give: the twin's reading there is known only to its own size
+# (tests/test_tolerance.py::test_an_ir_reading_beyond_the_calibrated_range_is_known_to_its_own_size).
+IR_EXTRAPOLATED_TOLERANCE = 1.0
+# A lamp's light at a receiver is the world file's lamp seen through the receiver's angular response, which
+# a datasheet's polar plot gives only loosely: off its axis a Lambertian and a narrower receiver differ by a
+# factor of two.  An ambient reading within the twin's lamp light of the twin's is the room as modelled, not
+# the robot (tests/test_tolerance.py::test_ambient_light_within_the_lamps_own_size_is_the_room).
+LAMP_RESPONSE_TOLERANCE = 1.0
 ACCUMULATED = {"forward": "travel", "heading_rate": "turn", "wheel_l": "count_l", "wheel_r": "count_r"}
 
 
@@ -58,8 +68,9 @@ class Channel:
     y_hat: np.ndarray  # (W, N, T - 1) the twin, one row per parameter set
     noise_floor: float  # the residual's standard deviation when the twin is right (quantisation, sensor noise)
     locate: bool = True  # residuals per period (True) or accumulated along the window (pose)
-    relative: bool = True  # a mismatch must also be large against the signal (not for levels: vbat, ambient)
+    relative: bool = True  # a mismatch must also be large against the signal (not for a level: vbat)
     tolerance: float = 0.0  # a bias within this share of the signal is the model's own tolerance (locate)
+    scale: np.ndarray | None = None  # (W, T - 1) the signal a bias is held against, where not y (ambient: the lamps')
 
     def residual(self, s: int = 0) -> np.ndarray:
         """(W, T - 1) recorded minus the twin with parameter set s."""
@@ -79,11 +90,14 @@ def _motion(pose: np.ndarray) -> np.ndarray:
 
 
 def build_channels(rec: Recording, windows: Windows, run: WindowRun, robots: list[RobotParams],
-                   world: World | None, unjudged: np.ndarray | None = None) -> list[Channel]:
+                   world: World | None, unjudged: np.ndarray | None = None,
+                   far: np.ndarray | None = None) -> list[Channel]:
     """Every channel the recording supports: recorded vs the twin's run (and its sensors on the track).
 
     unjudged: (W, T - 1, S) IR readings that are not judged (windows.unjudged_readings): there the twin is
-    given the recorded value, so they weigh nothing in a fit, a location or a fit %."""
+    given the recorded value, so they weigh nothing in a fit, a location or a fit %.  far: (W, T - 1, S)
+    IR readings of a wall beyond the calibrated range (windows.extrapolated_readings), held against the
+    twin's reading there (IR_EXTRAPOLATED_TOLERANCE) where a bias is located."""
     p = robots[0]
     idx = windows.index
     chans: list[Channel] = []
@@ -96,7 +110,7 @@ def build_channels(rec: Recording, windows: Windows, run: WindowRun, robots: lis
         if not rec.bench:  # on a bench the body is held: its motion says nothing of the drive
             chans += _motion_channels(rec, idx, run, p)
         if world is not None and world.n_walls and ring_comparable(rec, p):
-            chans += sensor_channels(rec, idx[:, 1:], robots, world, unjudged)
+            chans += sensor_channels(rec, idx[:, 1:], robots, world, unjudged, far)
     if not rec.battery_recorded:
         return chans
     vb = rec.vbat[idx[:, 1:]]
@@ -127,9 +141,9 @@ def _motion_channels(rec: Recording, idx: np.ndarray, run: WindowRun, p: RobotPa
 
 
 def sensor_channels(rec: Recording, rows: np.ndarray, robots: list[RobotParams], world: World,
-                    unjudged: np.ndarray | None) -> list[Channel]:
+                    unjudged: np.ndarray | None, far: np.ndarray | None = None) -> list[Channel]:
     """The IR and ambient channels at the rows (W, T - 1): the twin's sensors on the recorded track, so
-    whatever the twin's motion (no run needed)."""
+    whatever the twin's motion (no run needed); far as build_channels'."""
     on, amb = sensors_on_track(rec, rows, robots, world)  # (N, W, T - 1, S)
     p = robots[0]
     refl_rec = (rec.ir_on - rec.ir_amb)[rows].astype(float)
@@ -137,13 +151,23 @@ def sensor_channels(rec: Recording, rows: np.ndarray, robots: list[RobotParams],
     if unjudged is not None:
         refl_twin = np.where(unjudged[:, None], refl_rec[:, None], refl_twin)
     amb_twin = amb.astype(float).transpose(1, 0, 2, 3)
+    lamps = np.abs(amb_twin[:, 0] - (p.ir_ambient if world.ambient is None else world.ambient))
     chans = []
     for k in range(rec.n_ir):
         chans.append(Channel(IR[k], "counts", refl_rec[..., k], refl_twin[..., k], float(np.sqrt(2) * p.ir_noise + 0.5),
-                             tolerance=IR_RESPONSE_TOLERANCE))
+                             tolerance=IR_RESPONSE_TOLERANCE,
+                             scale=None if far is None else _extrapolated_scale(refl_rec[..., k], refl_twin[:, 0, ..., k],
+                                                                                far[..., k])))
         chans.append(Channel(AMBIENT[k], "counts", rec.ir_amb[rows][..., k].astype(float), amb_twin[..., k],
-                             float(p.ir_noise + 0.5), relative=False))
+                             float(p.ir_noise + 0.5), tolerance=LAMP_RESPONSE_TOLERANCE, scale=lamps[..., k]))
     return chans
+
+
+def _extrapolated_scale(y: np.ndarray, twin: np.ndarray, far: np.ndarray) -> np.ndarray:
+    """The signal an IR reading's bias is held against: the recorded reading, and beyond the calibrated
+    range at least the twin's own, scaled so that its share is IR_EXTRAPOLATED_TOLERANCE."""
+    beyond = np.maximum(np.abs(y), np.abs(twin) * (IR_EXTRAPOLATED_TOLERANCE / IR_RESPONSE_TOLERANCE))
+    return np.where(far, beyond, np.abs(y))
 
 
 def fit_percent(y: np.ndarray, y_hat: np.ndarray) -> float:

@@ -19,7 +19,8 @@ from host_sim.diagnosis.locate import (Finding, bias_margin, contact_windows, in
                                       regimes, scale_margin, scatter_finding, scatter_margin, timing_findings,
                                       timing_margin)
 from host_sim.diagnosis.windows import (DEFAULT_SECONDS, Windows, judge_slides, make_windows, run_windows,
-                                       stratified_held_out, unjudged_readings)
+                                       extrapolated_readings, stratified_held_out,
+                                       unjudged_readings)
 from host_sim.physics.params import RobotParams
 from host_sim.recordings.recording import Recording
 from host_sim.physics.world import World
@@ -59,7 +60,9 @@ def compare(rec: Recording, params: RobotParams, world: World | None, seconds: f
         # (tests/test_clipping.py::test_clipped_readings_are_unexplained_and_fit_no_sensor_gain)
         held = unjudged_clips(clips, windows.index[:, 1:], rec.n_ir if unjudged is None else unjudged.shape[-1])
         unjudged = held if unjudged is None else unjudged | held
-    chans = build_channels(rec, windows, run, [params], world, unjudged)
+    far = (extrapolated_readings(rec, windows.index[:, 1:], params, world)
+           if rec.pose is not None and world is not None and world.n_walls else None)
+    chans = build_channels(rec, windows, run, [params], world, unjudged, far)
     cmp = Comparison(seconds, windows, chans, contact, held_out_fit(chans, windows, contact), pose=run.pose[:, 0],
                      unjudged=unjudged, ceiling=held_out_ceiling(chans, windows, contact))
     if locate:

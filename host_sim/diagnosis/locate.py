@@ -318,11 +318,12 @@ def locate_channel(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regime
 
 
 def _signal(ch: Channel, keep: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """The recorded signal a bias is held against (bin_margin: RELATIVE_MIN of it), scaled up where the
-    channel's model is known only to a wider share (Channel.tolerance); zeros for a level."""
+    """The recorded signal a bias is held against (bin_margin: RELATIVE_MIN of it), or the channel's own
+    scale (ambient: the lamps' light), scaled up where the channel's model is known only to a wider share
+    (Channel.tolerance); zeros for a level."""
     if not ch.relative:
         return np.zeros_like(r)
-    return ch.y[keep] * max(1.0, ch.tolerance / RELATIVE_MIN)
+    return (ch.y if ch.scale is None else ch.scale)[keep] * max(1.0, ch.tolerance / RELATIVE_MIN)
 
 
 def bias_margin(ch: Channel, resid: np.ndarray, keep: np.ndarray, reg: Regimes) -> tuple[float, str]:

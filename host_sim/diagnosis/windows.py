@@ -28,6 +28,9 @@ POSE_DOUBT_RAD = 0.02  # a tracker's heading is good to a few tenths of a degree
 # sensors' range (~0.1 m), to about as much: a reading that changes this much within 1.1 degrees is not judged
 POSE_DOUBT_COUNTS = 50.0
 CONTACT_MARGIN = 0.005  # m beyond the body's radius: within it, the robot touches a wall
+# The datasheet's farthest calibration point (physics/params.py: ~28 counts at 25 cm): beyond it the IR law is
+# an extrapolation (channels.IR_EXTRAPOLATED_TOLERANCE).
+IR_CALIBRATED_RANGE = 0.25
 FACING_COS = -0.17  # a sensor whose axis is within 100 degrees of the way to a touched wall faces it
 # The twin steps SUBSTEPS times a period; a robot that slides over the floor (ice) spins its wheels up and
 # down within milliseconds, which 5 ms steps blur, and a fit then reads the blur as an actuator delay.  So
@@ -377,4 +380,12 @@ def unjudged_readings(rec: Recording, rows: np.ndarray, p: RobotParams, world: W
     doubt |= (dist < p.body_radius + CONTACT_MARGIN)[:, None] & facing
     doubt |= ir_sensor.reflection(world, rec.pose[flat], p)[0] < p.ir_near_peak * p.ir_blend
     return doubt.reshape(*rows.shape, len(p.ir_bearings))
+
+
+def extrapolated_readings(rec: Recording, rows: np.ndarray, p: RobotParams, world: World) -> np.ndarray:
+    """(*rows.shape, S) bool: the wall along each sensor's axis at the recorded pose lies beyond the
+    datasheet's farthest calibration point (IR_CALIBRATED_RANGE), where the twin's law is extrapolated."""
+    assert rec.pose is not None
+    dist = ir_sensor.reflection(world, rec.pose[rows.reshape(-1)], p)[0]
+    return (dist > IR_CALIBRATED_RANGE).reshape(*rows.shape, len(p.ir_bearings))
 
