@@ -70,7 +70,8 @@ class Channel:
     locate: bool = True  # residuals per period (True) or accumulated along the window (pose)
     relative: bool = True  # a mismatch must also be large against the signal (not for a level: vbat)
     tolerance: float = 0.0  # a bias within this share of the signal is the model's own tolerance (locate)
-    scale: np.ndarray | None = None  # (W, T - 1) the signal a bias is held against, where not y (ambient: the lamps')
+    # (W, T - 1) the signal a bias is held against where not y: the lamps' light (ambient), the twin's (far IR)
+    scale: np.ndarray | None = None
 
     def residual(self, s: int = 0) -> np.ndarray:
         """(W, T - 1) recorded minus the twin with parameter set s."""
@@ -154,10 +155,9 @@ def sensor_channels(rec: Recording, rows: np.ndarray, robots: list[RobotParams],
     lamps = np.abs(amb_twin[:, 0] - (p.ir_ambient if world.ambient is None else world.ambient))
     chans = []
     for k in range(rec.n_ir):
+        far_scale = None if far is None else _extrapolated_scale(refl_rec[..., k], refl_twin[:, 0, ..., k], far[..., k])
         chans.append(Channel(IR[k], "counts", refl_rec[..., k], refl_twin[..., k], float(np.sqrt(2) * p.ir_noise + 0.5),
-                             tolerance=IR_RESPONSE_TOLERANCE,
-                             scale=None if far is None else _extrapolated_scale(refl_rec[..., k], refl_twin[:, 0, ..., k],
-                                                                                far[..., k])))
+                             tolerance=IR_RESPONSE_TOLERANCE, scale=far_scale))
         chans.append(Channel(AMBIENT[k], "counts", rec.ir_amb[rows][..., k].astype(float), amb_twin[..., k],
                              float(p.ir_noise + 0.5), tolerance=LAMP_RESPONSE_TOLERANCE, scale=lamps[..., k]))
     return chans
