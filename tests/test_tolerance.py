@@ -323,3 +323,31 @@ def test_the_build_is_weighed_by_the_noise_it_leaves(tmp_path):
     assert not left, d.summary()
     moved = {(n.quantity, n.where): v for n, v in zip(d.calibration.nuisances, d.calibration.values)}
     assert 0.02 < moved[("torque_constant", "left")] < 0.06 and 0.02 < moved[("torque_constant", "right")] < 0.06
+
+
+def test_compare_holds_the_sensors_against_what_their_model_knows(tmp_path):
+    """The channels compare builds carry both scales: a lamp 40 % dimmer than the world file says locates no
+    ambient channel, a room 8 counts darker than it says locates them; and an IR reading of a wall beyond
+    25 cm is held against the twin's own reading."""
+    from host_sim.diagnosis.channels import AMBIENT, IR, IR_EXTRAPOLATED_TOLERANCE, IR_RESPONSE_TOLERANCE
+    from host_sim.diagnosis.compare import compare
+    from host_sim.diagnosis.windows import extrapolated_readings
+    from host_sim.physics.world import world_from_dict
+
+    def room(level: float, ambient: float):
+        return world_from_dict({**ROOM.to_dict(), "lamps": [{"x": 1.0, "y": 1.2, "level": level}],
+                                "ambient": ambient}, "test room")
+
+    rec = record(tmp_path, world=room(10.0, 150.0))
+    seen = lambda cmp: {f.channel for f in cmp.findings} & set(AMBIENT)  # noqa: E731
+    dimmer = compare(rec, DEFAULT, room(10.0 / 0.6, 150.0))
+    assert dimmer.channel(AMBIENT[0]).scale.max() > 10.0  # the lamp shines on the robot's way
+    assert not seen(dimmer), [f.words for f in dimmer.findings]
+    darker = compare(rec, DEFAULT, room(10.0, 158.0))
+    assert len(seen(darker)) == 8, [f.words for f in darker.findings]
+    far = extrapolated_readings(rec, darker.windows.index[:, 1:], DEFAULT, ROOM)
+    assert far.any() and (~far).any()
+    ir = darker.channel(IR[0])
+    twin = np.abs(ir.y_hat[:, 0])
+    assert np.all(ir.scale[far[..., 0]] >= twin[far[..., 0]] * (IR_EXTRAPOLATED_TOLERANCE / IR_RESPONSE_TOLERANCE))
+    assert np.array_equal(ir.scale[~far[..., 0]], np.abs(ir.y)[~far[..., 0]])
