@@ -331,7 +331,7 @@ def test_compare_holds_the_sensors_against_what_their_model_knows(tmp_path):
     25 cm is held against the twin's own reading."""
     from host_sim.diagnosis.channels import AMBIENT, IR, IR_EXTRAPOLATED_TOLERANCE, IR_RESPONSE_TOLERANCE
     from host_sim.diagnosis.compare import compare
-    from host_sim.diagnosis.windows import extrapolated_readings
+    from host_sim.diagnosis.windows import IR_CALIBRATED_RANGE, axis_distances
     from host_sim.physics.world import world_from_dict
 
     def room(level: float, ambient: float):
@@ -345,7 +345,7 @@ def test_compare_holds_the_sensors_against_what_their_model_knows(tmp_path):
     assert not seen(dimmer), [f.words for f in dimmer.findings]
     darker = compare(rec, DEFAULT, room(10.0, 158.0))
     assert len(seen(darker)) == 8, [f.words for f in darker.findings]
-    far = extrapolated_readings(rec, darker.windows.index[:, 1:], DEFAULT, ROOM)
+    far = axis_distances(rec, darker.windows.index[:, 1:], DEFAULT, ROOM) > IR_CALIBRATED_RANGE
     assert far.any() and (~far).any()
     ir = darker.channel(IR[0])
     twin = np.abs(ir.y_hat[:, 0])

@@ -97,7 +97,7 @@ def build_channels(rec: Recording, windows: Windows, run: WindowRun, robots: lis
 
     unjudged: (W, T - 1, S) IR readings that are not judged (windows.unjudged_readings): there the twin is
     given the recorded value, so they weigh nothing in a fit, a location or a fit %.  far: (W, T - 1, S)
-    IR readings of a wall beyond the calibrated range (windows.extrapolated_readings), held against the
+    IR readings of a wall beyond the calibrated range (windows.IR_CALIBRATED_RANGE), held against the
     twin's reading there (IR_EXTRAPOLATED_TOLERANCE) where a bias is located."""
     p = robots[0]
     idx = windows.index

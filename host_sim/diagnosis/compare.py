@@ -18,8 +18,8 @@ from host_sim.diagnosis.locate import (Finding, bias_margin, contact_windows, in
                                       lag_finding, lag_margin, locate_scale, reading_lag_findings, reading_lag_margin,
                                       regimes, scale_margin, scatter_finding, scatter_margin, timing_findings,
                                       timing_margin)
-from host_sim.diagnosis.windows import (DEFAULT_SECONDS, Windows, judge_slides, make_windows, run_windows,
-                                       extrapolated_readings, stratified_held_out,
+from host_sim.diagnosis.windows import (DEFAULT_SECONDS, IR_CALIBRATED_RANGE, Windows, axis_distances,
+                                       judge_slides, make_windows, run_windows, stratified_held_out,
                                        unjudged_readings)
 from host_sim.physics.params import RobotParams
 from host_sim.recordings.recording import Recording
@@ -53,15 +53,16 @@ def compare(rec: Recording, params: RobotParams, world: World | None, seconds: f
     contact = contact_windows(rec, windows, params, world)
     judge_slides(rec, windows, params, contact)
     run = run_windows(rec, windows, params, world)
-    unjudged = (unjudged_readings(rec, windows.index[:, 1:], params, world)
-                if rec.pose is not None and world is not None and world.n_walls else None)
+    unjudged = far = None
+    if rec.pose is not None and world is not None and world.n_walls:
+        axis = axis_distances(rec, windows.index[:, 1:], params, world)
+        unjudged = unjudged_readings(rec, windows.index[:, 1:], params, world, axis)
+        far = axis > IR_CALIBRATED_RANGE
     clips = clipped(rec, params)
     if clips:  # a clipped reading says nothing of the robot's optics: no gain is fitted to take it up
         # (tests/test_clipping.py::test_clipped_readings_are_unexplained_and_fit_no_sensor_gain)
         held = unjudged_clips(clips, windows.index[:, 1:], rec.n_ir if unjudged is None else unjudged.shape[-1])
         unjudged = held if unjudged is None else unjudged | held
-    far = (extrapolated_readings(rec, windows.index[:, 1:], params, world)
-           if rec.pose is not None and world is not None and world.n_walls else None)
     chans = build_channels(rec, windows, run, [params], world, unjudged, far)
     cmp = Comparison(seconds, windows, chans, contact, held_out_fit(chans, windows, contact), pose=run.pose[:, 0],
                      unjudged=unjudged, ceiling=held_out_ceiling(chans, windows, contact))

@@ -346,8 +346,19 @@ def sensors_on_track(rec: Recording, rows: np.ndarray, robots: list[RobotParams]
     return on.reshape(shape), amb.reshape(shape)
 
 
-def unjudged_readings(rec: Recording, rows: np.ndarray, p: RobotParams, world: World) -> np.ndarray:
-    """(*rows.shape, S) bool: the twin's reflected light at the recorded pose is ill-conditioned there.
+def axis_distances(rec: Recording, rows: np.ndarray, p: RobotParams, world: World) -> np.ndarray:
+    """(*rows.shape, S): the distance (m) from each sensor to the wall along its axis at the recorded pose
+    (beyond its reach where none): what the near rule of unjudged_readings and the far one of
+    IR_CALIBRATED_RANGE are judged on."""
+    assert rec.pose is not None
+    dist = ir_sensor.reflection(world, rec.pose[rows.reshape(-1)], p)[0]
+    return dist.reshape(*rows.shape, len(p.ir_bearings))
+
+
+def unjudged_readings(rec: Recording, rows: np.ndarray, p: RobotParams, world: World,
+                      axis: np.ndarray | None = None) -> np.ndarray:
+    """(*rows.shape, S) bool: the twin's reflected light at the recorded pose is ill-conditioned there
+    (axis: axis_distances at these rows, if the caller has them).
 
     A sensor's ray that grazes a wall's end (or a corner) hits or misses it as the pose moves by the
     tracker's noise: the twin would read 500 counts or nothing from the same recorded pose.  Such a reading
@@ -378,14 +389,8 @@ def unjudged_readings(rec: Recording, rows: np.ndarray, p: RobotParams, world: W
     bearing = rec.pose[flat, 2:3] + np.asarray(p.ir_bearings)
     facing = -(np.cos(bearing) * away[:, :1] + np.sin(bearing) * away[:, 1:]) > FACING_COS
     doubt |= (dist < p.body_radius + CONTACT_MARGIN)[:, None] & facing
-    doubt |= ir_sensor.reflection(world, rec.pose[flat], p)[0] < p.ir_near_peak * p.ir_blend
+    if axis is None:
+        axis = axis_distances(rec, rows, p, world)
+    doubt |= axis.reshape(doubt.shape) < p.ir_near_peak * p.ir_blend
     return doubt.reshape(*rows.shape, len(p.ir_bearings))
-
-
-def extrapolated_readings(rec: Recording, rows: np.ndarray, p: RobotParams, world: World) -> np.ndarray:
-    """(*rows.shape, S) bool: the wall along each sensor's axis at the recorded pose lies beyond the
-    datasheet's farthest calibration point (IR_CALIBRATED_RANGE), where the twin's law is extrapolated."""
-    assert rec.pose is not None
-    dist = ir_sensor.reflection(world, rec.pose[rows.reshape(-1)], p)[0]
-    return (dist > IR_CALIBRATED_RANGE).reshape(*rows.shape, len(p.ir_bearings))
 
