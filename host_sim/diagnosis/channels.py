@@ -14,6 +14,7 @@ from host_sim.diagnosis.windows import WindowRun, Windows, sensors_on_track
 from host_sim.physics.params import MAX_IR_PAIRS, RobotParams
 from host_sim.recordings.recording import Recording
 from host_sim.physics.world import World
+from host_sim.sensors import ir_sensor
 
 # The firmware's ring by name; the pairs of a larger ring (ir_bearings) by number.
 SENSOR_NAMES = ("S1 front", "S2 front-left", "S3 left", "S4 back-left", "S5 back", "S6 back-right",
@@ -152,7 +153,7 @@ def sensor_channels(rec: Recording, rows: np.ndarray, robots: list[RobotParams],
     if unjudged is not None:
         refl_twin = np.where(unjudged[:, None], refl_rec[:, None], refl_twin)
     amb_twin = amb.astype(float).transpose(1, 0, 2, 3)
-    lamps = np.abs(amb_twin[:, 0] - (p.ir_ambient if world.ambient is None else world.ambient))
+    lamps = np.abs(amb_twin[:, 0] - ir_sensor.room_ambient(world, p))
     chans = []
     for k in range(rec.n_ir):
         far_scale = None if far is None else _extrapolated_scale(refl_rec[..., k], refl_twin[:, 0, ..., k], far[..., k])

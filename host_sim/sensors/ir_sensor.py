@@ -349,10 +349,15 @@ def _robot_lamp_gains(world: World, poses: np.ndarray, p: RobotParams, c: _Const
     return g
 
 
+def room_ambient(world: World, p: RobotParams) -> float:
+    """The ambient light (counts) every sensor sees before any lamp: the world's level, else the robot's."""
+    return p.ir_ambient if world.ambient is None else world.ambient
+
+
 def _ambient_batch(world: World, poses: np.ndarray, t: ArrayLike, p: RobotParams, c: _Consts
                    ) -> tuple[float | np.ndarray, float | np.ndarray]:
     """(ambient at the emitter-off reading, at the emitter-on one): the world's level plus the lamps."""
-    base = p.ir_ambient if world.ambient is None else world.ambient
+    base = room_ambient(world, p)
     if not world.lamps:
         return base, base
     gains = _robot_lamp_gains(world, poses, p, c)
@@ -427,7 +432,7 @@ def _reflected_one(c: _Consts, dist: list[float], ang: list[float], gain: float,
 def _ambient_one(world: World, x: float, y: float, phi: float, t: float, p: RobotParams,
                  c: _Consts) -> tuple[list[float], list[float]]:
     """_ambient_batch for one robot: (off, on) per sensor."""
-    base = p.ir_ambient if world.ambient is None else world.ambient
+    base = room_ambient(world, p)
     amb_off = [base] * c.n
     if not world.lamps:
         return amb_off, amb_off
