@@ -263,6 +263,10 @@ class Recording:
             return np.zeros(len(self.t), dtype=bool)
         return np.isfinite(self.pose).all(axis=1)
 
+    def tracked(self, k: int) -> bool:
+        """Whether row k has a tracker pose (pose_rows[k], without casting every row)."""
+        return self.pose is not None and bool(np.isfinite(self.pose[k]).all())
+
 
 def load_recording(path: str | os.PathLike[str], *, require_sidecar: bool = True,
                    ordered_times: bool = True) -> Recording:

@@ -127,7 +127,7 @@ def state_at(rec: Recording, k: int, p: RobotParams) -> tuple[tuple[float, ...],
 def state_or_origin(rec: Recording, k: int, p: RobotParams) -> tuple[tuple[float, ...], tuple[float, float]]:
     """state_at, or where the tracker has no pose at row k, the wheels' state at the origin (of an empty
     world: the encoders alone say nothing of where the robot is)."""
-    if rec.pose is not None and bool(rec.pose_rows[k]):
+    if rec.tracked(k):
         return state_at(rec, k, p)
     theta = [motors.encoder_angle(int(rec.enc[k, w]), p, w) for w in range(2)]
     q = dynamics.q_from_axle_pose(0.0, 0.0, 0.0, p, theta[0], theta[1])
@@ -305,7 +305,7 @@ def replay_batch(rec: Recording, params_list: Any, start: int = 0, *, stop: int 
     from host_sim.physics.world import world_from_dict
 
     inputs = replay_inputs(rec, start, stop, nominal_timing)
-    tracked = rec.pose is not None and bool(rec.pose_rows[start])
+    tracked = rec.tracked(start)
     if world is None and tracked and isinstance(rec.meta.get("world"), dict):
         world = world_from_dict(rec.meta["world"], f"{rec.path or 'recording'} (sidecar world)")
     params, robots = robot_params(with_drive(rec, params_list), base)

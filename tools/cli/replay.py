@@ -115,7 +115,7 @@ def _replay(args: argparse.Namespace, rec: Any, params: Any, world: Any) -> tupl
     from host_sim.recordings.replay import ReplayError, replay, replay_drive
 
     substeps = args.substeps or int(rec.meta.get("substeps") or 8)  # type: ignore[call-overload]
-    tracked = rec.pose is not None and bool(rec.pose_rows[args.start])
+    tracked = rec.tracked(args.start)
     if args.world and not tracked:
         raise CliError(f"--world {args.world}: the recording has no tracker pose at row {args.start} to place "
                        f"the robot in it; without --world the drive alone is replayed")
