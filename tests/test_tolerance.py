@@ -112,6 +112,34 @@ def test_a_caster_that_rolls_with_some_drag_is_the_build_not_a_fault(tmp_path):
     assert any("tolerance's edge (coulomb_friction" in n for n in without.notes), without.summary()
 
 
+def test_a_quantity_stated_as_a_factor_reaches_as_far_each_way():
+    """A Stribeck speed the datasheet gives loosely, a factor of 2 either way (band 0.5), is bounded at half
+    and twice its value, and freed (RELEASE bands) at a factor 2**5; the others stay +-band, one-sided 0..band.
+    At +60 % it is not at the edge, as it was when +50 % was."""
+    from host_sim.diagnosis.calibrate import RELEASE, Nuisance, _at_edge, bounds
+
+    nuis = [Nuisance("stribeck_speed", "stribeck_speed"), Nuisance("half_axle", "half_axle"),
+            Nuisance("caster_drag", "caster_drag")]
+    band = np.array([0.5, 0.015, 0.025])
+    lo, hi = bounds(nuis, band)
+    assert lo == pytest.approx([-0.5, -0.015, 0.0]) and hi == pytest.approx([1.0, 0.015, 0.025])
+    lo, hi = bounds(nuis, band, RELEASE)
+    assert lo == pytest.approx([0.5 ** 5 - 1, -5 * 0.015, 0.0]) and hi == pytest.approx([2 ** 5 - 1, 5 * 0.015, 0.125])
+    assert not _at_edge(nuis[0], 0.6, 0.5) and _at_edge(nuis[0], 0.99, 0.5) and _at_edge(nuis[0], -0.5, 0.5)
+    assert _at_edge(nuis[1], -0.015, 0.015) and not _at_edge(nuis[2], 0.0, 0.025)
+
+
+def test_grease_whose_breakaway_falls_over_twice_the_datasheet_speed_is_the_build(tmp_path):
+    """Axles whose breakaway falls over 1.8 rad/s, the datasheet's 1 rad/s "give or take a factor of 2": the
+    calibration puts the Stribeck speed near its value, within the tolerance, and the robot is a match."""
+    rec = record_manoeuvre(tmp_path, dataclasses.replace(AS_BUILT, stiction_l=0.3, stiction_r=0.3, stribeck_speed=1.8))
+    d = diagnose(rec, DEFAULT, ARENA)
+    assert d.verdict == "match" and not d.effects, d.summary()
+    assert not any("tolerance's edge" in n for n in d.notes), d.summary()
+    moved = {n.quantity: v for n, v in zip(d.calibration.nuisances, d.calibration.values)}
+    assert moved["stribeck_speed"] == pytest.approx(0.8, abs=0.2)
+
+
 def test_the_build_and_the_effect_are_fitted_together(tmp_path):
     """A fault beyond the tolerance on a robot built within it: the fault is named and measured, the build
     is not named, whatever part of the fault the calibration took up first."""

@@ -18,7 +18,7 @@ from host_sim.diagnosis.channels import drive_channel, sensor_channel
 from host_sim.diagnosis.fit import (FIT_FTOL, FIT_XTOL, Model, Objective, sandwich_intervals, earns_its_place,
                                    f_test, touching_runs)
 from host_sim.physics import effects as E
-from host_sim.diagnosis.tolerance import ABSOLUTE, ONE_SIDED, UNIT_OF, Tolerance
+from host_sim.diagnosis.tolerance import ABSOLUTE, FACTOR, ONE_SIDED, UNIT_OF, Tolerance
 from host_sim.physics.params import RobotParams
 
 PRIOR_SD = 0.5  # of a band: a band holds about 95 % of robots built to the datasheet (±2 sd)
@@ -56,11 +56,11 @@ class Calibration:
 
     def to_json(self) -> list[dict[str, Any]]:
         return [{"value": n.quantity, "where": n.where, "relative": round(v, 5), "band": b,
-                 "at_edge": abs(v) >= AT_EDGE * b} for n, v, b in zip(self.nuisances, self.values, self.bands)]
+                 "at_edge": _at_edge(n, v, b)} for n, v, b in zip(self.nuisances, self.values, self.bands)]
 
     def at_edge(self) -> list[Nuisance]:
         """The nuisances fitted at their band's edge: the data would take them beyond the tolerance."""
-        return [n for n, v, b in zip(self.nuisances, self.values, self.bands) if abs(v) >= AT_EDGE * b]
+        return [n for n, v, b in zip(self.nuisances, self.values, self.bands) if _at_edge(n, v, b)]
 
     def at_datasheet(self, tol: Tolerance, which: set[Nuisance] | None = None) -> Calibration:
         """The same nuisances, those of `which` (all by default) at the datasheet's values (relative 0):
@@ -116,10 +116,22 @@ def set_values(p: RobotParams, tol: Tolerance, nuisances: list[Nuisance], x: np.
     return dataclasses.replace(p, **changes)
 
 
-def lower_bounds(nuisances: list[Nuisance], band: np.ndarray) -> np.ndarray:
-    """Each nuisance's lower bound: -band, or 0 for a one-sided one (tolerance.ONE_SIDED),
-    which a build has or lacks but never holds below none."""
-    return np.where([n.quantity in ONE_SIDED for n in nuisances], 0.0, -band)
+def bounds(nuisances: list[Nuisance], band: np.ndarray, reach: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Each nuisance's (lower, upper) bound, `reach` bands out: -band..band; 0..band for a one-sided one
+    (tolerance.ONE_SIDED), which a build has or lacks but never holds below none; and for one stated as a
+    factor either way (tolerance.FACTOR), (1 - band) - 1 .. 1 / (1 - band) - 1, the factor to the power `reach`
+    (tests/test_tolerance.py::test_a_quantity_stated_as_a_factor_reaches_as_far_each_way)."""
+    one = np.array([n.quantity in ONE_SIDED for n in nuisances], dtype=bool)
+    factor = np.array([n.quantity in FACTOR for n in nuisances], dtype=bool)
+    down = np.clip(1.0 - band, 1e-9, None) ** reach
+    lo = np.where(one, 0.0, np.where(factor, down - 1.0, -reach * band))
+    return lo, np.where(factor, 1.0 / down - 1.0, reach * band)
+
+
+def _at_edge(n: Nuisance, v: float, band: float) -> bool:
+    """The nuisance's value v sits within AT_EDGE of its upper bound, or of a lower one below the datasheet."""
+    (lo,), (hi,) = bounds([n], np.array([band]))
+    return v >= AT_EDGE * hi or (lo < 0.0 and v <= AT_EDGE * lo)
 
 
 def inside(x0: np.ndarray, lo: np.ndarray, band: np.ndarray) -> np.ndarray:
@@ -132,15 +144,15 @@ def inside(x0: np.ndarray, lo: np.ndarray, band: np.ndarray) -> np.ndarray:
 def calibrate(obj: Objective, params: RobotParams, tol: Tolerance, nuisances: list[Nuisance],
               start: list[float] | None = None) -> Calibration:
     """The MAP fit of the nuisances on obj's training windows: weighted residuals and the prior's rows
-    x / (PRIOR_SD band), x bounded by ±band (0..band if one-sided), from start (default the datasheet,
+    x / (PRIOR_SD band), x within its bounds (bounds), from start (default the datasheet,
     x = 0; inside).  Nothing held out is seen."""
     if not nuisances:
         return Calibration(params)
     band = np.array([tol.bands[n.quantity] for n in nuisances])
-    lo = lower_bounds(nuisances, band)
+    lo, hi = bounds(nuisances, band)
     x0 = np.zeros(len(nuisances)) if start is None else np.array(start, dtype=float)
     x = _least_squares(obj, lambda x: set_values(params, tol, nuisances, x), inside(x0, lo, band),
-                       lo, band, PRIOR_SD * band)[0]
+                       lo, hi, PRIOR_SD * band)[0]
     return Calibration(set_values(params, tol, nuisances, x), list(nuisances), [float(v) for v in x],
                        [float(b) for b in band])
 
@@ -170,7 +182,8 @@ def refit_jointly(obj: Objective, tol: Tolerance, cal: Calibration, model: Model
     band = np.array([cal.bands[i] for i in keep])
     sizes = [len(v) for v in model.values]
     lo_e, hi_e = (np.concatenate([E.bounds(c.name, tol.datasheet)[j] for c in model.effects]) for j in (0, 1))
-    lo, hi = np.concatenate([lower_bounds(nuis, band), lo_e]), np.concatenate([band, hi_e])
+    lo_n, hi_n = bounds(nuis, band)
+    lo, hi = np.concatenate([lo_n, lo_e]), np.concatenate([hi_n, hi_e])
     x0 = np.clip(np.concatenate([inside(np.array([cal.values[i] for i in keep]), lo[:len(keep)], band),
                                  np.concatenate(model.values)]), lo + 1e-3 * (hi - lo), hi - 1e-3 * (hi - lo))
     sd = np.concatenate([PRIOR_SD * band, np.full(len(lo_e), np.inf)])
@@ -235,12 +248,13 @@ def edge_binds(obj: Objective, params: RobotParams, tol: Tolerance, cal: Calibra
     bands, no prior), the twin must earn it as an effect must (fit's F test and held-out gain on obj's
     held-out windows, against the calibration).  Else the edge is the twin's own model pressing on it,
     not the robot (tests/test_tolerance.py::test_a_fault_the_build_can_almost_take_up_is_still_named)."""
-    edge = [i for i, (v, b) in enumerate(zip(cal.values, cal.bands)) if abs(v) >= AT_EDGE * b]
+    edge = [i for i, (n, v, b) in enumerate(zip(cal.nuisances, cal.values, cal.bands)) if _at_edge(n, v, b)]
     if not edge:
         return False
     band = np.array(cal.bands)
-    lo, hi, sd = lower_bounds(cal.nuisances, band), band.copy(), PRIOR_SD * band
-    lo[edge], hi[edge], sd[edge] = np.sign(lo[edge]) * RELEASE * band[edge], RELEASE * band[edge], np.inf
+    (lo, hi), sd = bounds(cal.nuisances, band), PRIOR_SD * band
+    released = bounds(cal.nuisances, band, RELEASE)
+    lo[edge], hi[edge], sd[edge] = released[0][edge], released[1][edge], np.inf
     freed = _least_squares(obj, lambda x: set_values(params, tol, cal.nuisances, x),
                            inside(np.array(cal.values), lo, band), lo, hi, sd)[0]
     robots = [set_values(params, tol, cal.nuisances, np.array(cal.values)),

@@ -27,14 +27,17 @@ BANDS: dict[str, float] = {
     "ir_gain": 0.15,  # an optical pair's efficiency, each pair its own
     "stiction": 0.4,  # a greased gear train's breakaway friction, 0-40 % above its dry friction
     "ir_misalignment": 0.035,  # rad: an IR pair's axis within 2 degrees of its bearing, as its holder is moulded
-    "stribeck_speed": 0.5,  # the speed over which a breakaway falls to the dry friction: the grease's, stated loosely
+    "stribeck_speed": 0.5,  # the speed over which a breakaway falls to the dry friction: the grease's, a factor of 2
     "caster_drag": 0.025,  # N: a ball caster's rolling drag, a coefficient up to 0.01 on up to half the weight (5 N)
 }
 # Bands of a quantity the datasheet gives as absent (0): the band is the value itself, in its unit, not a
-# fraction of the datasheet's (calibrate.set_values, calibrate.lower_bounds).
+# fraction of the datasheet's (calibrate.set_values, calibrate.bounds).
 ABSOLUTE = ("stiction", "ir_misalignment", "caster_drag")
 UNIT_OF = {"ir_misalignment": "rad", "caster_drag": "N"}  # the ABSOLUTE ones not a fraction: said in their unit
 ONE_SIDED = ("stiction", "caster_drag")  # a breakaway is never below the dry friction, nor a drag below none
+# Quantities a datasheet states only loosely, as a factor either way: a band b reaches from (1 - b) times the
+# value to 1 / (1 - b) times it (0.5: half to twice), not to (1 + b) times (calibrate.bounds).
+FACTOR = ("stribeck_speed",)
 # The effect parameter fields whose value is a change from a datasheet value (a wheel's delta), by the
 # datasheet field it changes; the others set the datasheet field itself (half_axle) or a relative scale
 # (ir_gain_scale, about 1).
