@@ -115,7 +115,7 @@ def test_a_caster_that_rolls_with_some_drag_is_the_build_not_a_fault(tmp_path):
 def test_a_quantity_stated_as_a_factor_reaches_as_far_each_way():
     """A Stribeck speed the datasheet gives loosely, a factor of 2 either way (band 0.5), is bounded at half
     and twice its value, and freed (RELEASE bands) at a factor 2**5; the others stay +-band, one-sided 0..band.
-    At +60 % it is not at the edge, as it was when +50 % was."""
+    +60 % lies inside it, not at its edge."""
     from host_sim.diagnosis.calibrate import RELEASE, Nuisance, _at_edge, bounds
 
     nuis = [Nuisance("stribeck_speed", "stribeck_speed"), Nuisance("half_axle", "half_axle"),

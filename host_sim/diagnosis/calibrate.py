@@ -123,7 +123,7 @@ def bounds(nuisances: list[Nuisance], band: np.ndarray, reach: float = 1.0) -> t
     (tests/test_tolerance.py::test_a_quantity_stated_as_a_factor_reaches_as_far_each_way)."""
     one = np.array([n.quantity in ONE_SIDED for n in nuisances], dtype=bool)
     factor = np.array([n.quantity in FACTOR for n in nuisances], dtype=bool)
-    down = np.clip(1.0 - band, 1e-9, None) ** reach
+    down = (1.0 - band) ** reach  # a band is below 1 (tolerance.load_bands)
     lo = np.where(one, 0.0, np.where(factor, down - 1.0, -reach * band))
     return lo, np.where(factor, 1.0 / down - 1.0, reach * band)
 
