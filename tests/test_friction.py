@@ -59,6 +59,27 @@ def test_solve_meets_the_conditions_and_batch_equals_scalar():
     assert kinds == {(False, False), (True, False), (False, True), (True, True)}  # every combination met
 
 
+def test_batch_equals_scalar_bit_for_bit_on_either_path(monkeypatch):
+    """A few robots off the easy path are solved one by one, many vectorised: both give `solve`'s answer
+    to the last bit, with the step's start speeds (reversals) and without."""
+    v0, w, t = random_problems(4000, seed=7)
+    start = np.random.default_rng(8).normal(0, 1, (4000, 2)) * v0.std()
+    v0[::3] = 5.0 * np.sign(v0[::3]) + v0[::3]  # a third turn fast: batches with few and many near rest
+    taken = {"one by one": 0, "vectorised": 0}
+    for path, name in (("one by one", "_solve_each"), ("vectorised", "_three_candidates")):
+        real = getattr(friction, name)
+        monkeypatch.setattr(friction, name, lambda *a, path=path, real=real: (taken.__setitem__(path, taken[path] + 1), real(*a))[1])
+    for lo, size in zip(range(0, 4000, 40), [3, 8, 17, 40] * 25):
+        k = slice(lo, lo + size)
+        for st in (None, start[k]):
+            got = friction.solve_batch(v0[k, 0], v0[k, 1], *(x[k] for x in w), t[k, 0], t[k, 1], start=st)
+            for j in range(len(got[0])):
+                s0 = (0.0, 0.0) if st is None else tuple(st[j].tolist())
+                want = friction.solve(*v0[k][j].tolist(), *(float(x[k][j]) for x in w), *t[k][j].tolist(), start=s0)
+                assert want == tuple(g[j] for g in got)
+    assert min(taken.values()) > 10, taken  # both paths taken
+
+
 def test_solve_is_continuous_in_its_data():
     """A fit by finite differences on T needs the friction continuous in T (and in the speeds): a small
     change of the data moves the solution by a comparable amount (Lipschitz), across stick-slip switches."""

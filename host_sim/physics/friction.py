@@ -98,7 +98,9 @@ def solve_batch(vl: np.ndarray, vr: np.ndarray, w11: PerRobot, w12: PerRobot, w2
     if start is not None:
         easy &= (el * start[:, 0] >= 0.0) & (er * start[:, 1] >= 0.0)
     near = np.flatnonzero(~easy)
-    if near.size:
+    if 0 < near.size <= FEW:
+        _solve_each(near, vl, vr, (w11, w12, w21, w22), tl, tr, start, (fl, fr, stick_l, stick_r))
+    elif near.size:
         sub = (lambda a: a[near] if isinstance(a, np.ndarray) and a.ndim else a)
         w = (sub(w11), sub(w12), sub(w21), sub(w22))
         g = _three_candidates(vl[near], vr[near], *w, sub(tl), sub(tr))
@@ -106,6 +108,23 @@ def solve_batch(vl: np.ndarray, vr: np.ndarray, w11: PerRobot, w12: PerRobot, w2
             g = _crossings(vl[near], vr[near], w, sub(tl), sub(tr), g, start[near])
         fl[near], fr[near], stick_l[near], stick_r[near] = g
     return fl, fr, stick_l, stick_r
+
+
+FEW = 16  # up to this many robots off the easy path, `solve` one by one beats numpy's per-call cost
+
+
+def _solve_each(near: np.ndarray, vl: np.ndarray, vr: np.ndarray, w: tuple[PerRobot, ...], tl: PerRobot, tr: PerRobot,
+                start: np.ndarray | None, out: tuple[np.ndarray, ...]) -> None:
+    """`solve` for the robots `near`, written into out = (f_l, f_r, left sticks, right sticks); the same
+    floating-point operations in the same order, so bit for bit the vectorised answer
+    (tests/test_friction.py::test_batch_equals_scalar_bit_for_bit_on_either_path)."""
+    def each(a: PerRobot) -> list[float]:
+        return a[near].tolist() if isinstance(a, np.ndarray) and a.ndim else [float(a)] * near.size
+    cols = [each(a) for a in (vl, vr, *w, tl, tr)]
+    starts = start[near].tolist() if start is not None else [(0.0, 0.0)] * near.size
+    fl, fr, stick_l, stick_r = out
+    for j, i in enumerate(near.tolist()):
+        fl[i], fr[i], stick_l[i], stick_r[i] = solve(*(c[j] for c in cols), start=tuple(starts[j]))
 
 
 def _crossings(vl: np.ndarray, vr: np.ndarray, w: tuple[PerRobot, ...], tl: PerRobot, tr: PerRobot, g: tuple[np.ndarray, ...],
