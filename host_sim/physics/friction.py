@@ -110,7 +110,7 @@ def solve_batch(vl: np.ndarray, vr: np.ndarray, w11: PerRobot, w12: PerRobot, w2
     return fl, fr, stick_l, stick_r
 
 
-FEW = 16  # up to this many robots off the easy path, `solve` one by one beats numpy's per-call cost
+FEW = 32  # up to this many robots off the easy path, `solve` one by one beats numpy's per-call cost
 
 
 def _solve_each(near: np.ndarray, vl: np.ndarray, vr: np.ndarray, w: tuple[PerRobot, ...], tl: PerRobot, tr: PerRobot,
