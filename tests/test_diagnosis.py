@@ -17,12 +17,13 @@ from host_sim.diagnosis import DiagnosisError, diagnose
 from host_sim.diagnosis import locate
 from host_sim.diagnosis.compare import compare, rule_margins
 from host_sim.diagnosis.report import check_excitation
+from host_sim.diagnosis.channels import SENSOR_NAMES
 from host_sim.diagnosis.phrasing import sentence
 from host_sim.physics.params import DEFAULT, load_params
 from host_sim.recordings.recording import RecordingWriter, load_recording
 from host_sim.controller.sil import SilController
 from host_sim.loops.simulation import Simulation
-from host_sim.physics.world import builtin_world, world_from_dict
+from host_sim.physics.world import World, builtin_world, world_from_dict
 from tests.helpers import run_twinbot
 
 ROOM = builtin_world("paper_room")
@@ -421,8 +422,29 @@ def test_too_little_of_a_motion_away_from_the_walls_is_said(nominal_run):
     assert not any("turned for" in n for n in excitation_notes(nominal_run, first, DEFAULT, ROOM))
     straight = load_recording(nominal_run.path)
     straight.enc[:, 1] = straight.enc[:, 0]  # the encoders now say the robot never turned
-    (note,) = excitation_notes(straight, first, DEFAULT, ROOM)
+    (note,) = [n for n in excitation_notes(straight, first, DEFAULT, ROOM) if "away from the walls" in n]
     assert "turned for 0.0 s" in note and "track width" in note and "--excite" in note
+
+
+def test_a_sensor_that_seldom_faced_a_wall_is_said_to_be_poorly_judged(nominal_run):
+    """A sensor that faced a wall within 12 cm for less than 4 s is named, with its seconds; over 30 s the
+    explorer brings some sensors to the walls for longer.  Moved to the room's middle, no sensor faced one: all eight are named.
+    Without walls the ring is not judged at all, and no sensor is named."""
+    from host_sim.diagnosis.report import excitation_notes
+
+    def seldom(rec, world):
+        first = compare(rec, DEFAULT, world, locate=False)
+        notes = [n for n in excitation_notes(rec, first, DEFAULT, world) if "gain, alignment" in n]
+        return notes[0] if notes else ""
+
+    note = seldom(nominal_run, ROOM)
+    assert 0 < sum(f"{name} for " in note for name in SENSOR_NAMES[:8]) < 8, note
+    middle = load_recording(nominal_run.path)
+    middle.pose[:, :2] = (ROOM.size[0] / 2, ROOM.size[1] / 2)
+    note = seldom(middle, ROOM)
+    assert all(f"{name} for 0.0 s" in note for name in SENSOR_NAMES[:8]), note
+    open_floor = World(name="open", size=ROOM.size, walls=[], start=ROOM.start)
+    assert seldom(nominal_run, open_floor) == ""
 
 
 def test_a_reading_the_recorded_pose_cannot_settle_is_not_judged(nominal_run):
