@@ -131,7 +131,8 @@ def bounds(nuisances: list[Nuisance], band: np.ndarray, reach: float = 1.0) -> t
 def _at_edge(n: Nuisance, v: float, band: float) -> bool:
     """The nuisance's value v sits within AT_EDGE of its upper bound, or of a lower one below the datasheet."""
     (lo,), (hi,) = bounds([n], np.array([band]))
-    return bool(v >= AT_EDGE * hi or (lo < 0.0 and v <= AT_EDGE * lo))  # a JSON bool, not numpy's
+    # a JSON bool, not numpy's (tests/test_diagnosis.py::test_json_html_and_parameter_file_from_the_command)
+    return bool(v >= AT_EDGE * hi or (lo < 0.0 and v <= AT_EDGE * lo))
 
 
 def inside(x0: np.ndarray, lo: np.ndarray, band: np.ndarray) -> np.ndarray:

@@ -258,14 +258,19 @@ class Recording:
 
     @property
     def pose_rows(self) -> np.ndarray:
-        """(n,) bool: the rows with a tracker pose."""
+        """(n,) bool: the rows with a tracker pose (_posed)."""
         if self.pose is None:
             return np.zeros(len(self.t), dtype=bool)
-        return np.isfinite(self.pose).all(axis=1)
+        return _posed(self.pose)
 
     def tracked(self, k: int) -> bool:
-        """Whether row k has a tracker pose (pose_rows[k], without casting every row)."""
-        return self.pose is not None and bool(np.isfinite(self.pose[k]).all())
+        """Whether row k has a tracker pose: pose_rows[k], without casting every row."""
+        return self.pose is not None and bool(_posed(self.pose[k]))
+
+
+def _posed(pose: np.ndarray) -> np.ndarray:
+    """Rows of x, y, heading (..., 3) that hold a tracker pose: all three finite."""
+    return np.isfinite(pose).all(axis=-1)
 
 
 def load_recording(path: str | os.PathLike[str], *, require_sidecar: bool = True,
