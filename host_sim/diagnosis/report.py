@@ -22,6 +22,8 @@ from host_sim.diagnosis.channels import (ACCUMULATED, IR, SENSOR_NAMES, WHEELS, 
 from host_sim.diagnosis.clipping import clipped
 from host_sim.diagnosis.locate import Finding, Regimes, noise_level, regimes, runs, total_noise
 from host_sim.diagnosis.model_error import with_model_error
+from host_sim.diagnosis import odometry
+from host_sim.diagnosis.odometry import Odometry
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
 from host_sim.diagnosis.testblock import TestBlockError, check_test_recording, split_test_block
 from host_sim.diagnosis.block_verdict import judge_held_out, judge_test_block
@@ -63,6 +65,7 @@ class Diagnosis:
     test_judgements: list[dict[str, Any]] = field(default_factory=list)  # verdict.Judgement per channel judged
     model: Model | None = None  # the fitted twin, when effects were tried
     calibration: Calibration | None = None  # the twin calibrated within the datasheet's tolerance
+    odometry: Odometry | None = None  # each wheel's distance per count against the tracker (odometry.py)
     located_datasheet: list[dict[str, Any]] = field(default_factory=list)  # what the datasheet twin showed
     after: Comparison | None = None  # the fitted twin judged on the same windows
     after_long: Comparison | None = None  # ... and on the longest ones (pictures)
@@ -78,6 +81,8 @@ class Diagnosis:
         if self.calibration is not None:
             doc["calibration"] = {"values": self.calibration.to_json(), "located_before": self.located_datasheet}
         doc["closest"] = self.closest
+        if self.odometry is not None:
+            doc["odometry"] = self.odometry.to_json()
         if self.fit_test:  # judged on a test block (diagnose's test_block): its figures and rules' findings
             doc["fit"]["test"] = {k: (_finite(v) if isinstance(v, dict) else v) for k, v in self.fit_test.items()}
             doc |= {"changes": self.changes, "test_judgements": self.test_judgements}
@@ -263,6 +268,7 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
         result = _diagnose_fitted(rec, tol, world, seconds, progress, workers)[0]
         result.notes[:0] = gap_notes
         _report_clips(result, rec, params)
+        _report_odometry(result, rec, params, world, tol)
         _tell_apart_named(result)
         return result
     try:
@@ -281,6 +287,7 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
     judge_test_block(result, block, base, world, chain, objective, seconds[0], progress)
     for part in ([rec, test_block] if isinstance(test_block, Recording) else [rec]):
         _report_clips(result, part, params)
+    _report_odometry(result, rec, params, world, tol)
     _tell_apart_named(result)
     return result
 
@@ -304,6 +311,34 @@ def _report_clips(result: Diagnosis, rec: Recording, params: RobotParams) -> Non
                          f"readings are not judged, {spans_text(found)}"}
         result.located.append(item)
         result.unexplained.append({k: item[k] for k in ("channel", "sensors", "regime", "spans", "words")})
+        result.verdict = {"match": "unexplained", "explained": "partly explained"}.get(result.verdict, result.verdict)
+
+
+def _report_odometry(result: Diagnosis, rec: Recording, params: RobotParams, world: World | None,
+                     tol: Tolerance) -> None:
+    """A wheel whose distance per count, against the tracker, lies beyond its radius's tolerance (odometry.py)
+    is a mismatch whatever the dynamics say: located and unexplained, so the verdict is neither a match nor
+    wholly explained, unless a wheel radius or an encoder scale named on that wheel accounts for it
+    (tests/test_odometry.py::test_a_wheel_that_goes_too_far_per_count_is_no_match)."""
+    odo = result.odometry = odometry.measure(rec, params, world)
+    if odo is None:
+        return
+    for w in odo.beyond(tol.bands.get("wheel_radius", 0.0)):
+        side = ("left", "right")[w]
+        if any(e["name"] in ("wheel_radius", "encoder_scale") and e.get("wheel") in (side, "both")
+               for e in result.effects):
+            continue
+        d, half = odo.per_count[w], odometry.Z * odo.per_count_se[w]
+        lo, hi = sorted((abs(d) - half, abs(d) + half))
+        item = {"channel": f"odometry_{side[0]}", "regime": "per encoder count", "spans": [list(odo.span)],
+                "fit_before": result.fit_before.get(f"count_{side[0]}", math.nan), "value": d,
+                "words": f"the {side} wheel goes {100 * abs(d):.1f} % {'less far' if d < 0 else 'farther'} per "
+                         f"encoder count than the datasheet's ({100 * lo:.1f}-{100 * hi:.1f} %), beyond its radius's "
+                         f"{100 * tol.bands.get('wheel_radius', 0.0):.1f} % tolerance "
+                         f"(the encoders against the tracker, {odo.windows} windows clear of the walls): a wheel "
+                         f"of another radius, or an encoder of another count per turn"}
+        result.located.append(item)
+        result.unexplained.append({k: item[k] for k in ("channel", "regime", "spans", "words")})
         result.verdict = {"match": "unexplained", "explained": "partly explained"}.get(result.verdict, result.verdict)
 
 

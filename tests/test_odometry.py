@@ -1,0 +1,76 @@
+"""Odometry (host_sim/diagnosis/odometry.py): each wheel's distance per count from the encoders against the
+tracker, and the verdict it keeps from being a match (report._report_odometry).
+
+The twin's tyres do not slip, so its recordings give the distance per count it was built with.
+"""
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from host_sim.diagnosis import odometry
+from host_sim.diagnosis.report import Diagnosis, _report_odometry
+from host_sim.diagnosis.tolerance import BANDS, Tolerance
+from host_sim.physics.params import DEFAULT
+from host_sim.recordings.recording import load_recording
+from tests.test_diagnosis import ROOM, record
+
+BIG_LEFT = DEFAULT.replace(wheel_radius_delta_l=0.04 * DEFAULT.wheel_radius)  # 4 % large: beyond its 1.5 % tolerance
+FINE_RIGHT = DEFAULT.replace(wheel_radius_delta_r=0.01 * DEFAULT.wheel_radius)  # 1 %: within the tolerance
+MORE_COUNTS_RIGHT = DEFAULT.replace(ticks_per_rev_delta_r=48.0)  # 1248 counts a turn, the datasheet says 1200
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    out = {}
+    for name, params in (("nominal", DEFAULT), ("big_left", BIG_LEFT), ("fine_right", FINE_RIGHT),
+                         ("counts_right", MORE_COUNTS_RIGHT)):
+        out[name] = record(tmp_path_factory.mktemp(name), params)
+    return out
+
+
+def test_a_wheel_beyond_its_tolerance_is_found_by_its_odometry_alone(runs):
+    """Each wheel's distance per count as built, to within two standard errors of a few tenths of a per cent;
+    beyond its tolerance only where it is: a wheel 4 % large, or an encoder with 4 % more counts a turn (3.8 %
+    less far a count), not a wheel 1 % large nor the datasheet's robot."""
+    band = BANDS["wheel_radius"]
+    expect = {"nominal": (0.0, 0.0), "big_left": (0.04, 0.0), "fine_right": (0.0, 0.01),
+              "counts_right": (0.0, 1200.0 / 1248.0 - 1.0)}
+    for name, (left, right) in expect.items():
+        odo = odometry.measure(runs[name], DEFAULT, ROOM)
+        assert odo is not None and odo.windows >= odometry.MIN_WINDOWS
+        for w, want in enumerate((left, right)):
+            assert max(odo.per_count_se) < 0.005
+            assert odo.per_count[w] == pytest.approx(want, abs=2 * odo.per_count_se[w] + 1e-3), (name, odo)
+        assert odo.half_axle == pytest.approx(0.0, abs=0.01)
+        assert odo.beyond(band) == {"big_left": [0], "counts_right": [1]}.get(name, []), (name, odo)
+
+
+def test_without_a_tracker_there_is_no_odometry(runs):
+    blind = load_recording(runs["big_left"].path)
+    blind.pose = None
+    assert odometry.measure(blind, DEFAULT, ROOM) is None
+
+
+def test_a_wheel_that_goes_too_far_per_count_is_no_match(runs):
+    """Beyond its tolerance, a wheel's distance per count is located and unexplained: a match becomes
+    unexplained, an explanation partial; a wheel radius or encoder scale named on that wheel accounts for it."""
+    tol = Tolerance(DEFAULT, dict(BANDS))
+    result = Diagnosis("run", "match", [])
+    _report_odometry(result, runs["counts_right"], DEFAULT, ROOM, tol)
+    assert result.verdict == "unexplained" and result.odometry is not None
+    (item,) = result.unexplained
+    said = re.search(r"the right wheel goes ([\d.]+) % less far per encoder count", item["words"])
+    assert item["channel"] == "odometry_r" and said and float(said.group(1)) == pytest.approx(3.85, abs=0.1)
+    assert "encoder" in item["words"] and "radius" in item["words"]
+    assert "odometry" in result.to_json() and result.located[0]["value"] == pytest.approx(-0.038, abs=0.005)
+    explained = Diagnosis("run", "explained", [], effects=[{"name": "track_width"}])
+    _report_odometry(explained, runs["counts_right"], DEFAULT, ROOM, tol)
+    assert explained.verdict == "partly explained"
+    named = Diagnosis("run", "explained", [], effects=[{"name": "encoder_scale", "wheel": "right"}])
+    _report_odometry(named, runs["counts_right"], DEFAULT, ROOM, tol)
+    assert named.verdict == "explained" and not named.unexplained
+    fine = Diagnosis("run", "match", [])
+    _report_odometry(fine, runs["fine_right"], DEFAULT, ROOM, tol)
+    assert fine.verdict == "match" and not fine.located
