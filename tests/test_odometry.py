@@ -5,11 +5,14 @@ The twin's tyres do not slip, so its recordings give the distance per count it w
 """
 from __future__ import annotations
 
+import html
 import re
 
 import pytest
 
 from host_sim.diagnosis import odometry
+from host_sim.diagnosis import diagnose
+from host_sim.diagnosis.html import render
 from host_sim.diagnosis.report import Diagnosis, _report_odometry
 from host_sim.diagnosis.tolerance import BANDS, Tolerance
 from host_sim.physics.params import DEFAULT
@@ -38,7 +41,7 @@ def test_a_wheel_beyond_its_tolerance_is_found_by_its_odometry_alone(runs):
     expect = {"nominal": (0.0, 0.0), "big_left": (0.04, 0.0), "fine_right": (0.0, 0.01),
               "counts_right": (0.0, 1200.0 / 1248.0 - 1.0)}
     for name, (left, right) in expect.items():
-        odo = odometry.measure(runs[name], DEFAULT, ROOM)
+        odo = odometry.measure_odometry(runs[name], DEFAULT, ROOM)
         assert odo is not None and odo.windows >= odometry.MIN_WINDOWS
         for w, want in enumerate((left, right)):
             assert max(odo.per_count_se) < 0.005
@@ -50,7 +53,7 @@ def test_a_wheel_beyond_its_tolerance_is_found_by_its_odometry_alone(runs):
 def test_without_a_tracker_there_is_no_odometry(runs):
     blind = load_recording(runs["big_left"].path)
     blind.pose = None
-    assert odometry.measure(blind, DEFAULT, ROOM) is None
+    assert odometry.measure_odometry(blind, DEFAULT, ROOM) is None
 
 
 def test_a_wheel_that_goes_too_far_per_count_is_no_match(runs):
@@ -74,3 +77,16 @@ def test_a_wheel_that_goes_too_far_per_count_is_no_match(runs):
     fine = Diagnosis("run", "match", [])
     _report_odometry(fine, runs["fine_right"], DEFAULT, ROOM, tol)
     assert fine.verdict == "match" and not fine.located
+
+
+def test_a_diagnosis_of_an_encoder_with_more_counts_is_no_match_and_its_page_says_why(runs, tmp_path):
+    """End to end: the right encoder counts 4 % more a turn than the datasheet says.  Whatever the dynamics
+    name, the verdict is not a match, and the HTML page carries the odometry's words where it is located."""
+    d = diagnose(runs["counts_right"], DEFAULT, ROOM)
+    assert d.verdict != "match" and d.odometry is not None and d.odometry.beyond(BANDS["wheel_radius"]) == [1]
+    named = [e for e in d.effects
+             if e["name"] in ("wheel_radius", "encoder_scale") and e.get("wheel") in ("right", "both")]
+    located = [item for item in d.located if item["channel"] == "odometry_r"]
+    assert bool(named) != bool(located), (d.summary(), named, located)
+    page = render(runs["counts_right"], d)
+    assert all(html.escape(item["words"]) in page for item in located) and "odometry" in d.to_json()

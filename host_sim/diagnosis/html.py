@@ -141,8 +141,10 @@ def render(rec: Recording, d: Diagnosis) -> str:
         parts.append(f'<h2>Trajectory</h2><img src="{traj}">')
     for item in d.located:
         ch = item["channel"]
-        finding = next(f for f in before.findings if f.channel == ch)
+        finding = next((f for f in before.findings if f.channel == ch), None)
         parts.append(f"<h2>{html.escape(ch)}</h2><p>{html.escape(item['words'])}</p>")
+        if finding is None:  # found apart from the twin's residuals (a clip, odometry): its words alone
+            continue
         if ch in ACCUMULATED.values():
             parts.append(f'<img src="{scale_figure(before, d.after, ch)}">')
             continue

@@ -98,7 +98,7 @@ def _fit(m: np.ndarray, x0: np.ndarray, scale: tuple[float, float]) -> tuple[np.
     return sol.x, cov, r
 
 
-def measure(rec: Recording, p: RobotParams, world: World | None) -> Odometry | None:
+def measure_odometry(rec: Recording, p: RobotParams, world: World | None) -> Odometry | None:
     """The robot's odometry, or None without a tracker, on a bench, or with under MIN_WINDOWS windows."""
     if rec.pose is None or rec.bench:
         return None

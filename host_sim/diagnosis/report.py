@@ -22,8 +22,7 @@ from host_sim.diagnosis.channels import (ACCUMULATED, IR, SENSOR_NAMES, WHEELS, 
 from host_sim.diagnosis.clipping import clipped
 from host_sim.diagnosis.locate import Finding, Regimes, noise_level, regimes, runs, total_noise
 from host_sim.diagnosis.model_error import with_model_error
-from host_sim.diagnosis import odometry
-from host_sim.diagnosis.odometry import Odometry
+from host_sim.diagnosis.odometry import Z as ODOMETRY_Z, Odometry, measure_odometry
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
 from host_sim.diagnosis.testblock import TestBlockError, check_test_recording, split_test_block
 from host_sim.diagnosis.block_verdict import judge_held_out, judge_test_block
@@ -320,7 +319,7 @@ def _report_odometry(result: Diagnosis, rec: Recording, params: RobotParams, wor
     is a mismatch whatever the dynamics say: located and unexplained, so the verdict is neither a match nor
     wholly explained, unless a wheel radius or an encoder scale named on that wheel accounts for it
     (tests/test_odometry.py::test_a_wheel_that_goes_too_far_per_count_is_no_match)."""
-    odo = result.odometry = odometry.measure(rec, params, world)
+    odo = result.odometry = measure_odometry(rec, params, world)
     if odo is None:
         return
     for w in odo.beyond(tol.bands.get("wheel_radius", 0.0)):
@@ -328,7 +327,7 @@ def _report_odometry(result: Diagnosis, rec: Recording, params: RobotParams, wor
         if any(e["name"] in ("wheel_radius", "encoder_scale") and e.get("wheel") in (side, "both")
                for e in result.effects):
             continue
-        d, half = odo.per_count[w], odometry.Z * odo.per_count_se[w]
+        d, half = odo.per_count[w], ODOMETRY_Z * odo.per_count_se[w]
         lo, hi = sorted((abs(d) - half, abs(d) + half))
         item = {"channel": f"odometry_{side[0]}", "regime": "per encoder count", "spans": [list(odo.span)],
                 "fit_before": result.fit_before.get(f"count_{side[0]}", math.nan), "value": d,
