@@ -62,8 +62,8 @@ def per_count(p: RobotParams) -> tuple[float, float]:
 
 
 def _window_motions(rec: Recording, p: RobotParams, world: World | None) -> tuple[np.ndarray, np.ndarray]:
-    """(K, 4) per window clear of the walls: the angles the encoders counted (rad), the tracked travel along
-    the mean heading and the tracked turn; and (K, 2) the windows' start and end times."""
+    """(K, 4) per window clear of the walls: the angles the encoders counted (rad), the tracked path (its
+    arc) and the tracked turn; and (K, 2) the windows' start and end times."""
     assert rec.pose is not None
     n = max(1, int(round(WINDOW_S / rec.sample_period)))
     starts = np.arange(0, len(rec.t) - n, n)

@@ -167,7 +167,8 @@ def sensor_excitation_notes(rec: Recording, reg: Regimes, world: World | None) -
     if not seldom:
         return []
     return [f"a wall came within 12 cm of {', '.join(seldom)} only, so these sensors' gain, alignment and "
-            f"latency are poorly judged (a run that brings each sensor near a wall for {MIN_REGIME_S:.0f} s judges them)"]
+            f"latency are poorly judged (a run that brings each sensor near a wall for {MIN_REGIME_S:.0f} s "
+            f"judges them)"]
 
 
 def check_data(rec: Recording, world: World | None, params: RobotParams | None = None) -> list[str]:
