@@ -260,6 +260,8 @@ def test_controls_and_out_of_library(suite: dict[str, Any]) -> None:
                              "wrong name"),
                             (closest, "right"),
                             (diag("unexplained", located=("ir_3",), unexplained=("ir_3",)), "wrong place"),
+                            # a wheel's distance per count against the tracker is the drive's encoders
+                            (diag("unexplained", located=("odometry_r",), unexplained=("odometry_r",)), "right"),
                             (diag("explained", [("mass", {}, "mass", 0.5)], located=("wheel_l",)), "wrong name"),
                             (diag("match"), "missed")):
         assert scoring.score_case(key([tilt]), answer, rec, DEFAULT)["outcome"] == outcome

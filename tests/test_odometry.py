@@ -71,9 +71,16 @@ def test_a_wheel_that_goes_too_far_per_count_is_no_match(runs):
     explained = Diagnosis("run", "explained", [], effects=[{"name": "track_width"}])
     _report_odometry(explained, runs["counts_right"], DEFAULT, ROOM, tol)
     assert explained.verdict == "partly explained"
-    named = Diagnosis("run", "explained", [], effects=[{"name": "encoder_scale", "wheel": "right"}])
+    def scale(wheel):
+        return {"name": "encoder_scale", "wheel": wheel, "params": {"encoder_scale": {"value": 48.0}}}
+    named = Diagnosis("run", "explained", [], effects=[scale("right")])
     _report_odometry(named, runs["counts_right"], DEFAULT, ROOM, tol)
-    assert named.verdict == "explained" and not named.unexplained
+    assert named.verdict == "explained" and not named.unexplained and named.effects == [scale("right")]
+    # both encoders' scale would make the left wheel go 3.8 % less far too, which it does not: not named
+    wrong = Diagnosis("run", "explained", [], effects=[scale("both")])
+    _report_odometry(wrong, runs["counts_right"], DEFAULT, ROOM, tol)
+    assert wrong.verdict == "unexplained" and not wrong.effects and "encoder_scale (both)" in wrong.notes[-1]
+    assert [item["channel"] for item in wrong.unexplained] == ["odometry_r"]
     fine = Diagnosis("run", "match", [])
     _report_odometry(fine, runs["fine_right"], DEFAULT, ROOM, tol)
     assert fine.verdict == "match" and not fine.located

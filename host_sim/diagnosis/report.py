@@ -23,6 +23,7 @@ from host_sim.diagnosis.clipping import clipped
 from host_sim.diagnosis.locate import Finding, Regimes, noise_level, regimes, runs, total_noise
 from host_sim.diagnosis.model_error import with_model_error
 from host_sim.diagnosis.odometry import Z as ODOMETRY_Z, Odometry, measure_odometry
+from host_sim.diagnosis.odometry import per_count as odometry_per_count
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
 from host_sim.diagnosis.testblock import TestBlockError, check_test_recording, split_test_block
 from host_sim.diagnosis.block_verdict import judge_held_out, judge_test_block
@@ -314,32 +315,51 @@ def _report_clips(result: Diagnosis, rec: Recording, params: RobotParams) -> Non
         result.verdict = {"match": "unexplained", "explained": "partly explained"}.get(result.verdict, result.verdict)
 
 
+ODOMETRY_EFFECTS = ("wheel_radius", "encoder_scale")  # the library's effects on a wheel's distance per count
+
+
 def _report_odometry(result: Diagnosis, rec: Recording, params: RobotParams, world: World | None,
                      tol: Tolerance) -> None:
-    """A wheel whose distance per count, against the tracker, lies beyond its radius's tolerance (odometry.py)
-    is a mismatch whatever the dynamics say: located and unexplained, so the verdict is neither a match nor
-    wholly explained, unless a wheel radius or an encoder scale named on that wheel accounts for it
+    """A wheel whose distance per count, against the tracker (odometry.py), lies beyond its radius's tolerance
+    of what the named effects make it is a mismatch whatever the dynamics say: located and unexplained, so
+    the verdict is neither a match nor wholly explained.  A wheel radius or encoder scale named that the
+    odometry contradicts on a wheel is no longer named: kinematics measure it directly
     (tests/test_odometry.py::test_a_wheel_that_goes_too_far_per_count_is_no_match)."""
     odo = result.odometry = measure_odometry(rec, params, world)
     if odo is None:
         return
-    for w in odo.beyond(tol.bands.get("wheel_radius", 0.0)):
+    band = tol.bands.get("wheel_radius", 0.0)
+    named = [e for e in result.effects if e["name"] in ODOMETRY_EFFECTS]
+    if named and odo.beyond(band, _implied_per_count(named, params)):
+        result.effects = [e for e in result.effects if e not in named]
+        result.notes.append("not named, as the odometry contradicts it on a wheel: " + ", ".join(
+            f"{e['name']} ({e.get('wheel', 'both')})" for e in named))
+        if not result.effects and result.verdict in ("explained", "partly explained"):
+            result.verdict = "unexplained"
+        named = []
+    for w in odo.beyond(band, _implied_per_count(named, params)):  # none where the named effects agree
         side = ("left", "right")[w]
-        if any(e["name"] in ("wheel_radius", "encoder_scale") and e.get("wheel") in (side, "both")
-               for e in result.effects):
-            continue
         d, half = odo.per_count[w], ODOMETRY_Z * odo.per_count_se[w]
         lo, hi = sorted((abs(d) - half, abs(d) + half))
         item = {"channel": f"odometry_{side[0]}", "regime": "per encoder count", "spans": [list(odo.span)],
                 "fit_before": result.fit_before.get(f"count_{side[0]}", math.nan), "value": d,
                 "words": f"the {side} wheel goes {100 * abs(d):.1f} % {'less far' if d < 0 else 'farther'} per "
                          f"encoder count than the datasheet's ({100 * lo:.1f}-{100 * hi:.1f} %), beyond its radius's "
-                         f"{100 * tol.bands.get('wheel_radius', 0.0):.1f} % tolerance "
+                         f"{100 * band:.1f} % tolerance "
                          f"(the encoders against the tracker, {odo.windows} windows clear of the walls): a wheel "
                          f"of another radius, or an encoder of another count per turn"}
         result.located.append(item)
         result.unexplained.append({k: item[k] for k in ("channel", "regime", "spans", "words")})
         result.verdict = {"match": "unexplained", "explained": "partly explained"}.get(result.verdict, result.verdict)
+
+
+def _implied_per_count(named: list[dict[str, Any]], datasheet: RobotParams) -> tuple[float, float]:
+    """Each wheel's distance per count that the named effects give, against the datasheet's (relative)."""
+    p = datasheet
+    for e in named:
+        p = E.apply(p, e["name"], e.get("wheel", "both"), [v["value"] for v in e["params"].values()])
+    made, base = odometry_per_count(p), odometry_per_count(datasheet)
+    return made[0] / base[0] - 1.0, made[1] / base[1] - 1.0
 
 
 def _diagnose_fitted(rec: Recording, tol: Tolerance, world: World | None, seconds: tuple[float, ...],

@@ -384,10 +384,11 @@ def _score_unlisted(diagnosis: dict[str, Any] | None, concealed: list[dict[str, 
 
 def _shows_on(channel: str, concealed: list[dict[str, Any]]) -> bool:
     """The channel is where an out-of-library kind shows: the IR ring for adc_clipping, the drive (and the
-    encoders' counts) for the others."""
+    encoders' counts, alone or against the tracker: odometry) for the others."""
     names = {e["name"] for e in concealed if not e["in_library"]}
     ring = channel.startswith("ir_") and "adc_clipping" in names
-    drive = channel in DRIVE_CHANNELS + ("count_l", "count_r") and bool(names - {"adc_clipping"})
+    drive = (channel in DRIVE_CHANNELS + ("count_l", "count_r", "odometry_l", "odometry_r")
+             and bool(names - {"adc_clipping"}))
     return ring or drive
 
 
