@@ -44,10 +44,11 @@ class Odometry:
     windows: int
     span: tuple[float, float]
 
-    def beyond(self, band: float, implied: tuple[float, float] = (0.0, 0.0)) -> list[int]:
-        """The wheels (0 left, 1 right) whose distance per count lies beyond band of the implied one (the
-        datasheet's, or what named effects make it) by more than Z se."""
-        return [w for w in (0, 1) if abs(self.per_count[w] - implied[w]) - Z * self.per_count_se[w] > band]
+    def beyond(self, band: float, implied: tuple[tuple[float, float], ...] = ((0.0, 0.0), (0.0, 0.0))) -> list[int]:
+        """The wheels (0 left, 1 right) whose distance per count lies beyond band of the implied range (lo, hi)
+        per wheel (the datasheet's, or what named effects make it over their intervals) by more than Z se."""
+        return [w for w in (0, 1) if max(implied[w][0] - self.per_count[w], self.per_count[w] - implied[w][1])
+                - Z * self.per_count_se[w] > band]
 
     def to_json(self) -> dict[str, object]:
         return {"per_count": list(self.per_count), "per_count_se": list(self.per_count_se),

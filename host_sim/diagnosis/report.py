@@ -7,6 +7,7 @@ windows (opt-in: on a test block, block_verdict).  Verdicts, refusals and the JS
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from dataclasses import dataclass, field
 from typing import Any, Callable
@@ -323,7 +324,8 @@ def _report_odometry(result: Diagnosis, rec: Recording, params: RobotParams, wor
     """A wheel whose distance per count, against the tracker (odometry.py), lies beyond its radius's tolerance
     of what the named effects make it is a mismatch whatever the dynamics say: located and unexplained, so
     the verdict is neither a match nor wholly explained.  A wheel radius or encoder scale named that the
-    odometry contradicts on a wheel is no longer named: kinematics measure it directly
+    odometry contradicts on a wheel, beyond the band of what it makes that wheel over its 95 % interval, is
+    no longer named: kinematics measure it directly
     (tests/test_odometry.py::test_a_wheel_that_goes_too_far_per_count_is_no_match)."""
     odo = result.odometry = measure_odometry(rec, params, world)
     if odo is None:
@@ -353,13 +355,18 @@ def _report_odometry(result: Diagnosis, rec: Recording, params: RobotParams, wor
         result.verdict = {"match": "unexplained", "explained": "partly explained"}.get(result.verdict, result.verdict)
 
 
-def _implied_per_count(named: list[dict[str, Any]], datasheet: RobotParams) -> tuple[float, float]:
-    """Each wheel's distance per count that the named effects give, against the datasheet's (relative)."""
-    p = datasheet
-    for e in named:
-        p = E.apply(p, e["name"], e.get("wheel", "both"), [v["value"] for v in e["params"].values()])
-    made, base = odometry_per_count(p), odometry_per_count(datasheet)
-    return made[0] / base[0] - 1.0, made[1] / base[1] - 1.0
+def _implied_per_count(named: list[dict[str, Any]], datasheet: RobotParams) -> tuple[tuple[float, float], ...]:
+    """Each wheel's distance per count, against the datasheet's (relative), that the named effects give over
+    their reported 95 % intervals: (lo, hi) per wheel ((0, 0) with none named)."""
+    base = odometry_per_count(datasheet)
+    made = []
+    for ends in itertools.product(*[itertools.product(*[p.get("ci95") or (p["value"], p["value"])
+                                                        for p in e["params"].values()]) for e in named]):
+        p = datasheet
+        for e, values in zip(named, ends):
+            p = E.apply(p, e["name"], e.get("wheel", "both"), list(values))
+        made.append([m / b - 1.0 for m, b in zip(odometry_per_count(p), base)])
+    return tuple((min(m[w] for m in made), max(m[w] for m in made)) for w in (0, 1))
 
 
 def _diagnose_fitted(rec: Recording, tol: Tolerance, world: World | None, seconds: tuple[float, ...],
