@@ -81,6 +81,11 @@ def test_a_wheel_that_goes_too_far_per_count_is_no_match(runs):
     _report_odometry(wrong, runs["counts_right"], DEFAULT, ROOM, tol)
     assert wrong.verdict == "unexplained" and not wrong.effects and "encoder_scale (both)" in wrong.notes[-1]
     assert [item["channel"] for item in wrong.unexplained] == ["odometry_r"]
+    # ... unless its 95 % interval reaches what the odometry shows on each wheel: 0 to 96 counts more a turn
+    loose = {**scale("both"), "params": {"encoder_scale": {"value": 48.0, "ci95": [0.0, 96.0]}}}
+    kept = Diagnosis("run", "explained", [], effects=[loose])
+    _report_odometry(kept, runs["counts_right"], DEFAULT, ROOM, tol)
+    assert kept.verdict == "explained" and kept.effects == [loose] and not kept.unexplained
     fine = Diagnosis("run", "match", [])
     _report_odometry(fine, runs["fine_right"], DEFAULT, ROOM, tol)
     assert fine.verdict == "match" and not fine.located

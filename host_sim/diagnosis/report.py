@@ -360,8 +360,8 @@ def _implied_per_count(named: list[dict[str, Any]], datasheet: RobotParams) -> t
     their reported 95 % intervals: (lo, hi) per wheel ((0, 0) with none named)."""
     base = odometry_per_count(datasheet)
     made = []
-    for ends in itertools.product(*[itertools.product(*[p.get("ci95") or (p["value"], p["value"])
-                                                        for p in e["params"].values()]) for e in named]):
+    for ends in itertools.product(*[itertools.product(*[prm.get("ci95") or (prm["value"], prm["value"])
+                                                        for prm in e["params"].values()]) for e in named]):
         p = datasheet
         for e, values in zip(named, ends):
             p = E.apply(p, e["name"], e.get("wheel", "both"), list(values))
