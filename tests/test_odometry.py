@@ -71,6 +71,7 @@ def test_a_wheel_that_goes_too_far_per_count_is_no_match(runs):
     explained = Diagnosis("run", "explained", [], effects=[{"name": "track_width"}])
     _report_odometry(explained, runs["counts_right"], DEFAULT, ROOM, tol)
     assert explained.verdict == "partly explained"
+
     def scale(wheel):
         return {"name": "encoder_scale", "wheel": wheel, "params": {"encoder_scale": {"value": 48.0}}}
     named = Diagnosis("run", "explained", [], effects=[scale("right")])

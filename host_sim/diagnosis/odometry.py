@@ -50,6 +50,11 @@ class Odometry:
         return [w for w in (0, 1) if max(implied[w][0] - self.per_count[w], self.per_count[w] - implied[w][1])
                 - Z * self.per_count_se[w] > band]
 
+    def interval(self, w: int) -> tuple[float, float]:
+        """Wheel w's departure in size (|relative|), give or take Z standard errors: (lo, hi)."""
+        d, half = abs(self.per_count[w]), Z * self.per_count_se[w]
+        return d - half, d + half
+
     def to_json(self) -> dict[str, object]:
         return {"per_count": list(self.per_count), "per_count_se": list(self.per_count_se),
                 "half_axle": self.half_axle, "half_axle_se": self.half_axle_se, "windows": self.windows}
@@ -74,7 +79,8 @@ def _window_motions(rec: Recording, p: RobotParams, world: World | None) -> tupl
     clear = np.ones(len(rec.t), dtype=bool)
     if world is not None and world.n_walls:
         clear = world.nearest_wall(np.nan_to_num(rec.pose[:, :2]))[0] > p.body_radius + WALL_CLEAR
-    run_clear = np.array([clear[a:b + 1].all() for a, b in zip(starts, ends)], dtype=bool)
+    blocked = np.concatenate([[0], np.cumsum(~clear)])  # rows not clear before each row
+    run_clear = blocked[ends + 1] == blocked[starts]
     keep = tracked[starts] & tracked[ends] & run_clear
     starts, ends = starts[keep], ends[keep]
     angle = (rec.enc[ends] - rec.enc[starts]).astype(float) * (2.0 * math.pi / p.ticks_per_rev)

@@ -23,7 +23,7 @@ from host_sim.diagnosis.channels import (ACCUMULATED, IR, SENSOR_NAMES, WHEELS, 
 from host_sim.diagnosis.clipping import clipped
 from host_sim.diagnosis.locate import Finding, Regimes, noise_level, regimes, runs, total_noise
 from host_sim.diagnosis.model_error import with_model_error
-from host_sim.diagnosis.odometry import Z as ODOMETRY_Z, Odometry, measure_odometry
+from host_sim.diagnosis.odometry import Odometry, measure_odometry
 from host_sim.diagnosis.odometry import per_count as odometry_per_count
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
 from host_sim.diagnosis.testblock import TestBlockError, check_test_recording, split_test_block
@@ -311,9 +311,15 @@ def _report_clips(result: Diagnosis, rec: Recording, params: RobotParams) -> Non
                          f"below the ADC's {params.adc_max} ({sum(int(c.rows.sum()) for c in at)} readings there): "
                          f"clipped (the ADC's reference or the amplifier), which the twin does not hold; those "
                          f"readings are not judged, {spans_text(found)}"}
-        result.located.append(item)
-        result.unexplained.append({k: item[k] for k in ("channel", "sensors", "regime", "spans", "words")})
-        result.verdict = {"match": "unexplained", "explained": "partly explained"}.get(result.verdict, result.verdict)
+        _file_unexplained(result, item, ("channel", "sensors", "regime", "spans", "words"))
+
+
+def _file_unexplained(result: Diagnosis, item: dict[str, Any], keys: tuple[str, ...]) -> None:
+    """A located mismatch the library does not hold: filed as located and (its keys) unexplained, so the
+    verdict is neither a match nor wholly explained."""
+    result.located.append(item)
+    result.unexplained.append({k: item[k] for k in keys})
+    result.verdict = {"match": "unexplained", "explained": "partly explained"}.get(result.verdict, result.verdict)
 
 
 ODOMETRY_EFFECTS = ("wheel_radius", "encoder_scale")  # the library's effects on a wheel's distance per count
@@ -332,17 +338,18 @@ def _report_odometry(result: Diagnosis, rec: Recording, params: RobotParams, wor
         return
     band = tol.bands.get("wheel_radius", 0.0)
     named = [e for e in result.effects if e["name"] in ODOMETRY_EFFECTS]
-    if named and odo.beyond(band, _implied_per_count(named, params)):
+    beyond = odo.beyond(band, _implied_per_count(named, params))  # none where the named effects agree
+    if named and beyond:
         result.effects = [e for e in result.effects if e not in named]
         result.notes.append("not named, as the odometry contradicts it on a wheel: " + ", ".join(
             f"{e['name']} ({e.get('wheel', 'both')})" for e in named))
         if not result.effects and result.verdict in ("explained", "partly explained"):
             result.verdict = "unexplained"
-        named = []
-    for w in odo.beyond(band, _implied_per_count(named, params)):  # none where the named effects agree
+        beyond = odo.beyond(band)
+    for w in beyond:
         side = ("left", "right")[w]
-        d, half = odo.per_count[w], ODOMETRY_Z * odo.per_count_se[w]
-        lo, hi = sorted((abs(d) - half, abs(d) + half))
+        d = odo.per_count[w]
+        lo, hi = odo.interval(w)
         item = {"channel": f"odometry_{side[0]}", "regime": "per encoder count", "spans": [list(odo.span)],
                 "fit_before": result.fit_before.get(f"count_{side[0]}", math.nan), "value": d,
                 "words": f"the {side} wheel goes {100 * abs(d):.1f} % {'less far' if d < 0 else 'farther'} per "
@@ -350,9 +357,7 @@ def _report_odometry(result: Diagnosis, rec: Recording, params: RobotParams, wor
                          f"{100 * band:.1f} % tolerance "
                          f"(the encoders against the tracker, {odo.windows} windows clear of the walls): a wheel "
                          f"of another radius, or an encoder of another count per turn"}
-        result.located.append(item)
-        result.unexplained.append({k: item[k] for k in ("channel", "regime", "spans", "words")})
-        result.verdict = {"match": "unexplained", "explained": "partly explained"}.get(result.verdict, result.verdict)
+        _file_unexplained(result, item, ("channel", "regime", "spans", "words"))
 
 
 def _implied_per_count(named: list[dict[str, Any]], datasheet: RobotParams) -> tuple[tuple[float, float], ...]:
