@@ -316,7 +316,8 @@ def _report_clips(result: Diagnosis, rec: Recording, params: RobotParams) -> Non
 
 def _file_unexplained(result: Diagnosis, item: dict[str, Any], keys: tuple[str, ...]) -> None:
     """A located mismatch the library does not hold: filed as located and (its keys) unexplained, so the
-    verdict is neither a match nor wholly explained."""
+    verdict is neither a match nor wholly explained
+    (tests/test_odometry.py::test_a_wheel_that_goes_too_far_per_count_is_no_match)."""
     result.located.append(item)
     result.unexplained.append({k: item[k] for k in keys})
     result.verdict = {"match": "unexplained", "explained": "partly explained"}.get(result.verdict, result.verdict)
