@@ -228,6 +228,39 @@ def test_an_effect_only_the_identification_manoeuvre_excites_is_named(tmp_path, 
     assert param["value"] == pytest.approx(true_value, rel=0.05)
 
 
+def test_a_battery_resistance_is_fitted_beside_the_packs_own_voltage(tmp_path):
+    """A pack charged 3 % over the datasheet's voltage, within its band, with a 1.5 ohm resistance: the
+    resistance is fitted beside the pack's own voltage (fit.COMPANIONS).  Held at the datasheet's voltage, a
+    resistance only lowered a reading already under the recorded one, every way the screening looked, and the
+    sag was left unexplained."""
+    robot = E.apply(DEFAULT.replace(battery_voltage=1.03 * DEFAULT.battery_voltage), "battery_resistance", "both",
+                    [1.5])
+    d = diagnose(record_manoeuvre(tmp_path, robot), DEFAULT, ARENA)
+    assert [e["name"] for e in d.effects] == ["battery_resistance"], d.summary()
+    assert d.effects[0]["params"]["resistance"]["value"] == pytest.approx(1.5, rel=0.1), d.summary()
+
+
+def test_a_packs_voltage_alone_is_not_credited_to_a_resistance(tmp_path):
+    """A pack 20 % over the datasheet's voltage, beyond its band, and no resistance: a resistance fitted with the
+    voltage beside it is judged against the voltage fitted alone (fit._reference), and does not pass; against
+    the twin at the datasheet's voltage, all the voltage did would have counted for it."""
+    from host_sim.diagnosis import fit
+    from host_sim.diagnosis.report import fit_objective
+    from host_sim.diagnosis.tolerance import BANDS, Tolerance
+
+    rec = record_manoeuvre(tmp_path, DEFAULT.replace(battery_voltage=1.2 * DEFAULT.battery_voltage))
+    obj = fit_objective(rec, ARENA, compare(rec, DEFAULT, ARENA))
+    obj.tolerance = Tolerance(DEFAULT, dict(BANDS))
+    r_train, r_test = obj.residuals([DEFAULT])
+    current = fit.Model([], [], DEFAULT, float(r_train[0] @ r_train[0]), float(r_test[0] @ r_test[0]),
+                        int(r_train.size), r_test=r_test[0])
+    battery = fit.Candidate("battery_resistance", "both")
+    tried = fit.fit_model(obj, DEFAULT, [battery], [[0.5]])
+    assert set(tried.build) == {"battery_voltage"}
+    assert fit.f_test(current.cost_train, tried.cost_train, 2, tried.n_train, 2) <= fit.P_MAX  # the voltage's doing
+    assert fit.choose(obj, current, [tried], [battery], ["vbat"]) is None and tried.p_value > fit.P_MAX
+
+
 def test_a_wheel_that_slips_burst_by_burst_is_located_without_a_bias(tmp_path):
     """A grip of 0.2: the wheels spin ahead of the twin's and fall back, a residual that averages out in
     every regime bin, many times the wheels' noise.  The nominal twin's own manoeuvre scatters within it."""

@@ -61,6 +61,11 @@ RING_EFFECTS = E.names_of_kind("ring")
 LEAK_DISTINCT_COUNTS = 3.0  # counts (one reading's noise): a leak that varies less over the recording is a constant
 LEAK_STRONG_BIC = 10.0  # BIC by which such a leak must beat the sensor's offset to be named (Kass & Raftery)
 AMBIENT_SMOOTH_S = 0.5  # s: the ambient light is judged on a running mean (the readings' own noise is not light)
+# The build's values an effect is fitted beside, each within its band of the datasheet (the objective's
+# tolerance): a battery's resistance sags the reading by R (i_e + P / V) below the pack's open-circuit voltage,
+# which a real pack holds anywhere in its band (its charge); held at the datasheet's, the resistance is fitted
+# to that offset instead (tests/test_diagnosis.py::test_a_battery_resistance_is_fitted_beside_the_packs_own_voltage).
+COMPANIONS: dict[str, tuple[str, ...]] = {"battery_resistance": ("battery_voltage",)}
 
 
 @dataclass(frozen=True)
@@ -88,6 +93,7 @@ class Model:
     rivals: list[Model] = field(default_factory=list)  # the models of the alternatives (their newest effect swapped)
     r_test: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the held-out weighted residuals
     located_gain: float = 0.0  # what its newest effect removed of the located channels' held-out residuals
+    build: dict[str, float] = field(default_factory=dict)  # the companions fitted beside its effects (COMPANIONS)
 
 
 def candidates_for(channels: list[str], drive: str = "current", bench: bool = False) -> list[Candidate]:
@@ -263,19 +269,31 @@ def _apply_all(base: RobotParams, effects: list[Candidate], values: list[list[fl
     return p
 
 
-def fit_model(obj: Objective, base: RobotParams, effects: list[Candidate], start: list[list[float]]) -> Model:
-    """Bounded least squares of the effects' parameters on the training windows."""
+def fit_model(obj: Objective, base: RobotParams, effects: list[Candidate], start: list[list[float]],
+              companions: tuple[str, ...] | None = None) -> Model:
+    """Bounded least squares of the effects' parameters on the training windows, with the build's values
+    fitted beside them (companions: by default those of the effects, COMPANIONS)."""
+    comp = _companions(obj, effects) if companions is None else companions
+    nc = len(comp)
     sizes = [len(E.LIBRARY[c.name].params) for c in effects]
-    lo, hi = _bounds(effects, base)
-    x0 = fit_start(effects, start, base)
+    lo_c, hi_c = _companion_bounds(obj, comp)
+    lo_e, hi_e = _bounds(effects, base)
+    lo, hi = np.concatenate([lo_c, lo_e]), np.concatenate([hi_c, hi_e])
+    inside = START_INSIDE * (hi_c - lo_c)
+    x0 = np.concatenate([np.clip([float(getattr(base, f)) for f in comp], lo_c + inside, hi_c - inside),
+                         fit_start(effects, start, base)])
     step = 1e-3 * (hi - lo)
 
     def unpack(x: np.ndarray) -> list[list[float]]:
-        out, i = [], 0
+        out, i = [], nc
         for n in sizes:
             out.append([float(v) for v in x[i:i + n]])
             i += n
         return out
+
+    def robot(x: np.ndarray) -> RobotParams:
+        built = base.replace(**{f: float(v) for f, v in zip(comp, x)}) if nc else base
+        return _apply_all(built, effects, unpack(x))
 
     cache: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
@@ -285,7 +303,7 @@ def fit_model(obj: Objective, base: RobotParams, effects: list[Candidate], start
             # One batch: the twin at x and at x nudged along every parameter (away from the nearer bound).
             h = np.where(x + step <= hi, step, -step)
             points = [x] + [x + np.eye(len(x))[i] * h[i] for i in range(len(x))]
-            train, test = obj.residuals([_apply_all(base, effects, unpack(pt)) for pt in points])
+            train, test = obj.residuals([robot(pt) for pt in points])
             jac = ((train[1:] - train[0]) / h[:, None]).T
             cache.clear()
             cache[key] = (train[0], jac, test[0])
@@ -294,11 +312,31 @@ def fit_model(obj: Objective, base: RobotParams, effects: list[Candidate], start
     sol = optimize.least_squares(lambda x: evaluate(x)[0], x0, jac=lambda x: evaluate(x)[1], bounds=(lo, hi),
                                  x_scale=hi - lo, max_nfev=30, ftol=FIT_FTOL, xtol=FIT_XTOL)
     r_train, jac, r_test = evaluate(sol.x)
-    model = Model(list(effects), unpack(sol.x), _apply_all(base, effects, unpack(sol.x)),
-                  float(r_train @ r_train), float(r_test @ r_test), int(r_train.size), r_test=r_test)
-    model.ci95 = (sandwich_intervals(sol.x, jac, r_train, sizes, lo, hi, touching_runs(obj.windows, obj.train_windows))
-                  if obj.clustered_intervals else _intervals(sol.x, jac, r_train, sizes, lo, hi))
+    model = Model(list(effects), unpack(sol.x), robot(sol.x), float(r_train @ r_train), float(r_test @ r_test),
+                  int(r_train.size), r_test=r_test, build={f: float(v) for f, v in zip(comp, sol.x)})
+    blocks = [1] * nc + sizes
+    model.ci95 = (sandwich_intervals(sol.x, jac, r_train, blocks, lo, hi, touching_runs(obj.windows, obj.train_windows))
+                  if obj.clustered_intervals else _intervals(sol.x, jac, r_train, blocks, lo, hi))[nc:]
     return model
+
+
+def _companions(obj: Objective, effects: list[Candidate]) -> tuple[str, ...]:
+    """The build's values fitted beside these effects: their COMPANIONS that the objective's tolerance bands."""
+    tol = getattr(obj, "tolerance", None)
+    if tol is None:
+        return ()
+    return tuple(dict.fromkeys(f for c in effects for f in COMPANIONS.get(c.name, ()) if tol.bands.get(f, 0.0) > 0))
+
+
+def _companion_bounds(obj: Objective, comp: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Each companion's band about the datasheet's value."""
+    if not comp:
+        return np.zeros(0), np.zeros(0)
+    tol = obj.tolerance
+    assert tol is not None  # _companions gives none without it
+    nominal = np.array([float(getattr(tol.datasheet, f)) for f in comp])
+    band = np.array([tol.bands[f] for f in comp])
+    return nominal * (1.0 - band), nominal * (1.0 + band)
 
 
 def fit_apart(obj: Objective, base: RobotParams, model: Model, keep: np.ndarray) -> Model:
@@ -314,6 +352,8 @@ def fit_apart(obj: Objective, base: RobotParams, model: Model, keep: np.ndarray)
 
 def _bounds(effects: list[Candidate], base: RobotParams) -> tuple[np.ndarray, np.ndarray]:
     """The fit's bounds: the library's, narrowed to what base's parameter checks admit (E.bounds)."""
+    if not effects:
+        return np.zeros(0), np.zeros(0)
     return (np.concatenate([E.bounds(c.name, base)[0] for c in effects]),
             np.concatenate([E.bounds(c.name, base)[1] for c in effects]))
 
@@ -324,7 +364,7 @@ def fit_start(effects: list[Candidate], start: list[list[float]], base: RobotPar
     backlash, drag...) would never leave it."""
     lo, hi = _bounds(effects, base)
     inside = START_INSIDE * (hi - lo)
-    return np.clip(np.concatenate(start), lo + inside, hi - inside)
+    return np.clip(np.array([v for values in start for v in values], dtype=float), lo + inside, hi - inside)
 
 
 def touching_runs(windows: Windows, which: np.ndarray) -> np.ndarray:
@@ -412,24 +452,36 @@ def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candid
     barely change the residuals near absent, so the linear step alone would screen them out.  The fit
     starts where that best was, not at absent: a grip (traction_limit) at its nominal value never
     slips, so a fit started there sees no gradient and stays; and where a trial was best, from the best
-    of a few values around it (zoom).
+    of a few values around it (zoom).  One with companions the current twin has not fitted (COMPANIONS) takes
+    its step along them too, and is fitted as screened: alone, its cost may rise every way while the build's
+    value beside it stands where it is.
     """
     robots = [current.params]
-    slots = []
+    slots, joint = [], set()
     for cand in cands:
-        lo, hi = (np.array(b) for b in E.bounds(cand.name, base))
-        x0 = np.array(_start_values(base, cand))
+        comp = tuple(f for f in _companions(obj, [cand]) if f not in current.build)
+        lo_c, hi_c = _companion_bounds(obj, comp)
+        lo_e, hi_e = (np.array(b) for b in E.bounds(cand.name, base))
+        lo, hi = np.concatenate([lo_e, lo_c]), np.concatenate([hi_e, hi_c])
+        x0 = np.concatenate([_start_values(base, cand), [float(getattr(current.params, f)) for f in comp]])
+        n = len(x0) - len(comp)
+
+        def robot(x: np.ndarray, cand: Candidate = cand, comp: tuple[str, ...] = comp, n: int = n) -> RobotParams:
+            built = current.params.replace(**{f: float(v) for f, v in zip(comp, x[n:])}) if comp else current.params
+            return E.apply(built, cand.name, cand.site, list(x[:n]))
+
         h = np.where(x0 + 1e-2 * (hi - lo) <= hi, 1e-2 * (hi - lo), -1e-2 * (hi - lo))
         first = len(robots)
-        robots.append(E.apply(current.params, cand.name, cand.site, list(x0)))
-        robots += [E.apply(current.params, cand.name, cand.site, list(x0 + np.eye(len(x0))[i] * h[i]))
-                   for i in range(len(x0))]
-        trials = screen_trials(cand.name, float(x0[0]), base)
+        robots.append(robot(x0))
+        robots += [robot(x0 + np.eye(len(x0))[i] * h[i]) for i in range(len(x0))]
+        trials = [] if comp else screen_trials(cand.name, float(x0[0]), base)
         robots += [E.apply(current.params, cand.name, cand.site, [x]) for x in trials]
-        slots.append((first, x0, h, lo - x0, hi - x0, trials))
+        slots.append((first, x0, h, lo - x0, hi - x0, trials, n))
+        if comp:
+            joint.add(cand)
     train, _test = obj.residuals(robots, part="train")
     predicted, starts, seen = [], [], []
-    for first, x0, h, dlo, dhi, trials in slots:
+    for first, x0, h, dlo, dhi, trials, n in slots:
         r0 = train[first]
         jac = ((train[first + 1:first + 1 + len(h)] - r0) / h[:, None]).T
         step, *_ = np.linalg.lstsq(jac, -r0, rcond=None)
@@ -438,12 +490,14 @@ def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candid
         tried = train[first + 1 + len(h):first + 1 + len(h) + len(trials)]
         costs = [float(resid @ resid)] + [float(r @ r) for r in tried]
         best = int(np.argmin(costs))
-        starts.append(list(x0 + step) if best == 0 else [trials[best - 1]])
+        starts.append(list(x0[:n] + step[:n]) if best == 0 else [trials[best - 1]])
         predicted.append(costs[best])
         # the values tried outright, with their actual costs, for zoom
         seen.append(sorted([(float(x0[0]), float(r0 @ r0))] + [(x, c) for x, c in zip(trials, costs[1:])]))
-    order = [int(i) for i in np.argsort(predicted)[:keep]]
-    return zoom(obj, base, current, [(cands[i], starts[i], seen[i]) for i in order])
+    chosen = [(cands[i], starts[i], seen[i]) for i in (int(i) for i in np.argsort(predicted)[:keep])]
+    zoomed = dict(zoom(obj, base, current, [entry for entry in chosen if entry[0] not in joint]))
+    return [(cand, start if cand in joint else zoomed[cand]) for cand, start, _seen in chosen
+            if cand in joint or cand in zoomed]
 
 
 def zoom(obj: Objective, base: RobotParams, current: Model,
@@ -697,20 +751,35 @@ def _costs_again(obj: Objective, model: Model) -> Model:
                                cost_test=float(r_test[0] @ r_test[0]), r_test=r_test[0])
 
 
+def _reference(obj: Objective, current: Model, m: Model, refs: dict[tuple[str, ...], Model]) -> Model:
+    """What a tried model m is judged against: current, or, where m fitted companions current lacks, current with
+    those fitted alone on top of it, so that an effect earns its place beyond what they take up (a pack's
+    voltage within its band is the build, not a resistance).  refs: those fitted so far, by companions."""
+    extra = tuple(f for f in m.build if f not in current.build)
+    if not extra:
+        return current
+    if extra not in refs:
+        alone = fit_model(obj, current.params, [], [], extra)
+        refs[extra] = dataclasses.replace(alone, effects=list(current.effects), values=current.values,
+                                          build={**current.build, **alone.build})
+    return refs[extra]
+
+
 def choose(obj: Objective, current: Model, tried: list[Model], cands: list[Candidate],
            located: list[str]) -> Model | None:
     """Of the fitted models that pass the two tests against `current`, the plainest of the lowest BIC (None
     if none passes).  One that fits the training windows a little better and fails held out is no reason
     to stop: the next best may pass
     (tests/test_diagnosis.py::test_the_chosen_effect_is_the_best_of_those_that_pass_held_out).  Sets each
-    model's p_value and located_gain."""
-    passing = []
+    model's p_value and located_gain, each against _reference's model."""
+    passing: list[Model] = []
+    refs: dict[tuple[str, ...], Model] = {}
     for m in tried:
         if getattr(obj, "tolerance", None) is not None and obj.tolerance.within(m.effects[-1].name, m.values[-1]):
             continue  # the robot as built, not a fault (tests/test_tolerance.py::test_an_effect_within_tolerance_is_not_named)
-        m.p_value = f_test(current.cost_train, m.cost_train, _sizes(m.values) - _sizes(current.values), m.n_train,
-                           _sizes(m.values))
-        accepted, m.located_gain = earns_its_place(obj, current, m, m.p_value, located)
+        ref = _reference(obj, current, m, refs)
+        m.p_value = f_test(ref.cost_train, m.cost_train, _dof(m) - _dof(ref), m.n_train, _dof(m))
+        accepted, m.located_gain = earns_its_place(obj, ref, m, m.p_value, located)
         if accepted:
             passing.append(m)
     passing = [m for m in passing if not _constant_in_disguise(obj.rec, m, passing)]
@@ -757,6 +826,11 @@ def _sizes(values: list[list[float]]) -> int:
     return sum(len(v) for v in values)
 
 
+def _dof(model: Model) -> int:
+    """The values a model fitted: its effects' and their companions'."""
+    return _sizes(model.values) + len(model.build)
+
+
 def backward(obj: Objective, base: RobotParams, chain: list[Model],
              say: Callable[[str], None] = lambda _t: None, located: list[str] | None = None) -> list[Model]:
     """Backward elimination after the forward pass: an effect chosen early may be made redundant by one
@@ -768,8 +842,8 @@ def backward(obj: Objective, base: RobotParams, chain: list[Model],
         rest = [j for j in range(len(final.effects)) if j != i]
         effects, values = [final.effects[j] for j in rest], [final.values[j] for j in rest]
         say(f"checking that {final.effects[i].label()} is still needed")
-        reduced = fit_model(obj, base, effects, values)
-        p = f_test(reduced.cost_train, final.cost_train, len(final.values[i]), final.n_train, _sizes(final.values))
+        reduced = fit_model(obj, base, effects, values, tuple(final.build))
+        p = f_test(reduced.cost_train, final.cost_train, _dof(final) - _dof(reduced), final.n_train, _dof(final))
         if earns_its_place(obj, reduced, final, p, located or [])[0]:
             continue
         rebuilt = chain[:1]
