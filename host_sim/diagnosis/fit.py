@@ -754,7 +754,9 @@ def _costs_again(obj: Objective, model: Model) -> Model:
 def _reference(obj: Objective, current: Model, m: Model, refs: dict[tuple[str, ...], Model]) -> Model:
     """What a tried model m is judged against: current, or, where m fitted companions current lacks, current with
     those fitted alone on top of it, so that an effect earns its place beyond what they take up (a pack's
-    voltage within its band is the build, not a resistance).  refs: those fitted so far, by companions."""
+    voltage within its band is the build, not a resistance;
+    tests/test_diagnosis.py::test_a_packs_voltage_alone_is_not_credited_to_a_resistance).  refs: those fitted so
+    far, by companions."""
     extra = tuple(f for f in m.build if f not in current.build)
     if not extra:
         return current
