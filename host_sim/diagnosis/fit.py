@@ -292,8 +292,7 @@ def fit_model(obj: Objective, base: RobotParams, effects: list[Candidate], start
         return out
 
     def robot(x: np.ndarray) -> RobotParams:
-        built = base.replace(**{f: float(v) for f, v in zip(comp, x)}) if nc else base
-        return _apply_all(built, effects, unpack(x))
+        return _apply_all(_built(base, comp, x), effects, unpack(x))
 
     cache: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
@@ -326,6 +325,11 @@ def _companions(obj: Objective, effects: list[Candidate]) -> tuple[str, ...]:
     if tol is None:
         return ()
     return tuple(dict.fromkeys(f for c in effects for f in COMPANIONS.get(c.name, ()) if tol.bands.get(f, 0.0) > 0))
+
+
+def _built(p: RobotParams, comp: tuple[str, ...], values: np.ndarray) -> RobotParams:
+    """p with each companion's field at its value (the first len(comp) of values)."""
+    return p.replace(**{f: float(v) for f, v in zip(comp, values)}) if comp else p
 
 
 def _companion_bounds(obj: Objective, comp: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -467,8 +471,7 @@ def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candid
         n = len(x0) - len(comp)
 
         def robot(x: np.ndarray, cand: Candidate = cand, comp: tuple[str, ...] = comp, n: int = n) -> RobotParams:
-            built = current.params.replace(**{f: float(v) for f, v in zip(comp, x[n:])}) if comp else current.params
-            return E.apply(built, cand.name, cand.site, list(x[:n]))
+            return E.apply(_built(current.params, comp, x[n:]), cand.name, cand.site, list(x[:n]))
 
         h = np.where(x0 + 1e-2 * (hi - lo) <= hi, 1e-2 * (hi - lo), -1e-2 * (hi - lo))
         first = len(robots)
