@@ -22,17 +22,19 @@ EMPTY = World(name="empty", size=(100.0, 100.0), walls=[])
 
 
 def switched_circuit(duty: float, emf: float, volts: float, res: float, ind: float, freq: float, brake: bool,
-                     cycles: int = 40, steps: int = 2000) -> float:
+                     cycles: int = 40, steps: int = 2000, battery: bool = False) -> float:
     """The mean current over the last PWM cycle of L di/dt = u - R i - e from i = 0, u the bridge's: V over the
     on-phase; off, 0 (brake) or, coasting, -V sign(i) through the diodes while current flows and e once it
-    has stopped (exact exponential steps; a step that crosses zero while coasting stops there)."""
+    has stopped (exact exponential steps; a step that crosses zero while coasting stops there).  battery: the
+    mean current the supply delivers instead, u / V of the motor's while the bridge connects it (on, or
+    coasting through the diodes), 0 while it brakes or no current flows."""
     period, sign = 1.0 / freq, (1.0 if duty >= 0 else -1.0)
     d, e = abs(duty), sign * emf
     h = period / steps
     decay = math.exp(-h * res / ind)
-    i, mean = 0.0, 0.0
+    i, mean, drawn = 0.0, 0.0, 0.0
     for _ in range(cycles):
-        mean = 0.0
+        mean = drawn = 0.0
         for k in range(steps):
             on = (k + 0.5) * h < d * period
             if on:
@@ -48,8 +50,10 @@ def switched_circuit(duty: float, emf: float, volts: float, res: float, ind: flo
             if not on and not brake and i != 0.0 and new * i < 0.0:
                 new = 0.0
             mean += 0.5 * (i + new) / steps
+            if on or (not brake and abs(u) == volts):
+                drawn += u / volts * 0.5 * (i + new) / steps
             i = new
-    return sign * mean
+    return drawn if battery else sign * mean
 
 
 @pytest.mark.parametrize("brake", [False, True], ids=["coast", "brake"])
@@ -62,6 +66,38 @@ def test_the_bridge_current_is_the_switched_circuits_cycle_average(brake, ind, f
     for (d, e), got in zip(cases, closed):
         want = switched_circuit(d, e, volts, res, ind, freq, brake, cycles=25, steps=800)
         assert got == pytest.approx(want, rel=3e-3, abs=2e-5), (d, e)
+
+
+@pytest.mark.parametrize("brake", [False, True], ids=["coast", "brake"])
+@pytest.mark.parametrize("ind,freq", [(2e-4, 20000.0), (1e-3, 5000.0)])
+def test_the_battery_current_is_the_switched_circuits_cycle_average(brake, ind, freq):
+    """What the supply gives a bridge, its ripple's R <i^2> included: at light duty far more than the mean
+    current's (R i + e) i / V."""
+    volts, res = 7.4, 10.0
+    cases = [(d, e) for d in (0.05, 0.2, 0.4, 0.7, 1.0, -0.3) for e in (-9.0, -2.0, 0.0, 1.5, 4.0, 7.0, 8.0)]
+    d, e = np.array([c[0] for c in cases]), np.array([c[1] for c in cases])
+    mean, closed = motors.bridge_currents(d, e, volts, res, ind, freq, brake)
+    assert np.array_equal(mean, motors.bridge_current(d, e, volts, res, ind, freq, brake))
+    for (duty, emf), got in zip(cases, closed):
+        want = switched_circuit(duty, emf, volts, res, ind, freq, brake, cycles=25, steps=800, battery=True)
+        assert got == pytest.approx(want, rel=3e-3, abs=2e-5), (duty, emf)
+    i = motors.bridge_current(0.2, 0.0, volts, res, 2e-4, 2e4, False)
+    mean, drawn = motors.bridge_currents(0.2, 0.0, volts, res, 2e-4, 2e4, False)
+    assert mean == i and drawn > 2.0 * res * i * i / volts
+
+
+def test_a_bridged_robots_supply_sags_with_what_its_bridges_draw():
+    """The sagged V_s = V_bat - R_int (i_e + both bridges' draw), each the switched circuit's at the wheel's
+    speed and V_s itself."""
+    p = RobotParams(drive="duty", battery_resistance=2.0)
+    sim = BatchSim(None, p, bench=True)
+    res = sim.run_inputs(np.tile([0.25, -0.6], (200, 1)), sensors=False)
+    v_s, w = float(res.vbat[-1, 0]), sim.v[0]
+    emf = p.torque_constant * p.gear_ratio * w
+    drawn = sum(switched_circuit(duty, e, v_s, p.armature_resistance, p.motor_inductance, p.pwm_frequency, False,
+                                 battery=True) for duty, e in zip((0.25, -0.6), emf))
+    assert v_s == pytest.approx(p.battery_voltage - 2.0 * (p.electronics_current + drawn), abs=2e-4)
+    assert v_s < p.battery_voltage - 2.0 * (p.electronics_current + 0.001)
 
 
 def test_brake_is_the_linear_average_and_coast_is_not_at_light_load():

@@ -55,6 +55,21 @@ def test_a_generating_motor_feeds_the_battery_through_the_diodes():
     assert mean == pytest.approx((V - 9.0) / R, abs=1e-6) and battery == pytest.approx(mean, abs=1e-6)
 
 
+def test_the_battery_gives_its_drivers_current_at_its_terminals():
+    """V = V_bat - R_int (i_q + both bridges' battery current at the terminal voltage V): the bridges' power
+    taken at the terminals, not at the open-circuit voltage (3 % less current at this sag)."""
+    spec = SHEET.replace(drive="duty", battery_resistance=2.0, inductance=(2e-4, 2e-4))
+    plant = Plant(spec, None, (0.0, 0.0, 0.0), 0)
+    plant.command((0.3, -0.5), 0)
+    plant.advance(1.0)
+    v, drawn = plant.v_term, 0.0
+    for k, duty in enumerate((0.3, -0.5)):
+        emf = plant.torque_constant(k) * spec.gear_ratio * float(plant.data.qvel[plant._drive_v[k]])
+        drawn += hbridge.step(plant._coil[k], duty, emf, v, spec.armature_resistance[k], spec.inductance[k],
+                              spec.pwm_frequency, False, plant.dt)[2]
+    assert v == pytest.approx(spec.battery_voltage - 2.0 * (spec.quiescent_current + drawn), abs=1e-5)
+
+
 def steady(spec: PlantSpec, cmd: float, seconds: float = 2.0) -> Plant:
     plant = Plant(spec, None, (0.0, 0.0, 0.0), 0)
     plant.command((cmd, cmd), 0)

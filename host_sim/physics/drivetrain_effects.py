@@ -214,12 +214,29 @@ def _drive_currents(cmd: np.ndarray, w: np.ndarray, volts: np.ndarray, d: Drive)
     drive's clipped reference, an H-bridge's cycle average for the others (motors.bridge_current)."""
     emf = d.kt * d.gear * w
     vb = volts[:, None]
-    duty = np.where(d.kind == DUTY, cmd, cmd / vb)  # voltage and the speed loop's output: volts across the motor
-    duty = motors.bridge_duty(duty, d.deadband, d.dead_time, d.f_pwm)
-    i = motors.bridge_current(duty, emf, vb, d.res_w, d.ind, d.f_pwm, d.brake)
+    i = motors.bridge_current(_duty(cmd, vb, d), emf, vb, d.res_w, d.ind, d.f_pwm, d.brake)
     if d.all_bridged:
         return i
     return np.where(d.kind == CURRENT, _currents(np.clip(cmd, -d.lim, d.lim), emf, volts, d.res)[0], i)
+
+
+def _drawn(cmd: np.ndarray, w: np.ndarray, volts: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray]:
+    """(motor currents (N, 2), what each driver draws from the battery (N, 2)): a bridge's cycle averages
+    (motors.bridge_currents, the ripple's draw included), a current driver's power (R i + e) i / V."""
+    emf = d.kt * d.gear * w
+    vb = volts[:, None]
+    i, drawn = motors.bridge_currents(_duty(cmd, vb, d), emf, vb, d.res_w, d.ind, d.f_pwm, d.brake)
+    if d.all_bridged:
+        return i, drawn
+    fed = _currents(np.clip(cmd, -d.lim, d.lim), emf, volts, d.res)[0]
+    current = d.kind == CURRENT
+    return np.where(current, fed, i), np.where(current, (d.res * fed + emf) * fed / vb, drawn)
+
+
+def _duty(cmd: np.ndarray, vb: np.ndarray, d: Drive) -> np.ndarray:
+    """(N, 2) the duty each bridge delivers for commands cmd at the supply vb (N, 1): a duty drive's command,
+    the others' volts across the motor over the supply (motors.bridge_duty)."""
+    return motors.bridge_duty(np.where(d.kind == DUTY, cmd, cmd / vb), d.deadband, d.dead_time, d.f_pwm)
 
 
 def holding_volts(w: np.ndarray, d: Drive) -> np.ndarray:
@@ -240,26 +257,25 @@ def holding_volts(w: np.ndarray, d: Drive) -> np.ndarray:
 
 
 def _bridge_supply(cmd: np.ndarray, w: np.ndarray, d: Drive) -> tuple[np.ndarray, np.ndarray]:
-    """supply() where some drive is not current: the battery delivers i_e + sum((R i + e) i) / V (the
-    bridges pass the motors' power, their ripple aside); Newton on V from V_bat, the slope by a difference."""
+    """supply() where some drive is not current: the battery delivers i_e plus what each driver draws
+    (_drawn); Newton on V from V_bat, the slope by a difference."""
     cmd = np.broadcast_to(cmd, w.shape)
     volts = d.v_bat.copy()
-    i = _drive_currents(cmd, w, volts, d)
     if not d.resistive:
-        return volts, i
-    emf = d.kt * d.gear * w
+        return volts, _drive_currents(cmd, w, volts, d)
 
-    def residual(v: np.ndarray, cur: np.ndarray) -> np.ndarray:
-        return v - d.v_bat + d.r_int * (d.i_e + ((d.res_w * cur + emf) * cur).sum(1) / v)
+    def residual(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        i, drawn = _drawn(cmd, w, v, d)
+        return v - d.v_bat + d.r_int * (d.i_e + drawn.sum(1)), i
 
+    gv, i = residual(volts)
     for _ in range(2 * SUPPLY_NEWTON):
-        gv = residual(volts, i)
         if not np.any(np.abs(gv) > 1e-12 * d.v_bat):
             break
         step = 1e-6 * d.v_bat
-        slope = (residual(volts + step, _drive_currents(cmd, w, volts + step, d)) - gv) / step
+        slope = (residual(volts + step)[0] - gv) / step
         volts = np.clip(volts - gv / np.maximum(slope, 0.5), 0.05 * d.v_bat, d.v_bat)
-        i = _drive_currents(cmd, w, volts, d)
+        gv, i = residual(volts)
     return volts, i
 
 

@@ -178,16 +178,57 @@ def bridge_current(duty: ArrayLike, emf: ArrayLike, volts: Any, res: Any, induct
     decay): the off-phase drives the current back through the diodes against -V; where it reaches 0 within
     the cycle (discontinuous conduction, light load) the terminal shows e until the next cycle.  Arrays
     broadcast together; the closed form's derivation is in docs/motors.md."""
+    sign, d, e = _mirrored(duty, emf)
+    _k, _fall_on, _rise, x = _coasting(d, e, volts, res, inductance, frequency)
+    return sign * _mean_current(d, e, volts, res, brake, x)
+
+
+def bridge_currents(duty: ArrayLike, emf: ArrayLike, volts: Any, res: Any, inductance: Any, frequency: Any,
+                    brake: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(the motor's mean current, the battery's) (A) over a PWM cycle in periodic steady state, for
+    bridge_current's arguments.  The battery gives the motor's current while the bridge connects it: the
+    on-phase and, coasting, the diodes' return against it.  Not (R i + e) i / V of the mean current i: the
+    ripple's R <i^2> is drawn too, most of it at light duty (docs/motors.md, "The battery's current";
+    tests/test_drives.py::test_the_battery_current_is_the_switched_circuits_cycle_average)."""
+    sign, d, e = _mirrored(duty, emf)  # the mirror image: the battery's current keeps its sign
+    k, fall_on, rise, x = _coasting(d, e, volts, res, inductance, frequency)
+    on_target, off_target = volts - e, np.where(brake, -e, -volts - e)  # R i each phase relaxes towards
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        fall_off = -np.expm1(-(1.0 - d) / k)
+        start = (off_target * fall_off + on_target * fall_on * (1.0 - fall_off)) / -np.expm1(-1.0 / k)
+        end = on_target + (start - on_target) * (1.0 - fall_on)
+        on = on_target * d + (start - on_target) * k * fall_on  # R x the charge of each phase, per period
+        off = off_target * (1.0 - d) + (end - off_target) * k * fall_off
+        broken = on_target * d - off_target * x - 2.0 * k * rise  # discontinuous: from 0, back to 0 at x
+    coast = np.where(e >= volts, volts - e, np.where((e > -volts) & (x < 1.0 - d), broken, on - off))
+    return sign * _mean_current(d, e, volts, res, brake, x), np.where(brake, on, coast) / res
+
+
+def _mirrored(duty: ArrayLike, emf: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(sign, |d|, e seen by |d|): a negative duty is the mirror image of a positive one."""
     duty, emf = np.asarray(duty, dtype=float), np.asarray(emf, dtype=float)
-    sign = np.where(duty < 0.0, -1.0, 1.0)  # a negative duty is the mirror image of a positive one
-    d, e = np.abs(duty), sign * emf
+    sign = np.where(duty < 0.0, -1.0, 1.0)
+    return sign, np.abs(duty), sign * emf
+
+
+def _coasting(d: np.ndarray, e: np.ndarray, volts: Any, res: Any, inductance: Any, frequency: Any
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(k = L / (R T), 1 - e^(-d/k), R i at the end of an on-phase from 0, the share x of the cycle a coasting
+    off-phase takes to bring it back to 0)."""
+    k = np.maximum(inductance * frequency / res, MIN_CYCLE_TAU)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        fall_on = -np.expm1(-d / k)
+        rise = (volts - e) * fall_on
+        x = k * np.log1p(rise / (volts + e))
+    return k, fall_on, rise, x
+
+
+def _mean_current(d: np.ndarray, e: np.ndarray, volts: Any, res: Any, brake: Any, x: np.ndarray) -> np.ndarray:
+    """The mean current for |d| against e: the linear average braking; coasting, by regime."""
     linear = (d * volts - e) / res
     continuous = ((2.0 * d - 1.0) * volts - e) / res
-    k = np.maximum(inductance * frequency / res, MIN_CYCLE_TAU)  # L / (R T)
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        rise = (volts - e) * -np.expm1(-d / k)  # R i at the end of the on-phase, from 0
-        x = k * np.log1p(rise / (volts + e))  # the off-phase's share of the cycle until i = 0
+    with np.errstate(invalid="ignore"):
         broken = (d * volts - volts * x - e * (d + x)) / res
     coast = np.where(e >= volts, (volts - e) / res,
                      np.where((e > -volts) & (x < 1.0 - d), broken, continuous))
-    return sign * np.where(brake, linear, coast)
+    return np.where(brake, linear, coast)

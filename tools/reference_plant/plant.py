@@ -207,7 +207,7 @@ class Plant:
             power += p
             currents.append(i)
         self.current = (currents[0], currents[1])
-        i_batt = s.quiescent_current + power / s.battery_voltage
+        i_batt = s.quiescent_current + power / v_bat  # the drivers take their power at the terminals
         self.v_term = s.battery_voltage - s.battery_resistance * i_batt
 
     def _regulated(self, k: int, emf: float, v_bat: float) -> tuple[float, float]:
