@@ -614,6 +614,21 @@ def test_the_search_stops_when_an_effect_clears_no_channel(tmp_path):
         assert any(s.startswith("effect 2: screening") for s in said) == goes_on, said
 
 
+def test_a_located_channel_an_effect_leaves_unchanged_does_not_dilute_its_located_gain():
+    """A battery's sag located beside an IR sensor's mismatch: the sensors read the recorded track, so no drive
+    effect moves the sensor's residuals, and the effect's located gain is taken on the channels it moves."""
+    from types import SimpleNamespace
+
+    from host_sim.diagnosis.fit import Objective
+
+    obj = SimpleNamespace(test_columns={"vbat": np.arange(10), "ir_0": np.arange(10, 20)})
+    before = np.concatenate([np.full(10, 2.0), np.full(10, 5.0)])
+    after = before.copy()
+    after[:10] = 1.0  # the battery's reading explained, the sensor's as it was
+    assert Objective.located_gain(obj, before, after, ["vbat", "ir_0"]) == pytest.approx(0.75)
+    assert Objective.located_gain(obj, before, before.copy(), ["vbat", "ir_0"]) == 0.0
+
+
 def test_the_chosen_effect_is_the_best_of_those_that_pass_held_out(tmp_path, nominal_run):
     """One candidate fits the training windows best (lowest BIC) but makes the held-out windows worse;
     another fits them a little less well and removes the held-out mismatch: the second is chosen, and

@@ -224,8 +224,12 @@ class Objective:
         return np.concatenate(train, axis=1), np.concatenate(test, axis=1)
 
     def located_gain(self, before: np.ndarray, after: np.ndarray, located: list[str]) -> float:
-        """1 - the held-out sum of squares after / before, on the located channels' columns alone."""
+        """1 - the held-out sum of squares after / before, on the located channels' columns alone, of those
+        the change moves: a drive effect leaves a sensor's residuals as they were (the sensors read the
+        recorded track), and they would only dilute its gain
+        (tests/test_diagnosis.py::test_a_located_channel_an_effect_leaves_unchanged_does_not_dilute_its_located_gain)."""
         cols = [self.test_columns[c] for c in located if c in self.test_columns]
+        cols = [c for c in cols if not np.array_equal(before[c], after[c])]
         if not cols:
             return 0.0
         pick = np.concatenate(cols)
