@@ -207,7 +207,9 @@ class Plant:
             power += p
             currents.append(i)
         self.current = (currents[0], currents[1])
-        i_batt = s.quiescent_current + power / v_bat  # the drivers take their power at the terminals
+        # the drivers take their power at the terminals (tests/test_plant_drives.py::
+        # test_the_battery_gives_its_drivers_current_at_its_terminals)
+        i_batt = s.quiescent_current + power / v_bat
         self.v_term = s.battery_voltage - s.battery_resistance * i_batt
 
     def _regulated(self, k: int, emf: float, v_bat: float) -> tuple[float, float]:
