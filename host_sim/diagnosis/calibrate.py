@@ -18,7 +18,7 @@ from host_sim.diagnosis.channels import drive_channel, sensor_channel
 from host_sim.diagnosis.fit import (FIT_FTOL, FIT_XTOL, Model, Objective, sandwich_intervals, earns_its_place,
                                    f_test, touching_runs)
 from host_sim.physics import effects as E
-from host_sim.diagnosis.tolerance import ABSOLUTE, FACTOR, ONE_SIDED, UNIT_OF, Tolerance
+from host_sim.diagnosis.tolerance import ABSOLUTE, UNIT_OF, Tolerance, relative_bounds
 from host_sim.physics.params import RobotParams
 
 PRIOR_SD = 0.5  # of a band: a band holds about 95 % of robots built to the datasheet (±2 sd)
@@ -117,15 +117,8 @@ def set_values(p: RobotParams, tol: Tolerance, nuisances: list[Nuisance], x: np.
 
 
 def bounds(nuisances: list[Nuisance], band: np.ndarray, reach: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """Each nuisance's (lower, upper) bound, `reach` bands out: -band..band; 0..band for a one-sided one
-    (tolerance.ONE_SIDED), which a build has or lacks but never holds below none; and for one stated as a
-    factor either way (tolerance.FACTOR), (1 - band) - 1 .. 1 / (1 - band) - 1, the factor to the power `reach`
-    (tests/test_tolerance.py::test_a_quantity_stated_as_a_factor_reaches_as_far_each_way)."""
-    one = np.array([n.quantity in ONE_SIDED for n in nuisances], dtype=bool)
-    factor = np.array([n.quantity in FACTOR for n in nuisances], dtype=bool)
-    down = (1.0 - band) ** reach  # a band is below 1 (tolerance.load_bands)
-    lo = np.where(one, 0.0, np.where(factor, down - 1.0, -reach * band))
-    return lo, np.where(factor, 1.0 / down - 1.0, reach * band)
+    """Each nuisance's (lower, upper) relative bound, `reach` bands out (tolerance.relative_bounds)."""
+    return relative_bounds([n.quantity for n in nuisances], band, reach)
 
 
 def _at_edge(n: Nuisance, v: float, band: float) -> bool:

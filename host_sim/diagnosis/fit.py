@@ -21,7 +21,7 @@ from scipy import optimize, stats
 from host_sim.physics import effects as E
 from host_sim.diagnosis.channels import (ACCUMULATED, AMBIENT, IR, MOTION, WHEELS, Channel, build_channels,
                                         drive_channel, judged_windows, sensor_channel, sensor_channels)
-from host_sim.diagnosis.tolerance import Tolerance
+from host_sim.diagnosis.tolerance import Tolerance, relative_bounds
 from host_sim.diagnosis.windows import Windows, by_step_parts, run_windows
 from host_sim.physics.params import DEFAULT, RobotParams
 from host_sim.recordings.recording import Recording
@@ -337,14 +337,15 @@ def _built(p: RobotParams, comp: tuple[str, ...], values: np.ndarray) -> RobotPa
 
 
 def _companion_bounds(obj: Objective, comp: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
-    """Each companion's band about the datasheet's value."""
+    """Each companion's band about the datasheet's value (tolerance.relative_bounds, as the calibration's; a
+    companion is a datasheet field, relative to its value, none of tolerance.ABSOLUTE)."""
     if not comp:
         return np.zeros(0), np.zeros(0)
     tol = obj.tolerance
     assert tol is not None  # _companions gives none without it
     nominal = np.array([float(getattr(tol.datasheet, f)) for f in comp])
-    band = np.array([tol.bands[f] for f in comp])
-    return nominal * (1.0 - band), nominal * (1.0 + band)
+    lo, hi = relative_bounds(list(comp), np.array([tol.bands[f] for f in comp]))
+    return nominal * (1.0 + lo), nominal * (1.0 + hi)
 
 
 def fit_apart(obj: Objective, base: RobotParams, model: Model, keep: np.ndarray) -> Model:

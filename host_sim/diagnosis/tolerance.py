@@ -9,6 +9,8 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from host_sim.physics import effects as E
 from host_sim.physics.params import RobotParams, read_json
 
@@ -94,6 +96,18 @@ class Tolerance:
             band = self.bands[a[0]] if a is not None and b is not None else None
             meets.append(band is not None and min(a[1], b[1]) <= band and max(a[1], b[1]) >= -band)
         return bool(meets) and all(meets)
+
+
+def relative_bounds(quantities: list[str], band: np.ndarray, reach: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Each quantity's (lower, upper) bound relative to the datasheet, `reach` bands out: -band..band; 0..band
+    for a one-sided one (ONE_SIDED), which a build has or lacks but never holds below none; and for one stated
+    as a factor either way (FACTOR), (1 - band) - 1 .. 1 / (1 - band) - 1, the factor to the power `reach`
+    (tests/test_tolerance.py::test_a_quantity_stated_as_a_factor_reaches_as_far_each_way)."""
+    one = np.array([q in ONE_SIDED for q in quantities], dtype=bool)
+    factor = np.array([q in FACTOR for q in quantities], dtype=bool)
+    down = (1.0 - band) ** reach  # a band is below 1 (load_bands)
+    lo = np.where(one, 0.0, np.where(factor, down - 1.0, -reach * band))
+    return lo, np.where(factor, 1.0 / down - 1.0, reach * band)
 
 
 def load_bands(path: str | Path) -> dict[str, float]:
