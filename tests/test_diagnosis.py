@@ -1103,8 +1103,9 @@ def test_ctrl_c_while_workers_fit_exits_130_and_leaves_no_process(tmp_path):
         said += line
     assert b"side by side" in said, said.decode()
     os.killpg(proc.pid, signal.SIGINT)  # the group: as a terminal's Ctrl-C
-    assert proc.wait(timeout=60) == 130
+    code = proc.wait(timeout=60)
     rest = proc.stderr.read().decode()
+    assert code == 130, rest
     assert "Traceback" not in rest, rest
     time.sleep(0.5)
     with pytest.raises(ProcessLookupError):  # nothing of the group is left
