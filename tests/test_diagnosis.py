@@ -1000,6 +1000,33 @@ def test_robots_run_in_one_batch_per_step_parts_as_they_would_together(nominal_r
     np.testing.assert_allclose(grouped.enc[:, 4], alone.enc[:, 0], rtol=0, atol=1e-9)
 
 
+def test_window_states_are_kept_by_what_they_read(nominal_run):
+    """Each window's starting state is worked out once per recording, rows, centre-of-mass offset and counts
+    per turn, and kept on the windows: a parameter set that differs in any of these gets its own, the same as
+    on fresh windows, and one that differs only elsewhere (a friction) shares the first's."""
+    import dataclasses
+
+    from host_sim.diagnosis.windows import Windows, initial_states, run_windows
+
+    def fresh() -> Windows:
+        return Windows(np.array([25, 150, 400]), 26, np.array([False, True, False]))
+
+    windows = fresh()
+    robots = [DEFAULT, E.apply(DEFAULT, "dry_friction", "right", [2e-3]), DEFAULT.replace(com_offset=0.02),
+              E.apply(DEFAULT, "encoder_scale", "left", [60.0]), E.apply(DEFAULT, "encoder_scale", "right", [-60.0])]
+    kept = run_windows(nominal_run, windows, robots, ROOM)
+    assert len(windows.states) == 2 * 4  # the windows' first rows and the lead-ins', for 4 different states
+    for i, p in enumerate(robots):
+        alone = run_windows(nominal_run, fresh(), [p], ROOM)
+        np.testing.assert_array_equal(kept.pose[:, i], alone.pose[:, 0])
+        np.testing.assert_array_equal(kept.enc[:, i], alone.enc[:, 0])
+    # another recording on the same windows is not given this one's states
+    moved = dataclasses.replace(nominal_run, pose=nominal_run.pose + np.array([0.01, 0.0, 0.0]))
+    run_windows(moved, windows, [DEFAULT], ROOM)
+    key = next(k for k in windows.states if k[1:] == (DEFAULT.com_offset, DEFAULT.ticks_per_rev, DEFAULT.ticks_per_rev))
+    np.testing.assert_array_equal(windows.states[key][1], initial_states(moved, windows.twin_start, DEFAULT)[0])
+
+
 def test_a_fit_ends_once_its_steps_gain_little(tmp_path, monkeypatch):
     """Each fit stops when a step lowers its cost by less than FIT_FTOL of it: a battery's resistance
     injected into the twin is named and measured as before, in three fits of 7 runs of the twin in all;

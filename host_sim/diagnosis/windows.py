@@ -6,7 +6,7 @@ tracker every window starts at the origin of an empty world.  See docs/diagnosis
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -59,6 +59,8 @@ class Windows:
     body: np.ndarray | None = None  # (W, 3) the tracked (u, l, omega) of C where each window's twin starts
     lead: int = LEAD_ROWS  # rows the twin replays before each window (0: it starts on the window's first row)
     lead_slides: np.ndarray | None = None  # (W,) bool: the tracker sees the robot slide in the lead-in (judge_slides)
+    # initial_states' answers, by rows and the fields they read: every fit evaluates the same windows again
+    states: dict[tuple[Any, ...], Any] = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if len(self.start) and int(np.min(self.start)) < self.lead:
@@ -168,6 +170,20 @@ def initial_states(rec: Recording, rows: np.ndarray, p: RobotParams) -> tuple[np
     return q, v
 
 
+def _states(windows: Windows, rec: Recording, rows: np.ndarray, p: RobotParams) -> tuple[np.ndarray, np.ndarray]:
+    """initial_states, kept in windows.states: a state reads of p only the centre of mass's offset and the
+    encoders' counts per turn (replay.state_at), so the parameter sets of a fit share it
+    (tests/test_diagnosis.py::test_window_states_are_kept_by_what_they_read).  Read-only arrays."""
+    key = (rows.tobytes(), p.com_offset, p.ticks_per_rev + p.ticks_per_rev_delta_l,
+           p.ticks_per_rev + p.ticks_per_rev_delta_r)
+    kept = windows.states.get(key)
+    if kept is None or kept[0] is not rec:
+        q, v = initial_states(rec, rows, p)
+        q.flags.writeable = v.flags.writeable = False
+        kept = windows.states[key] = (rec, q, v)
+    return kept[1], kept[2]
+
+
 def run_windows(rec: Recording, windows: Windows, params: Any, world: World | None, *,
                 base: RobotParams | None = None, substeps: int | None = None) -> WindowRun:
     """Replay every window for every parameter set (physics only; see sensors_on_track): in one batch
@@ -208,9 +224,9 @@ def _run_windows(rec: Recording, windows: Windows, params: Any, world: World | N
     on_track = np.empty((n_win, n_sets, 3))  # where each window's twin stands on its first row
     cold = np.empty((n_win, n_sets, 2))  # and its wheel speeds from the encoders there
     for s, p in enumerate(robots):
-        q[:, s], v[:, s] = initial_states(rec, first, p)
+        q[:, s], v[:, s] = _states(windows, rec, first, p)
         if windows.lead:
-            q_k, cold[:, s] = initial_states(rec, windows.start, p)
+            q_k, cold[:, s] = _states(windows, rec, windows.start, p)
             on_track[:, s] = q_k[:, :3]
     per_robot = robots[0] if n_sets == 1 else [p for _w in range(n_win) for p in robots]
     sim = BatchSim(world if rec.pose is not None else None, per_robot, q=q.reshape(-1, 5), v=v.reshape(-1, 2),
