@@ -155,6 +155,20 @@ def test_an_effect_that_does_not_explain_the_test_block_is_closest_not_named(tmp
     assert "closest in the library: " in d.summary() and not d.model.effects
 
 
+def test_an_effect_on_one_wheel_answers_for_its_own_and_the_bodys_channels():
+    """A one-wheel effect is judged on its wheel's channels, the body's motion and the battery; the other
+    wheel's own channels are that wheel's, reported beside it. An effect of both wheels or of the robot
+    answers for every drive channel, a sensor's for its own."""
+    from host_sim.diagnosis.block_verdict import family
+
+    located = ["wheel_l", "count_l", "wheel_r", "count_r", "heading_rate", "turn", "vbat", "ir_2"]
+    assert family("dry_friction", "left", located) == ["wheel_l", "count_l", "heading_rate", "turn", "vbat"]
+    assert family("torque_constant", "right", located) == ["wheel_r", "count_r", "heading_rate", "turn", "vbat"]
+    assert family("dry_friction", "both", located) == located[:-1]
+    assert family("track_width", "both", located) == located[:-1]
+    assert family("ir_gain", 2, located) == ["ir_2"]
+
+
 def test_windows_that_touch_are_one_cluster():
     """A window's lead-in replays the end of the window before: back-to-back windows are one cluster of the
     intervals' sandwich, a window left out between them parts them."""

@@ -65,15 +65,21 @@ def _judge_match(result: Any, block: Recording, twin: Comparison) -> None:
                                "words": test_block_words(j, result.fit_test)} for j in failing]
 
 
+OTHER_WHEEL = {"left": ("wheel_r", "count_r"), "right": ("wheel_l", "count_l")}
+
+
 def family(effect: str, site: Any, located: list[str]) -> list[str]:
-    """The located channels an effect answers for: the drive's for a drive or robot effect, sensor k's for
-    its own, every sensor's for the ring's."""
+    """The located channels an effect answers for: the drive's for a drive or robot effect, but for the other
+    wheel's own where it acts on one wheel (a mismatch left there is that wheel's, reported beside it:
+    tests/test_verdict.py::test_an_effect_on_one_wheel_answers_for_its_own_and_the_bodys_channels), sensor k's
+    for its own, every sensor's for the ring's."""
     kind = E.LIBRARY[effect].kind
     if kind == "sensor":
         return [c for c in located if c in (IR[int(site)], AMBIENT[int(site)])]
     if kind == "ring":
         return [c for c in located if sensor_channel(c)]
-    return [c for c in located if drive_channel(c)]
+    other = OTHER_WHEEL.get(str(site), ())
+    return [c for c in located if drive_channel(c) and c not in other]
 
 
 def _judge_named(result: Any, block: Recording, before: Comparison, after: Comparison, chain: list[Model],
