@@ -13,6 +13,7 @@ import numpy as np
 
 from host_sim.sensors import ir_sensor
 from host_sim.robot.batch import SUBSTEPS, BatchSim, robot_params, step_parts
+from host_sim.physics.motors import ticks_per_rev
 from host_sim.physics.params import RobotParams
 from host_sim.recordings.recording import Recording
 from host_sim.recordings.replay import SEED_ROWS, ReplayError, replay_inputs, sliding_rows, state_or_origin
@@ -174,8 +175,7 @@ def _states(windows: Windows, rec: Recording, rows: np.ndarray, p: RobotParams) 
     """initial_states, kept in windows.states: a state reads of p only the centre of mass's offset and the
     encoders' counts per turn (replay.state_at), so the parameter sets of a fit share it
     (tests/test_diagnosis.py::test_window_states_are_kept_by_what_they_read).  Read-only arrays."""
-    key = (rows.tobytes(), p.com_offset, p.ticks_per_rev + p.ticks_per_rev_delta_l,
-           p.ticks_per_rev + p.ticks_per_rev_delta_r)
+    key = (rows.tobytes(), p.com_offset, ticks_per_rev(p, 0), ticks_per_rev(p, 1))
     kept = windows.states.get(key)
     if kept is None or kept[0] is not rec:
         q, v = initial_states(rec, rows, p)
