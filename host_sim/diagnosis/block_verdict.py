@@ -8,7 +8,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from host_sim.diagnosis.channels import ACCUMULATED, IR, AMBIENT, drive_channel, sensor_channel
+from host_sim.diagnosis.channels import ACCUMULATED, IR, AMBIENT, WHEELS, drive_channel, sensor_channel
 from host_sim.diagnosis.compare import Comparison, compare
 from host_sim.diagnosis.fit import MIN_LOCATED_GAIN, Model, Objective, fit_apart
 from host_sim.diagnosis.phrasing import test_block_words
@@ -65,7 +65,7 @@ def _judge_match(result: Any, block: Recording, twin: Comparison) -> None:
                                "words": test_block_words(j, result.fit_test)} for j in failing]
 
 
-OTHER_WHEEL = {"left": ("wheel_r", "count_r"), "right": ("wheel_l", "count_l")}
+OTHER_WHEEL = {"left": (WHEELS[1], ACCUMULATED[WHEELS[1]]), "right": (WHEELS[0], ACCUMULATED[WHEELS[0]])}
 
 
 def family(effect: str, site: Any, located: list[str]) -> list[str]:
