@@ -908,6 +908,48 @@ def test_an_effect_whose_cost_rises_every_way_the_screening_looked_is_not_fitted
     assert zoom(dipping, DEFAULT, current, [(play, [1e-4], seen)]) == [(play, [1e-4])]
 
 
+def test_each_place_screened_keeps_its_most_promising_effect():
+    """Five wheel effects each promise more than IR pair 3's gain: the gain is still fitted, the best at its
+    place, beside the 4 best; pair 3's offset (its place has its best) and pair 5's (promising nothing) are not."""
+    from types import SimpleNamespace
+
+    from host_sim.diagnosis.fit import Candidate, Model, screen
+
+    wheel = {Candidate("dry_friction", "left"): 2e-3, Candidate("viscous_friction", "left"): 5e-4,
+             Candidate("torque_constant", "left"): 5e-4, Candidate("dry_friction", "right"): 3e-3,
+             Candidate("viscous_friction", "right"): 4e-4}
+    gain, offset, elsewhere = Candidate("ir_gain", 3), Candidate("ir_offset", 3), Candidate("ir_offset", 5)
+
+    def residuals(robots, part="both"):  # each wheel effect removes 10 of its own, the gain 3 of its own
+        return np.array([[10 * (1 - E.values(r, c.name, c.site)[0] / v) for c, v in wheel.items()]
+                         + [3 * (1 - (E.values(r, "ir_gain", 3)[0] - 1) / -0.25)] for r in robots]), None
+
+    obj = SimpleNamespace(residuals=residuals)
+    (r0,), _ = residuals([DEFAULT])
+    current = Model([], [], DEFAULT, float(r0 @ r0), float(r0 @ r0), r0.size)
+    shortlist = screen(obj, DEFAULT, current, [*wheel, offset, gain, elsewhere], 4)
+    assert {c for c, _start in shortlist} == {*wheel, gain} - {Candidate("viscous_friction", "right")}
+    ((start,),) = [s for c, s in shortlist if c == gain]
+    assert start == pytest.approx(0.75)
+
+
+def test_a_rival_acts_where_the_chosen_effect_does():
+    """A tried effect within 2 % of the chosen one's held-out cost is its rival only where it acts on the same
+    IR pair (the ring acts on all eight) or on the drive: elsewhere it removes another part of the mismatch."""
+    from host_sim.diagnosis.fit import AMBIGUITY, Candidate, Model, rivals
+
+    def tried(name, site, cost):
+        return Model([Candidate(name, site)], [[0.0]], DEFAULT, cost, cost, 1)
+
+    best = tried("ir_gain", 3, 100.0)
+    near = 100.0 * (1 + AMBIGUITY / 2)
+    same, ring = tried("ir_offset", 3, near), tried("ir_latency", "both", near)
+    others = [tried("dry_friction", "left", near), tried("ir_gain", 4, near), tried("ir_misalignment", 3, 110.0)]
+    assert rivals(best, [best, same, ring, *others]) == [same, ring]
+    wheel, width = tried("dry_friction", "left", 100.0), tried("track_width", "both", near)
+    assert rivals(wheel, [wheel, width, same]) == [width]
+
+
 def test_workers_share_a_large_batch_in_runs_of_neighbours():
     """A screening's robots are mostly of one set of step parts on ice or with a gear's play: the group is cut into
     pieces of at most its share (all the robots / workers, but not under MIN_SHARE), each a run of

@@ -112,6 +112,24 @@ def candidates_for(channels: list[str], drive: str = "current", bench: bool = Fa
     return out
 
 
+def reach(cand: Candidate) -> frozenset[str | int]:
+    """Where an effect acts: its IR pair (0..7), all eight (a ring effect), or the drive (a wheel's effect or
+    the whole robot's)."""
+    kind = E.LIBRARY[cand.name].kind
+    if kind == "sensor":
+        return frozenset({cand.site})
+    return frozenset(range(8)) if kind == "ring" else frozenset({"drive"})
+
+
+def rivals(best: Model, tried: list[Model]) -> list[Model]:
+    """The tried models that explain it equally well (held-out cost within AMBIGUITY of best's) with an effect
+    acting where best's does: one acting elsewhere removes another part of the mismatch, not this one
+    (tests/test_diagnosis.py::test_a_rival_acts_where_the_chosen_effect_does)."""
+    where = reach(best.effects[-1])
+    return [m for m in tried if m is not best and m.cost_test <= best.cost_test * (1 + AMBIGUITY)
+            and reach(m.effects[-1]) & where]
+
+
 def objective_channels(channels: list[str], available: list[str]) -> list[str]:
     """The channels a fit is judged on: the located ones and their family."""
     wanted: set[str] = set()
@@ -453,7 +471,8 @@ def bic(model: Model) -> float:
 
 def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candidate],
            keep: int) -> list[tuple[Candidate, list[float]]]:
-    """The `keep` candidates that promise the lowest training cost, each with where its fit should start.
+    """The `keep` candidates that promise the lowest training cost, and the most promising at each place (reach)
+    none of those acts on, each with where its fit should start.
 
     One batch run: the current model plus each candidate at its absent value, nudged, and at a few
     trial values across its range (screen_trials).  A candidate's promise is the best of one
@@ -502,7 +521,15 @@ def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candid
         predicted.append(costs[best])
         # the values tried outright, with their actual costs, for zoom
         seen.append(sorted([(float(x0[0]), float(r0 @ r0))] + [(x, c) for x, c in zip(trials, costs[1:])]))
-    chosen = [(cands[i], starts[i], seen[i]) for i in (int(i) for i in np.argsort(predicted)[:keep])]
+    order = [int(i) for i in np.argsort(predicted)]
+    picked = order[:keep]
+    for i in order[keep:]:
+        # a place the located channels point to keeps its best candidate, if it promises any gain: an IR pair's
+        # gain promises less than a wheel's many effects, each more than it, and would never be fitted
+        # (tests/test_diagnosis.py::test_each_place_screened_keeps_its_most_promising_effect)
+        if reach(cands[i]) not in {reach(cands[j]) for j in picked} and predicted[i] < float(train[0] @ train[0]):
+            picked.append(i)
+    chosen = [(cands[i], starts[i], seen[i]) for i in picked]
     zoomed = dict(zoom(obj, base, current, [entry for entry in chosen if entry[0] not in joint]))
     return [(cand, start if cand in joint else zoomed[cand]) for cand, start, _seen in chosen
             if cand in joint or cand in zoomed]
@@ -725,7 +752,7 @@ def _select(obj: Objective, base: RobotParams, cands: list[Candidate], progress:
         best = choose(obj, current, tried, cands, now_located)
         if best is None:
             break
-        best.rivals = [m for m in tried if m is not best and m.cost_test <= best.cost_test * (1 + AMBIGUITY)]
+        best.rivals = rivals(best, tried)
         best.alternatives = [m.effects[-1].label() for m in best.rivals]
         if refine is not None:
             say(f"effect {step + 1}: fitting {best.effects[-1].label()} and the robot's build together")
