@@ -908,9 +908,10 @@ def test_an_effect_whose_cost_rises_every_way_the_screening_looked_is_not_fitted
     assert zoom(dipping, DEFAULT, current, [(play, [1e-4], seen)]) == [(play, [1e-4])]
 
 
-def test_each_place_screened_keeps_its_most_promising_effect():
+def test_each_located_place_keeps_its_most_promising_effect():
     """Five wheel effects each promise more than IR pair 3's gain: the gain is still fitted, the best at its
-    place, beside the 4 best; pair 3's offset (its place has its best) and pair 5's (promising nothing) are not."""
+    place, beside the 4 best; pair 3's offset (its place has its best) and pair 5's (promising nothing) are not.
+    Once pair 3 is no longer located, its gain is left to the 4 best."""
     from types import SimpleNamespace
 
     from host_sim.diagnosis.fit import Candidate, Model, screen
@@ -927,10 +928,13 @@ def test_each_place_screened_keeps_its_most_promising_effect():
     obj = SimpleNamespace(residuals=residuals)
     (r0,), _ = residuals([DEFAULT])
     current = Model([], [], DEFAULT, float(r0 @ r0), float(r0 @ r0), r0.size)
-    shortlist = screen(obj, DEFAULT, current, [*wheel, offset, gain, elsewhere], 4)
-    assert {c for c, _start in shortlist} == {*wheel, gain} - {Candidate("viscous_friction", "right")}
+    cands = [*wheel, offset, gain, elsewhere]
+    shortlist = screen(obj, DEFAULT, current, cands, 4, ["wheel_l", "ir_3", "ir_5"])
+    best = {*wheel} - {Candidate("viscous_friction", "right")}
+    assert {c for c, _start in shortlist} == best | {gain}
     ((start,),) = [s for c, s in shortlist if c == gain]
     assert start == pytest.approx(0.75)
+    assert {c for c, _start in screen(obj, DEFAULT, current, cands, 4, ["wheel_l", "ir_5"])} == best
 
 
 def test_a_rival_acts_where_the_chosen_effect_does():

@@ -121,6 +121,12 @@ def reach(cand: Candidate) -> frozenset[str | int]:
     return frozenset(range(8)) if kind == "ring" else frozenset({"drive"})
 
 
+def places(channels: list[str]) -> set[str | int]:
+    """Where these channels point: the drive, and each IR pair (0..7) of theirs."""
+    out: set[str | int] = {int(c.split("_")[1]) for c in channels if sensor_channel(c)}
+    return out | ({"drive"} if any(drive_channel(c) for c in channels) else set())
+
+
 def rivals(best: Model, tried: list[Model]) -> list[Model]:
     """The tried models that explain it equally well (held-out cost within AMBIGUITY of best's) with an effect
     acting where best's does: one acting elsewhere removes another part of the mismatch, not this one
@@ -470,9 +476,9 @@ def bic(model: Model) -> float:
 
 
 def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candidate],
-           keep: int) -> list[tuple[Candidate, list[float]]]:
-    """The `keep` candidates that promise the lowest training cost, and the most promising at each place (reach)
-    none of those acts on, each with where its fit should start.
+           keep: int, located: list[str] | None = None) -> list[tuple[Candidate, list[float]]]:
+    """The `keep` candidates that promise the lowest training cost, and the most promising at each place the
+    located channels point to (places) that none of those acts on (reach), each with where its fit should start.
 
     One batch run: the current model plus each candidate at its absent value, nudged, and at a few
     trial values across its range (screen_trials).  A candidate's promise is the best of one
@@ -522,12 +528,13 @@ def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candid
         # the values tried outright, with their actual costs, for zoom
         seen.append(sorted([(float(x0[0]), float(r0 @ r0))] + [(x, c) for x, c in zip(trials, costs[1:])]))
     order = [int(i) for i in np.argsort(predicted)]
-    picked = order[:keep]
+    picked, wanted = order[:keep], places(located or [])
     for i in order[keep:]:
-        # a place the located channels point to keeps its best candidate, if it promises any gain: an IR pair's
-        # gain promises less than a wheel's many effects, each more than it, and would never be fitted
-        # (tests/test_diagnosis.py::test_each_place_screened_keeps_its_most_promising_effect)
-        if reach(cands[i]) not in {reach(cands[j]) for j in picked} and predicted[i] < float(train[0] @ train[0]):
+        # a place still located keeps its best candidate, if it promises any gain: an IR pair's gain promises
+        # less than a wheel's many effects, each more than it, and would never be fitted; one no longer located
+        # is left, its fit would be of noise (tests/test_diagnosis.py::test_each_located_place_keeps_its_most_promising_effect)
+        if (reach(cands[i]) & wanted and reach(cands[i]) not in {reach(cands[j]) for j in picked}
+                and predicted[i] < float(train[0] @ train[0])):
             picked.append(i)
     chosen = [(cands[i], starts[i], seen[i]) for i in picked]
     zoomed = dict(zoom(obj, base, current, [entry for entry in chosen if entry[0] not in joint]))
@@ -735,7 +742,7 @@ def _select(obj: Objective, base: RobotParams, cands: list[Candidate], progress:
         if not pool:
             break
         say(f"effect {step + 1}: screening {len(pool)} candidates")
-        shortlist = screen(obj, base, current, pool, SHORTLIST)
+        shortlist = screen(obj, base, current, pool, SHORTLIST, now_located)
         fitters = obj.workers
         if fitters is None:
             tried = []
