@@ -53,6 +53,19 @@ def compare(rec: Recording, params: RobotParams, world: World | None, seconds: f
     contact = contact_windows(rec, windows, params, world)
     judge_slides(rec, windows, params, contact)
     run = run_windows(rec, windows, params, world)
+    unjudged, far = ir_unjudged(rec, windows, params, world)
+    chans = build_channels(rec, windows, run, [params], world, unjudged, far)
+    cmp = Comparison(seconds, windows, chans, contact, held_out_fit(chans, windows, contact), pose=run.pose[:, 0],
+                     unjudged=unjudged, ceiling=held_out_ceiling(chans, windows, contact))
+    if locate:
+        _locate(cmp, rec, params, world)
+    return cmp
+
+
+def ir_unjudged(rec: Recording, windows: Windows, params: RobotParams, world: World | None
+                ) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """(the IR readings not judged, (W, T - 1, S): those the tracker's noise unsettles and the clipped ones; those
+    beyond the law's calibrated range), each None where there is none to judge (no pose or no walls)."""
     unjudged = far = None
     if rec.pose is not None and world is not None and world.n_walls:
         axis = axis_distances(rec, windows.index[:, 1:], params, world)
@@ -63,12 +76,7 @@ def compare(rec: Recording, params: RobotParams, world: World | None, seconds: f
         # (tests/test_clipping.py::test_clipped_readings_are_unexplained_and_fit_no_sensor_gain)
         held = unjudged_clips(clips, windows.index[:, 1:], rec.n_ir if unjudged is None else unjudged.shape[-1])
         unjudged = held if unjudged is None else unjudged | held
-    chans = build_channels(rec, windows, run, [params], world, unjudged, far)
-    cmp = Comparison(seconds, windows, chans, contact, held_out_fit(chans, windows, contact), pose=run.pose[:, 0],
-                     unjudged=unjudged, ceiling=held_out_ceiling(chans, windows, contact))
-    if locate:
-        _locate(cmp, rec, params, world)
-    return cmp
+    return unjudged, far
 
 
 def stratify(cmp: Comparison, rec: Recording) -> None:

@@ -60,6 +60,18 @@ class Regimes:
         self.labels[name] = (values, words)
 
 
+# The least of a kind of motion, or of a sensor facing a wall, that judges what it shows: with less, those
+# effects are said to be poorly judged (a "match" is then weak evidence).
+MIN_REGIME_S = 4.0
+
+
+def near_wall_seconds(rec: Recording, reg: Regimes) -> list[float]:
+    """Per IR pair: the seconds its axis met a wall within 12 cm of the rim (its `wall_k` regimes 0 and 1; 0.0
+    where the regimes have no walls)."""
+    return [float((reg.labels[f"wall_{k}"][0] < 2).sum()) * rec.sample_period if f"wall_{k}" in reg.labels else 0.0
+            for k in range(rec.n_ir)]
+
+
 def _wheel_speeds(rec: Recording, idx: np.ndarray, p: RobotParams) -> np.ndarray:
     """(W, T - 1, 2) rim speeds (m/s) from the recorded encoders, per period."""
     d = np.diff(rec.enc[idx], axis=1).astype(float)

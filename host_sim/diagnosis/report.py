@@ -21,7 +21,9 @@ from host_sim.diagnosis.fit import Model, Objective, Refine, candidates_for, fit
 from host_sim.diagnosis.channels import (ACCUMULATED, IR, SENSOR_NAMES, WHEELS, drive_channel, judged_windows,
                                         ring_comparable)
 from host_sim.diagnosis.clipping import clipped
-from host_sim.diagnosis.locate import Finding, Regimes, noise_level, regimes, runs, total_noise
+from host_sim.diagnosis.locate import (MIN_REGIME_S, Finding, Regimes, near_wall_seconds, noise_level, regimes, runs,
+                                      total_noise)
+from host_sim.diagnosis.ring import ring_law
 from host_sim.diagnosis.model_error import with_model_error
 from host_sim.diagnosis.odometry import Odometry, measure_odometry
 from host_sim.diagnosis.odometry import per_count as odometry_per_count
@@ -129,12 +131,11 @@ def _finite(d: dict[str, float]) -> dict[str, float | None]:
     return {k: (round(v, 2) if math.isfinite(v) else None) for k, v in d.items()}
 
 
-# What each kind of motion, away from the walls, lets the diagnosis judge; with less than
-# MIN_REGIME_S of it those effects are said to be poorly judged (a "match" is then weak evidence).
+# What each kind of motion, away from the walls, lets the diagnosis judge (with less than MIN_REGIME_S of it,
+# poorly).
 REGIME_EFFECTS = (("turning", (0, 2), "turned", "track width, turning resistance and the centre of mass"),
                   ("direction", (1,), "drove backwards", "backlash and the wheels' asymmetries in reverse"),
                   ("acceleration", (1, 2), "accelerated or braked", "mass, inertia and actuator delay"))
-MIN_REGIME_S = 4.0
 
 
 def excitation_notes(rec: Recording, first: Comparison, params: RobotParams, world: World | None) -> list[str]:
@@ -160,12 +161,8 @@ def sensor_excitation_notes(rec: Recording, reg: Regimes, world: World | None) -
     (tests/test_diagnosis.py::test_a_sensor_that_seldom_faced_a_wall_is_said_to_be_poorly_judged)."""
     if world is None or world.n_walls == 0:
         return []  # no walls: the IR ring is not judged at all, and check_data says so
-    seldom = []
-    for k in range(rec.n_ir):
-        if f"wall_{k}" in reg.labels:
-            seconds = float((reg.labels[f"wall_{k}"][0] < 2).sum()) * rec.sample_period
-            if seconds < MIN_REGIME_S:
-                seldom.append(f"{SENSOR_NAMES[k]} for {seconds:.1f} s")
+    seldom = [f"{SENSOR_NAMES[k]} for {seconds:.1f} s" for k, seconds in enumerate(near_wall_seconds(rec, reg))
+              if f"wall_{k}" in reg.labels and seconds < MIN_REGIME_S]
     if not seldom:
         return []
     return [f"a wall came within 12 cm of {', '.join(seldom)} only, so these sensors' gain, alignment and "
@@ -381,8 +378,11 @@ def _diagnose_fitted(rec: Recording, tol: Tolerance, world: World | None, second
     """The diagnosis on rec (with a test block: the part fitted): (its result, the chain of models, the
     objective, the twin the effects were fitted to: calibrated within tolerance); test_block: a test block
     follows, whose rules then judge what is named (block_verdict.judge_test_block)."""
+    ring = ring_law(rec, tol.datasheet, world, seconds[0])
+    if ring is not None:
+        tol = Tolerance(ring.params, tol.bands)
     params = tol.datasheet
-    notes = check_data(rec, world, params)
+    notes = check_data(rec, world, params) + ([ring.words()] if ring is not None else [])
     say = progress or (lambda _text: None)
     say("comparing the twin with the recording")
     comparisons = compare_all(rec, params, world, seconds)
