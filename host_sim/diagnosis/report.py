@@ -379,7 +379,7 @@ def _diagnose_fitted(rec: Recording, tol: Tolerance, world: World | None, second
     objective, the twin the effects were fitted to: calibrated within tolerance); test_block: a test block
     follows, whose rules then judge what is named (block_verdict.judge_test_block)."""
     ring = ring_law(rec, tol.datasheet, world, seconds[0])
-    if ring is not None:
+    if ring is not None:  # what every IR pair shares is the law's, not a pair's fault (tests/test_ring.py)
         tol = Tolerance(ring.params, tol.bands)
     params = tol.datasheet
     notes = check_data(rec, world, params) + ([ring.words()] if ring is not None else [])
