@@ -1243,6 +1243,41 @@ def test_a_twin_asked_for_twice_in_one_batch_runs_once(nominal_run):
     assert np.abs(train[1] - train[0]).max() > 1
 
 
+def test_a_twin_that_differs_in_its_sensors_alone_is_run_once(nominal_run, monkeypatch):
+    """A window run reads none of the IR model's fields (windows.SENSOR_FIELDS): twins that differ in those alone
+    run once, and an objective keeps its newest runs, so an IR effect's fit beside a located drive runs the drive
+    once, not at every step; the residuals are those of a run of each."""
+    from host_sim.diagnosis import fit as F
+    from host_sim.diagnosis.windows import SENSOR_FIELDS, run_windows
+
+    first = compare(nominal_run, DEFAULT, ROOM)
+    sensed = DEFAULT.replace(ir_gain=3.5, ir_latency=0.02, ir_gain_scale=(1.3,) * 8, ambient_leakage=(0.1,) * 8)
+    assert {"ir_gain", "ir_latency", "ir_gain_scale", "ambient_leakage"} <= set(SENSOR_FIELDS)
+    assert "body_radius" not in SENSOR_FIELDS  # the body meets the walls
+    both = run_windows(nominal_run, first.windows, [DEFAULT, sensed], ROOM)
+    for a in (both.enc, both.pose, both.vbat):
+        np.testing.assert_array_equal(a[:, 0], a[:, 1])
+    names = ["wheel_l", "wheel_r", "ir_0"]
+    make = lambda: F.Objective(nominal_run, first.windows, ROOM, names, {n: 1.0 for n in names + ["travel", "turn"]},
+                               first.contact, first.unjudged)
+    gains = [E.apply(DEFAULT, "ir_gain", 0, [g]) for g in (1.3, 0.8, 1.1)]
+    fresh = make().residuals([DEFAULT, *gains])
+    obj, ran = make(), []
+
+    def counted(rec, windows, robots, *a, **kw):
+        ran.append(len(robots))
+        return run_windows(rec, windows, robots, *a, **kw)
+
+    monkeypatch.setattr(F, "run_windows", counted)
+    kept = [obj.residuals([DEFAULT, gains[0]]), obj.residuals(gains[1:])]
+    assert ran == [1]  # the drive ran once, for all four
+    np.testing.assert_array_equal(np.vstack([kept[0][0], kept[1][0]]), fresh[0])
+    np.testing.assert_array_equal(np.vstack([kept[0][1], kept[1][1]]), fresh[1])
+    assert np.abs(fresh[0][1] - fresh[0][0]).max() > 1  # the gain shows
+    obj.residuals([E.apply(DEFAULT, "dry_friction", "left", [1e-3])])
+    assert ran == [1, 1]  # another drive runs
+
+
 def test_a_fit_on_the_sensors_alone_runs_no_physics(nominal_run, monkeypatch):
     """The IR channels are the twin's sensors on the recorded track, whatever its motion: an objective of
     sensor channels alone (an IR effect located on the ring) gets the same residuals without running the

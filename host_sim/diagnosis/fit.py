@@ -11,6 +11,7 @@ import dataclasses
 import math
 import multiprocessing
 import signal
+from collections import OrderedDict
 from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass, field
 from typing import Callable
@@ -22,7 +23,7 @@ from host_sim.physics import effects as E
 from host_sim.diagnosis.channels import (ACCUMULATED, AMBIENT, IR, MOTION, WHEELS, Channel, build_channels,
                                         drive_channel, judged_windows, sensor_channel, sensor_channels)
 from host_sim.diagnosis.tolerance import Tolerance, relative_bounds
-from host_sim.diagnosis.windows import Windows, by_step_parts, run_windows
+from host_sim.diagnosis.windows import WindowRun, Windows, by_step_parts, run_key, run_windows
 from host_sim.physics.params import DEFAULT, RobotParams
 from host_sim.recordings.recording import Recording
 from host_sim.physics.world import World
@@ -32,6 +33,8 @@ MAX_EFFECTS = 3
 # (fit_totals): a window's count carries its start's speed error, which the periods judge well enough.
 FITTED_TOTALS = ("forward", "heading_rate")
 SHORTLIST = 4  # candidates fitted in full after screening
+RUNS_KEPT = 16  # window runs an objective keeps, the newest: an IR effect's fit beside a located drive tries
+# twins that differ in their sensors alone, whose run is the one before
 MIN_SHARE = 16  # robots: a batch's own cost (its steps in Python) is about that many robots', so workers share
 # no smaller pieces of one (tests/test_diagnosis.py::test_workers_share_a_large_batch_in_runs_of_neighbours)
 WITHIN_NOISE = 1.0  # held-out cost per weighted residual below which no further effect is sought
@@ -176,6 +179,7 @@ class Objective:
         self.train_windows = np.zeros(0, dtype=int)  # each training residual's window: the intervals' clusters
         self.clustered_intervals = False  # window-clustered sandwich intervals (with a test block) or the Jacobian's
         self.tolerance: Tolerance | None = None  # the datasheet's: an effect within it is the robot as built
+        self.kept: OrderedDict[tuple[str, str], WindowRun] = OrderedDict()  # (part, run_key) -> its run, newest last
 
     def residuals(self, robots: list[RobotParams], part: str = "both") -> tuple[np.ndarray, np.ndarray]:
         """(train (N, n), test (N, m)) weighted residuals of N twins: with workers (select), the robots
@@ -217,7 +221,7 @@ class Objective:
             chans = {c.name: c for c in sensor_channels(self.rec, windows.index[:, 1:], robots, self.world,
                                                         unjudged)}
         else:
-            run = run_windows(self.rec, windows, robots, self.world)
+            run = self._runs(part, windows, robots)
             chans = {c.name: c for c in build_channels(self.rec, windows, run, robots,
                                                         self.world if self.sensors else None, unjudged)}
         train_w, test_w = self.train[run_these], self.test[run_these]
@@ -246,6 +250,27 @@ class Objective:
         if part != "test":
             self.train_windows = np.concatenate(groups)
         return np.concatenate(train, axis=1), np.concatenate(test, axis=1)
+
+    def _runs(self, part: str, windows: Windows, robots: list[RobotParams]) -> WindowRun:
+        """The robots' window runs (on `part`'s windows): those not kept, run in one batch, one per run_key;
+        the newest RUNS_KEPT kept (tests/test_diagnosis.py::test_a_twin_that_differs_in_its_sensors_alone_is_run_once)."""
+        keys = [(part, run_key(p)) for p in robots]
+        first: dict[tuple[str, str], RobotParams] = {}
+        for k, p in zip(keys, robots):
+            if k not in self.kept:
+                first.setdefault(k, p)
+        if first:
+            run = run_windows(self.rec, windows, list(first.values()), self.world)
+            assert run.vbat is not None
+            for j, k in enumerate(first):
+                self.kept[k] = WindowRun(run.enc[:, j:j + 1].copy(), run.pose[:, j:j + 1].copy(),
+                                         run.vbat[:, j:j + 1].copy())
+        runs = [self.kept[k] for k in keys]
+        for k in keys:
+            self.kept.move_to_end(k)
+        while len(self.kept) > RUNS_KEPT:
+            self.kept.popitem(last=False)
+        return WindowRun(*(np.concatenate([getattr(r, f) for r in runs], axis=1) for f in ("enc", "pose", "vbat")))
 
     def located_gain(self, before: np.ndarray, after: np.ndarray, located: list[str]) -> float:
         """1 - the held-out sum of squares after / before, on the located channels' columns alone, of those

@@ -6,13 +6,13 @@ tracker every window starts at the origin of an empty world.  See docs/diagnosis
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
 
 from host_sim.sensors import ir_sensor
-from host_sim.robot.batch import SUBSTEPS, BatchSim, robot_params, step_parts
+from host_sim.robot.batch import IR_FIELDS, SUBSTEPS, BatchSim, robot_params, step_parts
 from host_sim.physics.motors import ticks_per_rev
 from host_sim.physics.params import RobotParams
 from host_sim.recordings.recording import Recording
@@ -182,6 +182,17 @@ def _states(windows: Windows, rec: Recording, rows: np.ndarray, p: RobotParams) 
         q.flags.writeable = v.flags.writeable = False
         kept = windows.states[key] = (rec, q, v)
     return kept[1], kept[2]
+
+
+# The fields only the IR model reads (batch.IR_FIELDS but the body's, which meets the walls): a window run,
+# which reads no sensor, is the same for robots that differ in these alone
+# (tests/test_diagnosis.py::test_a_twin_that_differs_in_its_sensors_alone_is_run_once).
+SENSOR_FIELDS = tuple(f for f in IR_FIELDS if f.startswith("ir_") or f == "ambient_leakage")
+
+
+def run_key(p: RobotParams) -> str:
+    """What run_windows reads of p: p but its SENSOR_FIELDS, by repr (floats round-trip exactly)."""
+    return repr(tuple(getattr(p, f.name) for f in fields(p) if f.name not in SENSOR_FIELDS))
 
 
 def run_windows(rec: Recording, windows: Windows, params: Any, world: World | None, *,
