@@ -252,25 +252,35 @@ class Objective:
         return np.concatenate(train, axis=1), np.concatenate(test, axis=1)
 
     def _runs(self, part: str, windows: Windows, robots: list[RobotParams]) -> WindowRun:
-        """The robots' window runs (on `part`'s windows): those not kept, run in one batch, one per run_key;
-        the newest RUNS_KEPT kept (tests/test_diagnosis.py::test_a_twin_that_differs_in_its_sensors_alone_is_run_once)."""
+        """The robots' window runs (on `part`'s windows), one per run_key: a batch of new twins, each its own, runs
+        as it is; kept are the newest RUNS_KEPT of batches that small, as a fit's steps are
+        (tests/test_diagnosis.py::test_a_twin_that_differs_in_its_sensors_alone_is_run_once)."""
         keys = [(part, run_key(p)) for p in robots]
         first: dict[tuple[str, str], RobotParams] = {}
         for k, p in zip(keys, robots):
             if k not in self.kept:
                 first.setdefault(k, p)
-        if first:
-            run = run_windows(self.rec, windows, list(first.values()), self.world)
-            assert run.vbat is not None
-            for j, k in enumerate(first):
-                self.kept[k] = WindowRun(run.enc[:, j:j + 1].copy(), run.pose[:, j:j + 1].copy(),
-                                         run.vbat[:, j:j + 1].copy())
-        runs = [self.kept[k] for k in keys]
+        if len(first) == len(robots):
+            run = run_windows(self.rec, windows, robots, self.world)
+            if len(robots) > RUNS_KEPT:
+                return run  # a screening's batch: nothing to share, and too many to keep
+            self._keep(keys, run)
+        else:
+            if first:
+                self._keep(list(first), run_windows(self.rec, windows, list(first.values()), self.world))
+            runs = [self.kept[k] for k in keys]
+            run = WindowRun(*(np.concatenate([getattr(r, f) for r in runs], axis=1) for f in ("enc", "pose", "vbat")))
         for k in keys:
             self.kept.move_to_end(k)
         while len(self.kept) > RUNS_KEPT:
             self.kept.popitem(last=False)
-        return WindowRun(*(np.concatenate([getattr(r, f) for r in runs], axis=1) for f in ("enc", "pose", "vbat")))
+        return run
+
+    def _keep(self, keys: list[tuple[str, str]], run: WindowRun) -> None:
+        """Keep each robot j of run as keys[j]'s."""
+        assert run.vbat is not None
+        for j, k in enumerate(keys):
+            self.kept[k] = WindowRun(run.enc[:, j:j + 1], run.pose[:, j:j + 1], run.vbat[:, j:j + 1])
 
     def located_gain(self, before: np.ndarray, after: np.ndarray, located: list[str]) -> float:
         """1 - the held-out sum of squares after / before, on the located channels' columns alone, of those
