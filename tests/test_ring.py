@@ -3,6 +3,8 @@ against the others.  The recordings are the twin's own, its law scaled as a robo
 scale it."""
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 from host_sim.diagnosis import diagnose
@@ -28,10 +30,11 @@ def test_the_ring_reads_as_much_above_the_law_as_its_walls_and_a_weak_pair_is_ju
     assert ring.factor == pytest.approx(BRIGHT, rel=0.01)  # the median holds beside the weak pair
     assert ring.gains[6] / ring.factor == pytest.approx(0.7, rel=0.02)
     assert ring.params.ir_gain == pytest.approx(DEFAULT.ir_gain * ring.factor)
+    assert R.ring_law(rec, DEFAULT, None, 1.0) is None  # no walls to judge a pair by
+    assert R.ring_law(dataclasses.replace(rec, ambient_recorded=False), DEFAULT, ROOM, 1.0) is None  # nor a reading
     # fewer pairs at a wall than MIN_PAIRS: the law stands
     monkeypatch.setattr(R, "MIN_PAIRS", len(ring.pairs) + 1)
     assert R.ring_law(rec, DEFAULT, ROOM, 1.0) is None
-    assert R.ring_law(rec, DEFAULT, None, 1.0) is None  # no walls to judge a pair by
 
 
 def test_a_pair_within_its_band_on_a_ring_brighter_than_the_law_is_a_match(tmp_path, monkeypatch):

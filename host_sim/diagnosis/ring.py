@@ -7,8 +7,8 @@ what the datasheet's tolerance bands.  What the pairs share is then the law's, n
 
 Each pair's gain is fitted on its own readings, by linear least squares (a reading's reflected light is in
 proportion to it); the median over the pairs that faced a wall for MIN_REGIME_S scales the law (ir_gain) before
-anything is compared.  The median still holds with one pair or more faulty, beside at least MIN_PAIRS that are
-not (tests/test_ring.py).  The whole recording sets it, as a datasheet would be corrected; a test block is not
+anything is compared.  The median holds while fewer than half the pairs it is over are faulty: MIN_PAIRS of 3
+hold one (tests/test_ring.py).  The whole recording sets it, as a datasheet would be corrected; a test block is not
 seen (report._diagnose_fitted is given the fitted part alone).
 """
 from __future__ import annotations
@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from host_sim.diagnosis.channels import SENSOR_NAMES
+from host_sim.diagnosis.channels import SENSOR_NAMES, ring_comparable
 from host_sim.diagnosis.compare import ir_unjudged
 from host_sim.diagnosis.locate import MIN_REGIME_S, near_wall_seconds, regimes
 from host_sim.diagnosis.windows import Windows, make_windows, sensors_on_track
@@ -61,8 +61,9 @@ def pair_gains(rec: Recording, windows: Windows, p: RobotParams, world: World) -
 
 def ring_law(rec: Recording, datasheet: RobotParams, world: World | None, seconds: float) -> RingLaw | None:
     """The ring's law on rec (its `seconds` windows), or None where fewer than MIN_PAIRS pairs faced a wall for
-    MIN_REGIME_S (or there is no pose or no wall to judge them by)."""
-    if rec.pose is None or world is None or not world.n_walls:
+    MIN_REGIME_S, or the ring is not judged at all (no pose, no wall, or readings that are not the twin's ring's:
+    channels.ring_comparable)."""
+    if rec.pose is None or world is None or not world.n_walls or not ring_comparable(rec, datasheet):
         return None
     windows = make_windows(rec, seconds)
     near = near_wall_seconds(rec, regimes(rec, windows, datasheet, world))

@@ -184,8 +184,8 @@ def _states(windows: Windows, rec: Recording, rows: np.ndarray, p: RobotParams) 
     return kept[1], kept[2]
 
 
-# The fields only the IR model reads (batch.IR_FIELDS but the body's, which meets the walls): a window run,
-# which reads no sensor, is the same for robots that differ in these alone
+# The IR model's own fields (batch.IR_FIELDS named ir_*, and the leakage; not the body's radius, which meets the
+# walls): a window run, which reads no sensor, is the same for robots that differ in these alone
 # (tests/test_diagnosis.py::test_a_twin_that_differs_in_its_sensors_alone_is_run_once).
 SENSOR_FIELDS = tuple(f for f in IR_FIELDS if f.startswith("ir_") or f == "ambient_leakage")
 
