@@ -562,19 +562,26 @@ def screen(obj: Objective, base: RobotParams, current: Model, cands: list[Candid
         predicted.append(costs[best])
         # the values tried outright, with their actual costs, for zoom
         seen.append(sorted([(float(x0[0]), float(r0 @ r0))] + [(x, c) for x, c in zip(trials, costs[1:])]))
-    order = [int(i) for i in np.argsort(predicted)]
-    picked, wanted = order[:keep], places(located or [])
-    for i in order[keep:]:
-        # a place still located keeps its best candidate, if it promises any gain: an IR pair's gain promises
-        # less than a wheel's many effects, each more than it, and would never be fitted; one no longer located
-        # is left, its fit would be of noise (tests/test_diagnosis.py::test_each_located_place_keeps_its_most_promising_effect)
-        if (reach(cands[i]) & wanted and reach(cands[i]) not in {reach(cands[j]) for j in picked}
-                and predicted[i] < float(train[0] @ train[0])):
-            picked.append(i)
+    picked = _each_place(cands, predicted, keep, located or [], float(train[0] @ train[0]))
     chosen = [(cands[i], starts[i], seen[i]) for i in picked]
     zoomed = dict(zoom(obj, base, current, [entry for entry in chosen if entry[0] not in joint]))
     return [(cand, start if cand in joint else zoomed[cand]) for cand, start, _seen in chosen
             if cand in joint or cand in zoomed]
+
+
+def _each_place(cands: list[Candidate], predicted: list[float], keep: int, located: list[str], cost: float
+                ) -> list[int]:
+    """The `keep` candidates of lowest predicted cost, then the lowest at each place still located (places) that
+    none of those acts on (reach), if it promises any gain (under `cost`, the current twin's): an IR pair's gain
+    promises less than a wheel's many effects, each more than it, and would never be fitted; a place no longer
+    located is left, its fit would be of noise
+    (tests/test_diagnosis.py::test_each_located_place_keeps_its_most_promising_effect)."""
+    order = [int(i) for i in np.argsort(predicted)]
+    picked, wanted = order[:keep], places(located)
+    for i in order[keep:]:
+        if reach(cands[i]) & wanted and reach(cands[i]) not in {reach(cands[j]) for j in picked} and predicted[i] < cost:
+            picked.append(i)
+    return picked
 
 
 def zoom(obj: Objective, base: RobotParams, current: Model,

@@ -372,17 +372,24 @@ def _implied_per_count(named: list[dict[str, Any]], datasheet: RobotParams) -> t
     return tuple((min(m[w] for m in made), max(m[w] for m in made)) for w in (0, 1))
 
 
+def _ring_and_notes(rec: Recording, tol: Tolerance, world: World | None, seconds: float
+                    ) -> tuple[Tolerance, list[str]]:
+    """(tol, its IR law scaled to the ring's own where the ring judges it: what every pair shares is the law's, not
+    a pair's fault (ring.py; tests/test_ring.py); the data's notes (check_data), and the ring's)."""
+    ring = ring_law(rec, tol.datasheet, world, seconds)
+    if ring is not None:
+        tol = Tolerance(ring.params, tol.bands)
+    return tol, check_data(rec, world, tol.datasheet) + ([ring.words()] if ring is not None else [])
+
+
 def _diagnose_fitted(rec: Recording, tol: Tolerance, world: World | None, seconds: tuple[float, ...],
                      progress: Callable[[str], None] | None, workers: int, test_block: bool = False
                      ) -> tuple[Diagnosis, list[Model], Objective | None, RobotParams]:
     """The diagnosis on rec (with a test block: the part fitted): (its result, the chain of models, the
     objective, the twin the effects were fitted to: calibrated within tolerance); test_block: a test block
     follows, whose rules then judge what is named (block_verdict.judge_test_block)."""
-    ring = ring_law(rec, tol.datasheet, world, seconds[0])
-    if ring is not None:  # what every IR pair shares is the law's, not a pair's fault (tests/test_ring.py)
-        tol = Tolerance(ring.params, tol.bands)
+    tol, notes = _ring_and_notes(rec, tol, world, seconds[0])
     params = tol.datasheet
-    notes = check_data(rec, world, params) + ([ring.words()] if ring is not None else [])
     say = progress or (lambda _text: None)
     say("comparing the twin with the recording")
     comparisons = compare_all(rec, params, world, seconds)

@@ -1,15 +1,11 @@
 """The IR ring's own law: the factor by which every pair reads above or below the twin's law.
 
-The twin's IR law (sensors/ir_sensor.py) is the datasheet's, with the walls as the world file gives them. A
-robot's sensors follow their own curve and its walls reflect as they do, so all its pairs may read some per cent
-above or below the law at once; a pair's gain (ir_gain_scale) is its efficiency against the other pairs, which is
-what the datasheet's tolerance bands.  What the pairs share is then the law's, not a fault of any one pair.
-
-Each pair's gain is fitted on its own readings, by linear least squares (a reading's reflected light is in
-proportion to it); the median over the pairs that faced a wall for MIN_REGIME_S scales the law (ir_gain) before
-anything is compared.  The median holds while fewer than half the pairs it is over are faulty: MIN_PAIRS of 3
-hold one (tests/test_ring.py).  The whole recording sets it, as a datasheet would be corrected; a test block is not
-seen (report._diagnose_fitted is given the fitted part alone).
+A robot's sensors follow their own curve and its walls reflect as they do, so all its pairs may read some per cent
+above or below the datasheet's law at once; a pair's gain band is its efficiency against the other pairs. What the
+pairs share is then the law's, not a fault of any one pair: each pair's gain is fitted on its own readings (linear
+least squares), and their median over the pairs that faced a wall for MIN_REGIME_S scales the law (ir_gain) before
+anything is compared.  The median holds while fewer than half its pairs are faulty: MIN_PAIRS of 3 hold one.
+docs/diagnosis.md, "The ring's own law"; tests/test_ring.py.
 """
 from __future__ import annotations
 
