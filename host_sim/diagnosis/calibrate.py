@@ -14,7 +14,7 @@ from typing import Any, Callable
 import numpy as np
 from scipy import optimize
 
-from host_sim.diagnosis.channels import drive_channel, sensor_channel
+from host_sim.diagnosis.channels import drive_located, located_sensors
 from host_sim.diagnosis.fit import (FIT_FTOL, FIT_XTOL, Model, Objective, sandwich_intervals, earns_its_place,
                                    f_test, touching_runs)
 from host_sim.physics import effects as E
@@ -151,14 +151,6 @@ def calibrate(obj: Objective, params: RobotParams, tol: Tolerance, nuisances: li
                        [float(b) for b in band])
 
 
-def located_sensors(located: list[str]) -> list[int]:
-    return sorted({int(c.split("_")[1]) for c in located if sensor_channel(c)})
-
-
-def drive_located(located: list[str]) -> bool:
-    return any(drive_channel(c) for c in located)
-
-
 def refit_jointly(obj: Objective, tol: Tolerance, cal: Calibration, model: Model) -> tuple[Model, Calibration]:
     """model's effects and the calibration's nuisances fitted together (the nuisances with their prior), from
     where each stands: an effect fitted on a twin whose build took up part of its mismatch is biased, and
@@ -166,8 +158,7 @@ def refit_jointly(obj: Objective, tol: Tolerance, cal: Calibration, model: Model
     (tests/test_tolerance.py::test_the_build_and_the_effect_are_fitted_together).  A nuisance whose field an
     effect sets is left to the effect; only nuisances of the channels obj weighs are fitted."""
     taken = {target for c in model.effects for target in E.targets(c.name, c.site)}
-    weighed = {int(n.split("_")[1]) for n in obj.names if sensor_channel(n)}
-    drive = any(drive_channel(n) for n in obj.names)
+    weighed, drive = set(located_sensors(obj.names)), drive_located(obj.names)
     keep = [i for i, n in enumerate(cal.nuisances) if (n.field, n.index) not in taken
             and ((n.index is None and drive) or (n.index is not None and n.index in weighed))]
     if not keep or not model.effects:

@@ -52,6 +52,16 @@ def sensor_channel(name: str) -> bool:
     return name.startswith(("ir_", "amb_"))
 
 
+def located_sensors(channels: list[str]) -> list[int]:
+    """The IR pairs these channels point to, in order."""
+    return sorted({int(c.split("_")[1]) for c in channels if sensor_channel(c)})
+
+
+def drive_located(channels: list[str]) -> bool:
+    """Whether any of these channels is the drive's."""
+    return any(drive_channel(c) for c in channels)
+
+
 def judged_windows(name: str, contact: np.ndarray) -> np.ndarray:
     """(W,) bool: the windows a channel is judged on.  A wall contact the twin's dynamics get wrong is left
     out of the drive's channels; the sensors' readings come from the recorded track, so their windows at a

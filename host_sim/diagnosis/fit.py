@@ -21,7 +21,8 @@ from scipy import optimize, stats
 
 from host_sim.physics import effects as E
 from host_sim.diagnosis.channels import (ACCUMULATED, AMBIENT, IR, MOTION, WHEELS, Channel, build_channels,
-                                        drive_channel, judged_windows, sensor_channel, sensor_channels)
+                                        drive_channel, drive_located, judged_windows, located_sensors,
+                                        sensor_channel, sensor_channels)
 from host_sim.diagnosis.tolerance import Tolerance, relative_bounds
 from host_sim.diagnosis.windows import WindowRun, Windows, by_step_parts, run_key, run_windows
 from host_sim.physics.params import DEFAULT, RobotParams
@@ -103,11 +104,11 @@ def candidates_for(channels: list[str], drive: str = "current", bench: bool = Fa
     """The library's effects that may explain these channels, those it offers for the robot's drive and,
     on a bench, none of the floor's or the body's (effects.offered)."""
     out: list[Candidate] = []
-    if any(drive_channel(c) for c in channels):
+    if drive_located(channels):
         for name in DRIVE_EFFECTS:
             if E.offered(name, drive, bench):
                 out += [Candidate(name, s) for s in E.LIBRARY[name].sites()]
-    sensors = sorted({int(c.split("_")[1]) for c in channels if sensor_channel(c)})
+    sensors = located_sensors(channels)
     for k in sensors:
         out += [Candidate(name, k) for name in SENSOR_EFFECTS]
     if sensors:
@@ -126,8 +127,8 @@ def reach(cand: Candidate) -> frozenset[str | int]:
 
 def places(channels: list[str]) -> set[str | int]:
     """Where these channels point: the drive, and each IR pair (0..7) of theirs."""
-    out: set[str | int] = {int(c.split("_")[1]) for c in channels if sensor_channel(c)}
-    return out | ({"drive"} if any(drive_channel(c) for c in channels) else set())
+    out: set[str | int] = set(located_sensors(channels))
+    return out | ({"drive"} if drive_located(channels) else set())
 
 
 def rivals(best: Model, tried: list[Model]) -> list[Model]:

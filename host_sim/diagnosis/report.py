@@ -18,8 +18,8 @@ from host_sim.physics import effects as E
 from host_sim.diagnosis.tell_apart import tell_apart
 from host_sim.diagnosis.compare import Comparison, compare_all, stratify
 from host_sim.diagnosis.fit import Model, Objective, Refine, candidates_for, fit_totals, objective_channels, select
-from host_sim.diagnosis.channels import (ACCUMULATED, IR, SENSOR_NAMES, WHEELS, drive_channel, judged_windows,
-                                        ring_comparable)
+from host_sim.diagnosis.channels import (ACCUMULATED, IR, SENSOR_NAMES, WHEELS, drive_channel, drive_located,
+                                        judged_windows, located_sensors, ring_comparable)
 from host_sim.diagnosis.clipping import clipped
 from host_sim.diagnosis.locate import (MIN_REGIME_S, Finding, Regimes, near_wall_seconds, noise_level, regimes, runs,
                                       total_noise)
@@ -30,8 +30,8 @@ from host_sim.diagnosis.odometry import per_count as odometry_per_count
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
 from host_sim.diagnosis.testblock import TestBlockError, check_test_recording, split_test_block
 from host_sim.diagnosis.block_verdict import judge_held_out, judge_test_block
-from host_sim.diagnosis.calibrate import (Calibration, Nuisance, calibrate, drive_located, drive_nuisances,
-                                          edge_binds, located_sensors, refit_jointly, sensor_nuisances)
+from host_sim.diagnosis.calibrate import (Calibration, Nuisance, calibrate, drive_nuisances, edge_binds,
+                                          refit_jointly, sensor_nuisances)
 from host_sim.diagnosis.tolerance import BANDS, Tolerance
 from host_sim.diagnosis.phrasing import checked, sentence, spans_text
 from host_sim.physics.params import DEFAULT, RobotParams
