@@ -328,6 +328,39 @@ def test_a_build_the_effects_fit_within_tolerance_is_a_match():
     assert [u["channel"] for u in d.unexplained] == ["ir_4"]
 
 
+def test_what_no_effect_explains_is_what_the_build_within_tolerance_leaves(as_built_run):
+    """Where no effect earns its place, what is unexplained is what the build calibrated within the tolerance
+    still locates, with its fit and its build (the one --write-params writes), not the datasheet twin's
+    mismatch, part of which the tolerance holds.  Without such a build, what the twin located stays."""
+    from host_sim.diagnosis.calibrate import Calibration
+    from host_sim.diagnosis.compare import compare_all
+    from host_sim.diagnosis.fit import Model
+    from host_sim.diagnosis.phrasing import sentence
+    from host_sim.diagnosis.report import Diagnosis, _name
+
+    tol = Tolerance(DEFAULT, dict(BANDS))
+    within = compare_all(as_built_run, DEFAULT, ROOM)  # a twin that still locates the drive
+    assert within[0].findings
+    build = Calibration(AS_BUILT)
+    none = Model([], [], DEFAULT, 1.0, 1.0, 100)
+    located = [{"channel": "wheel_l", "regime": "everywhere", "spans": [[2.0, 3.0]],
+                "words": "the left wheel turns 8 % faster than the twin's everywhere, 2–3 s"}]
+
+    def named(kept):
+        d = Diagnosis("run.csv", "match", [], located=list(located), within=kept)
+        d.model = none
+        _name(d, none, [none], [], tol, (None, None), False)
+        return d
+
+    d = named((build, within))
+    assert d.verdict == "unexplained" and d.located == located, d.summary()
+    assert [u["words"] for u in d.unexplained] == [sentence(f) for f in within[0].findings]
+    assert d.fit_after == within[0].fit and d.calibration is build and d.model is None
+    assert any("what the build calibrated within it leaves" in n for n in d.notes)
+    d = named(None)
+    assert d.verdict == "unexplained" and [u["words"] for u in d.unexplained] == [located[0]["words"]]
+
+
 @pytest.mark.slow
 def test_the_build_is_weighed_by_the_noise_it_leaves(tmp_path):
     """A control of the reference plant: a robot drawn within its datasheet (both torque constants about 5 %

@@ -72,6 +72,9 @@ class Diagnosis:
     located_datasheet: list[dict[str, Any]] = field(default_factory=list)  # what the datasheet twin showed
     after: Comparison | None = None  # the fitted twin judged on the same windows
     after_long: Comparison | None = None  # ... and on the longest ones (pictures)
+    # the build calibrated within the tolerance where it still located something, and its comparisons: what is
+    # unexplained where no effect earns its place (_name)
+    within: tuple[Calibration, list[Comparison]] | None = field(default=None, repr=False)
     # each named effect's entry, label and the model that chose it: its rivals are told apart once the verdict
     # has settled which effects stay named (_tell_apart_named)
     apart: list[tuple[dict[str, Any], str, Model]] = field(default_factory=list, repr=False)
@@ -111,9 +114,10 @@ class Diagnosis:
                          f"{self.closest['removes_percent']:.0f} % of it" + (" (on the test block; not named)"
                                                                               if self.fit_test else " (not named)"))
         shown = [k for k in self.fit_before if not k.startswith("amb_")]
-        lines.append("  held-out fit % per channel (1 s windows), before" + (" -> after" if self.effects else "") + ": "
+        after = bool(self.effects) or self.within is not None and self.verdict != "match"  # another twin's fit
+        lines.append("  held-out fit % per channel (1 s windows), before" + (" -> after" if after else "") + ": "
                      + ", ".join(f"{k} {self.fit_before[k]:.0f}" + (f" -> {self.fit_after.get(k, float('nan')):.0f}"
-                                                                    if self.effects else "") for k in shown))
+                                                                    if after else "") for k in shown))
         test = self.fit_test
         if test.get("before"):
             lines.append(f"  test block ({test['from_s']:.0f}-{test['to_s']:.0f} s, seen by no fit nor rule), fit % "
@@ -467,12 +471,29 @@ def _name(result: Diagnosis, final: Model, chain: list[Model], remaining: list[d
     elif not result.effects:
         result.verdict = "unexplained"
         if not final.effects:  # else what is left is what the build with its values within tolerance leaves
-            result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")}
-                                  for item in result.located]
+            _unexplained_by_any(result)
     else:
         result.verdict = "explained" if not remaining else "partly explained"
         if not test_block:  # with one, the block's rules judge what is named (judge_test_block)
             judge_held_out(result, *compared, chain)
+
+
+def _unexplained_by_any(result: Diagnosis) -> None:
+    """No effect earned its place: what is unexplained is what the twin nearest the robot leaves, the build
+    calibrated within the tolerance where it still locates something (its fit the one reported, its build the
+    one written), else what the twin the effects were sought from locates.  The datasheet's twin would count
+    the part of the mismatch the tolerance holds as unexplained
+    (tests/test_tolerance.py::test_what_no_effect_explains_is_what_the_build_within_tolerance_leaves)."""
+    if result.within is None:
+        result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")} for item in result.located]
+        return
+    cal, (after, *rest) = result.within
+    result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")}
+                          for item in (_located(after, f) for f in after.findings)]
+    result.calibration, result.model = cal, None
+    result.after, result.after_long, result.fit_after = after, (rest or [after])[-1], dict(after.fit)
+    result.notes.append("no effect of the library explains the mismatch beyond the datasheet's tolerance; what is "
+                        "unexplained is what the build calibrated within it leaves")
 
 
 def _within_tolerance(result: Diagnosis, rec: Recording, world: World | None, first: Comparison, tol: Tolerance,
@@ -503,12 +524,14 @@ def _within_tolerance(result: Diagnosis, rec: Recording, world: World | None, fi
         # nothing may be left located) (tests/test_tolerance.py::test_a_fault_the_build_can_almost_take_up_is_still_named).
         result.notes.append("held at the tolerance's edge (" + ", ".join(n.label() for n in binding) + "): the "
                             "mismatch lies beyond the tolerance")
-    left = [f.channel for f in judge(cal.params)[0].findings]
+    calibrated = judge(cal.params)
+    left = [f.channel for f in calibrated[0].findings]
     if not binding and not left:
-        calibrated = judge(cal.params)[0]
         result.calibration, result.located_datasheet, result.located = cal, result.located, []
-        result.after, result.fit_after = calibrated, dict(calibrated.fit)
-        return cal.params, calibrated
+        result.after, result.fit_after = calibrated[0], dict(calibrated[0].fit)
+        return cal.params, calibrated[0]
+    if left:
+        result.within = cal, calibrated
     # Where a group's edge binds, or its channels are still located, its effects are sought from the
     # datasheet's values: a build fitted without the fault took up part of it and would bias each effect
     # fitted on top; the build is fitted beside each effect chosen instead (_fit_with_the_build).  A group
