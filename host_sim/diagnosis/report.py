@@ -437,13 +437,13 @@ def _diagnose_fitted(rec: Recording, tol: Tolerance, world: World | None, second
     result.fit_after = dict(after.fit)
     remaining = [_located(after, f) for f in after.findings]
     if little_data and final.effects and remaining:
-        # With little data, effects that leave the mismatch located are no evidence of their names: a
-        # partial fit on a few windows says nothing of what the rest is (the same test).
+        # With little data, effects that leave the mismatch located are no evidence of their names, nor is a
+        # build fitted on a few windows: the twin the effects were sought from is reported (the same test).
         result.notes.append(f"with so little data, what the library fits best "
                             f"({', '.join(c.label() for c in final.effects)}) leaves the mismatch located: "
                             f"no name is given")
         final = result.model = chain[0]
-        result.after, result.after_long, result.fit_after = first, comparisons[-1], dict(first.fit)
+        result.after, result.after_long, result.fit_after, result.within = first, comparisons[-1], dict(first.fit), None
     _name(result, final, chain, remaining, tol, (first, after), test_block)
     return result, chain, objective, base
 
