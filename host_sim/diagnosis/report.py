@@ -487,11 +487,12 @@ def _unexplained_by_any(result: Diagnosis) -> None:
     if result.within is None:
         result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")} for item in result.located]
         return
-    cal, (after, *rest) = result.within
+    cal, compared = result.within
+    after = compared[0]
     result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")}
                           for item in (_located(after, f) for f in after.findings)]
     result.calibration, result.model = cal, None
-    result.after, result.after_long, result.fit_after = after, (rest or [after])[-1], dict(after.fit)
+    result.after, result.after_long, result.fit_after = after, compared[-1], dict(after.fit)
     result.notes.append("no effect of the library explains the mismatch beyond the datasheet's tolerance; what is "
                         "unexplained is what the build calibrated within it leaves")
 
