@@ -273,8 +273,10 @@ def test_ambient_light_within_the_lamps_own_size_is_the_room():
 def test_a_match_with_the_build_back_at_the_datasheet_says_so(as_built_run, monkeypatch):
     """Where the calibrated build still locates a little but the drive's mechanics back at the datasheet's
     values locate nothing, the match is that twin's: the report gives its values (not the calibrated ones),
-    what the datasheet twin located, the fit after, and a note that says so."""
+    what the datasheet twin located, the fit after, and a note that says so.  The radii and the track the
+    odometry measured stay at its values: no fault of the dynamics moves them."""
     from host_sim.diagnosis import report
+    from host_sim.diagnosis.odometry import measure_odometry
 
     real = report._judge
 
@@ -284,7 +286,7 @@ def test_a_match_with_the_build_back_at_the_datasheet_says_so(as_built_run, monk
 
         def wrapped(twin):
             out = judge(twin)
-            if twin.wheel_radius_delta_l != 0.0:  # the calibrated build: the datasheet's findings stay
+            if twin.torque_constant_delta_r != 0.0:  # the calibrated build: the datasheet's findings stay
                 return [dataclasses.replace(out[0], findings=first.findings)] + out[1:]
             return [dataclasses.replace(c, findings=[]) for c in out]
 
@@ -294,8 +296,10 @@ def test_a_match_with_the_build_back_at_the_datasheet_says_so(as_built_run, monk
     d = diagnose(as_built_run, DEFAULT, ROOM)
     assert d.verdict == "match" and not d.effects, d.summary()
     assert any("back at the datasheet's values" in n for n in d.notes), d.notes
-    moved = {n.quantity: v for n, v in zip(d.calibration.nuisances, d.calibration.values)}
-    assert moved["wheel_radius"] == 0.0 and d.located_datasheet and d.fit_after
+    moved = {(n.quantity, n.where): v for n, v in zip(d.calibration.nuisances, d.calibration.values)}
+    assert moved[("torque_constant", "right")] == 0.0 and d.located_datasheet and d.fit_after
+    odo = measure_odometry(as_built_run, DEFAULT, ROOM)
+    assert moved[("wheel_radius", "left")] == odo.per_count[0] and moved[("half_axle", "")] == odo.half_axle
 
 
 def test_a_build_the_effects_fit_within_tolerance_is_a_match():
@@ -326,6 +330,33 @@ def test_a_build_the_effects_fit_within_tolerance_is_a_match():
     d = named(located[1:])
     assert d.verdict == "unexplained" and d.located == located, d.summary()
     assert [u["channel"] for u in d.unexplained] == ["ir_4"]
+
+
+def test_the_radii_and_the_track_are_the_odometrys_not_the_dynamics(as_built_run):
+    """Each wheel's radius and the track are measured by the odometry (encoders against the tracker, no
+    dynamics) and held there, within their bands, while the rest of the build is fitted: a fit of the
+    dynamics moves them to take up its own model error, and leaves a turn or a travel a few per cent off."""
+    from host_sim.diagnosis.calibrate import drive_nuisances, held_by_odometry
+    from host_sim.diagnosis.odometry import Odometry, measure_odometry
+
+    tol = Tolerance(DEFAULT, dict(BANDS))
+    odo = measure_odometry(as_built_run, DEFAULT, ROOM)
+    assert odo is not None and odo.per_count[0] == pytest.approx(0.008, abs=0.003)
+    d = diagnose(as_built_run, DEFAULT, ROOM)
+    assert d.verdict == "match", d.summary()
+    moved = {(n.quantity, n.where): v for n, v in zip(d.calibration.nuisances, d.calibration.values)}
+    assert {(n.quantity, n.where) for n in d.calibration.held} == {
+        ("wheel_radius", "left"), ("wheel_radius", "right"), ("half_axle", "")}
+    assert moved[("wheel_radius", "left")] == odo.per_count[0] and moved[("wheel_radius", "right")] == odo.per_count[1]
+    assert moved[("half_axle", "")] == odo.half_axle
+    said = {(v["value"], v["where"]): v["from"] for v in d.to_json()["calibration"]["values"]}
+    assert said[("half_axle", "")] == "odometry" and said[("torque_constant", "right")] == "fit"
+    assert any(f"half_axle {100 * odo.half_axle:+.1f} % (odometry)" in n for n in d.notes), d.notes
+    # at or beyond its band's edge the odometry's value is a fault's sign, not the build: fitted as the rest
+    wide = Odometry((0.05, -0.002), (0.001, 0.001), -0.0149, 0.001, 100, (0.0, 90.0))
+    held = {(n.quantity, n.where): v for n, v in held_by_odometry(wide, drive_nuisances(tol, True, False), tol).items()}
+    assert held == {("wheel_radius", "right"): -0.002}
+    assert held_by_odometry(None, drive_nuisances(tol, True, False), tol) == {}
 
 
 def test_what_no_effect_explains_is_what_the_build_within_tolerance_leaves(as_built_run):
@@ -359,6 +390,27 @@ def test_what_no_effect_explains_is_what_the_build_within_tolerance_leaves(as_bu
     assert any("what the build calibrated within it leaves" in n for n in d.notes)
     d = named(None)
     assert d.verdict == "unexplained" and [u["words"] for u in d.unexplained] == [located[0]["words"]]
+
+
+def test_the_test_blocks_after_is_the_build_that_leaves_what_no_effect_explains(as_built_run):
+    """On a test block as on the held-out windows, the after of a recording no effect explains is the fit of
+    the build calibrated within the tolerance, not the twin the effects were sought from: both figures are
+    one twin's.  With no such build, the after is the before."""
+    import numpy as np
+
+    from host_sim.diagnosis.block_verdict import judge_test_block
+    from host_sim.diagnosis.calibrate import Calibration
+    from host_sim.diagnosis.compare import compare
+    from host_sim.diagnosis.report import Diagnosis
+    from host_sim.diagnosis.testblock import window_count
+
+    every = np.ones(window_count(as_built_run, 1.0), dtype=bool)
+    build = compare(as_built_run, AS_BUILT, ROOM, 1.0, locate=False, held_out=every).fit
+    for within, after in (((Calibration(AS_BUILT), []), build), (None, None)):
+        d = Diagnosis("run.csv", "unexplained", [], within=within)
+        judge_test_block(d, as_built_run, DEFAULT, ROOM, [], None, 1.0, None)
+        assert d.fit_test["after"] == (after or d.fit_test["before"]), d.fit_test
+        assert d.fit_test["after"] != d.fit_test["before"] or within is None
 
 
 @pytest.mark.slow

@@ -27,9 +27,8 @@ def judge_test_block(result: Any, block: Recording, params: RobotParams, world: 
     say("judging on the test block")
     every = np.ones(window_count(block, seconds), dtype=bool)  # the test block: every window judged
     before = compare(block, params, world, seconds, locate=False, held_out=every)
-    model = result.model
-    after = (compare(block, model.params, world, seconds, locate=False, held_out=every)
-             if model is not None and model.effects else before)
+    twin = _after_twin(result)
+    after = compare(block, twin, world, seconds, locate=False, held_out=every) if twin is not None else before
     t = block.t
     result.fit_test = {"from_s": float(t[before.windows.start[0]]),
                        "to_s": float(t[before.windows.start[-1] + before.windows.rows - 1]),
@@ -39,6 +38,17 @@ def judge_test_block(result: Any, block: Recording, params: RobotParams, world: 
         _judge_match(result, block, after)
     elif result.effects:
         _judge_named(result, block, before, after, chain, objective, params, say)
+
+
+def _after_twin(result: Any) -> RobotParams | None:
+    """The twin whose fit is the "after": the fitted model's with effects, else the build calibrated within the
+    tolerance where no effect explains what it leaves (report._unexplained_by_any), so that the test block's
+    after is the same twin's as the held-out windows' (tests/test_tolerance.py::
+    test_the_test_blocks_after_is_the_build_that_leaves_what_no_effect_explains); None: the twin before."""
+    model = result.model
+    if model is not None and model.effects:
+        return model.params
+    return result.within[0].params if result.within is not None and model is None else None
 
 
 def judged_names(cmp: Comparison) -> list[str]:
@@ -63,6 +73,14 @@ def _judge_match(result: Any, block: Recording, twin: Comparison) -> None:
         result.verdict = "unexplained"
         result.unexplained = [{"channel": j.channel, "regime": "on the test block", "spans": _span(result),
                                "words": test_block_words(j, result.fit_test)} for j in failing]
+
+
+UNEXPLAINED_KEYS = ("channel", "regime", "spans", "words")  # what a located item says, unexplained
+
+
+def unexplained(items: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The located items as unexplained ones: where, in which regime, when, and the words."""
+    return [{k: item[k] for k in UNEXPLAINED_KEYS} for item in items]
 
 
 OTHER_WHEEL = {"left": (WHEELS[1], ACCUMULATED[WHEELS[1]]), "right": (WHEELS[0], ACCUMULATED[WHEELS[0]])}
@@ -113,7 +131,7 @@ def judge_held_out(result: Any, before: Comparison, after: Comparison, chain: li
                                                       lambda own: not left.intersection(own))
     _settle(result, chain)
     if not result.effects:  # nothing named: everything located is left unexplained
-        result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")} for item in result.located]
+        result.unexplained = unexplained(result.located)
 
 
 def _keep_explaining(result: Any, before: Comparison, after: Comparison, located: list[str],

@@ -3,7 +3,8 @@
 Each wheel's radius, torque constant, friction and breakaway friction, the track, the caster's rolling drag,
 the axles' Stribeck speed, the battery's voltage and each located sensor's gain are fitted as nuisance
 parameters, bounded by their bands (tolerance.py) with a Gaussian prior of half a band, on the training
-windows alone.  Reference: docs/diagnosis.md, "Within the datasheet's tolerance".
+windows alone; the radii and the track where the odometry measured them are held at its values (held).
+Reference: docs/diagnosis.md, "Within the datasheet's tolerance".
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from scipy import optimize
 from host_sim.diagnosis.channels import drive_located, located_sensors
 from host_sim.diagnosis.fit import (FIT_FTOL, FIT_XTOL, Model, Objective, sandwich_intervals, earns_its_place,
                                    f_test, touching_runs)
+from host_sim.diagnosis.odometry import Odometry
 from host_sim.physics import effects as E
 from host_sim.diagnosis.tolerance import ABSOLUTE, UNIT_OF, Tolerance, relative_bounds
 from host_sim.physics.params import RobotParams
@@ -53,10 +55,12 @@ class Calibration:
     nuisances: list[Nuisance] = field(default_factory=list)
     values: list[float] = field(default_factory=list)  # relative to the datasheet, e.g. -0.004
     bands: list[float] = field(default_factory=list)
+    held: tuple[Nuisance, ...] = ()  # measured apart, by the odometry: no fit of the dynamics moves them
 
     def to_json(self) -> list[dict[str, Any]]:
         return [{"value": n.quantity, "where": n.where, "relative": round(v, 5), "band": b,
-                 "at_edge": _at_edge(n, v, b)} for n, v, b in zip(self.nuisances, self.values, self.bands)]
+                 "at_edge": _at_edge(n, v, b), "from": "odometry" if n in self.held else "fit"}
+                for n, v, b in zip(self.nuisances, self.values, self.bands)]
 
     def at_edge(self) -> list[Nuisance]:
         """The nuisances fitted at their band's edge: the data would take them beyond the tolerance."""
@@ -66,14 +70,16 @@ class Calibration:
         """The same nuisances, those of `which` (all by default) at the datasheet's values (relative 0):
         where a search starts for a group whose calibration took up part of a fault
         (report._within_tolerance)."""
-        values = [0.0 if which is None or n in which else v for n, v in zip(self.nuisances, self.values)]
+        values = [0.0 if (which is None or n in which) and n not in self.held else v
+                  for n, v in zip(self.nuisances, self.values)]
         return Calibration(set_values(tol.datasheet, tol, self.nuisances, np.array(values)), list(self.nuisances),
-                           values, list(self.bands))
+                           values, list(self.bands), self.held)
 
     def words(self) -> str:
         moved = [(n, v) for n, v in zip(self.nuisances, self.values) if abs(v) >= 5e-4]
-        return ", ".join(f"{n.label()} {v:+.3g} {UNIT_OF[n.quantity]}" if n.quantity in UNIT_OF
-                         else f"{n.label()} {100 * v:+.1f} %" for n, v in moved) or "no value moved"
+        return ", ".join((f"{n.label()} {v:+.3g} {UNIT_OF[n.quantity]}" if n.quantity in UNIT_OF
+                          else f"{n.label()} {100 * v:+.1f} %") + (" (odometry)" if n in self.held else "")
+                         for n, v in moved) or "no value moved"
 
 
 def drive_nuisances(tol: Tolerance, has_vbat: bool, bench: bool) -> list[Nuisance]:
@@ -96,6 +102,20 @@ def sensor_nuisances(tol: Tolerance, sensors: list[int]) -> list[Nuisance]:
     if tol.bands.get("ir_gain", 0.0) <= 0:
         return []
     return [Nuisance("ir_gain", "ir_gain_scale", k, f"sensor {k}") for k in sensors]
+
+
+def held_by_odometry(odo: Odometry | None, nuisances: list[Nuisance], tol: Tolerance) -> dict[Nuisance, float]:
+    """The kinematic nuisances the odometry measured (each wheel's radius, the track: encoders against the
+    tracker, no dynamics) within their bands, each at its value.  A fit of the dynamics moves them to take up
+    the twin's own model error, and the turn and the travel it leaves are then located; one the odometry puts
+    at or beyond its band's edge is no build but a fault's sign, and is fitted as the rest
+    (tests/test_tolerance.py::test_the_radii_and_the_track_are_the_odometrys_not_the_dynamics)."""
+    if odo is None:
+        return {}
+    value = {("wheel_radius", "left"): odo.per_count[0], ("wheel_radius", "right"): odo.per_count[1],
+             ("half_axle", ""): odo.half_axle}
+    return {n: float(value[(n.quantity, n.where)]) for n in nuisances if (n.quantity, n.where) in value
+            and not _at_edge(n, value[(n.quantity, n.where)], tol.bands[n.quantity])}
 
 
 def set_values(p: RobotParams, tol: Tolerance, nuisances: list[Nuisance], x: np.ndarray) -> RobotParams:
@@ -136,19 +156,36 @@ def inside(x0: np.ndarray, lo: np.ndarray, band: np.ndarray) -> np.ndarray:
 
 
 def calibrate(obj: Objective, params: RobotParams, tol: Tolerance, nuisances: list[Nuisance],
-              start: list[float] | None = None) -> Calibration:
+              start: list[float] | None = None, held: dict[Nuisance, float] | None = None) -> Calibration:
     """The MAP fit of the nuisances on obj's training windows: weighted residuals and the prior's rows
     x / (PRIOR_SD band), x within its bounds (bounds), from start (default the datasheet,
-    x = 0; inside).  Nothing held out is seen."""
+    x = 0; inside), those of held at its values.  Nothing held out is seen."""
     if not nuisances:
         return Calibration(params)
+    held = held or {}
     band = np.array([tol.bands[n.quantity] for n in nuisances])
     lo, hi = bounds(nuisances, band)
     x0 = np.zeros(len(nuisances)) if start is None else np.array(start, dtype=float)
-    x = _least_squares(obj, lambda x: set_values(params, tol, nuisances, x), inside(x0, lo, band),
-                       lo, hi, PRIOR_SD * band)[0]
+    x0 = np.array([held.get(n, v) for n, v in zip(nuisances, x0)])
+    free = np.array([n not in held for n in nuisances])
+    x = _fit_free(obj, lambda x: set_values(params, tol, nuisances, x), inside(x0, lo, band), lo, hi,
+                  PRIOR_SD * band, free)
     return Calibration(set_values(params, tol, nuisances, x), list(nuisances), [float(v) for v in x],
-                       [float(b) for b in band])
+                       [float(b) for b in band], tuple(n for n in nuisances if n in held))
+
+
+def _fit_free(obj: Objective, robot: Callable[[np.ndarray], RobotParams], x0: np.ndarray, lo: np.ndarray,
+              hi: np.ndarray, sd: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """_least_squares over the entries free marks, the others held at x0's: the whole x fitted."""
+    if not free.any():
+        return x0
+
+    def whole(x: np.ndarray) -> np.ndarray:
+        out = x0.copy()
+        out[free] = x
+        return out
+
+    return whole(_least_squares(obj, lambda x: robot(whole(x)), x0[free], lo[free], hi[free], sd[free])[0])
 
 
 def refit_jointly(obj: Objective, tol: Tolerance, cal: Calibration, model: Model) -> tuple[Model, Calibration]:
@@ -159,7 +196,7 @@ def refit_jointly(obj: Objective, tol: Tolerance, cal: Calibration, model: Model
     effect sets is left to the effect; only nuisances of the channels obj weighs are fitted."""
     taken = {target for c in model.effects for target in E.targets(c.name, c.site)}
     weighed, drive = set(located_sensors(obj.names)), drive_located(obj.names)
-    keep = [i for i, n in enumerate(cal.nuisances) if (n.field, n.index) not in taken
+    keep = [i for i, n in enumerate(cal.nuisances) if (n.field, n.index) not in taken and n not in cal.held
             and ((n.index is None and drive) or (n.index is not None and n.index in weighed))]
     if not keep or not model.effects:
         return model, cal
@@ -197,7 +234,7 @@ def refit_jointly(obj: Objective, tol: Tolerance, cal: Calibration, model: Model
                                 cost_test=float(test[0] @ test[0]), r_test=test[0], ci95=ci)
     values_now = [float(x[nuis.index(n)]) if n in nuis else v for n, v in zip(cal.nuisances, cal.values)]
     build = Calibration(set_values(tol.datasheet, tol, cal.nuisances, np.array(values_now)), list(cal.nuisances),
-                        values_now, list(cal.bands))
+                        values_now, list(cal.bands), cal.held)
     return joint, build
 
 
@@ -240,8 +277,9 @@ def edge_binds(obj: Objective, params: RobotParams, tol: Tolerance, cal: Calibra
     (lo, hi), sd = bounds(cal.nuisances, band), PRIOR_SD * band
     released = bounds(cal.nuisances, band, RELEASE)
     lo[edge], hi[edge], sd[edge] = released[0][edge], released[1][edge], np.inf
-    freed = _least_squares(obj, lambda x: set_values(params, tol, cal.nuisances, x),
-                           inside(np.array(cal.values), lo, band), lo, hi, sd)[0]
+    free = np.array([n not in cal.held for n in cal.nuisances])  # held ones lie within their bands
+    freed = _fit_free(obj, lambda x: set_values(params, tol, cal.nuisances, x),
+                      inside(np.array(cal.values), lo, band), lo, hi, sd, free)
     robots = [set_values(params, tol, cal.nuisances, np.array(cal.values)),
               set_values(params, tol, cal.nuisances, freed)]
     train, test = obj.residuals(robots)

@@ -29,9 +29,9 @@ from host_sim.diagnosis.odometry import Odometry, measure_odometry
 from host_sim.diagnosis.odometry import per_count as odometry_per_count
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
 from host_sim.diagnosis.testblock import TestBlockError, check_test_recording, split_test_block
-from host_sim.diagnosis.block_verdict import judge_held_out, judge_test_block
+from host_sim.diagnosis.block_verdict import UNEXPLAINED_KEYS, judge_held_out, judge_test_block, unexplained
 from host_sim.diagnosis.calibrate import (Calibration, Nuisance, calibrate, drive_nuisances, edge_binds,
-                                          refit_jointly, sensor_nuisances)
+                                          held_by_odometry, refit_jointly, sensor_nuisances)
 from host_sim.diagnosis.tolerance import BANDS, Tolerance
 from host_sim.diagnosis.phrasing import checked, sentence, spans_text
 from host_sim.physics.params import DEFAULT, RobotParams
@@ -359,7 +359,7 @@ def _report_odometry(result: Diagnosis, rec: Recording, params: RobotParams, wor
                          f"{100 * band:.1f} % tolerance "
                          f"(the encoders against the tracker, {odo.windows} windows clear of the walls): a wheel "
                          f"of another radius, or an encoder of another count per turn"}
-        _file_unexplained(result, item, ("channel", "regime", "spans", "words"))
+        _file_unexplained(result, item, UNEXPLAINED_KEYS)
 
 
 def _implied_per_count(named: list[dict[str, Any]], datasheet: RobotParams) -> tuple[tuple[float, float], ...]:
@@ -460,7 +460,7 @@ def _name(result: Diagnosis, final: Model, chain: list[Model], remaining: list[d
                                    "interval reaches it: the robot as built may hold it, not named")):
         if why in built:
             result.notes.append(f"{words}: " + ", ".join(c.label() for c, b in zip(final.effects, built) if b == why))
-    result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")} for item in remaining]
+    result.unexplained = unexplained(remaining)
     if not result.effects and final.effects and not remaining:
         # Every effect fitted lies within its band (or its interval reaches it) and, with the build, leaves nothing
         # located: the robot as built explains the recording, a match
@@ -485,12 +485,11 @@ def _unexplained_by_any(result: Diagnosis) -> None:
     the part of the mismatch the tolerance holds as unexplained
     (tests/test_tolerance.py::test_what_no_effect_explains_is_what_the_build_within_tolerance_leaves)."""
     if result.within is None:
-        result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")} for item in result.located]
+        result.unexplained = unexplained(result.located)
         return
     cal, compared = result.within
     after = compared[0]
-    result.unexplained = [{k: item[k] for k in ("channel", "regime", "spans", "words")}
-                          for item in (_located(after, f) for f in after.findings)]
+    result.unexplained = unexplained([_located(after, f) for f in after.findings])
     result.calibration, result.model = cal, None
     result.after, result.after_long, result.fit_after = after, compared[-1], dict(after.fit)
     result.notes.append("no effect of the library explains the mismatch beyond the datasheet's tolerance; what is "
@@ -512,13 +511,15 @@ def _within_tolerance(result: Diagnosis, rec: Recording, world: World | None, fi
         return tol.datasheet, first
     say("calibrating the twin within the datasheet's tolerance")
     cal, binding = Calibration(tol.datasheet), []
+    odo = measure_odometry(rec, tol.datasheet, world)
     for group in (drive, sensors):  # the sensors read the recorded track: apart, they run no physics
         if group:
-            part, objective = _calibrate_group(rec, world, first, tol, judge, cal.params, group)
+            part, objective = _calibrate_group(rec, world, first, tol, judge, cal.params, group,
+                                               held_by_odometry(odo, group, tol))
             if part.at_edge() and edge_binds(objective, cal.params, tol, part, located):
                 binding += part.at_edge()
             cal = Calibration(part.params, cal.nuisances + part.nuisances, cal.values + part.values,
-                              cal.bands + part.bands)
+                              cal.bands + part.bands, cal.held + part.held)
     result.notes.append(f"calibrated within the datasheet's tolerance: {cal.words()}")
     if binding:
         # The data takes the build beyond its tolerance: a fault, which the build took up in part (so that
@@ -556,17 +557,17 @@ def _within_tolerance(result: Diagnosis, rec: Recording, world: World | None, fi
 
 
 def _calibrate_group(rec: Recording, world: World | None, first: Comparison, tol: Tolerance,
-                     judge: Callable[[RobotParams], list[Comparison]], params: RobotParams, group: list[Nuisance]
-                     ) -> tuple[Calibration, Objective]:
+                     judge: Callable[[RobotParams], list[Comparison]], params: RobotParams, group: list[Nuisance],
+                     held: dict[Nuisance, float]) -> tuple[Calibration, Objective]:
     """(a group's calibration, its objective): fitted weighed by the noise the datasheet twin leaves, then
     weighed by the noise the calibrated twin leaves and fitted once more from there.  The datasheet twin's
     spread counts the mismatch being calibrated away as noise, and so weighs a turn or a count a few per
     cent off too little for the locator's test of it
     (tests/test_tolerance.py::test_the_build_is_weighed_by_the_noise_it_leaves)."""
     objective = _group_objective(rec, world, first, group)
-    part = calibrate(objective, params, tol, group)
+    part = calibrate(objective, params, tol, group, held=held)
     objective.sigma = objective_sigma(judge(part.params)[0], objective.names, objective.totals)
-    return calibrate(objective, params, tol, group, start=part.values), objective
+    return calibrate(objective, params, tol, group, start=part.values, held=held), objective
 
 
 def _answers(n: Nuisance, channel: str) -> bool:
