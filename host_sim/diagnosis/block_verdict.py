@@ -44,11 +44,13 @@ def _after_twin(result: Any) -> RobotParams | None:
     """The twin whose fit is the "after": the fitted model's with effects, else the build calibrated within the
     tolerance where no effect explains what it leaves (report._unexplained_by_any), so that the test block's
     after is the same twin's as the held-out windows' (tests/test_tolerance.py::
-    test_the_test_blocks_after_is_the_build_that_leaves_what_no_effect_explains); None: the twin before."""
+    test_the_test_blocks_after_is_the_build_that_leaves_what_no_effect_explains); None: the twin before,
+    also on a match, which is the twin before's (the build back at the datasheet's values)."""
     model = result.model
     if model is not None and model.effects:
         return model.params
-    return result.within[0].params if result.within is not None and model is None else None
+    unexplained_by_any = result.within is not None and model is None and result.verdict != "match"
+    return result.within[0].params if unexplained_by_any else None
 
 
 def judged_names(cmp: Comparison) -> list[str]:
