@@ -397,8 +397,6 @@ def test_the_test_blocks_after_is_the_build_that_leaves_what_no_effect_explains(
     the build calibrated within the tolerance, not the twin the effects were sought from: both figures are
     one twin's.  With no such build, or on a match (the build back at the datasheet's values made it, while
     the calibrated one still located a little), the after is the before."""
-    import numpy as np
-
     from host_sim.diagnosis.block_verdict import judge_test_block
     from host_sim.diagnosis.calibrate import Calibration
     from host_sim.diagnosis.compare import compare
