@@ -300,6 +300,7 @@ def test_a_match_with_the_build_back_at_the_datasheet_says_so(as_built_run, monk
     assert moved[("torque_constant", "right")] == 0.0 and d.located_datasheet and d.fit_after
     odo = measure_odometry(as_built_run, DEFAULT, ROOM)
     assert moved[("wheel_radius", "left")] == odo.per_count[0] and moved[("half_axle", "")] == odo.half_axle
+    assert d.after_params is None  # a test block would judge this match on the twin that made it
 
 
 def test_a_build_the_effects_fit_within_tolerance_is_a_match():
@@ -387,6 +388,7 @@ def test_what_no_effect_explains_is_what_the_build_within_tolerance_leaves(as_bu
     assert d.verdict == "unexplained" and d.located == located, d.summary()
     assert [u["words"] for u in d.unexplained] == [sentence(f) for f in within[0].findings]
     assert d.fit_after == within[0].fit and d.calibration is build and d.model is None
+    assert d.after_params is build.params  # the test block's after is this twin's too (block_verdict._after_twin)
     assert any("what the build calibrated within it leaves" in n for n in d.notes)
     d = named(None)
     assert d.verdict == "unexplained" and [u["words"] for u in d.unexplained] == [located[0]["words"]]
@@ -395,19 +397,17 @@ def test_what_no_effect_explains_is_what_the_build_within_tolerance_leaves(as_bu
 def test_the_test_blocks_after_is_the_build_that_leaves_what_no_effect_explains(as_built_run):
     """On a test block as on the held-out windows, the after of a recording no effect explains is the fit of
     the build calibrated within the tolerance, not the twin the effects were sought from: both figures are
-    one twin's.  With no such build, or on a match (the build back at the datasheet's values made it, while
-    the calibrated one still located a little), the after is the before."""
+    one twin's.  With no such build (also on a match: test_a_match_with_the_build_back_at_the_datasheet_says_so),
+    the after is the before."""
     from host_sim.diagnosis.block_verdict import judge_test_block
-    from host_sim.diagnosis.calibrate import Calibration
     from host_sim.diagnosis.compare import compare
     from host_sim.diagnosis.report import Diagnosis
     from host_sim.diagnosis.testblock import window_count
 
     every = np.ones(window_count(as_built_run, 1.0), dtype=bool)
     build = compare(as_built_run, AS_BUILT, ROOM, 1.0, locate=False, held_out=every).fit
-    for verdict, within, after in (("unexplained", (Calibration(AS_BUILT), []), build), ("unexplained", None, None),
-                                   ("match", (Calibration(AS_BUILT), []), None)):
-        d = Diagnosis("run.csv", verdict, [], within=within)
+    for after_params, after in ((AS_BUILT, build), (None, None)):
+        d = Diagnosis("run.csv", "unexplained", [], after_params=after_params)
         judge_test_block(d, as_built_run, DEFAULT, ROOM, [], None, 1.0, None)
         assert d.fit_test["after"] == (after or d.fit_test["before"]), d.fit_test
         assert d.fit_test["after"] != d.fit_test["before"] or after is None

@@ -49,8 +49,7 @@ def _after_twin(result: Any) -> RobotParams | None:
     model = result.model
     if model is not None and model.effects:
         return model.params
-    unexplained_by_any = result.within is not None and model is None and result.verdict != "match"
-    return result.within[0].params if unexplained_by_any else None
+    return result.after_params
 
 
 def judged_names(cmp: Comparison) -> list[str]:

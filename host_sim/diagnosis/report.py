@@ -75,6 +75,9 @@ class Diagnosis:
     # the build calibrated within the tolerance where it still located something, and its comparisons: what is
     # unexplained where no effect earns its place (_name)
     within: tuple[Calibration, list[Comparison]] | None = field(default=None, repr=False)
+    # the twin whose fit is the "after" where it is neither the model's nor the twin before's: the build
+    # within the tolerance, where no effect explains what it leaves (_unexplained_by_any)
+    after_params: RobotParams | None = field(default=None, repr=False)
     # each named effect's entry, label and the model that chose it: its rivals are told apart once the verdict
     # has settled which effects stay named (_tell_apart_named)
     apart: list[tuple[dict[str, Any], str, Model]] = field(default_factory=list, repr=False)
@@ -490,7 +493,7 @@ def _unexplained_by_any(result: Diagnosis) -> None:
     cal, compared = result.within
     after = compared[0]
     result.unexplained = unexplained([_located(after, f) for f in after.findings])
-    result.calibration, result.model = cal, None
+    result.calibration, result.model, result.after_params = cal, None, cal.params
     result.after, result.after_long, result.fit_after = after, compared[-1], dict(after.fit)
     result.notes.append("no effect of the library explains the mismatch beyond the datasheet's tolerance; what is "
                         "unexplained is what the build calibrated within it leaves")
