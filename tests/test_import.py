@@ -194,6 +194,7 @@ def test_replay_and_plot_take_the_encoders_alone_without_a_world(tmp_path, capsy
 
 def test_the_diagnosis_says_what_it_cannot_judge():
     from host_sim.diagnosis.report import check_data, without_gapped_pose
+    from host_sim.physics.params import RobotParams
     from host_sim.physics.world import builtin_world
     from host_sim.recordings.recording import Recording
 
@@ -204,6 +205,9 @@ def test_the_diagnosis_says_what_it_cannot_judge():
     notes = check_data(rec, builtin_world("arena"))
     assert any("6 IR sensors are not the twin's ring of 8" in s for s in notes)
     assert any("no battery voltage recorded" in s for s in notes)
+    assert not any("set-points" in s for s in notes)  # a current drive's commands show the drive's load
+    speed_robot = RobotParams(drive="wheel_speed")
+    assert any("a match says little of it" in s for s in check_data(rec, builtin_world("arena"), speed_robot))
     rec.pose[7] = np.nan
     judged, gap = without_gapped_pose(rec)
     assert judged.pose is None and gap == ["the tracker pose is missing in 1 of 400 rows: judged without the tracker"]

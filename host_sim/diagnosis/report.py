@@ -198,6 +198,13 @@ def check_data(rec: Recording, world: World | None, params: RobotParams | None =
                      f" are not the twin's ring of {ring} pairs (ir_bearings): the IR sensors are not judged")
     if not rec.battery_recorded:
         notes.append("no battery voltage recorded: the battery is not judged")
+    if params is not None and params.drive_kind == "wheel_speed":
+        # The loop's output is not recorded: the same load at other volts leaves the wheels at their set-points
+        # (tests/test_import.py::test_the_diagnosis_says_what_it_cannot_judge).
+        notes.append("the commands are wheel-speed set-points, which the robot's own speed loop holds: a load on the "
+                     "drive (friction, a motor's resistance or torque constant, a drag, a slope) shows only while the "
+                     "loop settles, so a match says little of it (a recording of the loop's output as the commands, "
+                     "a duty or voltage drive, judges it)")
     return notes
 
 
