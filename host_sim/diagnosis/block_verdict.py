@@ -12,8 +12,8 @@ from host_sim.diagnosis.channels import ACCUMULATED, IR, AMBIENT, WHEELS, drive_
 from host_sim.diagnosis.compare import Comparison, compare
 from host_sim.diagnosis.fit import MIN_LOCATED_GAIN, Model, Objective, fit_apart
 from host_sim.diagnosis.phrasing import test_block_words
-from host_sim.diagnosis.testblock import window_count
 from host_sim.diagnosis.verdict import changed, judge_channels, removed_percent, step_window
+from host_sim.diagnosis.windows import make_windows
 from host_sim.physics import effects as E
 from host_sim.physics.params import RobotParams
 from host_sim.physics.world import World
@@ -25,7 +25,7 @@ def judge_test_block(result: Any, block: Recording, params: RobotParams, world: 
     """Set result's test-block figures and judge its verdict there (result: a report.Diagnosis)."""
     say = progress or (lambda _text: None)
     say("judging on the test block")
-    every = np.ones(window_count(block, seconds), dtype=bool)  # the test block: every window judged
+    every = np.ones(len(make_windows(block, seconds)), dtype=bool)  # the test block: every window judged
     before = compare(block, params, world, seconds, locate=False, held_out=every)
     twin = _after_twin(result)
     after = compare(block, twin, world, seconds, locate=False, held_out=every) if twin is not None else before

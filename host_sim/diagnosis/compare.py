@@ -19,7 +19,7 @@ from host_sim.diagnosis.locate import (Finding, bias_margin, contact_windows, in
                                       regimes, scale_margin, scatter_finding, scatter_margin, timing_findings,
                                       timing_margin)
 from host_sim.diagnosis.windows import (DEFAULT_SECONDS, IR_CALIBRATED_RANGE, Windows, axis_distances,
-                                       judge_slides, make_windows, run_windows, stratified_held_out,
+                                       can_lay, judge_slides, make_windows, run_windows, stratified_held_out,
                                        unjudged_readings)
 from host_sim.physics.params import RobotParams
 from host_sim.recordings.recording import Recording
@@ -204,8 +204,10 @@ def compare_all(rec: Recording, params: RobotParams, world: World | None,
                 held_out: np.ndarray | None = None) -> list[Comparison]:
     """One comparison per window length that fits the recording.  The shortest one locates; the longest
     one also judges the totals' proportional errors (_longer_scale).  held_out: the shortest one's
-    held-out windows (stratify's), else every third."""
-    fits = [s for s in seconds if len(rec) > int(round(s / rec.sample_period)) * 3]
+    held-out windows (stratify's), else every third.  A longer length none of whose windows is clear of a
+    late or lost row (windows.late_rows) is left out too."""
+    fits = [s for k, s in enumerate(seconds) if len(rec) > int(round(s / rec.sample_period)) * 3
+            and (k == 0 or can_lay(rec, s))]
     out = [compare(rec, params, world, s, locate=False, held_out=held_out if k == 0 else None)
            for k, s in enumerate(fits)]
     if locate and out:

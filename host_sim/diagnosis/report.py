@@ -177,6 +177,20 @@ def sensor_excitation_notes(rec: Recording, reg: Regimes, world: World | None) -
             f"judges them)"]
 
 
+def windows_notes(first: Comparison) -> list[str]:
+    """Notes on the windows left out over a late or lost row (windows.late_rows) and those judged apart at a
+    wall."""
+    notes, left_out = [], first.windows.left_out
+    if left_out:
+        notes.append(f"{left_out} of {len(first.windows) + left_out} windows hold a late or lost row: left out, as "
+                     f"the command a lost row carried is not recorded and a twin holding the one before would "
+                     f"diverge for a while")
+    if int(first.contact.sum()):
+        notes.append(f"{int(first.contact.sum())} of {len(first.contact)} windows touch a wall: judged apart "
+                     f"(channel 'contact')")
+    return notes
+
+
 def check_data(rec: Recording, world: World | None, params: RobotParams | None = None) -> list[str]:
     """Refuse what is too short to diagnose; return notes on what this recording cannot show."""
     period = rec.sample_period
@@ -425,9 +439,7 @@ def _diagnose_fitted(rec: Recording, tol: Tolerance, world: World | None, second
             raise
         result.notes.append(f"little data: {thin.shortfall}; a mismatch is located all the same, and what "
                             f"follows rests on what there is")
-    if int(first.contact.sum()):
-        result.notes.append(f"{int(first.contact.sum())} of {len(first.contact)} windows touch a wall: judged apart "
-                            f"(channel 'contact')")
+    result.notes += windows_notes(first)
     result.notes += excitation_notes(rec, first, params, world)
     if not result.located:
         result.fit_after = dict(first.fit)

@@ -32,7 +32,8 @@ def slice_recording(rec: Recording, first: int, stop: int) -> Recording:
 
 
 def window_count(rec: Recording, seconds: float = DEFAULT_SECONDS[0]) -> int:
-    """How many back-to-back windows of `seconds` windows.make_windows lays over the recording."""
+    """How many back-to-back windows of `seconds` windows.make_windows' grid lays over the recording, the
+    test block's split counted on (those it leaves out, over a late or lost row, counted too)."""
     rows = max(2, int(round(seconds / rec.sample_period)))
     offset = int(OFFSET_S / rec.sample_period)
     return max(0, len(range(offset, len(rec) - rows, rows)))

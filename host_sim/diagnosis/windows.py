@@ -15,6 +15,7 @@ from host_sim.sensors import ir_sensor
 from host_sim.robot.batch import IR_FIELDS, SUBSTEPS, BatchSim, robot_params, step_parts
 from host_sim.physics.motors import ticks_per_rev
 from host_sim.physics.params import RobotParams
+from host_sim.recordings.checks import LATE_PERIODS
 from host_sim.recordings.recording import Recording
 from host_sim.recordings.replay import SEED_ROWS, ReplayError, replay_inputs, sliding_rows, state_or_origin
 from host_sim.physics.world import World
@@ -60,6 +61,7 @@ class Windows:
     body: np.ndarray | None = None  # (W, 3) the tracked (u, l, omega) of C where each window's twin starts
     lead: int = LEAD_ROWS  # rows the twin replays before each window (0: it starts on the window's first row)
     lead_slides: np.ndarray | None = None  # (W,) bool: the tracker sees the robot slide in the lead-in (judge_slides)
+    left_out: int = 0  # windows of the grid left out: their twin would live through a late or lost row
     # initial_states' answers, by rows and the fields they read: every fit evaluates the same windows again
     states: dict[tuple[Any, ...], Any] = field(default_factory=dict, repr=False, compare=False)
 
@@ -73,7 +75,7 @@ class Windows:
         return Windows(self.start[keep], self.rows, self.held_out[keep], self.substeps,
                        None if self.sliding is None else self.sliding[keep],
                        None if self.body is None else self.body[keep], self.lead,
-                       None if self.lead_slides is None else self.lead_slides[keep])
+                       None if self.lead_slides is None else self.lead_slides[keep], self.left_out)
 
     @property
     def twin_start(self) -> np.ndarray:
@@ -134,12 +136,32 @@ def judge_slides(rec: Recording, windows: Windows, p: RobotParams, contact: np.n
 
 
 def make_windows(rec: Recording, seconds: float, hold_out_every: int = 3) -> Windows:
-    """Back-to-back windows of `seconds` over the recording from OFFSET_S on; every `hold_out_every`-th is
-    held out.
+    """Back-to-back windows of `seconds` over the recording from OFFSET_S on, but those whose twin would live
+    through a late or lost row (late_rows); every `hold_out_every`-th is held out.
 
     Held-out windows are interleaved in time (windows 2, 5, 8, ...), so the
     fit is judged on every part of the run, not only on its end.
     """
+    start, rows, lead, late = _grid(rec, seconds)
+    if late.all():
+        raise ReplayError(f"every window of {seconds:g} s holds a late or lost row (over {LATE_PERIODS:g} periods "
+                          f"after the row before): the twin cannot follow the robot through a row whose command "
+                          f"is not recorded")
+    start = start[~late]
+    held_out = (np.arange(len(start)) % hold_out_every) == hold_out_every - 1
+    return Windows(start, rows, held_out, lead=lead, left_out=int(late.sum()))
+
+
+def can_lay(rec: Recording, seconds: float) -> bool:
+    """make_windows lays at least one window of `seconds` over the recording."""
+    try:
+        return not _grid(rec, seconds)[3].all()
+    except ReplayError:
+        return False
+
+
+def _grid(rec: Recording, seconds: float) -> tuple[np.ndarray, int, int, np.ndarray]:
+    """(each window's first row, rows per window, lead-in rows, (W,) bool: the window holds a late row)."""
     rows = max(2, int(round(seconds / rec.sample_period)))
     offset = int(OFFSET_S / rec.sample_period)  # rounded down: 12 rows of 40 ms, never a multiple of 0.6 s
     n = len(rec)
@@ -147,8 +169,20 @@ def make_windows(rec: Recording, seconds: float, hold_out_every: int = 3) -> Win
         raise ReplayError(f"the recording has {n} rows, too short for one window of {seconds:g} s "
                           f"({rows} rows at {rec.sample_period * 1000:g} ms, from {offset * rec.sample_period:g} s)")
     start = np.arange(offset, n - rows, rows)  # the last row of each window has a row after it: its period is known
-    held_out = (np.arange(len(start)) % hold_out_every) == hold_out_every - 1
-    return Windows(start, rows, held_out, lead=min(LEAD_ROWS, offset))
+    lead = min(LEAD_ROWS, offset)
+    return start, rows, lead, late_rows(rec, start - lead, start + rows)
+
+
+def late_rows(rec: Recording, first: np.ndarray, last: np.ndarray) -> np.ndarray:
+    """(W,) bool: a step from row first[w] to row last[w] lasts over LATE_PERIODS of the recording's periods
+    (the median step).  A late row's command held for its whole step, or a lost row's command not recorded:
+    the recording cannot say which, and a twin that holds the command the robot changed diverges for the
+    speed's memory (tests/test_diagnosis.py::test_a_window_that_holds_a_lost_row_is_left_out)."""
+    steps = np.diff(rec.t)
+    if not len(steps):
+        return np.zeros(len(first), dtype=bool)
+    long_step = np.concatenate([[0], np.cumsum(steps > LATE_PERIODS * float(np.median(steps)))])
+    return long_step[last] > long_step[first]
 
 
 @dataclass
