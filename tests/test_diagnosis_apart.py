@@ -1,6 +1,7 @@
 """What would tell two effects apart: the manoeuvre run on both fitted twins (host_sim/diagnosis/tell_apart.py)."""
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from host_sim.diagnosis import tell_apart
@@ -37,6 +38,19 @@ def test_a_drive_effect_is_separated_where_its_physics_shows(runs):
     assert level > tell_apart.SEPARATION_MIN and "current references" in words
     by_segment = {s: lv for s, lv, _w in tell_apart.separation(runs["nominal"], runs["friction"])}
     assert by_segment["reversals"] > by_segment["creep"]
+
+
+def test_twins_run_together_run_as_alone():
+    # run_manoeuvres steps every twin in one batch, each with its own firmware: each must run as it would alone
+    # (its commands the same, its motion to rounding), or a rival's sentence would carry another twin's figures.
+    twins = [FRICTION, DEFAULT.replace(actuator_delay=0.02), RADIUS]
+    together = tell_apart.run_manoeuvres(twins, cycles=0.2)
+    for p, run in zip(twins, together):
+        alone = tell_apart.run_manoeuvres([p], cycles=0.2)[0]
+        assert (run.segment == alone.segment).all() and np.array_equal(run.cmd, alone.cmd)
+        np.testing.assert_allclose(run.speed, alone.speed, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(run.yaw_rate, alone.yaw_rate, rtol=0, atol=1e-9)
+    assert not np.array_equal(together[0].cmd, together[1].cmd)  # the twins differ: each kept its own
 
 
 def test_the_sentence_names_the_segment_and_the_command():

@@ -15,7 +15,7 @@ from typing import Any, Callable
 import numpy as np
 
 from host_sim.physics import effects as E
-from host_sim.diagnosis.tell_apart import tell_apart
+from host_sim.diagnosis.tell_apart import tell_apart_all
 from host_sim.diagnosis.compare import Comparison, compare_all, stratify
 from host_sim.diagnosis.fit import Model, Objective, Refine, candidates_for, fit_totals, objective_channels, select
 from host_sim.diagnosis.channels import (ACCUMULATED, IR, SENSOR_NAMES, WHEELS, drive_channel, drive_located,
@@ -774,7 +774,7 @@ def _effect_entry(model: Model, i: int, chain: list[Model], datasheet: RobotPara
 
 
 def _apart_sentences(label: str, step: Model) -> list[str]:
-    return [tell_apart((label, step.params), (r.effects[-1].label(), r.params)) for r in step.rivals]
+    return tell_apart_all((label, step.params), [(r.effects[-1].label(), r.params) for r in step.rivals])
 
 
 def _tell_apart_named(result: Diagnosis) -> None:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from host_sim.diagnosis.windows import DEFAULT_SECONDS, OFFSET_S
+from host_sim.diagnosis.windows import DEFAULT_SECONDS, OFFSET_S, grid_starts
 from host_sim.recordings.recording import Recording
 
 TEST_FRACTION = 0.25  # of the 1 s windows, the last ones: the test block
@@ -34,9 +34,7 @@ def slice_recording(rec: Recording, first: int, stop: int) -> Recording:
 def window_count(rec: Recording, seconds: float = DEFAULT_SECONDS[0]) -> int:
     """How many back-to-back windows of `seconds` windows.make_windows' grid lays over the recording, the
     test block's split counted on (those it leaves out, over a late or lost row, counted too)."""
-    rows = max(2, int(round(seconds / rec.sample_period)))
-    offset = int(OFFSET_S / rec.sample_period)
-    return max(0, len(range(offset, len(rec) - rows, rows)))
+    return len(grid_starts(rec, seconds)[0])
 
 
 def shortest_seconds(fraction: float, seconds: float = DEFAULT_SECONDS[0]) -> float:
@@ -64,9 +62,8 @@ def split_test_block(rec: Recording, fraction: float = TEST_FRACTION,
         raise TestBlockError(f"the recording lasts {len(rec) * rec.sample_period:.1f} s: too short to diagnose and "
                              f"keep a test block (at least {shortest_seconds(fraction, seconds):.0f} s; "
                              f"60-90 s is better)")
-    rows = max(2, int(round(seconds / rec.sample_period)))
-    offset = int(OFFSET_S / rec.sample_period)
-    first_test = offset + (n_windows - n_test) * rows  # the test block's first window's first row
+    start, _rows, offset = grid_starts(rec, seconds)
+    first_test = int(start[n_windows - n_test])  # the test block's first window's first row
     fitted = slice_recording(rec, 0, first_test + 1)
     test = slice_recording(rec, first_test - offset, len(rec))
     assert window_count(test, seconds) == n_test and window_count(fitted, seconds) == n_windows - n_test

@@ -160,15 +160,20 @@ def can_lay(rec: Recording, seconds: float) -> bool:
         return False
 
 
-def _grid(rec: Recording, seconds: float) -> tuple[np.ndarray, int, int, np.ndarray]:
-    """(each window's first row, rows per window, lead-in rows, (W,) bool: the window holds a late row)."""
+def grid_starts(rec: Recording, seconds: float) -> tuple[np.ndarray, int, int]:
+    """(each window's first row, rows per window, the rows before the first): the back-to-back windows of
+    `seconds` from OFFSET_S on, every one's last row with a row after it, which closes its period."""
     rows = max(2, int(round(seconds / rec.sample_period)))
     offset = int(OFFSET_S / rec.sample_period)  # rounded down: 12 rows of 40 ms, never a multiple of 0.6 s
-    n = len(rec)
-    if n < offset + rows + 1:
-        raise ReplayError(f"the recording has {n} rows, too short for one window of {seconds:g} s "
+    return np.arange(offset, len(rec) - rows, rows), rows, offset
+
+
+def _grid(rec: Recording, seconds: float) -> tuple[np.ndarray, int, int, np.ndarray]:
+    """(each window's first row, rows per window, lead-in rows, (W,) bool: the window holds a late row)."""
+    start, rows, offset = grid_starts(rec, seconds)
+    if not len(start):
+        raise ReplayError(f"the recording has {len(rec)} rows, too short for one window of {seconds:g} s "
                           f"({rows} rows at {rec.sample_period * 1000:g} ms, from {offset * rec.sample_period:g} s)")
-    start = np.arange(offset, n - rows, rows)  # the last row of each window has a row after it: its period is known
     lead = min(LEAD_ROWS, offset)
     return start, rows, lead, late_rows(rec, start - lead, start + rows)
 
