@@ -117,6 +117,68 @@ def test_a_residual_that_drifts_over_the_test_block_has_a_trend():
     assert not judged.steady and judged.trend_t > 4
 
 
+def _drifting(cmp, size, channel="wheel_l"):
+    """cmp with a channel recorded as its twin but for a drift over the run of `size` noise levels."""
+    ch = cmp.channel(channel)
+    ch.y = ch.y_hat[:, 0] + size * ch.noise_floor * np.linspace(-0.5, 0.5, len(cmp.windows))[:, None]
+    return cmp
+
+
+def test_a_residual_that_drifts_over_the_held_out_windows_drifts(twin_run):
+    """verdict.drifts: a trend of the held-out windows' mean residual, reported only where it moves the mean by
+    the smallest bias the locator names (one noise level) or more."""
+    from host_sim.diagnosis.compare import compare
+
+    cmp = compare(twin_run, DEFAULT, ROOM, locate=False)
+    names = ["wheel_l", "wheel_r", "travel"]
+    assert V.drifts(cmp, twin_run.t, names) == []  # the twin's own recording
+    assert V.drifts(_drifting(cmp, 0.5), twin_run.t, names) == []  # a trend, but under a noise level
+    ((judged, change),) = V.drifts(_drifting(cmp, 3.0), twin_run.t, names)
+    assert judged.channel == "wheel_l" and not judged.steady and 2.0 < change <= 3.0
+
+
+def test_a_match_that_drifts_over_the_recording_is_unexplained(twin_run):
+    """Without a test block, a match whose held-out windows drift (a motor that weakens, an encoder that slips
+    more as the run goes on) is unexplained, with the channel and its drift in words."""
+    from host_sim.diagnosis.block_verdict import judge_match_held_out
+    from host_sim.diagnosis.compare import compare
+
+    def judged(cmp):
+        d = R.Diagnosis("run.csv", "match", [cmp])
+        judge_match_held_out(d, twin_run.t)
+        return d
+
+    assert judged(compare(twin_run, DEFAULT, ROOM, locate=False)).verdict == "match"
+    d = judged(_drifting(compare(twin_run, DEFAULT, ROOM, locate=False), 3.0))
+    assert d.verdict == "unexplained" and [u["channel"] for u in d.unexplained] == ["wheel_l", "count_l"]  # its totals
+    assert d.located[0]["regime"] == "over the recording" and "a drift over the recording in the left wheel" in d.summary()
+
+
+def test_a_match_is_not_held_to_drift_on_its_sensors(twin_run):
+    """An IR sensor's residual maps its law's error over the walls the route passed, which change over a run:
+    its trend in time is not a drift of the robot, and a match is not judged on it."""
+    from host_sim.diagnosis.block_verdict import judge_match_held_out
+    from host_sim.diagnosis.compare import compare
+
+    cmp = _drifting(compare(twin_run, DEFAULT, ROOM, locate=False), 3.0, "ir_0")
+    assert [j.channel for j, _c in V.drifts(cmp, twin_run.t, ["ir_0"])] == ["ir_0"]  # it does trend
+    d = R.Diagnosis("run.csv", "match", [cmp])
+    judge_match_held_out(d, twin_run.t)
+    assert d.verdict == "match" and not d.unexplained
+
+
+def test_an_encoder_whose_scale_drifts_over_the_run_is_no_match(twin_run):
+    """The left encoder counting 4 % less at the start and 4 % more at the end than its wheel turns: a twin
+    calibrated on the whole run matches it on average, and only the drift says it is not the robot."""
+    counts = np.diff(twin_run.enc[:, 0]).astype(float) * (1.0 + 0.04 * np.linspace(-1.0, 1.0, len(twin_run) - 1))
+    enc_l = twin_run.enc[0, 0] + np.concatenate([[0], np.round(np.cumsum(counts))])
+    enc = np.column_stack([enc_l, twin_run.enc[:, 1]]).astype(twin_run.enc.dtype)
+    d = diagnose(dataclasses.replace(twin_run, enc=enc), DEFAULT, ROOM)
+    assert d.verdict == "unexplained" and not d.effects, d.summary()
+    assert {"wheel_l", "count_l"} & {u["channel"] for u in d.unexplained}
+    assert all(u["regime"] == "over the recording" for u in d.unexplained), d.summary()
+
+
 def test_a_parameter_changes_when_the_halves_differ_beyond_their_intervals():
     """|a - b| against the root sum of squares of the two 95 % half-widths."""
     assert V.changed([1.0], [1.3], [(0.9, 1.1)], [(1.2, 1.4)])

@@ -11,8 +11,8 @@ import numpy as np
 from host_sim.diagnosis.channels import ACCUMULATED, IR, AMBIENT, WHEELS, drive_channel, sensor_channel
 from host_sim.diagnosis.compare import Comparison, compare
 from host_sim.diagnosis.fit import MIN_LOCATED_GAIN, Model, Objective, fit_apart
-from host_sim.diagnosis.phrasing import test_block_words
-from host_sim.diagnosis.verdict import changed, judge_channels, removed_percent, step_window
+from host_sim.diagnosis.phrasing import drift_words, test_block_words
+from host_sim.diagnosis.verdict import changed, drifts, judge_channels, removed_percent, step_window
 from host_sim.diagnosis.windows import make_windows
 from host_sim.physics import effects as E
 from host_sim.physics.params import RobotParams
@@ -74,6 +74,27 @@ def _judge_match(result: Any, block: Recording, twin: Comparison) -> None:
         result.verdict = "unexplained"
         result.unexplained = [{"channel": j.channel, "regime": "on the test block", "spans": _span(result),
                                "words": test_block_words(j, result.fit_test)} for j in failing]
+
+
+def judge_match_held_out(result: Any, t: np.ndarray) -> None:
+    """Without a test block, a match needs no drift on the held-out windows either: a drive channel whose
+    windows' mean residual moves with time by the smallest bias the locator names (verdict.drifts) is
+    unexplained, whatever the twin (the build, fitted within tolerance, or the datasheet's) makes of it on
+    average (tests/test_verdict.py::test_a_match_that_drifts_over_the_recording_is_unexplained).  Not the IR
+    sensors': they read the recorded track, so their residual maps the IR law's error over the walls the
+    route passed, and a route that changes over the run trends without any drift
+    (tests/test_verdict.py::test_a_match_is_not_held_to_drift_on_its_sensors)."""
+    if result.verdict != "match":
+        return
+    cmp = result.after if result.after is not None else result.comparisons[0]
+    span = [float(t[cmp.windows.start[0]]), float(t[cmp.windows.start[-1] + cmp.windows.rows - 1])]
+    items = [{"channel": j.channel, "regime": "over the recording", "spans": [span],
+              "fit_before": result.fit_before.get(j.channel, float("nan")), "words": drift_words(j, change, span)}
+             for j, change in drifts(cmp, t, [c for c in judged_names(cmp) if drive_channel(c)])]
+    if items:
+        result.located += items
+        result.unexplained += unexplained(items)
+        result.verdict = "unexplained"
 
 
 UNEXPLAINED_KEYS = ("channel", "regime", "spans", "words")  # what a located item says, unexplained

@@ -89,6 +89,14 @@ def test_block_words(j: Judgement, block: dict[str, Any]) -> str:
     return f"on the test block ({block['from_s']:.0f}-{block['to_s']:.0f} s) {channel_words(j.channel)} " + ", ".join(what)
 
 
+def drift_words(j: Judgement, change: float, span: list[float]) -> str:
+    """A channel whose held-out windows drift, e.g. "a drift over the recording in the left wheel: its windows'
+    mean residual moves by -2.4 noise levels from 1 s to 89 s (trend t = -5.3), which no constant twin follows"."""
+    return (f"a drift over the recording in {channel_words(j.channel)}: its windows' mean residual moves by "
+            f"{change:+.1f} noise levels from {span[0]:.0f} s to {span[1]:.0f} s (trend t = {j.trend_t:.1f}), which "
+            f"no constant twin follows")
+
+
 def checked(item: dict[str, Any]) -> str:
     """A note of loading's checks (host_sim/recordings/checks.py, Note.to_json) as the report says it: the
     recording's timing or counts as mended, which the diagnosis never fits as physics."""

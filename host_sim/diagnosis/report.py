@@ -29,7 +29,8 @@ from host_sim.diagnosis.odometry import Odometry, measure_odometry
 from host_sim.diagnosis.odometry import per_count as odometry_per_count
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
 from host_sim.diagnosis.testblock import TestBlockError, check_test_recording, split_test_block
-from host_sim.diagnosis.block_verdict import UNEXPLAINED_KEYS, judge_held_out, judge_test_block, unexplained
+from host_sim.diagnosis.block_verdict import (UNEXPLAINED_KEYS, judge_held_out, judge_match_held_out, judge_test_block,
+                                              unexplained)
 from host_sim.diagnosis.calibrate import (Calibration, Nuisance, calibrate, drive_nuisances, edge_binds,
                                           held_by_odometry, refit_jointly, sensor_nuisances)
 from host_sim.diagnosis.tolerance import BANDS, Tolerance
@@ -296,6 +297,7 @@ def diagnose(rec: Recording, params: RobotParams, world: World | None, *,
         result.notes[:0] = gap_notes
         _report_clips(result, rec, params)
         _report_odometry(result, rec, params, world, tol)
+        judge_match_held_out(result, rec.t)
         _tell_apart_named(result)
         return result
     try:

@@ -129,6 +129,28 @@ def judge_channels(cmp: Comparison, t: np.ndarray, names: list[str], s: int = 0)
     return out
 
 
+def drifts(cmp: Comparison, t: np.ndarray, names: list[str]) -> list[tuple[Judgement, float]]:
+    """The channels (or window totals) of `names` whose held-out windows' mean residual changes with time, each
+    with that change from the first window to the last in noise levels: a trend beyond TREND_ALPHA (Bonferroni
+    over `names`) that moves the mean by EFFECT_MIN noise levels or more, the smallest bias the locator names
+    (tests/test_verdict.py::test_a_residual_that_drifts_over_the_held_out_windows_drifts)."""
+    out = []
+    for name in names:
+        resid, noise, keep = channel_residual(cmp, name)
+        held = cmp.windows.held_out[keep]
+        resid = resid[held]
+        if resid.shape[0] < 3 or not noise > 0:
+            continue
+        times = t[cmp.windows.index[keep, :-1]][held]
+        times = times if resid.shape[1] > 1 else times.mean(axis=1, keepdims=True)
+        j = judge_residual(name, resid, noise, times, max(len(names), 1))
+        x = times.mean(axis=1)
+        change = float(np.polyfit(x - x.mean(), resid.mean(axis=1), 1)[0] * np.ptp(x)) / noise
+        if not j.steady and abs(change) >= EFFECT_MIN:
+            out.append((j, change))
+    return out
+
+
 def removed_percent(before: Comparison, after: Comparison, names: list[str]) -> float:
     """How much of the located channels' residual a twin removes, in % of its sum of squares (each channel
     in the nominal twin's noise levels), on the same windows."""
