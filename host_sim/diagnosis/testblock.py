@@ -56,13 +56,13 @@ def split_test_block(rec: Recording, fraction: float = TEST_FRACTION,
     window's period (tests/test_verdict.py::test_the_test_block_is_the_last_quarter_and_nothing_else_sees_it)."""
     if not 0.0 < fraction < 1.0:
         raise TestBlockError(f"the test fraction must lie between 0 and 1, not {fraction:g}")
-    n_windows = window_count(rec, seconds)
+    start, _rows, offset = grid_starts(rec, seconds)
+    n_windows = len(start)  # window_count's
     n_test = max(MIN_TEST_WINDOWS, math.ceil(fraction * n_windows))
     if n_windows - n_test < MIN_FIT_WINDOWS:
         raise TestBlockError(f"the recording lasts {len(rec) * rec.sample_period:.1f} s: too short to diagnose and "
                              f"keep a test block (at least {shortest_seconds(fraction, seconds):.0f} s; "
                              f"60-90 s is better)")
-    start, _rows, offset = grid_starts(rec, seconds)
     first_test = int(start[n_windows - n_test])  # the test block's first window's first row
     fitted = slice_recording(rec, 0, first_test + 1)
     test = slice_recording(rec, first_test - offset, len(rec))
