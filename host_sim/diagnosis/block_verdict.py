@@ -156,22 +156,56 @@ def judge_held_out(result: Any, before: Comparison, after: Comparison, chain: li
         result.unexplained = unexplained(result.located)
 
 
+def leave_what_odometry_locates(result: Any, wheels: list[int]) -> None:
+    """The same rule for a wheel whose distance per count the odometry puts beyond its tolerance, which no
+    named effect accounts for (report._report_odometry): an effect that answers for that wheel was fitted on
+    a twin that goes the datasheet's distance per count there, and leaves the odometry's mismatch located, so
+    it is at most "closest" (its located gain) (tests/test_odometry.py::
+    test_an_effect_that_leaves_the_odometrys_mismatch_on_its_wheel_is_not_named)."""
+    kept, closest = [], result.closest
+    for entry in result.effects:
+        if any(family(entry["name"], site_of(entry), [WHEELS[w]]) for w in wheels):
+            closest = nearer(closest, entry, 100.0 * entry.get("evidence", {}).get("held_out_gain_located", 0.0))
+        else:
+            kept.append(entry)
+    if len(kept) < len(result.effects):
+        sides = " and ".join(("left", "right")[w] for w in wheels)
+        result.notes.append(f"not named, as the twin fitted with it leaves the {sides} wheel's distance per count "
+                            f"beyond its tolerance: " + ", ".join(e["name"] + f" ({site_of(e)})"
+                                                                  for e in result.effects if e not in kept))
+        result.effects, result.closest = kept, closest
+        _settle(result, [])
+        if not kept:  # nothing named: everything located is left unexplained
+            result.unexplained = unexplained(result.located)
+
+
 def _keep_explaining(result: Any, before: Comparison, after: Comparison, located: list[str],
                      explains: Callable[[list[str]], bool]) -> tuple[list[dict[str, Any]], dict[str, Any] | None]:
     """(the effects that explain the located channels they answer for, the closest of the others: the one
     that removes the most of its channels' residual, if any removes some)."""
     kept, closest = [], None
     for entry in result.effects:
-        own = family(entry["name"], entry.get("wheel", entry.get("sensor", "both")), located)
+        own = family(entry["name"], site_of(entry), located)
         if own and explains(own):
             kept.append(entry)
             continue
-        removes = removed_percent(before, after, own) if own else 0.0
-        label = entry["name"] + (f"({entry['wheel']})" if entry.get("wheel", "both") != "both" else "") + (
-            f"({entry['sensor']})" if "sensor" in entry else "")
-        if removes > 0 and (closest is None or removes > closest["removes_percent"]):
-            closest = {"name": label, "removes_percent": round(float(removes), 1)}
+        closest = nearer(closest, entry, removed_percent(before, after, own) if own else 0.0)
     return kept, closest
+
+
+def site_of(entry: dict[str, Any]) -> Any:
+    """A named effect's site: its wheel, its sensor, or "both"."""
+    return entry.get("wheel", entry.get("sensor", "both"))
+
+
+def nearer(closest: dict[str, Any] | None, entry: dict[str, Any], removes: float) -> dict[str, Any] | None:
+    """The closest effect of the two: `closest`, or the entry not named that removes `removes` % of the
+    mismatch, where it removes more (and some)."""
+    if removes <= 0 or (closest is not None and removes <= closest["removes_percent"]):
+        return closest
+    label = entry["name"] + (f"({entry['wheel']})" if entry.get("wheel", "both") != "both" else "") + (
+        f"({entry['sensor']})" if "sensor" in entry else "")
+    return {"name": label, "removes_percent": round(float(removes), 1)}
 
 
 def _changes(result: Any, objective: Objective, params: RobotParams, located: list[str]) -> None:

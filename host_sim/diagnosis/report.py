@@ -30,7 +30,7 @@ from host_sim.diagnosis.odometry import per_count as odometry_per_count
 from host_sim.diagnosis.windows import DEFAULT_SECONDS
 from host_sim.diagnosis.testblock import TestBlockError, check_test_recording, split_test_block
 from host_sim.diagnosis.block_verdict import (UNEXPLAINED_KEYS, judge_held_out, judge_match_held_out, judge_test_block,
-                                              unexplained)
+                                              leave_what_odometry_locates, unexplained)
 from host_sim.diagnosis.calibrate import (Calibration, Nuisance, calibrate, drive_nuisances, edge_binds,
                                           held_by_odometry, refit_jointly, sensor_nuisances)
 from host_sim.diagnosis.tolerance import BANDS, Tolerance
@@ -360,7 +360,8 @@ def _report_odometry(result: Diagnosis, rec: Recording, params: RobotParams, wor
     the verdict is neither a match nor wholly explained.  A wheel radius or encoder scale named that the
     odometry contradicts on a wheel, beyond the band of what it makes that wheel over its 95 % interval, is
     no longer named: kinematics measure it directly
-    (tests/test_odometry.py::test_a_wheel_that_goes_too_far_per_count_is_no_match)."""
+    (tests/test_odometry.py::test_a_wheel_that_goes_too_far_per_count_is_no_match).  Any other effect named on
+    such a wheel leaves that mismatch located: at most closest (block_verdict.leave_what_odometry_locates)."""
     odo = result.odometry = measure_odometry(rec, params, world)
     if odo is None:
         return
@@ -386,6 +387,7 @@ def _report_odometry(result: Diagnosis, rec: Recording, params: RobotParams, wor
                          f"(the encoders against the tracker, {odo.windows} windows clear of the walls): a wheel "
                          f"of another radius, or an encoder of another count per turn"}
         _file_unexplained(result, item, UNEXPLAINED_KEYS)
+    leave_what_odometry_locates(result, beyond)
 
 
 def _implied_per_count(named: list[dict[str, Any]], datasheet: RobotParams) -> tuple[tuple[float, float], ...]:
