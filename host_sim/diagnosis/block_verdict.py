@@ -10,7 +10,7 @@ import numpy as np
 
 from host_sim.diagnosis.channels import ACCUMULATED, IR, AMBIENT, WHEELS, drive_channel, sensor_channel
 from host_sim.diagnosis.compare import Comparison, compare
-from host_sim.diagnosis.fit import MIN_LOCATED_GAIN, Model, Objective, fit_apart
+from host_sim.diagnosis.fit import MIN_LOCATED_GAIN, Candidate, Model, Objective, fit_apart
 from host_sim.diagnosis.phrasing import drift_words, test_block_words
 from host_sim.diagnosis.verdict import changed, drifts, judge_channels, removed_percent, step_window
 from host_sim.diagnosis.windows import make_windows
@@ -203,9 +203,7 @@ def nearer(closest: dict[str, Any] | None, entry: dict[str, Any], removes: float
     mismatch, where it removes more (and some)."""
     if removes <= 0 or (closest is not None and removes <= closest["removes_percent"]):
         return closest
-    label = entry["name"] + (f"({entry['wheel']})" if entry.get("wheel", "both") != "both" else "") + (
-        f"({entry['sensor']})" if "sensor" in entry else "")
-    return {"name": label, "removes_percent": round(float(removes), 1)}
+    return {"name": Candidate(entry["name"], site_of(entry)).label(), "removes_percent": round(float(removes), 1)}
 
 
 def _changes(result: Any, objective: Objective, params: RobotParams, located: list[str]) -> None:
